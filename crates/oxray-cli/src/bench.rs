@@ -1,0 +1,215 @@
+//! Benchmarks: BVH build time and ray throughput for coherent (pinhole camera) and incoherent
+//! (random hemisphere from surface points) rays, closest hit and any hit.
+
+use crate::mesh::Mesh;
+use glam::Vec3;
+use oxray::{BuildFlags, BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use std::time::Instant;
+
+/// A small, fast, deterministic generator (SplitMix64), so benchmark rays are reproducible.
+#[derive(Clone, Debug)]
+pub struct Rng(u64);
+
+impl Rng {
+    /// A generator from a seed.
+    pub fn new(seed: u64) -> Self {
+        Rng(seed)
+    }
+    /// The next 64 random bits.
+    pub fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    /// Uniform in `[0, 1)`.
+    pub fn next_f32(&mut self) -> f32 {
+        (self.next_u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
+    }
+}
+
+/// Builds a GAS over a mesh.
+pub fn build_gas(mesh: &Mesh, flags: BuildFlags) -> Result<Gas, oxray::BuildError> {
+    let input = TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles));
+    Gas::build(&BuildOptions::new(flags), &[input.into()])
+}
+
+fn center_radius(mesh: &Mesh) -> (Vec3, f32) {
+    let (lo, hi) = mesh.bounds();
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
+}
+
+/// Primary rays of a `width` x `height` pinhole camera that frames the mesh, in scanline order.
+pub fn camera_rays(mesh: &Mesh, width: u32, height: u32) -> Vec<Ray> {
+    let (c, r) = center_radius(mesh);
+    let eye = c + Vec3::new(0.35, 0.25, 1.0).normalize() * (2.2 * r);
+    let fwd = (c - eye).normalize();
+    let right = fwd.cross(Vec3::Y).normalize();
+    let up = right.cross(fwd);
+    let tan = (30f32.to_radians() * 0.5).tan();
+    let aspect = width as f32 / height as f32;
+    let mut rays = Vec::with_capacity((width * height) as usize);
+    for y in 0..height {
+        for x in 0..width {
+            let sx = ((x as f32 + 0.5) / width as f32 * 2.0 - 1.0) * tan * aspect;
+            let sy = (1.0 - (y as f32 + 0.5) / height as f32 * 2.0) * tan;
+            let d = (fwd + right * sx + up * sy).normalize();
+            rays.push(Ray::new(eye, d));
+        }
+    }
+    rays
+}
+
+/// `n` rays leaving random points of random (non-degenerate) triangles in cosine-distributed
+/// directions about the triangle's normal: the secondary rays of a path tracer.
+pub fn hemisphere_rays(mesh: &Mesh, n: usize, seed: u64) -> Vec<Ray> {
+    let (_, r) = center_radius(mesh);
+    let mut rng = Rng::new(seed);
+    let mut rays = Vec::with_capacity(n);
+    if mesh.triangles.is_empty() {
+        return rays;
+    }
+    while rays.len() < n {
+        let t = mesh.triangles[(rng.next_u64() % mesh.triangles.len() as u64) as usize];
+        let [a, b, c] = t.map(|i| Vec3::from(mesh.positions[i as usize]));
+        let nrm = (b - a).cross(c - a);
+        if nrm.length_squared() == 0.0 || !nrm.is_finite() {
+            continue;
+        }
+        let nrm = nrm.normalize();
+        let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
+        if u + v > 1.0 {
+            (u, v) = (1.0 - u, 1.0 - v);
+        }
+        let p = a + (b - a) * u + (c - a) * v;
+        let (r1, r2) = (rng.next_f32(), rng.next_f32());
+        let phi = std::f32::consts::TAU * r1;
+        let s = r2.sqrt();
+        let (t1, t2) = nrm.any_orthonormal_pair();
+        let d = (t1 * (phi.cos() * s) + t2 * (phi.sin() * s) + nrm * (1.0 - r2).sqrt()).normalize();
+        rays.push(Ray::with_interval(p, d, 1e-5 * r, f32::INFINITY));
+    }
+    rays
+}
+
+/// Median of the values.
+pub fn median(mut xs: Vec<f64>) -> f64 {
+    xs.sort_by(f64::total_cmp);
+    let n = xs.len();
+    if n == 0 {
+        0.0
+    } else if n % 2 == 1 {
+        xs[n / 2]
+    } else {
+        0.5 * (xs[n / 2 - 1] + xs[n / 2])
+    }
+}
+
+/// Results of one mesh's benchmark.
+#[derive(Clone, Debug, Default)]
+pub struct BenchResult {
+    /// Mesh name.
+    pub name: String,
+    /// Triangles.
+    pub triangles: usize,
+    /// Median build time (ms) with default flags, then fast-build, then fast-trace.
+    pub build_ms: [f64; 3],
+    /// SAH cost of the three builds.
+    pub sah: [f64; 3],
+    /// Mrays/s (median) for coherent closest, coherent any, incoherent closest, incoherent any.
+    pub mrays: [f64; 4],
+    /// Mrays/s of incoherent closest hit on the three builds.
+    pub mrays_by_flags: [f64; 3],
+    /// Fraction of coherent and incoherent rays that hit.
+    pub hit_rate: [f64; 2],
+}
+
+/// Runs the benchmark on a mesh with `runs` repetitions of each measurement.
+pub fn run(name: &str, mesh: &Mesh, runs: usize, rays: &BenchRays) -> Result<BenchResult, oxray::BuildError> {
+    let mut res = BenchResult {
+        name: name.to_string(),
+        triangles: mesh.triangles.len(),
+        ..Default::default()
+    };
+    let flag_sets = [BuildFlags::empty(), BuildFlags::PREFER_FAST_BUILD, BuildFlags::PREFER_FAST_TRACE];
+    let mut gases = Vec::new();
+    for (k, flags) in flag_sets.into_iter().enumerate() {
+        let mut times = Vec::new();
+        let mut gas = None;
+        for _ in 0..runs {
+            let t = Instant::now();
+            let g = build_gas(mesh, flags)?;
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+            gas = Some(g);
+        }
+        let gas = gas.expect("runs >= 1");
+        res.build_ms[k] = median(times);
+        res.sah[k] = gas.stats().sah_cost;
+        gases.push(gas);
+    }
+    let gas = &gases[0];
+    let mut hits = vec![None; rays.coherent.len().max(rays.incoherent.len())];
+    let mut occ = vec![false; hits.len()];
+    let time = |f: &mut dyn FnMut()| {
+        f(); // warm-up
+        median((0..runs).map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        }).collect())
+    };
+    for (k, set) in [&rays.coherent, &rays.incoherent].into_iter().enumerate() {
+        let n = set.len();
+        let h = &mut hits[..n];
+        let s = time(&mut || gas.intersect_batch(set, h).expect("lengths match"));
+        res.mrays[2 * k] = n as f64 / s / 1e6;
+        res.hit_rate[k] = h.iter().filter(|x| x.is_some()).count() as f64 / n.max(1) as f64;
+        let o = &mut occ[..n];
+        let s = time(&mut || gas.occluded_batch(set, o).expect("lengths match"));
+        res.mrays[2 * k + 1] = n as f64 / s / 1e6;
+    }
+    for (k, g) in gases.iter().enumerate() {
+        let n = rays.incoherent.len();
+        let h = &mut hits[..n];
+        let s = time(&mut || g.intersect_batch(&rays.incoherent, h).expect("lengths match"));
+        res.mrays_by_flags[k] = n as f64 / s / 1e6;
+    }
+    Ok(res)
+}
+
+/// The ray sets of a benchmark.
+pub struct BenchRays {
+    /// Pinhole camera rays.
+    pub coherent: Vec<Ray>,
+    /// Hemisphere rays from surface points.
+    pub incoherent: Vec<Ray>,
+}
+
+impl BenchRays {
+    /// Rays for a mesh: a `side` x `side` camera and as many hemisphere rays.
+    pub fn new(mesh: &Mesh, side: u32) -> Self {
+        BenchRays {
+            coherent: camera_rays(mesh, side, side),
+            incoherent: hemisphere_rays(mesh, (side * side) as usize, 7),
+        }
+    }
+}
+
+/// Writes a mesh and its rays for the side-by-side script (`scripts/bench_embree.py`):
+/// `NAME.mesh` (u32 vertex count, u32 triangle count, f32x3 vertices, u32x3 triangles),
+/// `NAME.coherent.rays` and `NAME.incoherent.rays` (f32[8] per ray), all little endian.
+pub fn export(dir: &std::path::Path, name: &str, mesh: &Mesh, rays: &BenchRays) -> std::io::Result<()> {
+    std::fs::create_dir_all(dir)?;
+    let mut m = Vec::new();
+    m.extend((mesh.positions.len() as u32).to_le_bytes());
+    m.extend((mesh.triangles.len() as u32).to_le_bytes());
+    m.extend_from_slice(bytemuck::cast_slice(&mesh.positions));
+    m.extend_from_slice(bytemuck::cast_slice(&mesh.triangles));
+    std::fs::write(dir.join(format!("{name}.mesh")), m)?;
+    std::fs::write(dir.join(format!("{name}.coherent.rays")), bytemuck::cast_slice(&rays.coherent))?;
+    std::fs::write(dir.join(format!("{name}.incoherent.rays")), bytemuck::cast_slice(&rays.incoherent))?;
+    Ok(())
+}

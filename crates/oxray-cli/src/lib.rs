@@ -1,0 +1,6 @@
+//! The library behind the `oxray` command-line tool: mesh loaders and benchmarks.
+
+#![warn(missing_docs)]
+
+pub mod bench;
+pub mod mesh;

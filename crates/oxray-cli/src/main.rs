@@ -1,0 +1,119 @@
+//! `oxray`: the command-line tool.
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+use oxray_cli::bench::{self, BenchRays};
+use oxray_cli::mesh::Mesh;
+use std::path::{Path, PathBuf};
+
+#[derive(Parser)]
+#[command(name = "oxray", version, about = "oxray: a programmable ray-tracing engine")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Build time and Mrays/s (closest and any hit; coherent and incoherent rays) on meshes.
+    /// Without MESH, the bunny and igea from ../shared/data when present, else a generated
+    /// icosphere.
+    Bench {
+        /// Meshes (.obj, .ply).
+        meshes: Vec<PathBuf>,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Rays per set are SIDE x SIDE.
+        #[arg(long, default_value_t = 1024)]
+        side: u32,
+        /// Repetitions of each measurement (the median is reported).
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+        /// Also write each mesh and its rays here, for scripts/bench_embree.py.
+        #[arg(long)]
+        export: Option<PathBuf>,
+    },
+}
+
+fn main() {
+    if let Err(e) = run(Cli::parse()) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn default_meshes() -> Vec<PathBuf> {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
+    ["stanford-bunny.obj", "igea.ply"]
+        .iter()
+        .map(|f| data.join(f))
+        .filter(|p| p.exists())
+        .collect()
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Bench {
+            meshes,
+            threads,
+            side,
+            runs,
+            export,
+        } => {
+            if side == 0 || side > 16384 {
+                bail!("--side must be in 1..=16384, got {side}");
+            }
+            if runs == 0 {
+                bail!("--runs must be at least 1");
+            }
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.unwrap_or(0))
+                .build()
+                .context("cannot start the worker threads")?;
+            let mut sets: Vec<(String, Mesh)> = Vec::new();
+            let paths = if meshes.is_empty() { default_meshes() } else { meshes };
+            if paths.is_empty() {
+                println!("(no meshes given and ../shared/data absent: using a generated icosphere)");
+                sets.push(("icosphere-7".into(), Mesh::icosphere(7)));
+            }
+            for p in paths {
+                let mesh = Mesh::load(&p)?;
+                let name = p.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+                sets.push((name, mesh));
+            }
+            println!(
+                "threads: {}, rays per set: {}, median of {runs} runs",
+                pool.current_num_threads(),
+                side * side
+            );
+            println!(
+                "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | coherent closest | coherent any | incoherent closest | incoherent any | incoherent closest by build (default / fast-build / fast-trace) |"
+            );
+            println!("|---|---:|---|---|---:|---:|---:|---:|---|");
+            for (name, mesh) in &sets {
+                let rays = BenchRays::new(mesh, side);
+                if let Some(dir) = &export {
+                    bench::export(dir, name, mesh, &rays)
+                        .with_context(|| format!("cannot write to {}", dir.display()))?;
+                }
+                let r = pool.install(|| bench::run(name, mesh, runs, &rays))?;
+                println!(
+                    "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} |",
+                    r.name, r.triangles, r.build_ms[0], r.build_ms[1], r.build_ms[2],
+                    r.sah[0], r.sah[1], r.sah[2],
+                    r.mrays[0], r.mrays[1], r.mrays[2], r.mrays[3],
+                    r.mrays_by_flags[0], r.mrays_by_flags[1], r.mrays_by_flags[2],
+                );
+                eprintln!(
+                    "  {}: {:.1} Mtris/s build, hit rate coherent {:.1}%, incoherent {:.1}%",
+                    r.name,
+                    r.triangles as f64 / r.build_ms[0] / 1e3,
+                    100.0 * r.hit_rate[0],
+                    100.0 * r.hit_rate[1]
+                );
+            }
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,118 @@
+//! The 4-wide BVH that CPU traversal runs on, collapsed from a [`Bvh2`].
+
+use super::bvh2::Bvh2;
+use crate::geometry::Aabb;
+use bytemuck::{Pod, Zeroable};
+
+/// A 128-byte, 64-byte-aligned node with four children, boxes stored structure-of-arrays so that
+/// one ray is tested against all four boxes with 4-wide arithmetic.
+///
+/// `bounds[axis][lane]` is the lower bound and `bounds[3 + axis][lane]` the upper bound of child
+/// `lane`. A child with `count == 0` is an inner node at index `child`; with `count > 0` it is a
+/// leaf holding primitive slots `child .. child + count`. Unused lanes have an empty box
+/// (`+inf .. -inf`) that no ray can enter.
+#[repr(C, align(64))]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct Bvh4Node {
+    /// Child boxes: lower x, y, z then upper x, y, z, each for the four lanes.
+    pub bounds: [[f32; 4]; 6],
+    /// Child node index or first primitive slot.
+    pub child: [u32; 4],
+    /// Primitive count of a leaf child; 0 for an inner child or an unused lane.
+    pub count: [u32; 4],
+}
+
+impl Bvh4Node {
+    const EMPTY: Bvh4Node = Bvh4Node {
+        bounds: [
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+            [f32::NEG_INFINITY; 4],
+        ],
+        child: [u32::MAX; 4],
+        count: [0; 4],
+    };
+
+    /// The box of child `lane`.
+    pub fn child_bounds(&self, lane: usize) -> Aabb {
+        let b = &self.bounds;
+        Aabb::new(
+            [b[0][lane], b[1][lane], b[2][lane]].into(),
+            [b[3][lane], b[4][lane], b[5][lane]].into(),
+        )
+    }
+
+    /// Whether lane `lane` holds a child.
+    pub fn is_used(&self, lane: usize) -> bool {
+        self.child_bounds(lane).is_valid()
+    }
+
+    fn set(&mut self, lane: usize, b: &Aabb, child: u32, count: u32) {
+        for axis in 0..3 {
+            self.bounds[axis][lane] = b.min[axis];
+            self.bounds[3 + axis][lane] = b.max[axis];
+        }
+        self.child[lane] = child;
+        self.count[lane] = count;
+    }
+}
+
+/// A 4-wide BVH; `nodes[0]` is the root. Primitive slots are those of the [`Bvh2`] it came from.
+#[derive(Clone, Debug)]
+pub struct Bvh4 {
+    /// Nodes, root first.
+    pub nodes: Vec<Bvh4Node>,
+}
+
+impl From<&Bvh2> for Bvh4 {
+    /// Collapses a binary BVH: each 4-wide node takes the binary node's children and keeps
+    /// opening the inner child with the largest surface area until it has four.
+    fn from(b: &Bvh2) -> Self {
+        let mut nodes = vec![Bvh4Node::EMPTY];
+        let Some(root) = b.nodes.first() else {
+            return Bvh4 { nodes };
+        };
+        if root.is_leaf() {
+            nodes[0].set(0, &root.bounds(), root.left_first, root.count);
+            return Bvh4 { nodes };
+        }
+        // (bvh2 inner node, bvh4 node to fill)
+        let mut work = vec![(0usize, 0usize)];
+        while let Some((src, dst)) = work.pop() {
+            let n = &b.nodes[src];
+            let first = n.left_first as usize;
+            let mut kids: [usize; 4] = [first, first + 1, 0, 0];
+            let mut k = 2;
+            while k < 4 {
+                let open = (0..k)
+                    .filter(|&i| !b.nodes[kids[i]].is_leaf())
+                    .max_by(|&i, &j| {
+                        let ai = b.nodes[kids[i]].bounds().half_area();
+                        let aj = b.nodes[kids[j]].bounds().half_area();
+                        // Ties go to the earlier lane, for a deterministic layout.
+                        ai.total_cmp(&aj).then(j.cmp(&i))
+                    });
+                let Some(i) = open else { break };
+                let c = b.nodes[kids[i]].left_first as usize;
+                kids[i] = c;
+                kids[k] = c + 1;
+                k += 1;
+            }
+            for (lane, &kid) in kids[..k].iter().enumerate() {
+                let kn = &b.nodes[kid];
+                if kn.is_leaf() {
+                    nodes[dst].set(lane, &kn.bounds(), kn.left_first, kn.count);
+                } else {
+                    let idx = nodes.len();
+                    nodes.push(Bvh4Node::EMPTY);
+                    nodes[dst].set(lane, &kn.bounds(), idx as u32, 0);
+                    work.push((kid, idx));
+                }
+            }
+        }
+        Bvh4 { nodes }
+    }
+}

@@ -1,0 +1,340 @@
+//! The geometry acceleration structure: primitives of one kind from one or more build inputs,
+//! under a 4-wide BVH.
+
+use super::bvh::{build_bvh2, BuildConfig, Bvh4, BvhStats};
+use super::input::{BuildInput, BuildInputKind, TriangleInput};
+use super::options::{BuildFlags, BuildOptions, GeometryFlags};
+use super::validate::{validate_sbt_offsets, validate_structure};
+use crate::error::{BuildError, InputLocation};
+use crate::geometry::triangle::is_degenerate;
+use crate::geometry::Aabb;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// What the structure keeps of each build input.
+#[derive(Clone, Debug)]
+pub(crate) struct InputRecord {
+    /// Global id of the input's first primitive (ids count over all inputs, in order).
+    pub first: u32,
+    /// Added to reported primitive indices.
+    pub primitive_index_offset: u32,
+    /// SBT-GAS index of the input's first record: the records of the inputs before it.
+    pub sbt_base: u32,
+}
+
+/// Bytes a built GAS occupies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct GasMemory {
+    /// Bytes of the structure: nodes, primitives and the tables that hits are resolved with.
+    /// At most the `output_size_in_bytes` of the memory query.
+    pub output_bytes: usize,
+    /// Of which BVH nodes.
+    pub node_bytes: usize,
+    /// Of which primitive data (vertices or boxes).
+    pub primitive_bytes: usize,
+}
+
+/// A geometry acceleration structure (GAS) over triangles or custom primitives.
+///
+/// It copies what it needs from the build inputs, which may be dropped once it is built.
+///
+/// ```
+/// use oxray::{BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+/// use glam::Vec3;
+/// let vertices = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+/// let triangles = [[0u32, 1, 2]];
+/// let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
+///     .indices(IndexBuffer::u32x3(&triangles));
+/// let gas = Gas::build(&BuildOptions::default(), &[input.into()])?;
+///
+/// let hit = gas.intersect(&Ray::new(Vec3::new(0.0, 0.0, 1.0), -Vec3::Z)).unwrap();
+/// assert_eq!((hit.t, hit.primitive_index), (1.0, 0));
+/// assert!(gas.occluded(&Ray::new(Vec3::new(0.0, 0.0, -1.0), Vec3::Z)));
+/// # Ok::<(), oxray::BuildError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Gas {
+    pub(crate) kind: BuildInputKind,
+    pub(crate) build_flags: BuildFlags,
+    pub(crate) bvh: Bvh4,
+    /// Triangle vertices in leaf-slot order (triangle GAS).
+    pub(crate) triangles: Vec<[[f32; 3]; 3]>,
+    /// Boxes in leaf-slot order (custom-primitive GAS).
+    pub(crate) aabbs: Vec<Aabb>,
+    /// Leaf slot to global primitive id.
+    pub(crate) slot_prim: Vec<u32>,
+    /// Per global primitive id, its SBT record within its input; empty when every input has one.
+    pub(crate) sbt_offsets: Vec<u32>,
+    pub(crate) inputs: Vec<InputRecord>,
+    /// Flags of every SBT record, indexed by SBT-GAS index.
+    pub(crate) record_flags: Vec<GeometryFlags>,
+    pub(crate) bounds: Aabb,
+    pub(crate) num_primitives: u32,
+}
+
+impl Gas {
+    /// Builds a GAS (`optixAccelBuild`). Inputs must all be of one kind; see [`BuildError`] for
+    /// every rule checked. Primitives that can never be hit (a NaN or infinite coordinate, a
+    /// zero-area triangle, an inverted box) are left out: they are inactive.
+    pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Gas, BuildError> {
+        let summary = validate_structure(options, inputs)?;
+
+        let mut records = Vec::with_capacity(inputs.len());
+        let mut record_flags = Vec::with_capacity(summary.num_sbt_records as usize);
+        let mut first = 0u32;
+        for (i, input) in inputs.iter().enumerate() {
+            let count = input.num_primitives();
+            let num_records = input.flags().len() as u32;
+            if let Some(o) = input.sbt_index_offsets() {
+                validate_sbt_offsets(InputLocation { input: i }, o, count, num_records)?;
+            }
+            if let BuildInput::Triangles(t) = input {
+                check_indices(InputLocation { input: i }, t)?;
+            }
+            records.push(InputRecord {
+                first,
+                primitive_index_offset: input.primitive_index_offset(),
+                sbt_base: record_flags.len() as u32,
+            });
+            record_flags.extend_from_slice(input.flags());
+            first += count;
+        }
+
+        let sbt_offsets: Vec<u32> = if inputs.iter().any(|i| i.flags().len() > 1) {
+            inputs
+                .iter()
+                .flat_map(|input| {
+                    let n = input.num_primitives() as usize;
+                    let offsets = input.sbt_index_offsets();
+                    (0..n).map(move |p| offsets.map_or(0, |o| o.get(p)))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+
+        let config = if options.flags.contains(BuildFlags::PREFER_FAST_TRACE) {
+            BuildConfig::FAST_TRACE
+        } else if options.flags.contains(BuildFlags::PREFER_FAST_BUILD) {
+            BuildConfig::FAST_BUILD
+        } else {
+            BuildConfig::BALANCED
+        };
+
+        let mut gas = Gas {
+            kind: summary.kind,
+            build_flags: options.flags,
+            bvh: Bvh4 { nodes: Vec::new() },
+            triangles: Vec::new(),
+            aabbs: Vec::new(),
+            slot_prim: Vec::new(),
+            sbt_offsets,
+            inputs: records,
+            record_flags,
+            bounds: Aabb::EMPTY,
+            num_primitives: summary.num_primitives,
+        };
+
+        match summary.kind {
+            BuildInputKind::Triangles => {
+                let tris: Vec<[Vec3; 3]> = inputs
+                    .iter()
+                    .flat_map(|input| match input {
+                        BuildInput::Triangles(t) => decode_triangles(t),
+                        BuildInput::CustomPrimitives(_) => unreachable!("inputs are homogeneous"),
+                    })
+                    .collect();
+                let active: Vec<(u32, Aabb)> = tris
+                    .par_iter()
+                    .enumerate()
+                    .filter(|(_, t)| !is_degenerate(t[0], t[1], t[2]))
+                    .map(|(i, t)| (i as u32, Aabb::from_points(t)))
+                    .collect();
+                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = active.into_iter().unzip();
+                let bvh2 = build_bvh2(&bounds, &config);
+                gas.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+                gas.triangles = gas
+                    .slot_prim
+                    .iter()
+                    .map(|&g| tris[g as usize].map(|v| v.to_array()))
+                    .collect();
+                gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
+                gas.bvh = Bvh4::from(&bvh2);
+            }
+            BuildInputKind::CustomPrimitives => {
+                let boxes: Vec<Aabb> = inputs
+                    .iter()
+                    .flat_map(|input| match input {
+                        BuildInput::CustomPrimitives(c) => {
+                            let a = c.aabbs;
+                            let stride = a.effective_stride();
+                            (0..a.count as usize).map(move |i| {
+                                let f: [f32; 6] = std::array::from_fn(|k| {
+                                    let at = i * stride + 4 * k;
+                                    f32::from_le_bytes(a.data[at..at + 4].try_into().unwrap_or([0; 4]))
+                                });
+                                Aabb::new(Vec3::new(f[0], f[1], f[2]), Vec3::new(f[3], f[4], f[5]))
+                            })
+                        }
+                        BuildInput::Triangles(_) => unreachable!("inputs are homogeneous"),
+                    })
+                    .collect();
+                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, b)| b.is_finite_valid())
+                    .map(|(i, b)| (i as u32, *b))
+                    .unzip();
+                let bvh2 = build_bvh2(&bounds, &config);
+                gas.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+                gas.aabbs = gas.slot_prim.iter().map(|&g| boxes[g as usize]).collect();
+                gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
+                gas.bvh = Bvh4::from(&bvh2);
+            }
+        }
+        Ok(gas)
+    }
+
+    /// The kind of primitives.
+    pub fn kind(&self) -> BuildInputKind {
+        self.kind
+    }
+
+    /// The flags it was built with.
+    pub fn build_flags(&self) -> BuildFlags {
+        self.build_flags
+    }
+
+    /// Primitives declared over all build inputs, inactive ones included.
+    pub fn num_primitives(&self) -> u32 {
+        self.num_primitives
+    }
+
+    /// Primitives that can be hit.
+    pub fn num_active_primitives(&self) -> u32 {
+        self.slot_prim.len() as u32
+    }
+
+    /// Number of build inputs.
+    pub fn num_build_inputs(&self) -> usize {
+        self.inputs.len()
+    }
+
+    /// SBT records over all build inputs (the span of SBT-GAS indices).
+    pub fn num_sbt_records(&self) -> u32 {
+        self.record_flags.len() as u32
+    }
+
+    /// The geometry flags of an SBT record, by SBT-GAS index.
+    pub fn geometry_flags(&self, sbt_gas_index: u32) -> Option<GeometryFlags> {
+        self.record_flags.get(sbt_gas_index as usize).copied()
+    }
+
+    /// The box around every active primitive (empty when there is none).
+    pub fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// The BVH.
+    pub fn bvh(&self) -> &Bvh4 {
+        &self.bvh
+    }
+
+    /// BVH statistics: nodes, depth, SAH cost, bytes.
+    pub fn stats(&self) -> BvhStats {
+        self.bvh.stats()
+    }
+
+    /// Bytes the structure occupies.
+    pub fn memory(&self) -> GasMemory {
+        use std::mem::size_of_val;
+        let node_bytes = size_of_val(self.bvh.nodes.as_slice());
+        let primitive_bytes =
+            size_of_val(self.triangles.as_slice()) + size_of_val(self.aabbs.as_slice());
+        GasMemory {
+            output_bytes: node_bytes
+                + primitive_bytes
+                + size_of_val(self.slot_prim.as_slice())
+                + size_of_val(self.sbt_offsets.as_slice())
+                + size_of_val(self.inputs.as_slice())
+                + size_of_val(self.record_flags.as_slice()),
+            node_bytes,
+            primitive_bytes,
+        }
+    }
+
+    /// The build input and the index within it of a global primitive id.
+    #[inline]
+    pub(crate) fn locate(&self, global: u32) -> (usize, u32) {
+        let i = if self.inputs.len() == 1 {
+            0
+        } else {
+            self.inputs.partition_point(|r| r.first <= global) - 1
+        };
+        (i, global - self.inputs[i].first)
+    }
+
+    /// Primitive index (with the input's offset), SBT-GAS index and build input of a leaf slot.
+    #[inline]
+    pub(crate) fn resolve(&self, slot: u32) -> (u32, u32, u32) {
+        let global = self.slot_prim[slot as usize];
+        let (input, local) = self.locate(global);
+        let rec = &self.inputs[input];
+        let sbt = rec.sbt_base + self.sbt_offsets.get(global as usize).copied().unwrap_or(0);
+        (local + rec.primitive_index_offset, sbt, input as u32)
+    }
+}
+
+/// Checks that every index of an indexed triangle input is in range.
+fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<(), BuildError> {
+    let Some(ix) = &t.indices else { return Ok(()) };
+    let stride = ix.effective_stride();
+    let nv = t.vertices.count;
+    let bad = (0..ix.count as usize).into_par_iter().position_first(|i| {
+        let at = i * stride;
+        ix.format.decode(&ix.data[at..]).iter().any(|&v| v >= nv)
+    });
+    match bad {
+        None => Ok(()),
+        Some(i) => {
+            let at_byte = i * stride;
+            let tri = ix.format.decode(&ix.data[at_byte..]);
+            let index = tri.into_iter().find(|&v| v >= nv).unwrap_or(nv);
+            Err(BuildError::IndexOutOfRange {
+                at,
+                triangle: i as u32,
+                index,
+                num_vertices: nv,
+            })
+        }
+    }
+}
+
+/// Decodes (and pre-transforms) every triangle of a validated input.
+fn decode_triangles(t: &TriangleInput<'_>) -> Vec<[Vec3; 3]> {
+    let v = &t.vertices;
+    let vstride = v.effective_stride();
+    let m = t.pre_transform;
+    let vertex = |i: u32| {
+        let p = v.format.decode(&v.data[i as usize * vstride..]);
+        match &m {
+            None => p,
+            Some(m) => Vec3::new(
+                m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],
+                m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+                m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11],
+            ),
+        }
+    };
+    let n = t.num_primitives() as usize;
+    (0..n)
+        .into_par_iter()
+        .map(|k| {
+            let idx = match &t.indices {
+                Some(ix) => ix.format.decode(&ix.data[k * ix.effective_stride()..]),
+                None => [3 * k as u32, 3 * k as u32 + 1, 3 * k as u32 + 2],
+            };
+            idx.map(vertex)
+        })
+        .collect()
+}

@@ -1,0 +1,71 @@
+//! The memory query that precedes a build (`optixAccelComputeMemoryUsage`, guide §5).
+
+use super::bvh::Bvh4Node;
+use super::gas::InputRecord;
+use super::input::BuildInput;
+use super::options::BuildOptions;
+use super::validate::{validate_structure, InputSummary};
+use crate::error::BuildError;
+use crate::geometry::Aabb;
+
+/// Buffer sizes for a build (`OptixAccelBufferSizes`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct AccelBufferSizes {
+    /// Upper bound of the bytes the built structure occupies ([`crate::Gas::memory`]).
+    pub output_size_in_bytes: usize,
+    /// Upper bound of the working memory the build allocates and frees.
+    pub temp_size_in_bytes: usize,
+    /// Working memory of an update; 0 unless `ALLOW_UPDATE` is set.
+    pub temp_update_size_in_bytes: usize,
+}
+
+/// Computes the buffer sizes of a build without building, from the inputs' declared counts
+/// (the buffers' contents are not read). Validates the inputs as the build would, short of
+/// the checks that need the data (index and SBT offset ranges).
+///
+/// ```
+/// use oxray::{compute_memory_usage, BuildInput, BuildOptions, Gas, TriangleInput, VertexBuffer};
+/// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+/// let inputs = [BuildInput::from(TriangleInput::new(VertexBuffer::f32x3(&v)))];
+/// let sizes = compute_memory_usage(&BuildOptions::default(), &inputs)?;
+/// let gas = Gas::build(&BuildOptions::default(), &inputs)?;
+/// assert!(gas.memory().output_bytes <= sizes.output_size_in_bytes);
+/// # Ok::<(), oxray::BuildError>(())
+/// ```
+pub fn compute_memory_usage(
+    options: &BuildOptions,
+    inputs: &[BuildInput<'_>],
+) -> Result<AccelBufferSizes, BuildError> {
+    let summary = validate_structure(options, inputs)?;
+    Ok(sizes_for(&summary, inputs.len()))
+}
+
+pub(crate) fn sizes_for(s: &InputSummary, num_inputs: usize) -> AccelBufferSizes {
+    let n = s.num_primitives as usize;
+    let output = output_bound(s, num_inputs);
+    // Decoded primitives (bounds and vertices) + the binary tree and its working set + the map
+    // from active primitives to global ids.
+    let temp = n * (std::mem::size_of::<Aabb>() + std::mem::size_of::<[[f32; 3]; 3]>() + 4)
+        + super::bvh::temp_bytes(n);
+    AccelBufferSizes {
+        output_size_in_bytes: output,
+        temp_size_in_bytes: temp,
+        temp_update_size_in_bytes: 0,
+    }
+}
+
+fn output_bound(s: &InputSummary, num_inputs: usize) -> usize {
+    let n = s.num_primitives as usize;
+    // A 4-wide node absorbs at least one binary inner node, and a binary tree over n leaves has
+    // n - 1 inner nodes, so n - 1 nodes (and the root) always suffice.
+    let nodes = n.saturating_sub(1).max(1) * std::mem::size_of::<Bvh4Node>();
+    let per_prim = match s.kind {
+        super::input::BuildInputKind::Triangles => std::mem::size_of::<[[f32; 3]; 3]>(),
+        super::input::BuildInputKind::CustomPrimitives => std::mem::size_of::<Aabb>(),
+    };
+    // Slot-to-primitive map, and per-primitive SBT offsets (kept only when some input has more
+    // than one record, but bounded here by counts alone).
+    let ids = n * 4 * 2;
+    let inputs = num_inputs * std::mem::size_of::<InputRecord>() + s.num_sbt_records as usize * 4;
+    nodes + n * per_prim + ids + inputs
+}

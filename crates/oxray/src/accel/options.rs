@@ -1,0 +1,76 @@
+//! Build options and flags (guide §5, §5.5) and per-SBT-record geometry flags (§5.1).
+
+use bitflags::bitflags;
+
+bitflags! {
+    /// How an acceleration structure is built and what may be done with it later
+    /// (`OptixBuildFlags`, guide §5.5). Values match OptiX's.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct BuildFlags: u32 {
+        /// Allows a later update (refit) of the structure (§5.6).
+        const ALLOW_UPDATE = 1 << 0;
+        /// Allows a later compaction (§5.8).
+        const ALLOW_COMPACTION = 1 << 1;
+        /// Spend more build time for faster traversal. Excludes `PREFER_FAST_BUILD`.
+        const PREFER_FAST_TRACE = 1 << 2;
+        /// Build faster at some cost in traversal speed. Excludes `PREFER_FAST_TRACE`.
+        const PREFER_FAST_BUILD = 1 << 3;
+        /// Allows fetching any primitive's vertices from the handle (§13.9).
+        const ALLOW_RANDOM_VERTEX_ACCESS = 1 << 4;
+        /// Allows fetching an instance's child from an instance AS (§13.12).
+        const ALLOW_RANDOM_INSTANCE_ACCESS = 1 << 5;
+        /// Allows a different opacity micromap array on update (§5.11).
+        const ALLOW_OPACITY_MICROMAP_UPDATE = 1 << 6;
+        /// Allows instances to disable opacity micromaps (§5.11).
+        const ALLOW_DISABLE_OPACITY_MICROMAPS = 1 << 7;
+    }
+}
+
+bitflags! {
+    /// Flags of one SBT record of a build input (`OptixGeometryFlags`, guide §5.1).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct GeometryFlags: u32 {
+        /// The any-hit program is not called for these primitives: they are opaque, unless an
+        /// instance or ray flag enforces any-hit.
+        const DISABLE_ANYHIT = 1 << 0;
+        /// The any-hit program is called at most once per primitive and ray.
+        const REQUIRE_SINGLE_ANYHIT_CALL = 1 << 1;
+        /// Triangles of this record are never culled by facing, whatever the ray flags.
+        const DISABLE_TRIANGLE_FACE_CULLING = 1 << 2;
+    }
+}
+
+/// A build or an in-place update of an existing structure (`OptixBuildOperation`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum BuildOperation {
+    /// Build from scratch.
+    #[default]
+    Build,
+    /// Refit an existing structure built with [`BuildFlags::ALLOW_UPDATE`].
+    Update,
+}
+
+/// Options of an acceleration-structure build (`OptixAccelBuildOptions`).
+///
+/// ```
+/// use oxray::{BuildFlags, BuildOptions};
+/// let opts = BuildOptions::new(BuildFlags::PREFER_FAST_TRACE);
+/// assert_eq!(opts.flags, BuildFlags::PREFER_FAST_TRACE);
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub struct BuildOptions {
+    /// Build flags.
+    pub flags: BuildFlags,
+    /// Build or update.
+    pub operation: BuildOperation,
+}
+
+impl BuildOptions {
+    /// A build with the given flags.
+    pub fn new(flags: BuildFlags) -> Self {
+        BuildOptions {
+            flags,
+            operation: BuildOperation::Build,
+        }
+    }
+}

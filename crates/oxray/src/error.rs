@@ -1,0 +1,202 @@
+//! Typed errors. Each carries its context and maps to the guide's `OptixResult` code.
+
+use crate::accel::input::BuildInputKind;
+use thiserror::Error;
+
+/// The `OptixResult` codes that oxray's errors map to (guide §3.1; values from the OptiX headers).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum ErrorCode {
+    /// `OPTIX_ERROR_INVALID_VALUE`.
+    InvalidValue = 7001,
+    /// `OPTIX_ERROR_INVALID_INPUT`.
+    InvalidInput = 7200,
+    /// `OPTIX_ERROR_INVALID_LAUNCH_PARAMETER`.
+    InvalidLaunchParameter = 7201,
+    /// `OPTIX_ERROR_NOT_SUPPORTED`.
+    NotSupported = 7800,
+}
+
+/// Where in a build an offending value lies: which build input and, where known, which primitive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InputLocation {
+    /// Index of the build input.
+    pub input: usize,
+}
+
+impl std::fmt::Display for InputLocation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "build input {}", self.input)
+    }
+}
+
+/// Which buffer of a build input an error is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BufferKind {
+    /// The vertex buffer.
+    Vertices,
+    /// The index buffer.
+    Indices,
+    /// The AABB buffer.
+    Aabbs,
+    /// The SBT index offset buffer.
+    SbtIndexOffsets,
+}
+
+impl std::fmt::Display for BufferKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            BufferKind::Vertices => "vertex buffer",
+            BufferKind::Indices => "index buffer",
+            BufferKind::Aabbs => "AABB buffer",
+            BufferKind::SbtIndexOffsets => "SBT index offset buffer",
+        })
+    }
+}
+
+/// Why an acceleration-structure build (or its memory query) was refused.
+#[derive(Debug, Error, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum BuildError {
+    /// A GAS build needs at least one build input (guide §5).
+    #[error("a geometry acceleration structure needs at least one build input")]
+    NoBuildInputs,
+    /// All build inputs of one GAS must have the same type (guide §5).
+    #[error("build input {index} is {found} but build input 0 is {expected}: all inputs of one GAS must have the same type")]
+    MixedInputTypes {
+        /// Index of the first input of another kind.
+        index: usize,
+        /// Kind of input 0.
+        expected: BuildInputKind,
+        /// Kind of the offending input.
+        found: BuildInputKind,
+    },
+    /// `PREFER_FAST_TRACE` and `PREFER_FAST_BUILD` exclude each other (guide §5.5).
+    #[error("build flags PREFER_FAST_TRACE and PREFER_FAST_BUILD are mutually exclusive")]
+    ConflictingBuildFlags,
+    /// The operation is not available (yet) for this structure.
+    #[error("{0} is not supported by this build")]
+    Unsupported(&'static str),
+    /// A GAS may hold at most 2^29 primitives (guide §12).
+    #[error("{count} primitives exceed the limit of {limit} per geometry acceleration structure")]
+    TooManyPrimitives {
+        /// Primitives over all inputs.
+        count: u64,
+        /// The limit, 2^29.
+        limit: u64,
+    },
+    /// A GAS may reference at most 2^24 SBT records (guide §12).
+    #[error("{count} SBT records exceed the limit of {limit} per geometry acceleration structure")]
+    TooManySbtRecords {
+        /// SBT records over all inputs.
+        count: u64,
+        /// The limit, 2^24.
+        limit: u64,
+    },
+    /// Every build input uses at least one SBT record (guide §5.1).
+    #[error("{at}: numSbtRecords is 0 (the flags slice is empty); every input needs at least one SBT record")]
+    NoSbtRecords {
+        /// The input.
+        at: InputLocation,
+    },
+    /// An input with more than one SBT record needs per-primitive SBT index offsets (guide §5.1).
+    #[error("{at}: {num_sbt_records} SBT records but no SBT index offset buffer")]
+    MissingSbtIndexOffsets {
+        /// The input.
+        at: InputLocation,
+        /// Its number of SBT records.
+        num_sbt_records: u32,
+    },
+    /// A per-primitive SBT index offset must lie in `[0, numSbtRecords)` (guide §5.1).
+    #[error("{at}, primitive {primitive}: SBT index offset {offset} is out of range (numSbtRecords = {num_sbt_records})")]
+    SbtIndexOffsetOutOfRange {
+        /// The input.
+        at: InputLocation,
+        /// Primitive within the input.
+        primitive: u32,
+        /// The offending offset.
+        offset: u32,
+        /// The input's number of SBT records.
+        num_sbt_records: u32,
+    },
+    /// A stride is smaller than one element or breaks the element's alignment.
+    #[error("{at}: {buffer} stride {stride} is invalid ({reason})")]
+    InvalidStride {
+        /// The input.
+        at: InputLocation,
+        /// Which buffer.
+        buffer: BufferKind,
+        /// The stride given.
+        stride: u32,
+        /// What rule it breaks.
+        reason: &'static str,
+    },
+    /// A buffer is shorter than its declared count and stride require.
+    #[error("{at}: {buffer} holds {len} bytes but {count} elements need {needed}")]
+    BufferTooSmall {
+        /// The input.
+        at: InputLocation,
+        /// Which buffer.
+        buffer: BufferKind,
+        /// Elements declared.
+        count: u64,
+        /// Bytes needed.
+        needed: u64,
+        /// Bytes given.
+        len: u64,
+    },
+    /// A triangle soup (no index buffer) needs a multiple of three vertices.
+    #[error("{at}: {count} vertices without an index buffer is not a multiple of 3")]
+    VertexCountNotMultipleOfThree {
+        /// The input.
+        at: InputLocation,
+        /// The vertex count.
+        count: u32,
+    },
+    /// An index refers past the end of the vertex buffer.
+    #[error("{at}, triangle {triangle}: vertex index {index} is out of range ({num_vertices} vertices)")]
+    IndexOutOfRange {
+        /// The input.
+        at: InputLocation,
+        /// Triangle within the input.
+        triangle: u32,
+        /// The offending index.
+        index: u32,
+        /// Vertices in the input.
+        num_vertices: u32,
+    },
+    /// `primitiveIndexOffset + numPrimitives` must fit in 32 bits.
+    #[error("{at}: primitive index offset {offset} + {count} primitives overflows 32 bits")]
+    PrimitiveIndexOffsetOverflow {
+        /// The input.
+        at: InputLocation,
+        /// The offset.
+        offset: u32,
+        /// Primitives in the input.
+        count: u32,
+    },
+}
+
+impl BuildError {
+    /// The `OptixResult` code the guide gives for this error.
+    pub fn code(&self) -> ErrorCode {
+        match self {
+            BuildError::Unsupported(_) => ErrorCode::NotSupported,
+            BuildError::NoBuildInputs | BuildError::ConflictingBuildFlags => ErrorCode::InvalidValue,
+            _ => ErrorCode::InvalidInput,
+        }
+    }
+}
+
+/// Why a batched query was refused.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+pub enum QueryError {
+    /// The output slice must have one element per ray.
+    #[error("{rays} rays but the output holds {outputs} results")]
+    LengthMismatch {
+        /// Rays given.
+        rays: usize,
+        /// Output elements given.
+        outputs: usize,
+    },
+}

@@ -1,0 +1,7 @@
+//! Per-primitive geometry: bounds and ray intersection for each primitive kind.
+
+mod aabb;
+pub mod triangle;
+pub mod vertex;
+
+pub use aabb::Aabb;

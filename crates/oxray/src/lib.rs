@@ -1,0 +1,60 @@
+//! # oxray
+//!
+//! A programmable ray-tracing engine that implements the programming model of NVIDIA OptiX 9,
+//! with an embedded CPU backend (pure Rust, all cores).
+//!
+//! This release provides geometry acceleration structures (GAS) over triangles and custom
+//! primitives, built from OptiX-style build inputs, and ray queries on them:
+//!
+//! ```
+//! use oxray::{BuildFlags, BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+//! use glam::Vec3;
+//!
+//! // A unit quad in the z = 0 plane, as two triangles.
+//! let vertices = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+//! let triangles = [[0u32, 1, 2], [0, 2, 3]];
+//! let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
+//!     .indices(IndexBuffer::u32x3(&triangles));
+//! let gas = Gas::build(&BuildOptions::new(BuildFlags::PREFER_FAST_TRACE), &[input.into()])?;
+//!
+//! // Closest hit of one ray...
+//! let ray = Ray::new(Vec3::new(0.25, 0.75, 1.0), -Vec3::Z);
+//! let hit = gas.intersect(&ray).expect("the ray hits the quad");
+//! assert_eq!(hit.primitive_index, 1);
+//! assert!(hit.hit_kind.is_triangle_front_face());
+//!
+//! // ... and occlusion of a batch, in parallel.
+//! let rays = vec![ray; 1000];
+//! let mut occluded = vec![false; rays.len()];
+//! gas.occluded_batch(&rays, &mut occluded)?;
+//! assert!(occluded.iter().all(|&o| o));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! The semantics are the guide's: the primitive index carries the input's offset, the SBT-GAS
+//! index sums the records of earlier inputs (§7.3.2), hits lie in the closed interval
+//! `[tmin, tmax]`, triangles report hit kind `0xFE`/`0xFF` for front/back faces, and
+//! triangle intersection is watertight.
+
+#![warn(missing_docs)]
+
+pub mod accel;
+pub mod error;
+pub mod geometry;
+mod query;
+pub mod traversal;
+
+pub use accel::input::{
+    AabbBuffer, BuildInput, BuildInputKind, CustomPrimitiveInput, IndexBuffer, SbtIndexOffsets,
+    SbtIndexSize, TriangleInput, VertexBuffer,
+};
+pub use accel::options::{BuildFlags, BuildOperation, BuildOptions, GeometryFlags};
+pub use accel::{compute_memory_usage, AccelBufferSizes, Gas, GasMemory};
+pub use error::{BuildError, ErrorCode, QueryError};
+pub use geometry::vertex::{IndexFormat, VertexFormat};
+pub use geometry::Aabb;
+pub use query::{
+    CandidateAction, CustomHit, CustomIntersector, CustomPrimitive, Hit, HitKind,
+    NoCustomPrimitives,
+};
+pub use traversal::{Ray, RayError, TraversalStack};

@@ -1,0 +1,334 @@
+//! Ray queries on a GAS: closest hit, any hit (occlusion) and filtered queries, one ray at a time
+//! or in parallel batches. This is the Embree-like path for simulation users and the kernel the
+//! program pipeline is built on.
+
+use crate::accel::Gas;
+use crate::error::QueryError;
+use crate::geometry::triangle::TriangleHit;
+use crate::geometry::Aabb;
+use crate::traversal::{traverse_gas, Decision, GasVisitor, PreparedRay, Primitives, Ray, TraversalStack};
+use rayon::prelude::*;
+
+/// The kind of a hit (`optixGetHitKind`, guide §13.7): `0xFE`/`0xFF` for the front/back face of a
+/// triangle, `0..=127` as reported for a custom primitive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct HitKind(pub u8);
+
+impl HitKind {
+    /// `OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE`.
+    pub const TRIANGLE_FRONT_FACE: HitKind = HitKind(0xFE);
+    /// `OPTIX_HIT_KIND_TRIANGLE_BACK_FACE`.
+    pub const TRIANGLE_BACK_FACE: HitKind = HitKind(0xFF);
+
+    /// A custom hit kind: only the low 7 bits are kept (guide §12).
+    pub const fn custom(kind: u8) -> HitKind {
+        HitKind(kind & 0x7F)
+    }
+
+    /// Whether this is a triangle's front face.
+    pub const fn is_triangle_front_face(self) -> bool {
+        self.0 == 0xFE
+    }
+
+    /// Whether this is a triangle's back face.
+    pub const fn is_triangle_back_face(self) -> bool {
+        self.0 == 0xFF
+    }
+}
+
+/// A hit returned by a query.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Hit {
+    /// Distance along the ray.
+    pub t: f32,
+    /// First barycentric (weight of the triangle's second vertex), or the custom hit's `u`.
+    pub u: f32,
+    /// Second barycentric (weight of the third vertex), or the custom hit's `v`.
+    pub v: f32,
+    /// Index of the primitive within its build input, plus the input's primitive index offset.
+    pub primitive_index: u32,
+    /// SBT-GAS index: the records of earlier inputs plus the primitive's SBT index offset.
+    pub sbt_gas_index: u32,
+    /// Which build input the primitive came from.
+    pub build_input: u32,
+    /// Front or back face of a triangle, or the custom hit kind.
+    pub hit_kind: HitKind,
+}
+
+/// A custom primitive handed to an intersection closure.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CustomPrimitive {
+    /// Primitive index (with the input's offset).
+    pub primitive_index: u32,
+    /// SBT-GAS index.
+    pub sbt_gas_index: u32,
+    /// Build input.
+    pub build_input: u32,
+    /// The primitive's box.
+    pub aabb: Aabb,
+}
+
+/// An intersection reported by a custom-primitive closure.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CustomHit {
+    /// Distance along the ray; ignored unless within the ray's current `[tmin, tmax]`.
+    pub t: f32,
+    /// Hit kind; only the low 7 bits are kept.
+    pub hit_kind: u8,
+    /// User value returned as [`Hit::u`].
+    pub u: f32,
+    /// User value returned as [`Hit::v`].
+    pub v: f32,
+}
+
+/// Intersects custom primitives: given the primitive and the ray with its current interval,
+/// returns the closest intersection in that interval, if any.
+pub trait CustomIntersector {
+    /// Intersects one primitive.
+    fn intersect(&mut self, primitive: &CustomPrimitive, ray: &Ray) -> Option<CustomHit>;
+}
+
+impl<F: FnMut(&CustomPrimitive, &Ray) -> Option<CustomHit>> CustomIntersector for F {
+    fn intersect(&mut self, primitive: &CustomPrimitive, ray: &Ray) -> Option<CustomHit> {
+        self(primitive, ray)
+    }
+}
+
+/// The intersector of [`Gas::intersect`]: custom primitives are never hit.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoCustomPrimitives;
+
+impl CustomIntersector for NoCustomPrimitives {
+    fn intersect(&mut self, _: &CustomPrimitive, _: &Ray) -> Option<CustomHit> {
+        None
+    }
+}
+
+/// What an any-hit filter decides about a candidate (guide §13.13).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CandidateAction {
+    /// Accept: the candidate becomes the closest hit so far and the interval shrinks to it.
+    Accept,
+    /// Ignore (`optixIgnoreIntersection`): not a hit; the interval stays.
+    Ignore,
+    /// Accept and stop traversal (`optixTerminateRay`).
+    Terminate,
+}
+
+struct QueryVisitor<'a, C, F> {
+    gas: &'a Gas,
+    ray: &'a Ray,
+    custom: &'a mut C,
+    filter: F,
+    first_hit_ends: bool,
+    best: Option<Hit>,
+}
+
+impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'_, C, F> {
+    #[inline(always)]
+    fn offer(&mut self, hit: Hit) -> Decision {
+        match (self.filter)(&hit) {
+            CandidateAction::Ignore => Decision::Ignore,
+            action => {
+                self.best = Some(hit);
+                if self.first_hit_ends || action == CandidateAction::Terminate {
+                    Decision::AcceptAndTerminate
+                } else {
+                    Decision::Accept
+                }
+            }
+        }
+    }
+}
+
+impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor for QueryVisitor<'_, C, F> {
+    #[inline(always)]
+    fn triangle(&mut self, slot: u32, h: &TriangleHit) -> Decision {
+        let (primitive_index, sbt_gas_index, build_input) = self.gas.resolve(slot);
+        self.offer(Hit {
+            t: h.t,
+            u: h.u,
+            v: h.v,
+            primitive_index,
+            sbt_gas_index,
+            build_input,
+            hit_kind: if h.front_face {
+                HitKind::TRIANGLE_FRONT_FACE
+            } else {
+                HitKind::TRIANGLE_BACK_FACE
+            },
+        })
+    }
+
+    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32) -> (Option<f32>, bool) {
+        let (primitive_index, sbt_gas_index, build_input) = self.gas.resolve(slot);
+        let prim = CustomPrimitive {
+            primitive_index,
+            sbt_gas_index,
+            build_input,
+            aabb: self.gas.aabbs[slot as usize],
+        };
+        let ray = Ray { tmin, tmax, ..*self.ray };
+        let Some(c) = self.custom.intersect(&prim, &ray) else {
+            return (None, false);
+        };
+        if !(c.t >= tmin && c.t <= tmax) {
+            return (None, false);
+        }
+        let hit = Hit {
+            t: c.t,
+            u: c.u,
+            v: c.v,
+            primitive_index,
+            sbt_gas_index,
+            build_input,
+            hit_kind: HitKind::custom(c.hit_kind),
+        };
+        match self.offer(hit) {
+            Decision::Ignore => (None, false),
+            Decision::Accept => (Some(c.t), false),
+            Decision::AcceptAndTerminate => (Some(c.t), true),
+        }
+    }
+}
+
+fn accept_all(_: &Hit) -> CandidateAction {
+    CandidateAction::Accept
+}
+
+impl Gas {
+    fn query<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction>(
+        &self,
+        ray: &Ray,
+        custom: &mut C,
+        filter: F,
+        first_hit_ends: bool,
+        stack: &mut TraversalStack,
+    ) -> Option<Hit> {
+        let prepared = PreparedRay::new(ray)?;
+        let mut v = QueryVisitor {
+            gas: self,
+            ray,
+            custom,
+            filter,
+            first_hit_ends,
+            best: None,
+        };
+        let prims = match self.kind {
+            crate::BuildInputKind::Triangles => Primitives::Triangles(&self.triangles),
+            crate::BuildInputKind::CustomPrimitives => Primitives::Aabbs(&self.aabbs),
+        };
+        traverse_gas(&self.bvh.nodes, prims, &prepared, ray.tmin, ray.tmax, &mut v, stack);
+        v.best
+    }
+
+    /// The closest hit in `[ray.tmin, ray.tmax]`, or `None`. Custom primitives are not hit (use
+    /// [`intersect_with`](Self::intersect_with)); an invalid ray (see [`Ray::validate`]) hits
+    /// nothing. Where two hits are at the same distance, which one is returned is fixed by the
+    /// structure, identical from run to run.
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.query(ray, &mut NoCustomPrimitives, accept_all, false, &mut TraversalStack::new())
+    }
+
+    /// The closest hit, with custom primitives intersected by `custom`.
+    pub fn intersect_with<C: CustomIntersector>(&self, ray: &Ray, custom: &mut C) -> Option<Hit> {
+        self.query(ray, custom, accept_all, false, &mut TraversalStack::new())
+    }
+
+    /// The closest hit that `filter` accepts: an any-hit program in closure form. The filter sees
+    /// each candidate within the current interval (in no particular order, possibly more than
+    /// once per primitive) and may accept, ignore, or accept and terminate.
+    ///
+    /// ```
+    /// # use oxray::{BuildOptions, CandidateAction, Gas, Ray, TriangleInput, VertexBuffer, NoCustomPrimitives};
+    /// # use glam::Vec3;
+    /// // Two parallel triangles; ignore the first primitive to see the one behind it.
+    /// let v = [[-1.0f32, -1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 1.0, 1.0],
+    ///          [-1.0, -1.0, 2.0], [1.0, -1.0, 2.0], [0.0, 1.0, 2.0]];
+    /// let gas = Gas::build(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+    /// let hit = gas.intersect_filtered(&ray, &mut NoCustomPrimitives, |h| {
+    ///     if h.primitive_index == 0 { CandidateAction::Ignore } else { CandidateAction::Accept }
+    /// });
+    /// assert_eq!(hit.unwrap().t, 2.0);
+    /// # Ok::<(), oxray::BuildError>(())
+    /// ```
+    pub fn intersect_filtered<C: CustomIntersector>(
+        &self,
+        ray: &Ray,
+        custom: &mut C,
+        filter: impl FnMut(&Hit) -> CandidateAction,
+    ) -> Option<Hit> {
+        self.query(ray, custom, filter, false, &mut TraversalStack::new())
+    }
+
+    /// Whether anything lies in `[ray.tmin, ray.tmax]` (a shadow or visibility ray): traversal
+    /// stops at the first hit found, which need not be the closest.
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.query(ray, &mut NoCustomPrimitives, accept_all, true, &mut TraversalStack::new())
+            .is_some()
+    }
+
+    /// Whether anything lies in the ray's interval, with custom primitives intersected by
+    /// `custom`.
+    pub fn occluded_with<C: CustomIntersector>(&self, ray: &Ray, custom: &mut C) -> bool {
+        self.query(ray, custom, accept_all, true, &mut TraversalStack::new())
+            .is_some()
+    }
+
+    /// Closest hits of a batch of rays, in parallel on the current rayon pool. The results are
+    /// the same as [`intersect`](Self::intersect) ray by ray, whatever the number of threads.
+    pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [Option<Hit>]) -> Result<(), QueryError> {
+        self.batch(rays, hits, |gas, ray, stack| {
+            gas.query(ray, &mut NoCustomPrimitives, accept_all, false, stack)
+        })
+    }
+
+    /// Occlusion of a batch of rays, in parallel.
+    pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) -> Result<(), QueryError> {
+        self.batch(rays, occluded, |gas, ray, stack| {
+            gas.query(ray, &mut NoCustomPrimitives, accept_all, true, stack)
+                .is_some()
+        })
+    }
+
+    /// Closest hits of a batch, with custom primitives intersected by `custom` (called from
+    /// several threads at once).
+    pub fn intersect_batch_with<C>(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+        custom: &C,
+    ) -> Result<(), QueryError>
+    where
+        C: Fn(&CustomPrimitive, &Ray) -> Option<CustomHit> + Sync,
+    {
+        self.batch(rays, hits, |gas, ray, stack| {
+            gas.query(ray, &mut |p: &CustomPrimitive, r: &Ray| custom(p, r), accept_all, false, stack)
+        })
+    }
+
+    fn batch<T: Send>(
+        &self,
+        rays: &[Ray],
+        out: &mut [T],
+        f: impl Fn(&Gas, &Ray, &mut TraversalStack) -> T + Sync,
+    ) -> Result<(), QueryError> {
+        if rays.len() != out.len() {
+            return Err(QueryError::LengthMismatch {
+                rays: rays.len(),
+                outputs: out.len(),
+            });
+        }
+        const CHUNK: usize = 256;
+        rays.par_chunks(CHUNK)
+            .zip(out.par_chunks_mut(CHUNK))
+            .for_each(|(rays, out)| {
+                let mut stack = TraversalStack::new();
+                for (r, o) in rays.iter().zip(out) {
+                    *o = f(self, r, &mut stack);
+                }
+            });
+        Ok(())
+    }
+}

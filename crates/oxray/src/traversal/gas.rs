@@ -1,0 +1,184 @@
+//! The traversal kernel over one GAS: a 4-wide BVH walked nearest-first with a fixed-size stack,
+//! with the decisions about candidate hits delegated to a [`GasVisitor`]. Queries, any-hit filters
+//! and (later) the program pipeline are visitors, monomorphised into the loop.
+
+use super::ray::{max_ignore_nan, min_ignore_nan, PreparedRay, ROBUST_FAR};
+use crate::accel::bvh::{Bvh4Node, TRAVERSAL_STACK_SIZE};
+use crate::geometry::triangle::TriangleHit;
+use crate::geometry::Aabb;
+
+/// What a visitor decides about a candidate hit (guide §13.4, §13.13).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Decision {
+    /// Not a hit (an any-hit program ignored it, or it was culled): tmax stays.
+    Ignore,
+    /// Accepted: tmax shrinks to its t.
+    Accept,
+    /// Accepted, and traversal ends (terminate-ray, or terminate-on-first-hit).
+    AcceptAndTerminate,
+}
+
+/// Receives the candidate hits of a traversal.
+pub(crate) trait GasVisitor {
+    /// A triangle hit within the current interval, at leaf slot `slot`.
+    fn triangle(&mut self, slot: u32, hit: &TriangleHit) -> Decision;
+    /// A custom primitive whose box the ray enters within `[tmin, tmax]`. Returns the t of the
+    /// closest hit it accepted (the new tmax), and whether traversal must end.
+    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32) -> (Option<f32>, bool);
+}
+
+/// The primitives of a GAS in leaf-slot order.
+#[derive(Clone, Copy)]
+pub(crate) enum Primitives<'a> {
+    Triangles(&'a [[[f32; 3]; 3]]),
+    Aabbs(&'a [Aabb]),
+}
+
+#[derive(Clone, Copy, Default)]
+struct Entry {
+    child: u32,
+    count: u32,
+    dist: f32,
+}
+
+/// Scratch space for traversal: a stack deep enough for any BVH oxray builds. Reusing one across
+/// the rays of a batch saves initialising it per ray.
+pub struct TraversalStack {
+    entries: [Entry; TRAVERSAL_STACK_SIZE],
+}
+
+impl Default for TraversalStack {
+    fn default() -> Self {
+        TraversalStack {
+            entries: [Entry::default(); TRAVERSAL_STACK_SIZE],
+        }
+    }
+}
+
+impl TraversalStack {
+    /// A new stack.
+    pub fn new() -> Self {
+        Self::default()
+    }
+}
+
+/// Tests a ray against the four boxes of a node; returns the entry distances and a hit mask.
+#[inline(always)]
+fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 4], u32) {
+    let b = &node.bounds;
+    let mut tn = [tmin; 4];
+    let mut tf = [tmax; 4];
+    for a in 0..3 {
+        let nb = &b[r.near[a]];
+        let fb = &b[r.far[a]];
+        let (o, inv) = (r.org[a], r.inv[a]);
+        for l in 0..4 {
+            tn[l] = max_ignore_nan(tn[l], (nb[l] - o) * inv);
+            tf[l] = min_ignore_nan(tf[l], (fb[l] - o) * inv * ROBUST_FAR);
+        }
+    }
+    let mut mask = 0;
+    for l in 0..4 {
+        mask |= ((tn[l] <= tf[l]) as u32) << l;
+    }
+    (tn, mask)
+}
+
+/// Walks the BVH from the root, nearest child first, calling the visitor for every candidate in
+/// the shrinking interval. Returns the final tmax.
+#[inline(always)]
+pub(crate) fn traverse_gas<V: GasVisitor>(
+    nodes: &[Bvh4Node],
+    prims: Primitives<'_>,
+    ray: &PreparedRay,
+    tmin: f32,
+    mut tmax: f32,
+    visitor: &mut V,
+    stack: &mut TraversalStack,
+) -> f32 {
+    let stack = &mut stack.entries;
+    let mut sp = 0usize;
+    let mut cur = Entry {
+        child: 0,
+        count: 0,
+        dist: tmin,
+    };
+    loop {
+        if cur.count == 0 {
+            let node = &nodes[cur.child as usize];
+            let (dist, mut mask) = intersect4(node, ray, tmin, tmax);
+            if mask != 0 {
+                // Collect the hit children, then order them nearest first.
+                let mut hits = [Entry::default(); 4];
+                let mut n = 0;
+                while mask != 0 {
+                    let l = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    hits[n] = Entry {
+                        child: node.child[l],
+                        count: node.count[l],
+                        dist: dist[l],
+                    };
+                    n += 1;
+                }
+                if n > 1 {
+                    for i in 1..n {
+                        let e = hits[i];
+                        let mut j = i;
+                        while j > 0 && hits[j - 1].dist > e.dist {
+                            hits[j] = hits[j - 1];
+                            j -= 1;
+                        }
+                        hits[j] = e;
+                    }
+                    for k in (1..n).rev() {
+                        stack[sp] = hits[k];
+                        sp += 1;
+                    }
+                }
+                cur = hits[0];
+                continue;
+            }
+        } else {
+            let start = cur.child as usize;
+            let end = start + cur.count as usize;
+            match prims {
+                Primitives::Triangles(tris) => {
+                    for (slot, t) in tris[start..end].iter().enumerate() {
+                        if let Some(h) = ray.tri.intersect(&t[0], &t[1], &t[2], tmin, tmax) {
+                            match visitor.triangle((start + slot) as u32, &h) {
+                                Decision::Ignore => {}
+                                Decision::Accept => tmax = h.t,
+                                Decision::AcceptAndTerminate => return h.t,
+                            }
+                        }
+                    }
+                }
+                Primitives::Aabbs(boxes) => {
+                    for (slot, b) in boxes[start..end].iter().enumerate() {
+                        if ray.hits_box(b, tmin, tmax) {
+                            let (t, stop) = visitor.custom((start + slot) as u32, tmin, tmax);
+                            if let Some(t) = t {
+                                tmax = min_ignore_nan(tmax, t);
+                            }
+                            if stop {
+                                return tmax;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        // Pop the next entry that may still hold a hit.
+        loop {
+            if sp == 0 {
+                return tmax;
+            }
+            sp -= 1;
+            cur = stack[sp];
+            if cur.dist <= tmax {
+                break;
+            }
+        }
+    }
+}
