@@ -58,3 +58,8 @@ pub use query::{
     NoCustomPrimitives,
 };
 pub use traversal::{Ray, RayError, TraversalStack};
+
+/// The README's example, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+struct ReadmeDoctests;

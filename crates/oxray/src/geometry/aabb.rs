@@ -50,19 +50,19 @@ impl Aabb {
         })
     }
 
-    /// Grows the box to hold `p`.
+    /// Grows the box to hold `p`. NaN coordinates are ignored.
     #[inline]
     pub fn grow(&mut self, p: Vec3) {
-        self.min = self.min.min(p);
-        self.max = self.max.max(p);
+        self.min = min3(self.min, p);
+        self.max = max3(self.max, p);
     }
 
-    /// The smallest box holding both boxes.
+    /// The smallest box holding both boxes. NaN coordinates of `other` are ignored.
     #[inline]
     pub fn union(&self, other: &Aabb) -> Aabb {
         Aabb {
-            min: self.min.min(other.min),
-            max: self.max.max(other.max),
+            min: min3(self.min, other.min),
+            max: max3(self.max, other.max),
         }
     }
 
@@ -123,4 +123,19 @@ impl Aabb {
             2
         }
     }
+}
+
+/// Component-wise minimum that keeps `acc` where `x` is NaN; unlike `f32::min` it compiles to a
+/// single `minss`, which matters in the builder's inner loops.
+#[inline(always)]
+fn min3(acc: Vec3, x: Vec3) -> Vec3 {
+    let m = |a: f32, b: f32| if b < a { b } else { a };
+    Vec3::new(m(acc.x, x.x), m(acc.y, x.y), m(acc.z, x.z))
+}
+
+/// Component-wise maximum that keeps `acc` where `x` is NaN.
+#[inline(always)]
+fn max3(acc: Vec3, x: Vec3) -> Vec3 {
+    let m = |a: f32, b: f32| if b > a { b } else { a };
+    Vec3::new(m(acc.x, x.x), m(acc.y, x.y), m(acc.z, x.z))
 }

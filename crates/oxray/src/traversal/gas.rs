@@ -2,7 +2,7 @@
 //! with the decisions about candidate hits delegated to a [`GasVisitor`]. Queries, any-hit filters
 //! and (later) the program pipeline are visitors, monomorphised into the loop.
 
-use super::ray::{max_ignore_nan, min_ignore_nan, PreparedRay, ROBUST_FAR};
+use super::ray::{min_ignore_nan, PreparedRay, ROBUST_FAR};
 use crate::accel::bvh::{Bvh4Node, TRAVERSAL_STACK_SIZE};
 use crate::geometry::triangle::TriangleHit;
 use crate::geometry::Aabb;
@@ -63,8 +63,44 @@ impl TraversalStack {
 }
 
 /// Tests a ray against the four boxes of a node; returns the entry distances and a hit mask.
+///
+/// The slab distances use NaN-ignoring min/max: a NaN (origin exactly on a slab plane of an axis
+/// the ray does not move along) leaves the accumulated interval unchanged, as it should for a
+/// closed box.
+#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 4], u32) {
+    use std::arch::x86_64::*;
+    let b = &node.bounds;
+    // SAFETY: SSE is part of the x86_64 baseline, so the intrinsics are available. `Bvh4Node` is
+    // `repr(C, align(64))` with `bounds` (rows of `[f32; 4]`) first, so each row is a 16-byte
+    // aligned load of 4 floats; `dist` is 4 writable floats (unaligned store).
+    unsafe {
+        let load = |row: &[f32; 4]| _mm_load_ps(row.as_ptr());
+        let mut tn = _mm_set1_ps(tmin);
+        let mut tf = _mm_set1_ps(tmax);
+        let robust = _mm_set1_ps(ROBUST_FAR);
+        for a in 0..3 {
+            let o = _mm_set1_ps(r.org[a]);
+            let inv = _mm_set1_ps(r.inv[a]);
+            let n = _mm_mul_ps(_mm_sub_ps(load(&b[r.near[a]]), o), inv);
+            let f = _mm_mul_ps(_mm_mul_ps(_mm_sub_ps(load(&b[r.far[a]]), o), inv), robust);
+            // maxps/minps return their second operand when either is NaN.
+            tn = _mm_max_ps(n, tn);
+            tf = _mm_min_ps(f, tf);
+        }
+        let mask = _mm_movemask_ps(_mm_cmple_ps(tn, tf)) as u32;
+        let mut dist = [0.0f32; 4];
+        _mm_storeu_ps(dist.as_mut_ptr(), tn);
+        (dist, mask)
+    }
+}
+
+/// Portable form of the 4-wide box test.
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 4], u32) {
+    use super::ray::{max_ignore_nan, min_ignore_nan};
     let b = &node.bounds;
     let mut tn = [tmin; 4];
     let mut tf = [tmax; 4];

@@ -6,85 +6,140 @@
 use super::bvh2::{Bvh2, Bvh2Node};
 use super::FORCE_MEDIAN_DEPTH;
 use crate::geometry::Aabb;
-use glam::Vec3;
 use rayon::prelude::*;
 
 /// Tuning of the SAH builder; the build flags choose one of the presets.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct BuildConfig {
-    /// Bins per axis.
+    /// Bins per axis: 8, 16 or 32 (other values round up to one of these, at most 32).
     pub bins: usize,
     /// Largest leaf the SAH may choose; more primitives than this are always split.
     pub max_leaf_size: usize,
     /// Cost of visiting a node relative to intersecting one primitive.
     pub traversal_cost: f32,
-    /// Nodes with at most this many primitives are split by a full SAH sweep (exact SAH over
-    /// sorted centroids) instead of bins; 0 disables the sweep.
+    /// Nodes with at most this many primitives (at most 256) are split by a full SAH sweep
+    /// (exact SAH over sorted centroids) instead of bins; 0 disables the sweep.
     pub sweep_threshold: usize,
 }
 
 impl BuildConfig {
-    /// `PREFER_FAST_BUILD`: few bins, larger leaves.
+    /// `PREFER_FAST_BUILD`: few bins.
     pub const FAST_BUILD: BuildConfig = BuildConfig {
         bins: 8,
         max_leaf_size: 8,
-        traversal_cost: 1.0,
+        traversal_cost: 2.0,
         sweep_threshold: 0,
     };
     /// The default trade-off.
     pub const BALANCED: BuildConfig = BuildConfig {
         bins: 16,
         max_leaf_size: 8,
-        traversal_cost: 1.0,
-        sweep_threshold: 0,
+        traversal_cost: 3.0,
+        sweep_threshold: 12,
     };
     /// `PREFER_FAST_TRACE`: more bins, and an exact SAH sweep near the leaves.
     pub const FAST_TRACE: BuildConfig = BuildConfig {
         bins: 32,
         max_leaf_size: 8,
-        traversal_cost: 1.0,
-        sweep_threshold: 256,
+        traversal_cost: 2.0,
+        sweep_threshold: 128,
     };
 }
 
-const MAX_BINS: usize = 64;
+/// Largest node the exact sweep handles (its scratch lives on the stack).
+const MAX_SWEEP: usize = 256;
 /// Subtrees smaller than this are built on the current thread.
 const PARALLEL_SUBTREE: usize = 4096;
 /// Nodes larger than this bin their primitives in parallel chunks of this size.
 const PARALLEL_BINNING: usize = 1 << 15;
 
-/// The builder's view of one primitive.
-#[repr(C)]
+/// A box with a fourth, unused lane, so that unions compile to `minps`/`maxps`.
+#[repr(C, align(16))]
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct PrimRef {
-    min: [f32; 3],
-    id: u32,
-    max: [f32; 3],
-    _pad: u32,
+struct Box4 {
+    lo: [f32; 4],
+    hi: [f32; 4],
 }
 
-impl PrimRef {
-    #[inline]
-    fn centroid(&self, axis: usize) -> f32 {
-        self.min[axis] * 0.5 + self.max[axis] * 0.5
+impl Box4 {
+    const EMPTY: Box4 = Box4 {
+        lo: [f32::INFINITY; 4],
+        hi: [f32::NEG_INFINITY; 4],
+    };
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn grow(&mut self, o: &Box4) {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE is part of the x86_64 baseline; `Box4` is `align(16)` and its rows are
+        // `[f32; 4]`, so the loads and stores are aligned and in bounds. `minps(a, b)` returns `b`
+        // when either is NaN, so NaN in `o` keeps `self`, as the portable form does.
+        unsafe {
+            let lo = _mm_min_ps(_mm_load_ps(o.lo.as_ptr()), _mm_load_ps(self.lo.as_ptr()));
+            let hi = _mm_max_ps(_mm_load_ps(o.hi.as_ptr()), _mm_load_ps(self.hi.as_ptr()));
+            _mm_store_ps(self.lo.as_mut_ptr(), lo);
+            _mm_store_ps(self.hi.as_mut_ptr(), hi);
+        }
     }
-    #[inline]
-    fn bounds(&self) -> Aabb {
-        Aabb::new(self.min.into(), self.max.into())
+
+    #[cfg(not(target_arch = "x86_64"))]
+    #[inline(always)]
+    fn grow(&mut self, o: &Box4) {
+        for i in 0..4 {
+            self.lo[i] = if o.lo[i] < self.lo[i] { o.lo[i] } else { self.lo[i] };
+            self.hi[i] = if o.hi[i] > self.hi[i] { o.hi[i] } else { self.hi[i] };
+        }
+    }
+
+    #[inline(always)]
+    fn grow_point(&mut self, p: &[f32; 4]) {
+        for i in 0..4 {
+            self.lo[i] = if p[i] < self.lo[i] { p[i] } else { self.lo[i] };
+            self.hi[i] = if p[i] > self.hi[i] { p[i] } else { self.hi[i] };
+        }
+    }
+
+    fn aabb(&self) -> Aabb {
+        Aabb::new(
+            [self.lo[0], self.lo[1], self.lo[2]].into(),
+            [self.hi[0], self.hi[1], self.hi[2]].into(),
+        )
+    }
+
+    fn half_area(&self) -> f32 {
+        self.aabb().half_area()
+    }
+}
+
+/// The builder's view of one primitive: its box, with the primitive's id in the bits of the
+/// unused fourth lane of `hi` (ids are below 2^29, so those bits are a small finite float).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PrimRef(Box4);
+
+impl PrimRef {
+    fn new(b: &Aabb, id: u32) -> Self {
+        PrimRef(Box4 {
+            lo: [b.min.x, b.min.y, b.min.z, 0.0],
+            hi: [b.max.x, b.max.y, b.max.z, f32::from_bits(id)],
+        })
+    }
+
+    #[inline(always)]
+    fn id(&self) -> u32 {
+        self.0.hi[3].to_bits()
+    }
+
+    /// The centroid; binning and partitioning both use this, so they agree bit for bit.
+    #[inline(always)]
+    fn centroid(&self) -> [f32; 4] {
+        let b = &self.0;
+        std::array::from_fn(|i| b.lo[i] * 0.5 + b.hi[i] * 0.5)
     }
 }
 
 enum Node {
     Leaf { bounds: Aabb, start: u32, count: u32 },
     Inner { bounds: Aabb, children: Box<[Node; 2]> },
-}
-
-impl Node {
-    fn bounds(&self) -> Aabb {
-        match self {
-            Node::Leaf { bounds, .. } | Node::Inner { bounds, .. } => *bounds,
-        }
-    }
 }
 
 /// Bytes of working memory [`build_bvh2`] allocates for `n` primitives, at most.
@@ -98,31 +153,27 @@ pub(crate) fn temp_bytes(n: usize) -> usize {
 /// Builds a binary BVH over `bounds` (every box must be finite and valid).
 pub(crate) fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
     let config = BuildConfig {
-        bins: config.bins.clamp(2, MAX_BINS),
+        bins: config.bins.clamp(8, 32).next_power_of_two(),
         max_leaf_size: config.max_leaf_size.max(1),
+        sweep_threshold: config.sweep_threshold.min(MAX_SWEEP),
         ..*config
     };
     let mut refs: Vec<PrimRef> = bounds
         .par_iter()
         .enumerate()
-        .map(|(i, b)| PrimRef {
-            min: b.min.to_array(),
-            id: i as u32,
-            max: b.max.to_array(),
-            _pad: 0,
-        })
+        .map(|(i, b)| PrimRef::new(b, i as u32))
         .collect();
     if refs.is_empty() {
         return Bvh2::default();
     }
+    let (root_bounds, root_centroids) = reduce(&refs);
+    let root = build_node(&mut refs, 0, root_bounds, root_centroids, 0, &config);
     let mut nodes = Vec::with_capacity(2 * refs.len());
-    let root_bounds = reduce_bounds(&refs);
-    let root = build_node(&mut refs, 0, root_bounds, 0, &config);
     nodes.push(placeholder());
     flatten(root, 0, &mut nodes);
     Bvh2 {
         nodes,
-        prim_order: refs.iter().map(|r| r.id).collect(),
+        prim_order: refs.iter().map(PrimRef::id).collect(),
     }
 }
 
@@ -166,41 +217,39 @@ fn flatten(node: Node, at: usize, nodes: &mut Vec<Bvh2Node>) {
     }
 }
 
-fn reduce_bounds(refs: &[PrimRef]) -> Aabb {
-    let fold = |b: Aabb, r: &PrimRef| b.union(&r.bounds());
-    if refs.len() > PARALLEL_BINNING {
-        refs.par_chunks(PARALLEL_BINNING)
-            .map(|c| c.iter().fold(Aabb::EMPTY, fold))
-            .reduce(|| Aabb::EMPTY, |a, b| a.union(&b))
-    } else {
-        refs.iter().fold(Aabb::EMPTY, fold)
-    }
-}
-
-fn centroid_bounds(refs: &[PrimRef]) -> Aabb {
-    let fold = |mut b: Aabb, r: &PrimRef| {
-        b.grow(Vec3::new(r.centroid(0), r.centroid(1), r.centroid(2)));
-        b
+/// The box of the primitives and the box of their centroids.
+fn reduce(refs: &[PrimRef]) -> (Box4, Box4) {
+    let fold = |(mut b, mut c): (Box4, Box4), r: &PrimRef| {
+        b.grow(&r.0);
+        c.grow_point(&r.centroid());
+        (b, c)
     };
+    let empty = (Box4::EMPTY, Box4::EMPTY);
     if refs.len() > PARALLEL_BINNING {
         refs.par_chunks(PARALLEL_BINNING)
-            .map(|c| c.iter().fold(Aabb::EMPTY, fold))
-            .reduce(|| Aabb::EMPTY, |a, b| a.union(&b))
+            .map(|c| c.iter().fold(empty, fold))
+            .reduce(
+                || empty,
+                |(mut a, mut b), (c, d)| {
+                    a.grow(&c);
+                    b.grow(&d);
+                    (a, b)
+                },
+            )
     } else {
-        refs.iter().fold(Aabb::EMPTY, fold)
+        refs.iter().fold(empty, fold)
     }
 }
 
-/// A chosen split: primitives go left when `goes_left` says so.
+/// A chosen split.
 #[derive(Clone, Copy)]
 enum Split {
-    /// Bin-based: left iff bin(centroid[axis]) < bin.
+    /// Left iff the bin of the centroid along `axis` is below `bin`.
     Binned {
         axis: usize,
         bin: usize,
         cmin: f32,
         scale: f32,
-        bins: usize,
     },
     /// Sorted by centroid along `axis`, the first `count` go left.
     Sorted { axis: usize, count: usize },
@@ -208,131 +257,171 @@ enum Split {
     Median { axis: usize },
 }
 
-#[inline]
-fn bin_of(c: f32, cmin: f32, scale: f32, bins: usize) -> usize {
+#[inline(always)]
+fn bin_of<const B: usize>(c: f32, cmin: f32, scale: f32) -> usize {
     // `as usize` saturates (and maps NaN to 0), so every centroid lands in a valid bin.
-    (((c - cmin) * scale) as usize).min(bins - 1)
+    (((c - cmin) * scale) as usize).min(B - 1)
 }
 
+/// The bins of a primitive's centroid on the three axes; equal, axis by axis, to [`bin_of`]
+/// applied to [`PrimRef::centroid`] (same operations, and clamping before or after the
+/// truncation gives the same integer).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -> [usize; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of the x86_64 baseline; all pointers come from `[f32; 4]`/`[i32; 4]`
+    // arrays (the `Box4` rows are 16-byte aligned; the others are loaded unaligned).
+    unsafe {
+        let half = _mm_set1_ps(0.5);
+        let c = _mm_add_ps(
+            _mm_mul_ps(_mm_load_ps(r.0.lo.as_ptr()), half),
+            _mm_mul_ps(_mm_load_ps(r.0.hi.as_ptr()), half),
+        );
+        let f = _mm_mul_ps(_mm_sub_ps(c, _mm_loadu_ps(cmin.as_ptr())), _mm_loadu_ps(scale.as_ptr()));
+        // maxps returns the second operand (0) for NaN, as `as usize` maps NaN to 0.
+        let f = _mm_min_ps(_mm_max_ps(f, _mm_setzero_ps()), _mm_set1_ps((B - 1) as f32));
+        let mut out = [0i32; 4];
+        _mm_storeu_si128(out.as_mut_ptr().cast(), _mm_cvttps_epi32(f));
+        [out[0] as usize, out[1] as usize, out[2] as usize, 0]
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -> [usize; 4] {
+    let c = r.centroid();
+    std::array::from_fn(|a| if a < 3 { bin_of::<B>(c[a], cmin[a], scale[a]) } else { 0 })
+}
+
+/// Per axis and bin: the primitives' box and their count.
 #[derive(Clone, Copy)]
-struct Bins {
-    bounds: [[Aabb; MAX_BINS]; 3],
-    counts: [[u32; MAX_BINS]; 3],
+struct Bins<const B: usize> {
+    boxes: [[Box4; B]; 3],
+    counts: [[u32; B]; 3],
 }
 
-impl Bins {
+impl<const B: usize> Bins<B> {
     fn new() -> Self {
         Bins {
-            bounds: [[Aabb::EMPTY; MAX_BINS]; 3],
-            counts: [[0; MAX_BINS]; 3],
+            boxes: [[Box4::EMPTY; B]; 3],
+            counts: [[0; B]; 3],
         }
     }
-    fn merge(mut self, o: &Bins) -> Bins {
+
+    fn merge(mut self, o: &Self) -> Self {
         for a in 0..3 {
-            for b in 0..MAX_BINS {
-                self.bounds[a][b] = self.bounds[a][b].union(&o.bounds[a][b]);
+            for b in 0..B {
+                self.boxes[a][b].grow(&o.boxes[a][b]);
                 self.counts[a][b] += o.counts[a][b];
             }
         }
         self
     }
-}
 
-fn fill_bins(refs: &[PrimRef], cmin: [f32; 3], scale: [f32; 3], bins: usize) -> Bins {
-    let fill = |chunk: &[PrimRef]| {
-        let mut b = Bins::new();
-        for r in chunk {
-            let rb = r.bounds();
+    /// Bins every primitive on the three axes at once.
+    fn fill(refs: &[PrimRef], cmin: &[f32; 4], scale: &[f32; 4]) -> Self {
+        let mut bins = Self::new();
+        for r in refs {
+            let idx = bin_indices::<B>(r, cmin, scale);
             for axis in 0..3 {
-                let i = bin_of(r.centroid(axis), cmin[axis], scale[axis], bins);
-                b.bounds[axis][i] = b.bounds[axis][i].union(&rb);
-                b.counts[axis][i] += 1;
+                let i = idx[axis];
+                bins.boxes[axis][i].grow(&r.0);
+                bins.counts[axis][i] += 1;
             }
         }
-        b
-    };
-    if refs.len() > PARALLEL_BINNING {
-        refs.par_chunks(PARALLEL_BINNING)
-            .map(fill)
-            .reduce(Bins::new, |a, b| a.merge(&b))
-    } else {
-        fill(refs)
+        bins
     }
 }
 
-/// Returns the best binned split and its SAH cost (in units of primitive intersections, relative
-/// to the parent's area).
-fn best_binned_split(refs: &[PrimRef], cb: &Aabb, config: &BuildConfig) -> Option<(Split, f32)> {
-    let bins = config.bins;
-    let ext = cb.extent();
-    let mut scale = [0.0f32; 3];
-    let cmin = cb.min.to_array();
+/// The boxes of the two sides of a split.
+#[derive(Clone, Copy)]
+struct Sides {
+    bounds: [Box4; 2],
+    centroids: [Box4; 2],
+}
+
+/// Returns the best binned split, its SAH cost (area-weighted primitive count, not yet divided
+/// by the parent's area) and the boxes of its sides (the centroid boxes are filled in by the
+/// partition).
+fn best_binned_split<const B: usize>(refs: &[PrimRef], cb: &Box4) -> Option<(Split, f32, [Box4; 2])> {
+    let mut scale = [0.0f32; 4];
     for axis in 0..3 {
-        let e = ext[axis];
-        let s = bins as f32 * (1.0 - 1e-6) / e;
+        let e = cb.hi[axis] - cb.lo[axis];
+        let s = B as f32 * (1.0 - 1e-6) / e;
         scale[axis] = if e > 0.0 && s.is_finite() { s } else { 0.0 };
     }
-    if scale == [0.0; 3] {
+    if scale == [0.0; 4] {
         return None;
     }
-    let b = fill_bins(refs, cmin, scale, bins);
-    let mut best: Option<(Split, f32)> = None;
+    let bins = if refs.len() > PARALLEL_BINNING {
+        refs.par_chunks(PARALLEL_BINNING)
+            .map(|c| Bins::<B>::fill(c, &cb.lo, &scale))
+            .reduce(Bins::new, |a, b| a.merge(&b))
+    } else {
+        Bins::<B>::fill(refs, &cb.lo, &scale)
+    };
+    let mut best: Option<(usize, usize, f32)> = None;
     for axis in 0..3 {
         if scale[axis] == 0.0 {
             continue;
         }
-        // Sweep from the right to get right-side areas and counts, then from the left.
-        let mut right_area = [0.0f32; MAX_BINS];
-        let mut right_count = [0u32; MAX_BINS];
-        let mut acc = Aabb::EMPTY;
+        // Sweep from the right for right-side areas and counts, then from the left.
+        let mut right_area = [0.0f32; B];
+        let mut right_count = [0u32; B];
+        let mut acc = Box4::EMPTY;
         let mut n = 0u32;
-        for i in (1..bins).rev() {
-            acc = acc.union(&b.bounds[axis][i]);
-            n += b.counts[axis][i];
+        for i in (1..B).rev() {
+            acc.grow(&bins.boxes[axis][i]);
+            n += bins.counts[axis][i];
             right_area[i] = acc.half_area();
             right_count[i] = n;
         }
-        let mut acc = Aabb::EMPTY;
+        let mut acc = Box4::EMPTY;
         let mut n = 0u32;
-        for i in 1..bins {
-            acc = acc.union(&b.bounds[axis][i - 1]);
-            n += b.counts[axis][i - 1];
+        for i in 1..B {
+            acc.grow(&bins.boxes[axis][i - 1]);
+            n += bins.counts[axis][i - 1];
             if n == 0 || right_count[i] == 0 {
                 continue;
             }
             let cost = acc.half_area() * n as f32 + right_area[i] * right_count[i] as f32;
-            if cost.is_finite() && best.is_none_or(|(_, c)| cost < c) {
-                best = Some((
-                    Split::Binned {
-                        axis,
-                        bin: i,
-                        cmin: cmin[axis],
-                        scale: scale[axis],
-                        bins,
-                    },
-                    cost,
-                ));
+            if cost.is_finite() && best.is_none_or(|(_, _, c)| cost < c) {
+                best = Some((axis, i, cost));
             }
         }
     }
-    best
+    let (axis, bin, cost) = best?;
+    let side = |r: std::ops::Range<usize>| {
+        bins.boxes[axis][r].iter().fold(Box4::EMPTY, |mut a, b| {
+            a.grow(b);
+            a
+        })
+    };
+    let split = Split::Binned {
+        axis,
+        bin,
+        cmin: cb.lo[axis],
+        scale: scale[axis],
+    };
+    Some((split, cost, [side(0..bin), side(bin..B)]))
 }
 
 /// Exact SAH: sorts along each axis and evaluates every split position.
 fn best_sweep_split(refs: &mut [PrimRef]) -> Option<(Split, f32)> {
     let n = refs.len();
-    let mut right_area = vec![0.0f32; n];
+    let mut right_area = [0.0f32; MAX_SWEEP];
     let mut best: Option<(Split, f32)> = None;
     for axis in 0..3 {
         sort_by_centroid(refs, axis);
-        let mut acc = Aabb::EMPTY;
+        let mut acc = Box4::EMPTY;
         for i in (1..n).rev() {
-            acc = acc.union(&refs[i].bounds());
+            acc.grow(&refs[i].0);
             right_area[i] = acc.half_area();
         }
-        let mut acc = Aabb::EMPTY;
+        let mut acc = Box4::EMPTY;
         for i in 1..n {
-            acc = acc.union(&refs[i - 1].bounds());
+            acc.grow(&refs[i - 1].0);
             let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
             if cost.is_finite() && best.is_none_or(|(_, c)| cost < c) {
                 best = Some((Split::Sorted { axis, count: i }, cost));
@@ -345,48 +434,53 @@ fn best_sweep_split(refs: &mut [PrimRef]) -> Option<(Split, f32)> {
 fn sort_by_centroid(refs: &mut [PrimRef], axis: usize) {
     // Ties are broken by id so that the order (and the tree) is fully determined.
     refs.sort_unstable_by(|a, b| {
-        a.centroid(axis)
-            .total_cmp(&b.centroid(axis))
-            .then(a.id.cmp(&b.id))
+        a.centroid()[axis]
+            .total_cmp(&b.centroid()[axis])
+            .then(a.id().cmp(&b.id()))
     });
 }
 
-/// Applies a split; returns how many primitives went left.
-fn partition(refs: &mut [PrimRef], split: Split) -> usize {
+/// Applies a split; returns how many primitives went left and, for a binned split, the boxes of
+/// the sides' centroids.
+fn partition<const B: usize>(refs: &mut [PrimRef], split: Split) -> (usize, Option<[Box4; 2]>) {
     match split {
         Split::Binned {
             axis,
             bin,
             cmin,
             scale,
-            bins,
         } => {
+            let mut cl = Box4::EMPTY;
+            let mut cr = Box4::EMPTY;
             let mut i = 0;
             let mut j = refs.len();
             while i < j {
-                if bin_of(refs[i].centroid(axis), cmin, scale, bins) < bin {
+                let c = refs[i].centroid();
+                if bin_of::<B>(c[axis], cmin, scale) < bin {
+                    cl.grow_point(&c);
                     i += 1;
                 } else {
+                    cr.grow_point(&c);
                     j -= 1;
                     refs.swap(i, j);
                 }
             }
-            i
+            (i, Some([cl, cr]))
         }
         Split::Sorted { axis, count } => {
             sort_by_centroid(refs, axis);
-            count
+            (count, None)
         }
         Split::Median { axis } => {
             let mid = refs.len() / 2;
             if axis < 3 {
                 refs.select_nth_unstable_by(mid, |a, b| {
-                    a.centroid(axis)
-                        .total_cmp(&b.centroid(axis))
-                        .then(a.id.cmp(&b.id))
+                    a.centroid()[axis]
+                        .total_cmp(&b.centroid()[axis])
+                        .then(a.id().cmp(&b.id()))
                 });
             }
-            mid
+            (mid, None)
         }
     }
 }
@@ -394,32 +488,50 @@ fn partition(refs: &mut [PrimRef], split: Split) -> usize {
 fn build_node(
     refs: &mut [PrimRef],
     offset: usize,
-    bounds: Aabb,
+    bounds: Box4,
+    cb: Box4,
+    depth: usize,
+    config: &BuildConfig,
+) -> Node {
+    match config.bins {
+        8 => build_node_b::<8>(refs, offset, bounds, cb, depth, config),
+        16 => build_node_b::<16>(refs, offset, bounds, cb, depth, config),
+        _ => build_node_b::<32>(refs, offset, bounds, cb, depth, config),
+    }
+}
+
+fn build_node_b<const B: usize>(
+    refs: &mut [PrimRef],
+    offset: usize,
+    bounds: Box4,
+    cb: Box4,
     depth: usize,
     config: &BuildConfig,
 ) -> Node {
     let n = refs.len();
     let leaf = Node::Leaf {
-        bounds,
+        bounds: bounds.aabb(),
         start: offset as u32,
         count: n as u32,
     };
     if n <= 1 {
         return leaf;
     }
-    let cb = centroid_bounds(refs);
+    let mut side_bounds = None;
     let split = if depth >= FORCE_MEDIAN_DEPTH {
         None
     } else if n <= config.sweep_threshold {
         best_sweep_split(refs)
     } else {
-        best_binned_split(refs, &cb, config)
+        best_binned_split::<B>(refs, &cb).map(|(split, cost, sides)| {
+            side_bounds = Some(sides);
+            (split, cost)
+        })
     };
     let split = match split {
         Some((split, cost)) => {
             // SAH in units of one primitive test, relative to this node's area.
-            let area = bounds.half_area();
-            let split_cost = config.traversal_cost + cost / area;
+            let split_cost = config.traversal_cost + cost / bounds.half_area();
             let leaf_cost = n as f32;
             if n <= config.max_leaf_size && (leaf_cost <= split_cost || !split_cost.is_finite()) {
                 return leaf;
@@ -430,38 +542,59 @@ fn build_node(
             if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH {
                 return leaf;
             }
-            let ext = cb.extent();
-            let axis = cb.largest_axis();
+            let e = [cb.hi[0] - cb.lo[0], cb.hi[1] - cb.lo[1], cb.hi[2] - cb.lo[2]];
+            let axis = if e[0] >= e[1] && e[0] >= e[2] {
+                0
+            } else if e[1] >= e[2] {
+                1
+            } else {
+                2
+            };
             Split::Median {
-                axis: if ext[axis] > 0.0 { axis } else { 3 },
+                axis: if e[axis] > 0.0 { axis } else { 3 },
             }
         }
     };
-    let mut mid = partition(refs, split);
+    let (mut mid, side_centroids) = partition::<B>(refs, split);
+    let mut sides = match (side_bounds, side_centroids) {
+        (Some(bounds), Some(centroids)) => Some(Sides { bounds, centroids }),
+        _ => None,
+    };
     if mid == 0 || mid == n {
         // Only reachable with non-finite arithmetic; any split keeps the tree correct.
         mid = n / 2;
+        sides = None;
     }
     let (l, r) = refs.split_at_mut(mid);
-    let (lb, rb) = if n > PARALLEL_SUBTREE {
-        rayon::join(|| reduce_bounds(l), || reduce_bounds(r))
-    } else {
-        (reduce_bounds(l), reduce_bounds(r))
-    };
-    let (left, right) = if n > PARALLEL_SUBTREE {
+    let parallel = n > PARALLEL_SUBTREE;
+    let sides = sides.unwrap_or_else(|| {
+        let ((lb, lc), (rb, rc)) = if parallel {
+            rayon::join(|| reduce(l), || reduce(r))
+        } else {
+            (reduce(l), reduce(r))
+        };
+        Sides {
+            bounds: [lb, rb],
+            centroids: [lc, rc],
+        }
+    });
+    let Sides {
+        bounds: [lb, rb],
+        centroids: [lc, rc],
+    } = sides;
+    let (left, right) = if parallel {
         rayon::join(
-            || build_node(l, offset, lb, depth + 1, config),
-            || build_node(r, offset + mid, rb, depth + 1, config),
+            || build_node(l, offset, lb, lc, depth + 1, config),
+            || build_node(r, offset + mid, rb, rc, depth + 1, config),
         )
     } else {
         (
-            build_node(l, offset, lb, depth + 1, config),
-            build_node(r, offset + mid, rb, depth + 1, config),
+            build_node(l, offset, lb, lc, depth + 1, config),
+            build_node(r, offset + mid, rb, rc, depth + 1, config),
         )
     };
-    debug_assert!(bounds.contains_box(&left.bounds().union(&right.bounds())));
     Node::Inner {
-        bounds,
+        bounds: bounds.aabb(),
         children: Box::new([left, right]),
     }
 }
