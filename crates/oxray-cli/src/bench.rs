@@ -128,13 +128,22 @@ pub struct BenchResult {
 }
 
 /// Runs the benchmark on a mesh with `runs` repetitions of each measurement.
-pub fn run(name: &str, mesh: &Mesh, runs: usize, rays: &BenchRays) -> Result<BenchResult, oxray::BuildError> {
+pub fn run(
+    name: &str,
+    mesh: &Mesh,
+    runs: usize,
+    rays: &BenchRays,
+) -> Result<BenchResult, oxray::BuildError> {
     let mut res = BenchResult {
         name: name.to_string(),
         triangles: mesh.triangles.len(),
         ..Default::default()
     };
-    let flag_sets = [BuildFlags::empty(), BuildFlags::PREFER_FAST_BUILD, BuildFlags::PREFER_FAST_TRACE];
+    let flag_sets = [
+        BuildFlags::empty(),
+        BuildFlags::PREFER_FAST_BUILD,
+        BuildFlags::PREFER_FAST_TRACE,
+    ];
     let mut gases = Vec::new();
     for (k, flags) in flag_sets.into_iter().enumerate() {
         let mut times = Vec::new();
@@ -155,11 +164,15 @@ pub fn run(name: &str, mesh: &Mesh, runs: usize, rays: &BenchRays) -> Result<Ben
     let mut occ = vec![false; hits.len()];
     let time = |f: &mut dyn FnMut()| {
         f(); // warm-up
-        median((0..runs).map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64()
-        }).collect())
+        median(
+            (0..runs)
+                .map(|_| {
+                    let t = Instant::now();
+                    f();
+                    t.elapsed().as_secs_f64()
+                })
+                .collect(),
+        )
     };
     for (k, set) in [&rays.coherent, &rays.incoherent].into_iter().enumerate() {
         let n = set.len();
@@ -174,7 +187,10 @@ pub fn run(name: &str, mesh: &Mesh, runs: usize, rays: &BenchRays) -> Result<Ben
     for (k, g) in gases.iter().enumerate() {
         let n = rays.incoherent.len();
         let h = &mut hits[..n];
-        let s = time(&mut || g.intersect_batch(&rays.incoherent, h).expect("lengths match"));
+        let s = time(&mut || {
+            g.intersect_batch(&rays.incoherent, h)
+                .expect("lengths match")
+        });
         res.mrays_by_flags[k] = n as f64 / s / 1e6;
     }
     Ok(res)
@@ -201,7 +217,12 @@ impl BenchRays {
 /// Writes a mesh and its rays for the side-by-side script (`scripts/bench_embree.py`):
 /// `NAME.mesh` (u32 vertex count, u32 triangle count, f32x3 vertices, u32x3 triangles),
 /// `NAME.coherent.rays` and `NAME.incoherent.rays` (f32[8] per ray), all little endian.
-pub fn export(dir: &std::path::Path, name: &str, mesh: &Mesh, rays: &BenchRays) -> std::io::Result<()> {
+pub fn export(
+    dir: &std::path::Path,
+    name: &str,
+    mesh: &Mesh,
+    rays: &BenchRays,
+) -> std::io::Result<()> {
     std::fs::create_dir_all(dir)?;
     let mut m = Vec::new();
     m.extend((mesh.positions.len() as u32).to_le_bytes());
@@ -209,7 +230,40 @@ pub fn export(dir: &std::path::Path, name: &str, mesh: &Mesh, rays: &BenchRays) 
     m.extend_from_slice(bytemuck::cast_slice(&mesh.positions));
     m.extend_from_slice(bytemuck::cast_slice(&mesh.triangles));
     std::fs::write(dir.join(format!("{name}.mesh")), m)?;
-    std::fs::write(dir.join(format!("{name}.coherent.rays")), bytemuck::cast_slice(&rays.coherent))?;
-    std::fs::write(dir.join(format!("{name}.incoherent.rays")), bytemuck::cast_slice(&rays.incoherent))?;
+    std::fs::write(
+        dir.join(format!("{name}.coherent.rays")),
+        bytemuck::cast_slice(&rays.coherent),
+    )?;
+    std::fs::write(
+        dir.join(format!("{name}.incoherent.rays")),
+        bytemuck::cast_slice(&rays.incoherent),
+    )?;
+    Ok(())
+}
+
+/// Writes oxray's closest-hit distances for the exported rays (`NAME.coherent.oxray-hits` and
+/// `NAME.incoherent.oxray-hits`: one f32 per ray, +inf for a miss), so that the side-by-side
+/// script can check that both engines agree.
+pub fn export_hits(
+    dir: &std::path::Path,
+    name: &str,
+    gas: &Gas,
+    rays: &BenchRays,
+) -> std::io::Result<()> {
+    for (set, rays) in [
+        ("coherent", &rays.coherent),
+        ("incoherent", &rays.incoherent),
+    ] {
+        let mut hits = vec![None; rays.len()];
+        gas.intersect_batch(rays, &mut hits).expect("lengths match");
+        let t: Vec<f32> = hits
+            .iter()
+            .map(|h| h.map_or(f32::INFINITY, |h| h.t))
+            .collect();
+        std::fs::write(
+            dir.join(format!("{name}.{set}.oxray-hits")),
+            bytemuck::cast_slice(&t),
+        )?;
+    }
     Ok(())
 }

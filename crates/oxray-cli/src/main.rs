@@ -7,7 +7,11 @@ use oxray_cli::mesh::Mesh;
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
-#[command(name = "oxray", version, about = "oxray: a programmable ray-tracing engine")]
+#[command(
+    name = "oxray",
+    version,
+    about = "oxray: a programmable ray-tracing engine"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -72,14 +76,24 @@ fn run(cli: Cli) -> Result<()> {
                 .build()
                 .context("cannot start the worker threads")?;
             let mut sets: Vec<(String, Mesh)> = Vec::new();
-            let paths = if meshes.is_empty() { default_meshes() } else { meshes };
+            let paths = if meshes.is_empty() {
+                default_meshes()
+            } else {
+                meshes
+            };
             if paths.is_empty() {
-                println!("(no meshes given and ../shared/data absent: using a generated icosphere)");
+                println!(
+                    "(no meshes given and ../shared/data absent: using a generated icosphere)"
+                );
                 sets.push(("icosphere-7".into(), Mesh::icosphere(7)));
             }
             for p in paths {
                 let mesh = Mesh::load(&p)?;
-                let name = p.file_stem().and_then(|s| s.to_str()).unwrap_or("mesh").to_string();
+                let name = p
+                    .file_stem()
+                    .and_then(|s| s.to_str())
+                    .unwrap_or("mesh")
+                    .to_string();
                 sets.push((name, mesh));
             }
             println!(
@@ -94,7 +108,9 @@ fn run(cli: Cli) -> Result<()> {
             for (name, mesh) in &sets {
                 let rays = BenchRays::new(mesh, side);
                 if let Some(dir) = &export {
+                    let gas = bench::build_gas(mesh, oxray::BuildFlags::empty())?;
                     bench::export(dir, name, mesh, &rays)
+                        .and_then(|_| bench::export_hits(dir, name, &gas, &rays))
                         .with_context(|| format!("cannot write to {}", dir.display()))?;
                 }
                 let r = pool.install(|| bench::run(name, mesh, runs, &rays))?;

@@ -48,7 +48,9 @@ pub enum MeshError {
         message: String,
     },
     /// A face refers to a vertex that does not exist.
-    #[error("{path}: triangle {triangle} refers to vertex {index} but there are {vertices} vertices")]
+    #[error(
+        "{path}: triangle {triangle} refers to vertex {index} but there are {vertices} vertices"
+    )]
     IndexOutOfRange {
         /// The file.
         path: String,
@@ -123,10 +125,26 @@ impl Mesh {
         .map(normalize)
         .collect();
         let mut triangles: Vec<[u32; 3]> = vec![
-            [0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11],
-            [1, 5, 9], [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8],
-            [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8], [3, 8, 9],
-            [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1],
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
         ];
         for _ in 0..subdivisions {
             let mut mid = std::collections::HashMap::new();
@@ -287,9 +305,7 @@ impl Reader<'_> {
     fn read(&mut self, ty: Scalar) -> Result<f64, String> {
         if self.enc == Encoding::Ascii {
             let t = self.token()?;
-            return t
-                .parse::<f64>()
-                .map_err(|_| format!("bad number {t:?}"));
+            return t.parse::<f64>().map_err(|_| format!("bad number {t:?}"));
         }
         let n = ty.size();
         let Some(raw) = self.bytes.get(self.pos..self.pos + n) else {
@@ -341,7 +357,9 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, String> {
             }
             ["element", name, count] => elements.push(Element {
                 name: name.to_string(),
-                count: count.parse().map_err(|_| format!("bad element count {count:?}"))?,
+                count: count
+                    .parse()
+                    .map_err(|_| format!("bad element count {count:?}"))?,
                 props: Vec::new(),
             }),
             ["property", "list", ct, ty, name] => {
@@ -436,7 +454,10 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, String> {
 
 fn find_header_end(bytes: &[u8]) -> Option<usize> {
     let pat = b"end_header";
-    bytes.windows(pat.len()).take(1 << 20).position(|w| w == pat)
+    bytes
+        .windows(pat.len())
+        .take(1 << 20)
+        .position(|w| w == pat)
 }
 
 fn index(v: f64) -> Result<u32, String> {

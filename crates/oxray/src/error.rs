@@ -154,7 +154,9 @@ pub enum BuildError {
         count: u32,
     },
     /// An index refers past the end of the vertex buffer.
-    #[error("{at}, triangle {triangle}: vertex index {index} is out of range ({num_vertices} vertices)")]
+    #[error(
+        "{at}, triangle {triangle}: vertex index {index} is out of range ({num_vertices} vertices)"
+    )]
     IndexOutOfRange {
         /// The input.
         at: InputLocation,
@@ -182,7 +184,9 @@ impl BuildError {
     pub fn code(&self) -> ErrorCode {
         match self {
             BuildError::Unsupported(_) => ErrorCode::NotSupported,
-            BuildError::NoBuildInputs | BuildError::ConflictingBuildFlags => ErrorCode::InvalidValue,
+            BuildError::NoBuildInputs | BuildError::ConflictingBuildFlags => {
+                ErrorCode::InvalidValue
+            }
             _ => ErrorCode::InvalidInput,
         }
     }

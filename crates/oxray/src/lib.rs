@@ -37,6 +37,8 @@
 //! triangle intersection is watertight.
 
 #![warn(missing_docs)]
+// Lane and axis loops index several arrays in step; iterator chains would hide that.
+#![allow(clippy::needless_range_loop)]
 
 pub mod accel;
 pub mod error;

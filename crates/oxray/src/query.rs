@@ -6,7 +6,9 @@ use crate::accel::Gas;
 use crate::error::QueryError;
 use crate::geometry::triangle::TriangleHit;
 use crate::geometry::Aabb;
-use crate::traversal::{traverse_gas, Decision, GasVisitor, PreparedRay, Primitives, Ray, TraversalStack};
+use crate::traversal::{
+    traverse_gas, Decision, GasVisitor, PreparedRay, Primitives, Ray, TraversalStack,
+};
 use rayon::prelude::*;
 
 /// The kind of a hit (`optixGetHitKind`, guide §13.7): `0xFE`/`0xFF` for the front/back face of a
@@ -141,7 +143,9 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'_, C
     }
 }
 
-impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor for QueryVisitor<'_, C, F> {
+impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
+    for QueryVisitor<'_, C, F>
+{
     #[inline(always)]
     fn triangle(&mut self, slot: u32, h: &TriangleHit) -> Decision {
         let (primitive_index, sbt_gas_index, build_input) = self.gas.resolve(slot);
@@ -168,7 +172,11 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor for Que
             build_input,
             aabb: self.gas.aabbs[slot as usize],
         };
-        let ray = Ray { tmin, tmax, ..*self.ray };
+        let ray = Ray {
+            tmin,
+            tmax,
+            ..*self.ray
+        };
         let Some(c) = self.custom.intersect(&prim, &ray) else {
             return (None, false);
         };
@@ -218,7 +226,15 @@ impl Gas {
             crate::BuildInputKind::Triangles => Primitives::Triangles(&self.triangles),
             crate::BuildInputKind::CustomPrimitives => Primitives::Aabbs(&self.aabbs),
         };
-        traverse_gas(&self.bvh.nodes, prims, &prepared, ray.tmin, ray.tmax, &mut v, stack);
+        traverse_gas(
+            &self.bvh.nodes,
+            prims,
+            &prepared,
+            ray.tmin,
+            ray.tmax,
+            &mut v,
+            stack,
+        );
         v.best
     }
 
@@ -227,7 +243,13 @@ impl Gas {
     /// nothing. Where two hits are at the same distance, which one is returned is fixed by the
     /// structure, identical from run to run.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.query(ray, &mut NoCustomPrimitives, accept_all, false, &mut TraversalStack::new())
+        self.query(
+            ray,
+            &mut NoCustomPrimitives,
+            accept_all,
+            false,
+            &mut TraversalStack::new(),
+        )
     }
 
     /// The closest hit, with custom primitives intersected by `custom`.
@@ -265,8 +287,14 @@ impl Gas {
     /// Whether anything lies in `[ray.tmin, ray.tmax]` (a shadow or visibility ray): traversal
     /// stops at the first hit found, which need not be the closest.
     pub fn occluded(&self, ray: &Ray) -> bool {
-        self.query(ray, &mut NoCustomPrimitives, accept_all, true, &mut TraversalStack::new())
-            .is_some()
+        self.query(
+            ray,
+            &mut NoCustomPrimitives,
+            accept_all,
+            true,
+            &mut TraversalStack::new(),
+        )
+        .is_some()
     }
 
     /// Whether anything lies in the ray's interval, with custom primitives intersected by
@@ -278,7 +306,11 @@ impl Gas {
 
     /// Closest hits of a batch of rays, in parallel on the current rayon pool. The results are
     /// the same as [`intersect`](Self::intersect) ray by ray, whatever the number of threads.
-    pub fn intersect_batch(&self, rays: &[Ray], hits: &mut [Option<Hit>]) -> Result<(), QueryError> {
+    pub fn intersect_batch(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) -> Result<(), QueryError> {
         self.batch(rays, hits, |gas, ray, stack| {
             gas.query(ray, &mut NoCustomPrimitives, accept_all, false, stack)
         })
@@ -304,7 +336,13 @@ impl Gas {
         C: Fn(&CustomPrimitive, &Ray) -> Option<CustomHit> + Sync,
     {
         self.batch(rays, hits, |gas, ray, stack| {
-            gas.query(ray, &mut |p: &CustomPrimitive, r: &Ray| custom(p, r), accept_all, false, stack)
+            gas.query(
+                ray,
+                &mut |p: &CustomPrimitive, r: &Ray| custom(p, r),
+                accept_all,
+                false,
+                stack,
+            )
         })
     }
 

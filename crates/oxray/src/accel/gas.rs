@@ -7,7 +7,9 @@ use super::options::{BuildFlags, BuildOptions, GeometryFlags};
 use super::validate::{validate_sbt_offsets, validate_structure};
 use crate::error::{BuildError, InputLocation};
 use crate::geometry::triangle::is_degenerate;
+use crate::geometry::triangle4::Triangle4;
 use crate::geometry::Aabb;
+use bytemuck::Zeroable;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -57,11 +59,12 @@ pub struct Gas {
     pub(crate) kind: BuildInputKind,
     pub(crate) build_flags: BuildFlags,
     pub(crate) bvh: Bvh4,
-    /// Triangle vertices in leaf-slot order (triangle GAS).
-    pub(crate) triangles: Vec<[[f32; 3]; 3]>,
+    /// Triangles in blocks of four, in leaf-slot order (triangle GAS): slot `s` is lane `s % 4`
+    /// of block `s / 4`. Each leaf starts a new block; unused lanes have no primitive.
+    pub(crate) triangles: Vec<Triangle4>,
     /// Boxes in leaf-slot order (custom-primitive GAS).
     pub(crate) aabbs: Vec<Aabb>,
-    /// Leaf slot to global primitive id.
+    /// Leaf slot to global primitive id ([`NO_PRIMITIVE`] for an unused lane).
     pub(crate) slot_prim: Vec<u32>,
     /// Per global primitive id, its SBT record within its input; empty when every input has one.
     pub(crate) sbt_offsets: Vec<u32>,
@@ -144,22 +147,22 @@ impl Gas {
                         BuildInput::CustomPrimitives(_) => unreachable!("inputs are homogeneous"),
                     })
                     .collect();
-                let active: Vec<(u32, Aabb)> = tris
+                // An indexed parallel map, then a sequential filter: rayon's filtered collect
+                // would allocate per item.
+                let boxes: Vec<Option<Aabb>> = tris
                     .par_iter()
-                    .enumerate()
-                    .filter(|(_, t)| !is_degenerate(t[0], t[1], t[2]))
-                    .map(|(i, t)| (i as u32, Aabb::from_points(t)))
+                    .map(|t| (!is_degenerate(t[0], t[1], t[2])).then(|| Aabb::from_points(t)))
                     .collect();
-                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = active.into_iter().unzip();
-                let bvh2 = build_bvh2(&bounds, &config);
-                gas.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
-                gas.triangles = gas
-                    .slot_prim
+                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
                     .iter()
-                    .map(|&g| tris[g as usize].map(|v| v.to_array()))
-                    .collect();
+                    .enumerate()
+                    .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
+                    .unzip();
+                let bvh2 = build_bvh2(&bounds, &config);
                 gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
                 gas.bvh = Bvh4::from(&bvh2);
+                let global: Vec<u32> = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+                (gas.triangles, gas.slot_prim) = pack_triangles(&mut gas.bvh, &global, &tris);
             }
             BuildInputKind::CustomPrimitives => {
                 let boxes: Vec<Aabb> = inputs
@@ -171,7 +174,9 @@ impl Gas {
                             (0..a.count as usize).map(move |i| {
                                 let f: [f32; 6] = std::array::from_fn(|k| {
                                     let at = i * stride + 4 * k;
-                                    f32::from_le_bytes(a.data[at..at + 4].try_into().unwrap_or([0; 4]))
+                                    f32::from_le_bytes(
+                                        a.data[at..at + 4].try_into().unwrap_or([0; 4]),
+                                    )
                                 });
                                 Aabb::new(Vec3::new(f[0], f[1], f[2]), Vec3::new(f[3], f[4], f[5]))
                             })
@@ -192,6 +197,14 @@ impl Gas {
                 gas.bvh = Bvh4::from(&bvh2);
             }
         }
+        // What the structure keeps is exactly what it reports (and what the query bounds).
+        gas.bvh.nodes.shrink_to_fit();
+        gas.triangles.shrink_to_fit();
+        gas.aabbs.shrink_to_fit();
+        gas.slot_prim.shrink_to_fit();
+        gas.sbt_offsets.shrink_to_fit();
+        gas.inputs.shrink_to_fit();
+        gas.record_flags.shrink_to_fit();
         Ok(gas)
     }
 
@@ -212,7 +225,10 @@ impl Gas {
 
     /// Primitives that can be hit.
     pub fn num_active_primitives(&self) -> u32 {
-        self.slot_prim.len() as u32
+        self.slot_prim
+            .iter()
+            .filter(|&&g| g != NO_PRIMITIVE)
+            .count() as u32
     }
 
     /// Number of build inputs.
@@ -247,17 +263,18 @@ impl Gas {
 
     /// Bytes the structure occupies.
     pub fn memory(&self) -> GasMemory {
-        use std::mem::size_of_val;
-        let node_bytes = size_of_val(self.bvh.nodes.as_slice());
-        let primitive_bytes =
-            size_of_val(self.triangles.as_slice()) + size_of_val(self.aabbs.as_slice());
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        let node_bytes = bytes(&self.bvh.nodes);
+        let primitive_bytes = bytes(&self.triangles) + bytes(&self.aabbs);
         GasMemory {
             output_bytes: node_bytes
                 + primitive_bytes
-                + size_of_val(self.slot_prim.as_slice())
-                + size_of_val(self.sbt_offsets.as_slice())
-                + size_of_val(self.inputs.as_slice())
-                + size_of_val(self.record_flags.as_slice()),
+                + bytes(&self.slot_prim)
+                + bytes(&self.sbt_offsets)
+                + bytes(&self.inputs)
+                + bytes(&self.record_flags),
             node_bytes,
             primitive_bytes,
         }
@@ -285,29 +302,58 @@ impl Gas {
     }
 }
 
+/// Marks an unused lane of a [`Triangle4`] block in `Gas::slot_prim`.
+pub(crate) const NO_PRIMITIVE: u32 = u32::MAX;
+
+/// Lays the triangles of every leaf out in blocks of four, leaves in node order, and points the
+/// leaves at their blocks. `global[slot]` is the primitive at binary-BVH slot `slot`.
+fn pack_triangles(
+    bvh: &mut Bvh4,
+    global: &[u32],
+    tris: &[[Vec3; 3]],
+) -> (Vec<Triangle4>, Vec<u32>) {
+    let mut blocks: Vec<Triangle4> = Vec::with_capacity(global.len() / 2 + 1);
+    let mut slot_prim = Vec::with_capacity(blocks.capacity() * 4);
+    for node in &mut bvh.nodes {
+        for lane in 0..4 {
+            let n = node.count[lane] as usize;
+            if n == 0 {
+                continue;
+            }
+            let start = node.child[lane] as usize;
+            node.child[lane] = (blocks.len() * 4) as u32;
+            for chunk in global[start..start + n].chunks(4) {
+                let mut block = Triangle4::zeroed();
+                for (l, &g) in chunk.iter().enumerate() {
+                    block.set(l, &tris[g as usize].map(|v| v.to_array()));
+                }
+                blocks.push(block);
+                slot_prim.extend_from_slice(chunk);
+                slot_prim.extend(std::iter::repeat_n(NO_PRIMITIVE, 4 - chunk.len()));
+            }
+        }
+    }
+    (blocks, slot_prim)
+}
+
 /// Checks that every index of an indexed triangle input is in range.
 fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<(), BuildError> {
     let Some(ix) = &t.indices else { return Ok(()) };
     let stride = ix.effective_stride();
     let nv = t.vertices.count;
-    let bad = (0..ix.count as usize).into_par_iter().position_first(|i| {
-        let at = i * stride;
-        ix.format.decode(&ix.data[at..]).iter().any(|&v| v >= nv)
-    });
-    match bad {
-        None => Ok(()),
-        Some(i) => {
-            let at_byte = i * stride;
-            let tri = ix.format.decode(&ix.data[at_byte..]);
-            let index = tri.into_iter().find(|&v| v >= nv).unwrap_or(nv);
-            Err(BuildError::IndexOutOfRange {
+    // A plain scan: one compare per index is cheaper than splitting the work.
+    for i in 0..ix.count as usize {
+        let tri = ix.format.decode(&ix.data[i * stride..]);
+        if let Some(&index) = tri.iter().find(|&&v| v >= nv) {
+            return Err(BuildError::IndexOutOfRange {
                 at,
                 triangle: i as u32,
                 index,
                 num_vertices: nv,
-            })
+            });
         }
     }
+    Ok(())
 }
 
 /// Decodes (and pre-transforms) every triangle of a validated input.

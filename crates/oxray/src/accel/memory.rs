@@ -6,6 +6,7 @@ use super::input::BuildInput;
 use super::options::BuildOptions;
 use super::validate::{validate_structure, InputSummary};
 use crate::error::BuildError;
+use crate::geometry::triangle4::Triangle4;
 use crate::geometry::Aabb;
 
 /// Buffer sizes for a build (`OptixAccelBufferSizes`).
@@ -46,7 +47,9 @@ pub(crate) fn sizes_for(s: &InputSummary, num_inputs: usize) -> AccelBufferSizes
     // Decoded primitives (bounds and vertices) + the binary tree and its working set + the map
     // from active primitives to global ids.
     let temp = n * (std::mem::size_of::<Aabb>() + std::mem::size_of::<[[f32; 3]; 3]>() + 4)
-        + super::bvh::temp_bytes(n);
+        + n * std::mem::size_of::<Option<Aabb>>()
+        + super::bvh::temp_bytes(n)
+        + FIXED_TEMP;
     AccelBufferSizes {
         output_size_in_bytes: output,
         temp_size_in_bytes: temp,
@@ -59,13 +62,21 @@ fn output_bound(s: &InputSummary, num_inputs: usize) -> usize {
     // A 4-wide node absorbs at least one binary inner node, and a binary tree over n leaves has
     // n - 1 inner nodes, so n - 1 nodes (and the root) always suffice.
     let nodes = n.saturating_sub(1).max(1) * std::mem::size_of::<Bvh4Node>();
-    let per_prim = match s.kind {
-        super::input::BuildInputKind::Triangles => std::mem::size_of::<[[f32; 3]; 3]>(),
-        super::input::BuildInputKind::CustomPrimitives => std::mem::size_of::<Aabb>(),
+    // Triangles go in blocks of four, a leaf starting a new block: a leaf of c triangles takes
+    // ceil(c / 4) <= c blocks, so at most one block (and four slots) per triangle.
+    let (per_prim, slots) = match s.kind {
+        super::input::BuildInputKind::Triangles => (std::mem::size_of::<Triangle4>(), 4),
+        super::input::BuildInputKind::CustomPrimitives => (std::mem::size_of::<Aabb>(), 1),
     };
     // Slot-to-primitive map, and per-primitive SBT offsets (kept only when some input has more
     // than one record, but bounded here by counts alone).
-    let ids = n * 4 * 2;
+    let ids = n * 4 * (slots + 1);
     let inputs = num_inputs * std::mem::size_of::<InputRecord>() + s.num_sbt_records as usize * 4;
-    nodes + n * per_prim + ids + inputs
+    nodes + n * per_prim + ids + inputs + FIXED_OUTPUT
 }
+
+/// Bytes every structure may take beyond its per-primitive data (the root node, small tables).
+const FIXED_OUTPUT: usize = 1024;
+/// Working memory every build may take beyond its per-primitive data (thread-pool jobs, small
+/// scratch arrays).
+const FIXED_TEMP: usize = 16 * 1024;

@@ -74,16 +74,45 @@ pub(crate) fn validate_structure(
         match input {
             BuildInput::Triangles(t) => {
                 let v = &t.vertices;
-                check_stride(at, BufferKind::Vertices, v.stride, v.format.size(), v.format.alignment())?;
-                check_len(at, BufferKind::Vertices, v.data.len(), v.count, v.effective_stride(), v.format.size())?;
+                check_stride(
+                    at,
+                    BufferKind::Vertices,
+                    v.stride,
+                    v.format.size(),
+                    v.format.alignment(),
+                )?;
+                check_len(
+                    at,
+                    BufferKind::Vertices,
+                    v.data.len(),
+                    v.count,
+                    v.effective_stride(),
+                    v.format.size(),
+                )?;
                 match &t.indices {
                     Some(ix) => {
-                        check_stride(at, BufferKind::Indices, ix.stride, ix.format.size(), ix.format.alignment())?;
-                        check_len(at, BufferKind::Indices, ix.data.len(), ix.count, ix.effective_stride(), ix.format.size())?;
+                        check_stride(
+                            at,
+                            BufferKind::Indices,
+                            ix.stride,
+                            ix.format.size(),
+                            ix.format.alignment(),
+                        )?;
+                        check_len(
+                            at,
+                            BufferKind::Indices,
+                            ix.data.len(),
+                            ix.count,
+                            ix.effective_stride(),
+                            ix.format.size(),
+                        )?;
                     }
                     None => {
                         if v.count % 3 != 0 {
-                            return Err(BuildError::VertexCountNotMultipleOfThree { at, count: v.count });
+                            return Err(BuildError::VertexCountNotMultipleOfThree {
+                                at,
+                                count: v.count,
+                            });
                         }
                     }
                 }
@@ -91,24 +120,45 @@ pub(crate) fn validate_structure(
             BuildInput::CustomPrimitives(c) => {
                 let a = &c.aabbs;
                 check_stride(at, BufferKind::Aabbs, a.stride, 24, 8)?;
-                check_len(at, BufferKind::Aabbs, a.data.len(), a.count, a.effective_stride(), 24)?;
+                check_len(
+                    at,
+                    BufferKind::Aabbs,
+                    a.data.len(),
+                    a.count,
+                    a.effective_stride(),
+                    24,
+                )?;
             }
         }
         let n = input.num_primitives();
         let offset = input.primitive_index_offset();
         if offset.checked_add(n).is_none() {
-            return Err(BuildError::PrimitiveIndexOffsetOverflow { at, offset, count: n });
+            return Err(BuildError::PrimitiveIndexOffsetOverflow {
+                at,
+                offset,
+                count: n,
+            });
         }
         let num_sbt_records = input.flags().len() as u32;
         match input.sbt_index_offsets() {
             None if num_sbt_records > 1 => {
-                return Err(BuildError::MissingSbtIndexOffsets { at, num_sbt_records });
+                return Err(BuildError::MissingSbtIndexOffsets {
+                    at,
+                    num_sbt_records,
+                });
             }
             None => {}
             Some(o) => {
                 let size = o.size.size();
                 check_stride(at, BufferKind::SbtIndexOffsets, o.stride, size, size)?;
-                check_len(at, BufferKind::SbtIndexOffsets, o.data.len(), n, o.effective_stride(), size)?;
+                check_len(
+                    at,
+                    BufferKind::SbtIndexOffsets,
+                    o.data.len(),
+                    n,
+                    o.effective_stride(),
+                    size,
+                )?;
             }
         }
     }

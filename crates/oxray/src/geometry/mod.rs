@@ -2,6 +2,7 @@
 
 mod aabb;
 pub mod triangle;
+pub mod triangle4;
 pub mod vertex;
 
 pub use aabb::Aabb;

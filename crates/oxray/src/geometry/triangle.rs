@@ -12,9 +12,11 @@ use glam::Vec3;
 /// The per-ray constants of the watertight test.
 #[derive(Clone, Copy, Debug)]
 pub struct WatertightRay {
-    org: [f32; 3],
-    k: [usize; 3],
-    shear: [f32; 3],
+    pub(crate) org: [f32; 3],
+    /// Axis permutation: `k[2]` is the dominant axis of the direction.
+    pub(crate) k: [usize; 3],
+    /// `(dx/dz, dy/dz, 1/dz)` in the permuted axes.
+    pub(crate) shear: [f32; 3],
 }
 
 /// A triangle hit: distance, barycentrics and facing.
@@ -88,17 +90,17 @@ impl WatertightRay {
         let bz = sz * b[kz];
         let cz = sz * c[kz];
 
-        let suspect = u == 0.0 || v == 0.0 || w == 0.0 || !(u + v + w).is_finite();
-        if suspect {
+        let det = u + v + w;
+        let t_scaled = u * az + v * bz + w * cz;
+        if needs_f64(u, v, w, det, t_scaled) {
             return Self::intersect_f64([ax, ay, az], [bx, by, bz], [cx, cy, cz], tmin, tmax);
         }
         if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
             return None;
         }
-        let det = u + v + w;
-        let t_scaled = u * az + v * bz + w * cz;
         let inv = 1.0 / det;
-        let t = t_scaled * inv;
+        // `+ 0.0` turns a -0.0 distance into +0.0.
+        let t = t_scaled * inv + 0.0;
         if !(t >= tmin && t <= tmax) {
             return None;
         }
@@ -137,7 +139,7 @@ impl WatertightRay {
         }
         let t_scaled = u * az + v * bz + w * cz;
         let inv = 1.0 / det;
-        let t = (t_scaled * inv) as f32;
+        let t = (t_scaled * inv) as f32 + 0.0;
         if !(t >= tmin && t <= tmax) {
             return None;
         }
@@ -148,6 +150,18 @@ impl WatertightRay {
             front_face: det > 0.0,
         })
     }
+}
+
+/// Below this magnitude a determinant or a scaled distance may have lost precision to underflow.
+pub(crate) const F32_TINY: f32 = 1.0 / (1u128 << 96) as f32;
+
+/// Whether the `f32` results may be wrong, so that the exact `f64` path must decide: an edge
+/// function of zero (the ray meets an edge or vertex exactly), a determinant or scaled distance
+/// that overflowed or underflowed (distances grow with the cube of the coordinates), or NaN.
+#[inline(always)]
+pub(crate) fn needs_f64(u: f32, v: f32, w: f32, det: f32, t_scaled: f32) -> bool {
+    let ok = |x: f32| x.abs() >= F32_TINY && x.abs() < f32::INFINITY;
+    u == 0.0 || v == 0.0 || w == 0.0 || !ok(det) || !ok(t_scaled)
 }
 
 /// Whether a triangle can never be hit: a non-finite vertex or zero area. The builder leaves such
@@ -188,7 +202,11 @@ mod tests {
             assert_eq!(hit(o, dir, TRI).unwrap().front_face, front);
         }
         // The same holds whichever axis dominates the direction.
-        for d in [Vec3::new(0.3, 0.2, 1.0), Vec3::new(-0.9, 0.1, 0.95), Vec3::new(0.1, -0.99, 0.98)] {
+        for d in [
+            Vec3::new(0.3, 0.2, 1.0),
+            Vec3::new(-0.9, 0.1, 0.95),
+            Vec3::new(0.1, -0.99, 0.98),
+        ] {
             let target = Vec3::new(0.2, 0.2, 1.0);
             let h = hit(target - d, d, TRI).unwrap();
             assert!(h.front_face);
@@ -214,7 +232,12 @@ mod tests {
     #[test]
     fn shared_edge_is_hit_exactly_once_or_twice_never_zero() {
         // Two triangles sharing the diagonal of the unit square; rays through the diagonal.
-        let q = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+        let q = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+        ];
         for i in 0..=64 {
             let s = i as f32 / 64.0;
             let o = Vec3::new(s, s, -1.0);
@@ -235,7 +258,11 @@ mod tests {
         let z = Vec3::ZERO;
         assert!(is_degenerate(z, Vec3::X, Vec3::X * 2.0));
         assert!(is_degenerate(z, Vec3::X, Vec3::new(f32::NAN, 0.0, 0.0)));
-        assert!(is_degenerate(z, Vec3::X, Vec3::new(0.0, f32::INFINITY, 0.0)));
+        assert!(is_degenerate(
+            z,
+            Vec3::X,
+            Vec3::new(0.0, f32::INFINITY, 0.0)
+        ));
         assert!(!is_degenerate(z, Vec3::X * 1e-20, Vec3::Y * 1e-20));
     }
 

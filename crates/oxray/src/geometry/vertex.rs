@@ -43,21 +43,50 @@ impl VertexFormat {
     }
 
     /// Decodes one vertex from the first [`size`](Self::size) bytes of `bytes` (little endian).
+    ///
+    /// # Panics
+    /// If `bytes` is shorter than one vertex (build inputs are validated before decoding).
     #[inline]
     pub fn decode(self, bytes: &[u8]) -> Vec3 {
-        let f32_at = |i: usize| f32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
-        let f16_at = |i: usize| half::f16::from_le_bytes([bytes[i], bytes[i + 1]]).to_f32();
-        let sn_at = |i: usize| {
-            let x = i16::from_le_bytes([bytes[i], bytes[i + 1]]) as f32;
+        // One bounds check per vertex: the fixed-size array below needs no more.
+        fn take<const N: usize>(b: &[u8]) -> [u8; N] {
+            b[..N].try_into().expect("slice of length N")
+        }
+        fn f32s<const N: usize>(b: [u8; N], i: usize) -> f32 {
+            f32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]])
+        }
+        fn f16s<const N: usize>(b: [u8; N], i: usize) -> f32 {
+            half::f16::from_le_bytes([b[2 * i], b[2 * i + 1]]).to_f32()
+        }
+        fn sn<const N: usize>(b: [u8; N], i: usize) -> f32 {
+            let x = i16::from_le_bytes([b[2 * i], b[2 * i + 1]]) as f32;
             (x / 32767.0).max(-1.0)
-        };
+        }
         match self {
-            VertexFormat::F32x3 => Vec3::new(f32_at(0), f32_at(4), f32_at(8)),
-            VertexFormat::F32x2 => Vec3::new(f32_at(0), f32_at(4), 0.0),
-            VertexFormat::F16x3 => Vec3::new(f16_at(0), f16_at(2), f16_at(4)),
-            VertexFormat::F16x2 => Vec3::new(f16_at(0), f16_at(2), 0.0),
-            VertexFormat::Snorm16x3 => Vec3::new(sn_at(0), sn_at(2), sn_at(4)),
-            VertexFormat::Snorm16x2 => Vec3::new(sn_at(0), sn_at(2), 0.0),
+            VertexFormat::F32x3 => {
+                let b = take::<12>(bytes);
+                Vec3::new(f32s(b, 0), f32s(b, 1), f32s(b, 2))
+            }
+            VertexFormat::F32x2 => {
+                let b = take::<8>(bytes);
+                Vec3::new(f32s(b, 0), f32s(b, 1), 0.0)
+            }
+            VertexFormat::F16x3 => {
+                let b = take::<6>(bytes);
+                Vec3::new(f16s(b, 0), f16s(b, 1), f16s(b, 2))
+            }
+            VertexFormat::F16x2 => {
+                let b = take::<4>(bytes);
+                Vec3::new(f16s(b, 0), f16s(b, 1), 0.0)
+            }
+            VertexFormat::Snorm16x3 => {
+                let b = take::<6>(bytes);
+                Vec3::new(sn(b, 0), sn(b, 1), sn(b, 2))
+            }
+            VertexFormat::Snorm16x2 => {
+                let b = take::<4>(bytes);
+                Vec3::new(sn(b, 0), sn(b, 1), 0.0)
+            }
         }
     }
 }
@@ -90,17 +119,21 @@ impl IndexFormat {
     }
 
     /// Decodes one triplet from `bytes` (little endian).
+    ///
+    /// # Panics
+    /// If `bytes` is shorter than one triplet (build inputs are validated before decoding).
     #[inline]
     pub fn decode(self, bytes: &[u8]) -> [u32; 3] {
         match self {
             IndexFormat::U16x3 => {
-                let at = |i: usize| u16::from_le_bytes([bytes[i], bytes[i + 1]]) as u32;
-                [at(0), at(2), at(4)]
+                let b: [u8; 6] = bytes[..6].try_into().expect("6 bytes");
+                std::array::from_fn(|i| u16::from_le_bytes([b[2 * i], b[2 * i + 1]]) as u32)
             }
             IndexFormat::U32x3 => {
-                let at =
-                    |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
-                [at(0), at(4), at(8)]
+                let b: [u8; 12] = bytes[..12].try_into().expect("12 bytes");
+                std::array::from_fn(|i| {
+                    u32::from_le_bytes([b[4 * i], b[4 * i + 1], b[4 * i + 2], b[4 * i + 3]])
+                })
             }
         }
     }
@@ -112,7 +145,10 @@ mod tests {
 
     #[test]
     fn decodes_every_format() {
-        let f: Vec<u8> = [1.5f32, -2.0, 3.25].iter().flat_map(|x| x.to_le_bytes()).collect();
+        let f: Vec<u8> = [1.5f32, -2.0, 3.25]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
         assert_eq!(VertexFormat::F32x3.decode(&f), Vec3::new(1.5, -2.0, 3.25));
         assert_eq!(VertexFormat::F32x2.decode(&f), Vec3::new(1.5, -2.0, 0.0));
         let h: Vec<u8> = [1.5f32, -2.0, 3.25]
@@ -121,16 +157,31 @@ mod tests {
             .collect();
         assert_eq!(VertexFormat::F16x3.decode(&h), Vec3::new(1.5, -2.0, 3.25));
         assert_eq!(VertexFormat::F16x2.decode(&h), Vec3::new(1.5, -2.0, 0.0));
-        let s: Vec<u8> = [32767i16, -32768, 0].iter().flat_map(|x| x.to_le_bytes()).collect();
-        assert_eq!(VertexFormat::Snorm16x3.decode(&s), Vec3::new(1.0, -1.0, 0.0));
-        assert_eq!(VertexFormat::Snorm16x2.decode(&s), Vec3::new(1.0, -1.0, 0.0));
+        let s: Vec<u8> = [32767i16, -32768, 0]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
+        assert_eq!(
+            VertexFormat::Snorm16x3.decode(&s),
+            Vec3::new(1.0, -1.0, 0.0)
+        );
+        assert_eq!(
+            VertexFormat::Snorm16x2.decode(&s),
+            Vec3::new(1.0, -1.0, 0.0)
+        );
     }
 
     #[test]
     fn decodes_indices() {
-        let a: Vec<u8> = [7u16, 8, 65535].iter().flat_map(|x| x.to_le_bytes()).collect();
+        let a: Vec<u8> = [7u16, 8, 65535]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
         assert_eq!(IndexFormat::U16x3.decode(&a), [7, 8, 65535]);
-        let b: Vec<u8> = [7u32, 8, 1 << 30].iter().flat_map(|x| x.to_le_bytes()).collect();
+        let b: Vec<u8> = [7u32, 8, 1 << 30]
+            .iter()
+            .flat_map(|x| x.to_le_bytes())
+            .collect();
         assert_eq!(IndexFormat::U32x3.decode(&b), [7, 8, 1 << 30]);
     }
 }

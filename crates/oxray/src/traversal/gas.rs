@@ -2,9 +2,9 @@
 //! with the decisions about candidate hits delegated to a [`GasVisitor`]. Queries, any-hit filters
 //! and (later) the program pipeline are visitors, monomorphised into the loop.
 
-use super::ray::{min_ignore_nan, PreparedRay, ROBUST_FAR};
+use super::ray::{min_ignore_nan, PreparedRay, ROBUST_FAR, TMAX_SLACK};
 use crate::accel::bvh::{Bvh4Node, TRAVERSAL_STACK_SIZE};
-use crate::geometry::triangle::TriangleHit;
+use crate::geometry::triangle4::Triangle4;
 use crate::geometry::Aabb;
 
 /// What a visitor decides about a candidate hit (guide §13.4, §13.13).
@@ -21,7 +21,7 @@ pub(crate) enum Decision {
 /// Receives the candidate hits of a traversal.
 pub(crate) trait GasVisitor {
     /// A triangle hit within the current interval, at leaf slot `slot`.
-    fn triangle(&mut self, slot: u32, hit: &TriangleHit) -> Decision;
+    fn triangle(&mut self, slot: u32, hit: &crate::geometry::triangle::TriangleHit) -> Decision;
     /// A custom primitive whose box the ray enters within `[tmin, tmax]`. Returns the t of the
     /// closest hit it accepted (the new tmax), and whether traversal must end.
     fn custom(&mut self, slot: u32, tmin: f32, tmax: f32) -> (Option<f32>, bool);
@@ -30,7 +30,8 @@ pub(crate) trait GasVisitor {
 /// The primitives of a GAS in leaf-slot order.
 #[derive(Clone, Copy)]
 pub(crate) enum Primitives<'a> {
-    Triangles(&'a [[[f32; 3]; 3]]),
+    /// Blocks of four; leaf slot `s` is lane `s % 4` of block `s / 4`.
+    Triangles(&'a [Triangle4]),
     Aabbs(&'a [Aabb]),
 }
 
@@ -63,6 +64,7 @@ impl TraversalStack {
 }
 
 /// Tests a ray against the four boxes of a node; returns the entry distances and a hit mask.
+/// `tmax` is the interval's end with [`TMAX_SLACK`] applied.
 ///
 /// The slab distances use NaN-ignoring min/max: a NaN (origin exactly on a slab plane of an axis
 /// the ray does not move along) leaves the accumulated interval unchanged, as it should for a
@@ -74,15 +76,16 @@ fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 
     let b = &node.bounds;
     // SAFETY: SSE is part of the x86_64 baseline, so the intrinsics are available. `Bvh4Node` is
     // `repr(C, align(64))` with `bounds` (rows of `[f32; 4]`) first, so each row is a 16-byte
-    // aligned load of 4 floats; `dist` is 4 writable floats (unaligned store).
+    // aligned load of 4 floats, as are the `Lanes` of the ray (`align(16)`); `dist` is 4 writable
+    // floats (unaligned store).
     unsafe {
         let load = |row: &[f32; 4]| _mm_load_ps(row.as_ptr());
         let mut tn = _mm_set1_ps(tmin);
         let mut tf = _mm_set1_ps(tmax);
         let robust = _mm_set1_ps(ROBUST_FAR);
         for a in 0..3 {
-            let o = _mm_set1_ps(r.org[a]);
-            let inv = _mm_set1_ps(r.inv[a]);
+            let o = _mm_load_ps(r.org4[a].0.as_ptr());
+            let inv = _mm_load_ps(r.inv4[a].0.as_ptr());
             let n = _mm_mul_ps(_mm_sub_ps(load(&b[r.near[a]]), o), inv);
             let f = _mm_mul_ps(_mm_mul_ps(_mm_sub_ps(load(&b[r.far[a]]), o), inv), robust);
             // maxps/minps return their second operand when either is NaN.
@@ -134,6 +137,7 @@ pub(crate) fn traverse_gas<V: GasVisitor>(
 ) -> f32 {
     let stack = &mut stack.entries;
     let mut sp = 0usize;
+    let mut box_tmax = tmax * TMAX_SLACK;
     let mut cur = Entry {
         child: 0,
         count: 0,
@@ -142,60 +146,91 @@ pub(crate) fn traverse_gas<V: GasVisitor>(
     loop {
         if cur.count == 0 {
             let node = &nodes[cur.child as usize];
-            let (dist, mut mask) = intersect4(node, ray, tmin, tmax);
+            let (dist, mut mask) = intersect4(node, ray, tmin, box_tmax);
             if mask != 0 {
-                // Collect the hit children, then order them nearest first.
-                let mut hits = [Entry::default(); 4];
-                let mut n = 0;
+                let entry = |l: usize| Entry {
+                    child: node.child[l],
+                    count: node.count[l],
+                    dist: dist[l],
+                };
+                let a = entry(mask.trailing_zeros() as usize);
+                mask &= mask - 1;
+                if mask == 0 {
+                    // One child hit: descend without touching the stack.
+                    cur = a;
+                    continue;
+                }
+                let b = entry(mask.trailing_zeros() as usize);
+                mask &= mask - 1;
+                if mask == 0 {
+                    // Two: push the farther one.
+                    let (near, far) = if b.dist < a.dist { (b, a) } else { (a, b) };
+                    stack[sp] = far;
+                    sp += 1;
+                    cur = near;
+                    continue;
+                }
+                // Three or four: push all, sort them farthest first, continue with the nearest.
+                let base = sp;
+                stack[sp] = a;
+                stack[sp + 1] = b;
+                sp += 2;
                 while mask != 0 {
-                    let l = mask.trailing_zeros() as usize;
+                    stack[sp] = entry(mask.trailing_zeros() as usize);
                     mask &= mask - 1;
-                    hits[n] = Entry {
-                        child: node.child[l],
-                        count: node.count[l],
-                        dist: dist[l],
-                    };
-                    n += 1;
+                    sp += 1;
                 }
-                if n > 1 {
-                    for i in 1..n {
-                        let e = hits[i];
-                        let mut j = i;
-                        while j > 0 && hits[j - 1].dist > e.dist {
-                            hits[j] = hits[j - 1];
-                            j -= 1;
-                        }
-                        hits[j] = e;
+                for i in base + 1..sp {
+                    let e = stack[i];
+                    let mut j = i;
+                    while j > base && stack[j - 1].dist < e.dist {
+                        stack[j] = stack[j - 1];
+                        j -= 1;
                     }
-                    for k in (1..n).rev() {
-                        stack[sp] = hits[k];
-                        sp += 1;
-                    }
+                    stack[j] = e;
                 }
-                cur = hits[0];
+                sp -= 1;
+                cur = stack[sp];
                 continue;
             }
         } else {
             let start = cur.child as usize;
-            let end = start + cur.count as usize;
+            let count = cur.count as usize;
             match prims {
-                Primitives::Triangles(tris) => {
-                    for (slot, t) in tris[start..end].iter().enumerate() {
-                        if let Some(h) = ray.tri.intersect(&t[0], &t[1], &t[2], tmin, tmax) {
-                            match visitor.triangle((start + slot) as u32, &h) {
+                Primitives::Triangles(blocks) => {
+                    let mut slot = start;
+                    let end = start + count;
+                    while slot < end {
+                        let valid = (end - slot).min(4);
+                        let hits = ray.tri.intersect4(&blocks[slot / 4], valid, tmin, tmax);
+                        let mut m = hits.mask;
+                        while m != 0 {
+                            let l = m.trailing_zeros() as usize;
+                            m &= m - 1;
+                            // An earlier lane may have shrunk the interval.
+                            if hits.t[l] > tmax {
+                                continue;
+                            }
+                            let h = hits.get(l);
+                            match visitor.triangle((slot + l) as u32, &h) {
                                 Decision::Ignore => {}
-                                Decision::Accept => tmax = h.t,
+                                Decision::Accept => {
+                                    tmax = h.t;
+                                    box_tmax = tmax * TMAX_SLACK;
+                                }
                                 Decision::AcceptAndTerminate => return h.t,
                             }
                         }
+                        slot += 4;
                     }
                 }
                 Primitives::Aabbs(boxes) => {
-                    for (slot, b) in boxes[start..end].iter().enumerate() {
+                    for (slot, b) in boxes[start..start + count].iter().enumerate() {
                         if ray.hits_box(b, tmin, tmax) {
                             let (t, stop) = visitor.custom((start + slot) as u32, tmin, tmax);
                             if let Some(t) = t {
                                 tmax = min_ignore_nan(tmax, t);
+                                box_tmax = tmax * TMAX_SLACK;
                             }
                             if stop {
                                 return tmax;
@@ -212,7 +247,7 @@ pub(crate) fn traverse_gas<V: GasVisitor>(
             }
             sp -= 1;
             cur = stack[sp];
-            if cur.dist <= tmax {
+            if cur.dist <= box_tmax {
                 break;
             }
         }

@@ -3,7 +3,7 @@
 mod gas;
 mod ray;
 
-pub(crate) use gas::{traverse_gas, Decision, GasVisitor, Primitives};
 pub use gas::TraversalStack;
-pub use ray::{Ray, RayError};
+pub(crate) use gas::{traverse_gas, Decision, GasVisitor, Primitives};
 pub(crate) use ray::PreparedRay;
+pub use ray::{Ray, RayError};

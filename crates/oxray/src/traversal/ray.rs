@@ -115,7 +115,15 @@ pub(crate) struct PreparedRay {
     pub near: [usize; 3],
     pub far: [usize; 3],
     pub tri: WatertightRay,
+    /// `org` and `inv` broadcast to four lanes, for the 4-wide box test.
+    pub org4: [Lanes; 3],
+    pub inv4: [Lanes; 3],
 }
+
+/// Four `f32` lanes, 16-byte aligned.
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Lanes(pub [f32; 4]);
 
 impl PreparedRay {
     /// `None` for an invalid ray, which can hit nothing.
@@ -130,7 +138,11 @@ impl PreparedRay {
             // A zero component gets +inf whatever its sign: the slab test then yields NaN exactly
             // when the origin lies on a slab plane, and the NaN-ignoring min/max of the box test
             // treat that as "inside", which is right for a closed box.
-            inv[a] = if d[a] == 0.0 { f32::INFINITY } else { 1.0 / d[a] };
+            inv[a] = if d[a] == 0.0 {
+                f32::INFINITY
+            } else {
+                1.0 / d[a]
+            };
             if inv[a] >= 0.0 {
                 near[a] = a;
                 far[a] = a + 3;
@@ -145,6 +157,8 @@ impl PreparedRay {
             near,
             far,
             tri: WatertightRay::new(ray.origin, ray.direction),
+            org4: ray.origin.to_array().map(|x| Lanes([x; 4])),
+            inv4: inv.map(|x| Lanes([x; 4])),
         })
     }
 
@@ -166,13 +180,20 @@ impl PreparedRay {
             t0 = max_ignore_nan(t0, tn);
             t1 = min_ignore_nan(t1, tf);
         }
-        t0 <= min_ignore_nan(tmax, t1 * ROBUST_FAR)
+        t0 <= min_ignore_nan(tmax * TMAX_SLACK, t1 * ROBUST_FAR)
     }
 }
 
 /// `1 + 2 * gamma(3)` (Ize 2013): scaling the far distance by it makes the slab test
 /// conservative under `f32` rounding.
-pub(crate) const ROBUST_FAR: f32 = 1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+pub(crate) const ROBUST_FAR: f32 =
+    1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+
+/// Boxes are tested against `tmax * TMAX_SLACK`: a triangle whose computed t equals tmax may
+/// lie in a box whose computed entry distance is a few ulps larger (the two are rounded
+/// differently), and the closed interval `[tmin, tmax]` must still find it. The slack costs at
+/// most a few extra box visits.
+pub(crate) const TMAX_SLACK: f32 = 1.0 + 1.0 / 16384.0;
 
 /// `max(acc, x)` that keeps `acc` when `x` is NaN (compiles to `maxps`).
 #[inline(always)]

@@ -15,11 +15,15 @@ pub struct BuildConfig {
     pub bins: usize,
     /// Largest leaf the SAH may choose; more primitives than this are always split.
     pub max_leaf_size: usize,
-    /// Cost of visiting a node relative to intersecting one primitive.
+    /// Cost of visiting a node relative to intersecting one block of primitives.
     pub traversal_cost: f32,
     /// Nodes with at most this many primitives (at most 256) are split by a full SAH sweep
     /// (exact SAH over sorted centroids) instead of bins; 0 disables the sweep.
     pub sweep_threshold: usize,
+    /// Primitives the traversal tests at once (4 for triangles, which leaves store in blocks of
+    /// four): the SAH counts a leaf's cost in blocks, and a node with at most one block of
+    /// primitives becomes a leaf.
+    pub block_size: usize,
 }
 
 impl BuildConfig {
@@ -27,25 +31,30 @@ impl BuildConfig {
     pub const FAST_BUILD: BuildConfig = BuildConfig {
         bins: 8,
         max_leaf_size: 8,
-        traversal_cost: 2.0,
+        traversal_cost: 1.0,
         sweep_threshold: 0,
+        block_size: 4,
     };
     /// The default trade-off.
     pub const BALANCED: BuildConfig = BuildConfig {
         bins: 16,
         max_leaf_size: 8,
-        traversal_cost: 3.0,
-        sweep_threshold: 12,
+        traversal_cost: 1.0,
+        sweep_threshold: 0,
+        block_size: 4,
     };
     /// `PREFER_FAST_TRACE`: more bins, and an exact SAH sweep near the leaves.
     pub const FAST_TRACE: BuildConfig = BuildConfig {
         bins: 32,
         max_leaf_size: 8,
-        traversal_cost: 2.0,
+        traversal_cost: 1.0,
         sweep_threshold: 128,
+        block_size: 4,
     };
 }
 
+/// Nodes with fewer primitives than this use 8 bins whatever the configuration.
+const SMALL_NODE: usize = 64;
 /// Largest node the exact sweep handles (its scratch lives on the stack).
 const MAX_SWEEP: usize = 256;
 /// Subtrees smaller than this are built on the current thread.
@@ -86,8 +95,16 @@ impl Box4 {
     #[inline(always)]
     fn grow(&mut self, o: &Box4) {
         for i in 0..4 {
-            self.lo[i] = if o.lo[i] < self.lo[i] { o.lo[i] } else { self.lo[i] };
-            self.hi[i] = if o.hi[i] > self.hi[i] { o.hi[i] } else { self.hi[i] };
+            self.lo[i] = if o.lo[i] < self.lo[i] {
+                o.lo[i]
+            } else {
+                self.lo[i]
+            };
+            self.hi[i] = if o.hi[i] > self.hi[i] {
+                o.hi[i]
+            } else {
+                self.hi[i]
+            };
         }
     }
 
@@ -137,16 +154,10 @@ impl PrimRef {
     }
 }
 
-enum Node {
-    Leaf { bounds: Aabb, start: u32, count: u32 },
-    Inner { bounds: Aabb, children: Box<[Node; 2]> },
-}
-
 /// Bytes of working memory [`build_bvh2`] allocates for `n` primitives, at most.
 pub(crate) fn temp_bytes(n: usize) -> usize {
-    let nodes = 2 * n.max(1);
     n * std::mem::size_of::<PrimRef>()
-        + nodes * (std::mem::size_of::<Node>() + std::mem::size_of::<Bvh2Node>())
+        + 2 * n.max(1) * std::mem::size_of::<Bvh2Node>()
         + n * std::mem::size_of::<u32>()
 }
 
@@ -167,10 +178,19 @@ pub(crate) fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
         return Bvh2::default();
     }
     let (root_bounds, root_centroids) = reduce(&refs);
-    let root = build_node(&mut refs, 0, root_bounds, root_centroids, 0, &config);
-    let mut nodes = Vec::with_capacity(2 * refs.len());
-    nodes.push(placeholder());
-    flatten(root, 0, &mut nodes);
+    // Node slots: the root, then the interior of its subtree (see `build_node`).
+    let mut nodes = vec![placeholder(); 2 * refs.len() - 1];
+    let (root, interior) = nodes.split_at_mut(1);
+    root[0] = build_node(
+        &mut refs,
+        0,
+        interior,
+        1,
+        root_bounds,
+        root_centroids,
+        0,
+        &config,
+    );
     Bvh2 {
         nodes,
         prim_order: refs.iter().map(PrimRef::id).collect(),
@@ -183,37 +203,6 @@ fn placeholder() -> Bvh2Node {
         left_first: 0,
         max: [0.0; 3],
         count: 0,
-    }
-}
-
-fn flatten(node: Node, at: usize, nodes: &mut Vec<Bvh2Node>) {
-    match node {
-        Node::Leaf {
-            bounds,
-            start,
-            count,
-        } => {
-            nodes[at] = Bvh2Node {
-                min: bounds.min.to_array(),
-                left_first: start,
-                max: bounds.max.to_array(),
-                count,
-            };
-        }
-        Node::Inner { bounds, children } => {
-            let first = nodes.len();
-            nodes.push(placeholder());
-            nodes.push(placeholder());
-            nodes[at] = Bvh2Node {
-                min: bounds.min.to_array(),
-                left_first: first as u32,
-                max: bounds.max.to_array(),
-                count: 0,
-            };
-            let [l, r] = *children;
-            flatten(l, first, nodes);
-            flatten(r, first + 1, nodes);
-        }
     }
 }
 
@@ -278,7 +267,10 @@ fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -
             _mm_mul_ps(_mm_load_ps(r.0.lo.as_ptr()), half),
             _mm_mul_ps(_mm_load_ps(r.0.hi.as_ptr()), half),
         );
-        let f = _mm_mul_ps(_mm_sub_ps(c, _mm_loadu_ps(cmin.as_ptr())), _mm_loadu_ps(scale.as_ptr()));
+        let f = _mm_mul_ps(
+            _mm_sub_ps(c, _mm_loadu_ps(cmin.as_ptr())),
+            _mm_loadu_ps(scale.as_ptr()),
+        );
         // maxps returns the second operand (0) for NaN, as `as usize` maps NaN to 0.
         let f = _mm_min_ps(_mm_max_ps(f, _mm_setzero_ps()), _mm_set1_ps((B - 1) as f32));
         let mut out = [0i32; 4];
@@ -291,7 +283,13 @@ fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -
 #[inline(always)]
 fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -> [usize; 4] {
     let c = r.centroid();
-    std::array::from_fn(|a| if a < 3 { bin_of::<B>(c[a], cmin[a], scale[a]) } else { 0 })
+    std::array::from_fn(|a| {
+        if a < 3 {
+            bin_of::<B>(c[a], cmin[a], scale[a])
+        } else {
+            0
+        }
+    })
 }
 
 /// Per axis and bin: the primitives' box and their count.
@@ -344,7 +342,11 @@ struct Sides {
 /// Returns the best binned split, its SAH cost (area-weighted primitive count, not yet divided
 /// by the parent's area) and the boxes of its sides (the centroid boxes are filled in by the
 /// partition).
-fn best_binned_split<const B: usize>(refs: &[PrimRef], cb: &Box4) -> Option<(Split, f32, [Box4; 2])> {
+fn best_binned_split<const B: usize>(
+    refs: &[PrimRef],
+    cb: &Box4,
+    block: usize,
+) -> Option<(Split, f32, [Box4; 2])> {
     let mut scale = [0.0f32; 4];
     for axis in 0..3 {
         let e = cb.hi[axis] - cb.lo[axis];
@@ -385,7 +387,8 @@ fn best_binned_split<const B: usize>(refs: &[PrimRef], cb: &Box4) -> Option<(Spl
             if n == 0 || right_count[i] == 0 {
                 continue;
             }
-            let cost = acc.half_area() * n as f32 + right_area[i] * right_count[i] as f32;
+            let cost = acc.half_area() * n.div_ceil(block as u32) as f32
+                + right_area[i] * right_count[i].div_ceil(block as u32) as f32;
             if cost.is_finite() && best.is_none_or(|(_, _, c)| cost < c) {
                 best = Some((axis, i, cost));
             }
@@ -407,8 +410,37 @@ fn best_binned_split<const B: usize>(refs: &[PrimRef], cb: &Box4) -> Option<(Spl
     Some((split, cost, [side(0..bin), side(bin..B)]))
 }
 
+/// The split of a node of at most two blocks: sorted along the widest centroid axis, one full
+/// block on the left.
+fn small_split(refs: &mut [PrimRef], cb: &Box4, block: usize) -> Option<(Split, f32)> {
+    let e = [
+        cb.hi[0] - cb.lo[0],
+        cb.hi[1] - cb.lo[1],
+        cb.hi[2] - cb.lo[2],
+    ];
+    let axis = if e[0] >= e[1] && e[0] >= e[2] {
+        0
+    } else if e[1] >= e[2] {
+        1
+    } else {
+        2
+    };
+    sort_by_centroid(refs, axis);
+    let side = |r: &[PrimRef]| {
+        r.iter().fold(Box4::EMPTY, |mut a, p| {
+            a.grow(&p.0);
+            a
+        })
+    };
+    let n = refs.len();
+    let cost = side(&refs[..block]).half_area()
+        + side(&refs[block..]).half_area() * (n - block).div_ceil(block) as f32;
+    cost.is_finite()
+        .then_some((Split::Sorted { axis, count: block }, cost))
+}
+
 /// Exact SAH: sorts along each axis and evaluates every split position.
-fn best_sweep_split(refs: &mut [PrimRef]) -> Option<(Split, f32)> {
+fn best_sweep_split(refs: &mut [PrimRef], block: usize) -> Option<(Split, f32)> {
     let n = refs.len();
     let mut right_area = [0.0f32; MAX_SWEEP];
     let mut best: Option<(Split, f32)> = None;
@@ -422,7 +454,8 @@ fn best_sweep_split(refs: &mut [PrimRef]) -> Option<(Split, f32)> {
         let mut acc = Box4::EMPTY;
         for i in 1..n {
             acc.grow(&refs[i - 1].0);
-            let cost = acc.half_area() * i as f32 + right_area[i] * (n - i) as f32;
+            let cost = acc.half_area() * i.div_ceil(block) as f32
+                + right_area[i] * (n - i).div_ceil(block) as f32;
             if cost.is_finite() && best.is_none_or(|(_, c)| cost < c) {
                 best = Some((Split::Sorted { axis, count: i }, cost));
             }
@@ -485,54 +518,84 @@ fn partition<const B: usize>(refs: &mut [PrimRef], split: Split) -> (usize, Opti
     }
 }
 
+/// Builds the subtree over `refs` (primitive slots `offset..offset + refs.len()`) and returns its
+/// root node.
+///
+/// Node slots are assigned without coordination, so subtrees can be built in parallel and the
+/// layout does not depend on scheduling: the subtree over `n` primitives owns the `2n - 2` slots of
+/// `interior` (global index `base`); a split after `m` primitives puts the left subtree's interior
+/// first (`2m - 2` slots), then the pair of children, then the right subtree's interior. Slots
+/// under leaves stay unused.
+#[allow(clippy::too_many_arguments)]
 fn build_node(
     refs: &mut [PrimRef],
     offset: usize,
+    interior: &mut [Bvh2Node],
+    base: usize,
     bounds: Box4,
     cb: Box4,
     depth: usize,
     config: &BuildConfig,
-) -> Node {
-    match config.bins {
-        8 => build_node_b::<8>(refs, offset, bounds, cb, depth, config),
-        16 => build_node_b::<16>(refs, offset, bounds, cb, depth, config),
-        _ => build_node_b::<32>(refs, offset, bounds, cb, depth, config),
+) -> Bvh2Node {
+    // Small nodes bin coarsely: their few primitives cannot use many bins, and each bin costs.
+    let bins = if refs.len() < SMALL_NODE {
+        8
+    } else {
+        config.bins
+    };
+    match bins {
+        8 => build_node_b::<8>(refs, offset, interior, base, bounds, cb, depth, config),
+        16 => build_node_b::<16>(refs, offset, interior, base, bounds, cb, depth, config),
+        _ => build_node_b::<32>(refs, offset, interior, base, bounds, cb, depth, config),
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn build_node_b<const B: usize>(
     refs: &mut [PrimRef],
     offset: usize,
+    interior: &mut [Bvh2Node],
+    base: usize,
     bounds: Box4,
     cb: Box4,
     depth: usize,
     config: &BuildConfig,
-) -> Node {
+) -> Bvh2Node {
     let n = refs.len();
-    let leaf = Node::Leaf {
-        bounds: bounds.aabb(),
-        start: offset as u32,
+    let aabb = bounds.aabb();
+    let leaf = Bvh2Node {
+        min: aabb.min.to_array(),
+        left_first: offset as u32,
+        max: aabb.max.to_array(),
         count: n as u32,
     };
+    if n <= config.block_size.max(1) && depth < FORCE_MEDIAN_DEPTH {
+        return leaf;
+    }
     if n <= 1 {
         return leaf;
     }
+    let blocks = |k: usize| k.div_ceil(config.block_size.max(1)) as f32;
     let mut side_bounds = None;
+    let block = config.block_size.max(1);
     let split = if depth >= FORCE_MEDIAN_DEPTH {
         None
+    } else if n <= 2 * block && n <= config.max_leaf_size && n > config.sweep_threshold {
+        // At most two blocks: the only split worth a node puts one full block on one side.
+        small_split(refs, &cb, block)
     } else if n <= config.sweep_threshold {
-        best_sweep_split(refs)
+        best_sweep_split(refs, config.block_size.max(1))
     } else {
-        best_binned_split::<B>(refs, &cb).map(|(split, cost, sides)| {
+        best_binned_split::<B>(refs, &cb, config.block_size.max(1)).map(|(split, cost, sides)| {
             side_bounds = Some(sides);
             (split, cost)
         })
     };
     let split = match split {
         Some((split, cost)) => {
-            // SAH in units of one primitive test, relative to this node's area.
+            // SAH in units of one block test, relative to this node's area.
             let split_cost = config.traversal_cost + cost / bounds.half_area();
-            let leaf_cost = n as f32;
+            let leaf_cost = blocks(n);
             if n <= config.max_leaf_size && (leaf_cost <= split_cost || !split_cost.is_finite()) {
                 return leaf;
             }
@@ -542,7 +605,11 @@ fn build_node_b<const B: usize>(
             if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH {
                 return leaf;
             }
-            let e = [cb.hi[0] - cb.lo[0], cb.hi[1] - cb.lo[1], cb.hi[2] - cb.lo[2]];
+            let e = [
+                cb.hi[0] - cb.lo[0],
+                cb.hi[1] - cb.lo[1],
+                cb.hi[2] - cb.lo[2],
+            ];
             let axis = if e[0] >= e[1] && e[0] >= e[2] {
                 0
             } else if e[1] >= e[2] {
@@ -582,19 +649,46 @@ fn build_node_b<const B: usize>(
         bounds: [lb, rb],
         centroids: [lc, rc],
     } = sides;
+    let (left_interior, rest) = interior.split_at_mut(2 * mid - 2);
+    let (pair, right_interior) = rest.split_at_mut(2);
+    let pair_index = base + 2 * mid - 2;
+    let right_base = pair_index + 2;
     let (left, right) = if parallel {
         rayon::join(
-            || build_node(l, offset, lb, lc, depth + 1, config),
-            || build_node(r, offset + mid, rb, rc, depth + 1, config),
+            || build_node(l, offset, left_interior, base, lb, lc, depth + 1, config),
+            || {
+                build_node(
+                    r,
+                    offset + mid,
+                    right_interior,
+                    right_base,
+                    rb,
+                    rc,
+                    depth + 1,
+                    config,
+                )
+            },
         )
     } else {
         (
-            build_node(l, offset, lb, lc, depth + 1, config),
-            build_node(r, offset + mid, rb, rc, depth + 1, config),
+            build_node(l, offset, left_interior, base, lb, lc, depth + 1, config),
+            build_node(
+                r,
+                offset + mid,
+                right_interior,
+                right_base,
+                rb,
+                rc,
+                depth + 1,
+                config,
+            ),
         )
     };
-    Node::Inner {
-        bounds: bounds.aabb(),
-        children: Box::new([left, right]),
+    pair[0] = left;
+    pair[1] = right;
+    Bvh2Node {
+        count: 0,
+        left_first: pair_index as u32,
+        ..leaf
     }
 }

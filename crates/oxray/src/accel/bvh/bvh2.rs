@@ -36,7 +36,8 @@ impl Bvh2Node {
 /// builder's input) of the primitive at leaf slot `slot`.
 #[derive(Clone, Debug, Default)]
 pub struct Bvh2 {
-    /// Nodes, root first; children pairs are adjacent.
+    /// Nodes, root first; children pairs are adjacent. Slots that no node references (under
+    /// leaves) may be left unused.
     pub nodes: Vec<Bvh2Node>,
     /// Leaf slot to input primitive.
     pub prim_order: Vec<u32>,
