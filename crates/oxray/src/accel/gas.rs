@@ -140,13 +140,18 @@ impl Gas {
 
         match summary.kind {
             BuildInputKind::Triangles => {
-                let tris: Vec<[Vec3; 3]> = inputs
+                let mut per_input: Vec<Vec<[Vec3; 3]>> = inputs
                     .iter()
-                    .flat_map(|input| match input {
+                    .map(|input| match input {
                         BuildInput::Triangles(t) => decode_triangles(t),
                         BuildInput::CustomPrimitives(_) => unreachable!("inputs are homogeneous"),
                     })
                     .collect();
+                let tris: Vec<[Vec3; 3]> = if per_input.len() == 1 {
+                    per_input.pop().unwrap_or_default()
+                } else {
+                    per_input.concat()
+                };
                 // An indexed parallel map, then a sequential filter: rayon's filtered collect
                 // would allocate per item.
                 let boxes: Vec<Option<Aabb>> = tris
@@ -161,7 +166,7 @@ impl Gas {
                 let bvh2 = build_bvh2(&bounds, &config);
                 gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
                 gas.bvh = Bvh4::from(&bvh2);
-                let global: Vec<u32> = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+                let global: Vec<u32> = bvh2.prim_order.par_iter().map(|&k| ids[k as usize]).collect();
                 (gas.triangles, gas.slot_prim) = pack_triangles(&mut gas.bvh, &global, &tris);
             }
             BuildInputKind::CustomPrimitives => {
@@ -307,32 +312,46 @@ pub(crate) const NO_PRIMITIVE: u32 = u32::MAX;
 
 /// Lays the triangles of every leaf out in blocks of four, leaves in node order, and points the
 /// leaves at their blocks. `global[slot]` is the primitive at binary-BVH slot `slot`.
-fn pack_triangles(
-    bvh: &mut Bvh4,
-    global: &[u32],
-    tris: &[[Vec3; 3]],
-) -> (Vec<Triangle4>, Vec<u32>) {
-    let mut blocks: Vec<Triangle4> = Vec::with_capacity(global.len() / 2 + 1);
-    let mut slot_prim = Vec::with_capacity(blocks.capacity() * 4);
+fn pack_triangles(bvh: &mut Bvh4, global: &[u32], tris: &[[Vec3; 3]]) -> (Vec<Triangle4>, Vec<u32>) {
+    // Serially: give every leaf its blocks, and note each block's primitives.
+    let mut sources: Vec<(u32, u32)> = Vec::new();
     for node in &mut bvh.nodes {
         for lane in 0..4 {
-            let n = node.count[lane] as usize;
+            let n = node.count[lane];
             if n == 0 {
                 continue;
             }
-            let start = node.child[lane] as usize;
-            node.child[lane] = (blocks.len() * 4) as u32;
-            for chunk in global[start..start + n].chunks(4) {
-                let mut block = Triangle4::zeroed();
-                for (l, &g) in chunk.iter().enumerate() {
-                    block.set(l, &tris[g as usize].map(|v| v.to_array()));
-                }
-                blocks.push(block);
-                slot_prim.extend_from_slice(chunk);
-                slot_prim.extend(std::iter::repeat_n(NO_PRIMITIVE, 4 - chunk.len()));
+            let start = node.child[lane];
+            node.child[lane] = (sources.len() * 4) as u32;
+            for k in (0..n).step_by(4) {
+                sources.push((start + k, (n - k).min(4)));
             }
         }
     }
+    // In parallel: fill the blocks and the slot map.
+    let blocks: Vec<Triangle4> = sources
+        .par_iter()
+        .map(|&(start, n)| {
+            let mut block = Triangle4::zeroed();
+            for l in 0..n as usize {
+                let g = global[start as usize + l];
+                block.set(l, &tris[g as usize].map(|v| v.to_array()));
+            }
+            block
+        })
+        .collect();
+    let slot_prim: Vec<u32> = (0..sources.len() * 4)
+        .into_par_iter()
+        .map(|slot| {
+            let (start, n) = sources[slot / 4];
+            let l = (slot % 4) as u32;
+            if l < n {
+                global[(start + l) as usize]
+            } else {
+                NO_PRIMITIVE
+            }
+        })
+        .collect();
     (blocks, slot_prim)
 }
 

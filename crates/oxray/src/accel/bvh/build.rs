@@ -24,6 +24,8 @@ pub struct BuildConfig {
     /// four): the SAH counts a leaf's cost in blocks, and a node with at most one block of
     /// primitives becomes a leaf.
     pub block_size: usize,
+    /// Search splits along the widest axis of the centroids only (a third of the binning work).
+    pub widest_axis_only: bool,
 }
 
 impl BuildConfig {
@@ -34,6 +36,7 @@ impl BuildConfig {
         traversal_cost: 1.0,
         sweep_threshold: 0,
         block_size: 4,
+        widest_axis_only: true,
     };
     /// The default trade-off.
     pub const BALANCED: BuildConfig = BuildConfig {
@@ -42,6 +45,7 @@ impl BuildConfig {
         traversal_cost: 1.0,
         sweep_threshold: 0,
         block_size: 4,
+        widest_axis_only: false,
     };
     /// `PREFER_FAST_TRACE`: more bins, and an exact SAH sweep near the leaves.
     pub const FAST_TRACE: BuildConfig = BuildConfig {
@@ -50,6 +54,7 @@ impl BuildConfig {
         traversal_cost: 1.0,
         sweep_threshold: 128,
         block_size: 4,
+        widest_axis_only: false,
     };
 }
 
@@ -58,9 +63,9 @@ const SMALL_NODE: usize = 64;
 /// Largest node the exact sweep handles (its scratch lives on the stack).
 const MAX_SWEEP: usize = 256;
 /// Subtrees smaller than this are built on the current thread.
-const PARALLEL_SUBTREE: usize = 4096;
+const PARALLEL_SUBTREE: usize = 1024;
 /// Nodes larger than this bin their primitives in parallel chunks of this size.
-const PARALLEL_BINNING: usize = 1 << 15;
+const PARALLEL_BINNING: usize = 1 << 13;
 
 /// A box with a fourth, unused lane, so that unions compile to `minps`/`maxps`.
 #[repr(C, align(16))]
@@ -323,6 +328,10 @@ impl<const B: usize> Bins<B> {
         for r in refs {
             let idx = bin_indices::<B>(r, cmin, scale);
             for axis in 0..3 {
+                // Axes without extent (or not searched) take no part.
+                if scale[axis] == 0.0 {
+                    continue;
+                }
                 let i = idx[axis];
                 bins.boxes[axis][i].grow(&r.0);
                 bins.counts[axis][i] += 1;
@@ -346,12 +355,15 @@ fn best_binned_split<const B: usize>(
     refs: &[PrimRef],
     cb: &Box4,
     block: usize,
+    widest_axis_only: bool,
 ) -> Option<(Split, f32, [Box4; 2])> {
     let mut scale = [0.0f32; 4];
+    let widest = widest_axis(cb);
     for axis in 0..3 {
         let e = cb.hi[axis] - cb.lo[axis];
         let s = B as f32 * (1.0 - 1e-6) / e;
-        scale[axis] = if e > 0.0 && s.is_finite() { s } else { 0.0 };
+        let searched = !widest_axis_only || axis == widest;
+        scale[axis] = if searched && e > 0.0 && s.is_finite() { s } else { 0.0 };
     }
     if scale == [0.0; 4] {
         return None;
@@ -408,6 +420,18 @@ fn best_binned_split<const B: usize>(
         scale: scale[axis],
     };
     Some((split, cost, [side(0..bin), side(bin..B)]))
+}
+
+/// The axis along which a box is widest.
+fn widest_axis(b: &Box4) -> usize {
+    let e = [b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]];
+    if e[0] >= e[1] && e[0] >= e[2] {
+        0
+    } else if e[1] >= e[2] {
+        1
+    } else {
+        2
+    }
 }
 
 /// The split of a node of at most two blocks: sorted along the widest centroid axis, one full
@@ -586,7 +610,7 @@ fn build_node_b<const B: usize>(
     } else if n <= config.sweep_threshold {
         best_sweep_split(refs, config.block_size.max(1))
     } else {
-        best_binned_split::<B>(refs, &cb, config.block_size.max(1)).map(|(split, cost, sides)| {
+        best_binned_split::<B>(refs, &cb, block, config.widest_axis_only).map(|(split, cost, sides)| {
             side_bounds = Some(sides);
             (split, cost)
         })
