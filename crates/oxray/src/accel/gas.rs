@@ -166,7 +166,11 @@ impl Gas {
                 let bvh2 = build_bvh2(&bounds, &config);
                 gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
                 gas.bvh = Bvh4::from(&bvh2);
-                let global: Vec<u32> = bvh2.prim_order.par_iter().map(|&k| ids[k as usize]).collect();
+                let global: Vec<u32> = bvh2
+                    .prim_order
+                    .par_iter()
+                    .map(|&k| ids[k as usize])
+                    .collect();
                 (gas.triangles, gas.slot_prim) = pack_triangles(&mut gas.bvh, &global, &tris);
             }
             BuildInputKind::CustomPrimitives => {
@@ -312,7 +316,11 @@ pub(crate) const NO_PRIMITIVE: u32 = u32::MAX;
 
 /// Lays the triangles of every leaf out in blocks of four, leaves in node order, and points the
 /// leaves at their blocks. `global[slot]` is the primitive at binary-BVH slot `slot`.
-fn pack_triangles(bvh: &mut Bvh4, global: &[u32], tris: &[[Vec3; 3]]) -> (Vec<Triangle4>, Vec<u32>) {
+fn pack_triangles(
+    bvh: &mut Bvh4,
+    global: &[u32],
+    tris: &[[Vec3; 3]],
+) -> (Vec<Triangle4>, Vec<u32>) {
     // Serially: give every leaf its blocks, and note each block's primitives.
     let mut sources: Vec<(u32, u32)> = Vec::new();
     for node in &mut bvh.nodes {

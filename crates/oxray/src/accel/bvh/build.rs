@@ -24,8 +24,9 @@ pub struct BuildConfig {
     /// four): the SAH counts a leaf's cost in blocks, and a node with at most one block of
     /// primitives becomes a leaf.
     pub block_size: usize,
-    /// Search splits along the widest axis of the centroids only (a third of the binning work).
-    pub widest_axis_only: bool,
+    /// Nodes with fewer primitives than this search splits along the widest axis of their
+    /// centroids only (a third of the binning work); larger nodes search all three axes.
+    pub widest_axis_below: usize,
 }
 
 impl BuildConfig {
@@ -33,10 +34,10 @@ impl BuildConfig {
     pub const FAST_BUILD: BuildConfig = BuildConfig {
         bins: 8,
         max_leaf_size: 8,
-        traversal_cost: 1.0,
+        traversal_cost: 1.5,
         sweep_threshold: 0,
         block_size: 4,
-        widest_axis_only: true,
+        widest_axis_below: usize::MAX,
     };
     /// The default trade-off.
     pub const BALANCED: BuildConfig = BuildConfig {
@@ -45,16 +46,16 @@ impl BuildConfig {
         traversal_cost: 1.0,
         sweep_threshold: 0,
         block_size: 4,
-        widest_axis_only: false,
+        widest_axis_below: 1024,
     };
     /// `PREFER_FAST_TRACE`: more bins, and an exact SAH sweep near the leaves.
     pub const FAST_TRACE: BuildConfig = BuildConfig {
         bins: 32,
         max_leaf_size: 8,
         traversal_cost: 1.0,
-        sweep_threshold: 128,
+        sweep_threshold: 32,
         block_size: 4,
-        widest_axis_only: false,
+        widest_axis_below: 0,
     };
 }
 
@@ -363,7 +364,11 @@ fn best_binned_split<const B: usize>(
         let e = cb.hi[axis] - cb.lo[axis];
         let s = B as f32 * (1.0 - 1e-6) / e;
         let searched = !widest_axis_only || axis == widest;
-        scale[axis] = if searched && e > 0.0 && s.is_finite() { s } else { 0.0 };
+        scale[axis] = if searched && e > 0.0 && s.is_finite() {
+            s
+        } else {
+            0.0
+        };
     }
     if scale == [0.0; 4] {
         return None;
@@ -610,10 +615,12 @@ fn build_node_b<const B: usize>(
     } else if n <= config.sweep_threshold {
         best_sweep_split(refs, config.block_size.max(1))
     } else {
-        best_binned_split::<B>(refs, &cb, block, config.widest_axis_only).map(|(split, cost, sides)| {
-            side_bounds = Some(sides);
-            (split, cost)
-        })
+        best_binned_split::<B>(refs, &cb, block, n < config.widest_axis_below).map(
+            |(split, cost, sides)| {
+                side_bounds = Some(sides);
+                (split, cost)
+            },
+        )
     };
     let split = match split {
         Some((split, cost)) => {
