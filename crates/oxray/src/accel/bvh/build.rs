@@ -636,20 +636,13 @@ fn build_node_b<const B: usize>(
             if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH {
                 return leaf;
             }
-            let e = [
-                cb.hi[0] - cb.lo[0],
-                cb.hi[1] - cb.lo[1],
-                cb.hi[2] - cb.lo[2],
-            ];
-            let axis = if e[0] >= e[1] && e[0] >= e[2] {
-                0
-            } else if e[1] >= e[2] {
-                1
-            } else {
-                2
-            };
+            let axis = widest_axis(&cb);
             Split::Median {
-                axis: if e[axis] > 0.0 { axis } else { 3 },
+                axis: if cb.hi[axis] - cb.lo[axis] > 0.0 {
+                    axis
+                } else {
+                    3
+                },
             }
         }
     };
