@@ -185,7 +185,8 @@ pub(crate) fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
     }
     let (root_bounds, root_centroids) = reduce(&refs);
     // Node slots: the root, then the interior of its subtree (see `build_node`).
-    let mut nodes = vec![placeholder(); 2 * refs.len() - 1];
+    // Zeroed memory from the allocator: pages under leaves are never even touched.
+    let mut nodes: Vec<Bvh2Node> = bytemuck::allocation::zeroed_vec(2 * refs.len() - 1);
     let (root, interior) = nodes.split_at_mut(1);
     root[0] = build_node(
         &mut refs,
@@ -200,15 +201,6 @@ pub(crate) fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
     Bvh2 {
         nodes,
         prim_order: refs.iter().map(PrimRef::id).collect(),
-    }
-}
-
-fn placeholder() -> Bvh2Node {
-    Bvh2Node {
-        min: [0.0; 3],
-        left_first: 0,
-        max: [0.0; 3],
-        count: 0,
     }
 }
 
@@ -323,22 +315,33 @@ impl<const B: usize> Bins<B> {
         self
     }
 
-    /// Bins every primitive on the three axes at once.
+    /// Bins every primitive on the three axes at once. Even and odd primitives go to separate
+    /// bin sets, merged at the end, so that consecutive primitives falling in the same bin do
+    /// not wait on each other's stores.
     fn fill(refs: &[PrimRef], cmin: &[f32; 4], scale: &[f32; 4]) -> Self {
-        let mut bins = Self::new();
-        for r in refs {
+        let mut even = Self::new();
+        let mut odd = Self::new();
+        let active: [bool; 3] = std::array::from_fn(|a| scale[a] != 0.0);
+        let add = |bins: &mut Self, r: &PrimRef| {
             let idx = bin_indices::<B>(r, cmin, scale);
             for axis in 0..3 {
                 // Axes without extent (or not searched) take no part.
-                if scale[axis] == 0.0 {
-                    continue;
+                if active[axis] {
+                    let i = idx[axis];
+                    bins.boxes[axis][i].grow(&r.0);
+                    bins.counts[axis][i] += 1;
                 }
-                let i = idx[axis];
-                bins.boxes[axis][i].grow(&r.0);
-                bins.counts[axis][i] += 1;
             }
+        };
+        let mut pairs = refs.chunks_exact(2);
+        for pair in &mut pairs {
+            add(&mut even, &pair[0]);
+            add(&mut odd, &pair[1]);
         }
-        bins
+        if let [last] = pairs.remainder() {
+            add(&mut even, last);
+        }
+        even.merge(&odd)
     }
 }
 
