@@ -34,7 +34,7 @@ impl BuildConfig {
     pub const FAST_BUILD: BuildConfig = BuildConfig {
         bins: 8,
         max_leaf_size: 8,
-        traversal_cost: 1.5,
+        traversal_cost: 1.0,
         sweep_threshold: 0,
         block_size: 4,
         widest_axis_below: usize::MAX,
