@@ -204,3 +204,101 @@ pub enum QueryError {
         outputs: usize,
     },
 }
+
+/// Why a module, program group or pipeline could not be created (guide §6), or an SBT region
+/// was refused (§7).
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PipelineError {
+    /// An entry name lacks the prefix of its program kind (guide §6.2).
+    #[error("entry {name:?} registered as a {kind} program must start with {prefix:?}")]
+    BadEntryName {
+        /// The name.
+        name: String,
+        /// The program kind.
+        kind: &'static str,
+        /// The prefix it needs.
+        prefix: &'static str,
+    },
+    /// Two programs of one module share an entry name.
+    #[error("entry {0:?} is defined twice in one module")]
+    DuplicateEntry(String),
+    /// A program group names an entry its module lacks, or one of another kind.
+    #[error("module has no {kind} program named {name:?}")]
+    UnknownEntry {
+        /// The name.
+        name: String,
+        /// The kind wanted.
+        kind: &'static str,
+    },
+    /// `num_payload_values` must be at most 32 (guide §13.3).
+    #[error("num_payload_values {0} exceeds 32")]
+    TooManyPayloadValues(u32),
+    /// `num_attribute_values` must be at most 8 (guide §13.4).
+    #[error("num_attribute_values {0} exceeds 8")]
+    TooManyAttributeValues(u32),
+    /// `max_trace_depth` must be at most 31 (guide §12).
+    #[error("max_trace_depth {0} exceeds 31")]
+    TraceDepthTooLarge(u32),
+    /// A pipeline needs at least one program group.
+    #[error("a pipeline needs at least one program group")]
+    NoProgramGroups,
+    /// SBT strides are multiples of 16 that hold at least the 32-byte header (guide §7.2).
+    #[error("SBT stride {stride} is not a multiple of 16 of at least 32 bytes")]
+    InvalidSbtStride {
+        /// The stride.
+        stride: usize,
+    },
+    /// An SBT region's bytes are fewer than its records need.
+    #[error("SBT region holds {len} bytes but its records need {needed}")]
+    SbtRegionTooSmall {
+        /// Bytes needed.
+        needed: usize,
+        /// Bytes given.
+        len: usize,
+    },
+}
+
+impl PipelineError {
+    /// The `OptixResult` code the guide gives for this error.
+    pub fn code(&self) -> ErrorCode {
+        ErrorCode::InvalidValue
+    }
+}
+
+/// Why a launch was refused (guide §7, §10, §12). Nothing ran.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum LaunchError {
+    /// `width * height * depth` must be at most 2^30 (guide §12).
+    #[error("launch of {width} x {height} x {depth} exceeds 2^30 launch indices")]
+    TooLarge {
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+        /// Depth.
+        depth: u32,
+    },
+    /// The SBT has no ray-generation record.
+    #[error("the SBT has no ray-generation record")]
+    NoRaygenRecord,
+    /// A record's header does not name a program group of this pipeline, or names one of the
+    /// wrong kind for its region.
+    #[error("SBT {region} record {index}: {reason}")]
+    InvalidSbtRecord {
+        /// The region (raygen, exception, miss, hitgroup, callables).
+        region: &'static str,
+        /// The record.
+        index: usize,
+        /// What is wrong.
+        reason: &'static str,
+    },
+}
+
+impl LaunchError {
+    /// The `OptixResult` code the guide gives for this error.
+    pub fn code(&self) -> ErrorCode {
+        ErrorCode::InvalidLaunchParameter
+    }
+}

@@ -42,8 +42,13 @@
 
 pub mod accel;
 pub mod error;
+pub mod exception;
 pub mod geometry;
+mod output;
+pub mod pipeline;
+pub mod program;
 mod query;
+pub mod sbt;
 pub mod traversal;
 
 pub use accel::input::{
@@ -52,13 +57,24 @@ pub use accel::input::{
 };
 pub use accel::options::{BuildFlags, BuildOperation, BuildOptions, GeometryFlags};
 pub use accel::{compute_memory_usage, AccelBufferSizes, Gas, GasMemory};
-pub use error::{BuildError, ErrorCode, QueryError};
+pub use error::{BuildError, ErrorCode, LaunchError, PipelineError, QueryError};
+pub use exception::{Exception, ExceptionCode, ExceptionFlags, Interrupt, ProgramResult};
 pub use geometry::vertex::{IndexFormat, VertexFormat};
 pub use geometry::Aabb;
+pub use output::OutputBuffer;
+pub use pipeline::{
+    DeviceContext, LaunchReport, LogLevel, Pipeline, PipelineCompileOptions, PipelineLinkOptions,
+    PrimitiveTypeFlags, TraversableGraphFlags,
+};
+pub use program::{
+    AnyHitCtx, ClosestHitCtx, ExceptionCtx, HitGroupDesc, IntersectionCtx, MissCtx, Module,
+    ProgramGroup, ProgramGroupKind, ProgramKind, RayFlags, RayGenCtx, TraceRay, TraversableHandle,
+};
 pub use query::{
     CandidateAction, CustomHit, CustomIntersector, CustomPrimitive, Hit, HitKind,
     NoCustomPrimitives,
 };
+pub use sbt::{SbtHeader, SbtRegion, ShaderBindingTable};
 pub use traversal::{Ray, RayError, TraversalStack};
 
 /// The README's example, compiled and run as a doctest.

@@ -193,7 +193,7 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
             hit_kind: HitKind::custom(c.hit_kind),
         };
         match self.offer(hit) {
-            Decision::Ignore => (None, false),
+            Decision::Ignore | Decision::Abort => (None, false),
             Decision::Accept => (Some(c.t), false),
             Decision::AcceptAndTerminate => (Some(c.t), true),
         }

@@ -16,6 +16,8 @@ pub(crate) enum Decision {
     Accept,
     /// Accepted, and traversal ends (terminate-ray, or terminate-on-first-hit).
     AcceptAndTerminate,
+    /// Not accepted, and traversal ends (an exception was raised).
+    Abort,
 }
 
 /// Receives the candidate hits of a traversal.
@@ -219,6 +221,7 @@ pub(crate) fn traverse_gas<V: GasVisitor>(
                                     box_tmax = tmax * TMAX_SLACK;
                                 }
                                 Decision::AcceptAndTerminate => return h.t,
+                                Decision::Abort => return tmax,
                             }
                         }
                         slot += 4;

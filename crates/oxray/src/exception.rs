@@ -1,0 +1,141 @@
+//! Exceptions (guide §13.14): codes, flags, and the value that unwinds a launch index.
+
+use bitflags::bitflags;
+
+bitflags! {
+    /// Which exceptions a pipeline checks for (`OptixExceptionFlags`).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct ExceptionFlags: u32 {
+        /// Continuation-stack overflow (`OPTIX_EXCEPTION_FLAG_STACK_OVERFLOW`).
+        const STACK_OVERFLOW = 1 << 0;
+        /// A trace nested deeper than `max_trace_depth` (`OPTIX_EXCEPTION_FLAG_TRACE_DEPTH`).
+        const TRACE_DEPTH = 1 << 1;
+        /// User exceptions thrown by programs (`OPTIX_EXCEPTION_FLAG_USER`).
+        const USER = 1 << 2;
+    }
+}
+
+/// An exception code (`optixGetExceptionCode`): user codes are `0..2^30`, built-in codes are
+/// negative (values from the OptiX headers).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ExceptionCode(pub i32);
+
+impl ExceptionCode {
+    /// `OPTIX_EXCEPTION_CODE_STACK_OVERFLOW`.
+    pub const STACK_OVERFLOW: ExceptionCode = ExceptionCode(-1);
+    /// `OPTIX_EXCEPTION_CODE_TRACE_DEPTH_EXCEEDED`.
+    pub const TRACE_DEPTH_EXCEEDED: ExceptionCode = ExceptionCode(-2);
+    /// `OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_MISS_SBT`: the miss index is past the miss records.
+    pub const INVALID_MISS_SBT: ExceptionCode = ExceptionCode(-6);
+    /// `OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_HIT_SBT`: the hit-group index is past the records.
+    pub const INVALID_HIT_SBT: ExceptionCode = ExceptionCode(-7);
+    /// `OPTIX_EXCEPTION_CODE_UNSUPPORTED_PRIMITIVE_TYPE`: the pipeline's primitive-type flags
+    /// exclude the primitives of the traced structure.
+    pub const UNSUPPORTED_PRIMITIVE_TYPE: ExceptionCode = ExceptionCode(-8);
+    /// `OPTIX_EXCEPTION_CODE_UNSUPPORTED_SINGLE_LEVEL_GAS`: a GAS was traced directly but the
+    /// pipeline's traversable-graph flags do not allow a single GAS.
+    pub const UNSUPPORTED_SINGLE_LEVEL_GAS: ExceptionCode = ExceptionCode(-15);
+    /// `OPTIX_EXCEPTION_CODE_INVALID_RAY` (validation mode): NaN or infinite origin or
+    /// direction, negative tmin, or tmin > tmax.
+    pub const INVALID_RAY: ExceptionCode = ExceptionCode(-9);
+    /// `OPTIX_EXCEPTION_CODE_CALLABLE_INVALID_SBT`: the callable index is past the records.
+    pub const CALLABLE_INVALID_SBT: ExceptionCode = ExceptionCode(-12);
+    /// `OPTIX_EXCEPTION_CODE_PAYLOAD_TYPE_MISMATCH`: more payload words than the pipeline has.
+    pub const PAYLOAD_TYPE_MISMATCH: ExceptionCode = ExceptionCode(-33);
+
+    /// Largest user code, `2^30 - 1`.
+    pub const MAX_USER: i32 = (1 << 30) - 1;
+
+    /// Whether this is a user code.
+    pub fn is_user(self) -> bool {
+        (0..=Self::MAX_USER).contains(&self.0)
+    }
+}
+
+/// An exception raised in a launch index: its code and up to eight detail words.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Exception {
+    /// The code.
+    pub code: ExceptionCode,
+    details: [u32; 8],
+    num_details: u8,
+}
+
+impl Exception {
+    pub(crate) fn new(code: ExceptionCode, details: &[u32]) -> Self {
+        let n = details.len().min(8);
+        let mut d = [0; 8];
+        d[..n].copy_from_slice(&details[..n]);
+        Exception {
+            code,
+            details: d,
+            num_details: n as u8,
+        }
+    }
+
+    /// The detail words (`optixGetExceptionDetail_0..7`).
+    pub fn details(&self) -> &[u32] {
+        &self.details[..self.num_details as usize]
+    }
+}
+
+impl std::fmt::Display for Exception {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let name = match self.code {
+            ExceptionCode::STACK_OVERFLOW => "stack overflow",
+            ExceptionCode::TRACE_DEPTH_EXCEEDED => "trace depth exceeded",
+            ExceptionCode::INVALID_MISS_SBT => "invalid miss SBT index",
+            ExceptionCode::INVALID_HIT_SBT => "invalid hit-group SBT index",
+            ExceptionCode::INVALID_RAY => "invalid ray",
+            ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE => "unsupported primitive type",
+            ExceptionCode::UNSUPPORTED_SINGLE_LEVEL_GAS => {
+                "single GAS not allowed by the graph flags"
+            }
+            ExceptionCode::CALLABLE_INVALID_SBT => "invalid callable SBT index",
+            ExceptionCode::PAYLOAD_TYPE_MISMATCH => "payload size mismatch",
+            c if c.is_user() => "user exception",
+            _ => "exception",
+        };
+        write!(f, "{name} (code {}", self.code.0)?;
+        if self.num_details > 0 {
+            write!(f, ", details {:?}", self.details())?;
+        }
+        write!(f, ")")
+    }
+}
+
+/// Why a program stopped early. Device functions that, in OptiX, never return
+/// (`optixTrace` raising an exception, `optixThrowException`, `optixIgnoreIntersection`,
+/// `optixTerminateRay`, an intersection whose any-hit terminated the ray) give an `Interrupt`
+/// instead, which the program passes on with `?` or `return`. It can only be made by those
+/// functions, so a program cannot invent one it is not allowed to raise.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Interrupt(pub(crate) InterruptKind);
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum InterruptKind {
+    /// An exception: the launch index ends and the exception program runs.
+    Exception(Exception),
+    /// `optixIgnoreIntersection` from an any-hit program.
+    IgnoreIntersection,
+    /// `optixTerminateRay` from an any-hit program (or an intersection program whose report
+    /// was terminated).
+    TerminateRay,
+}
+
+impl Interrupt {
+    pub(crate) fn exception(code: ExceptionCode, details: &[u32]) -> Self {
+        Interrupt(InterruptKind::Exception(Exception::new(code, details)))
+    }
+
+    /// The exception, if this interrupt is one.
+    pub fn as_exception(&self) -> Option<&Exception> {
+        match &self.0 {
+            InterruptKind::Exception(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+/// What every program returns: `Ok(())`, or an [`Interrupt`] passed on from a device function.
+pub type ProgramResult = Result<(), Interrupt>;

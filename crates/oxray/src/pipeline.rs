@@ -1,0 +1,344 @@
+//! Device context, pipelines (guide §4, §6.7) and launches (§10).
+
+use crate::error::{LaunchError, PipelineError};
+use crate::exception::{Exception, ExceptionFlags};
+use crate::program::{run_raygen, LaunchShared, ProgramGroup, ProgramGroupKind};
+use crate::sbt::{SbtHeader, SbtRegion, ShaderBindingTable};
+use bitflags::bitflags;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::sync::Arc;
+
+/// Log levels of the context's log callback (guide §4.1; numeric values as OptiX's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum LogLevel {
+    /// No messages.
+    Disable = 0,
+    /// Unrecoverable errors.
+    Fatal = 1,
+    /// Recoverable errors.
+    Error = 2,
+    /// Warnings.
+    Warning = 3,
+    /// Status and progress.
+    Print = 4,
+}
+
+type LogFn = Arc<dyn Fn(LogLevel, &str, &str) + Send + Sync>;
+
+/// The device context (`OptixDeviceContext`): validation mode and logging.
+///
+/// ```
+/// use oxray::{DeviceContext, LogLevel};
+/// let ctx = DeviceContext::new()
+///     .validation_mode(true)
+///     .log_callback(LogLevel::Warning, |level, tag, message| eprintln!("[{level:?}][{tag}] {message}"));
+/// assert!(ctx.is_validation_mode());
+/// ```
+#[derive(Clone, Default)]
+pub struct DeviceContext {
+    validation_mode: bool,
+    log_level: Option<LogLevel>,
+    log: Option<LogFn>,
+}
+
+impl DeviceContext {
+    /// A context without validation or logging.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Validation mode (guide §4.3): launches also check rays (NaN or infinite components,
+    /// negative tmin, tmin > tmax raise `INVALID_RAY`) and report every exception to the log.
+    pub fn validation_mode(mut self, on: bool) -> Self {
+        self.validation_mode = on;
+        self
+    }
+
+    /// Whether validation mode is on.
+    pub fn is_validation_mode(&self) -> bool {
+        self.validation_mode
+    }
+
+    /// Sets the log callback: it receives messages at `level` and below (more severe).
+    pub fn log_callback(
+        mut self,
+        level: LogLevel,
+        f: impl Fn(LogLevel, &str, &str) + Send + Sync + 'static,
+    ) -> Self {
+        self.log_level = Some(level);
+        self.log = Some(Arc::new(f));
+        self
+    }
+
+    pub(crate) fn log(&self, level: LogLevel, tag: &str, message: &str) {
+        if let (Some(max), Some(f)) = (self.log_level, &self.log) {
+            if level != LogLevel::Disable && level <= max {
+                f(level, tag, message);
+            }
+        }
+    }
+}
+
+bitflags! {
+    /// Which traversable graphs a pipeline may trace (`OptixTraversableGraphFlags`); empty means
+    /// any.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct TraversableGraphFlags: u32 {
+        /// A GAS traced directly.
+        const ALLOW_SINGLE_GAS = 1 << 0;
+        /// One level of instances over GASes, without transforms.
+        const ALLOW_SINGLE_LEVEL_INSTANCING = 1 << 1;
+    }
+}
+
+bitflags! {
+    /// Which primitive types a pipeline may intersect (`OptixPrimitiveTypeFlags`); empty means
+    /// triangles and custom primitives.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct PrimitiveTypeFlags: u32 {
+        /// Custom primitives.
+        const CUSTOM = 1 << 0;
+        /// Triangles.
+        const TRIANGLE = 1 << 31;
+    }
+}
+
+/// Compile options shared by every program of a pipeline (`OptixPipelineCompileOptions`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PipelineCompileOptions {
+    /// Whether rays carry a time (otherwise `ray_time()` is 0).
+    pub uses_motion_blur: bool,
+    /// Allowed traversable graphs.
+    pub traversable_graph_flags: TraversableGraphFlags,
+    /// Payload words a trace may pass (at most 32).
+    pub num_payload_values: u32,
+    /// Attribute words an intersection may report (at most 8).
+    pub num_attribute_values: u32,
+    /// Exceptions checked for.
+    pub exception_flags: ExceptionFlags,
+    /// Allowed primitive types.
+    pub uses_primitive_type_flags: PrimitiveTypeFlags,
+}
+
+impl Default for PipelineCompileOptions {
+    fn default() -> Self {
+        PipelineCompileOptions {
+            uses_motion_blur: false,
+            traversable_graph_flags: TraversableGraphFlags::empty(),
+            num_payload_values: 8,
+            num_attribute_values: 2,
+            exception_flags: ExceptionFlags::empty(),
+            uses_primitive_type_flags: PrimitiveTypeFlags::empty(),
+        }
+    }
+}
+
+/// Link options (`OptixPipelineLinkOptions`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PipelineLinkOptions {
+    /// Deepest trace nesting (ray generation traces at depth 1); at most 31.
+    pub max_trace_depth: u32,
+}
+
+impl Default for PipelineLinkOptions {
+    fn default() -> Self {
+        PipelineLinkOptions { max_trace_depth: 1 }
+    }
+}
+
+pub(crate) struct PipelineShared<P> {
+    pub compile: PipelineCompileOptions,
+    pub link: PipelineLinkOptions,
+    pub validation_mode: bool,
+    pub groups: Vec<ProgramGroup<P>>,
+    by_id: HashMap<u64, usize>,
+    context: DeviceContext,
+}
+
+/// A pipeline (`OptixPipeline`): program groups linked with their options, ready to launch.
+/// `P` is the type of the launch parameters.
+pub struct Pipeline<P> {
+    shared: Arc<PipelineShared<P>>,
+}
+
+/// What a launch reports.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LaunchReport {
+    /// Launch indices that ended in an exception.
+    pub exceptions: u64,
+    /// The first (up to five, by launch index) exceptions, with their launch indices.
+    pub first_exceptions: Vec<([u32; 3], Exception)>,
+}
+
+impl<P> Pipeline<P> {
+    /// Links a pipeline (`optixPipelineCreate`), checking the options against the guide's
+    /// limits (§12).
+    pub fn new(
+        context: &DeviceContext,
+        compile: &PipelineCompileOptions,
+        link: &PipelineLinkOptions,
+        groups: &[ProgramGroup<P>],
+    ) -> Result<Self, PipelineError> {
+        if compile.num_payload_values > 32 {
+            return Err(PipelineError::TooManyPayloadValues(
+                compile.num_payload_values,
+            ));
+        }
+        if compile.num_attribute_values > 8 {
+            return Err(PipelineError::TooManyAttributeValues(
+                compile.num_attribute_values,
+            ));
+        }
+        if link.max_trace_depth > 31 {
+            return Err(PipelineError::TraceDepthTooLarge(link.max_trace_depth));
+        }
+        if groups.is_empty() {
+            return Err(PipelineError::NoProgramGroups);
+        }
+        let by_id = groups
+            .iter()
+            .enumerate()
+            .map(|(i, g)| (g.inner.id, i))
+            .collect();
+        Ok(Pipeline {
+            shared: Arc::new(PipelineShared {
+                compile: *compile,
+                link: *link,
+                validation_mode: context.is_validation_mode(),
+                groups: groups.to_vec(),
+                by_id,
+                context: context.clone(),
+            }),
+        })
+    }
+
+    fn resolve(
+        &self,
+        region: &SbtRegion,
+        name: &'static str,
+        kind: ProgramGroupKind,
+    ) -> Result<Vec<usize>, LaunchError> {
+        (0..region.count())
+            .map(|i| {
+                let bytes = region.record(i).unwrap_or(&[]);
+                let bad = |reason| LaunchError::InvalidSbtRecord {
+                    region: name,
+                    index: i,
+                    reason,
+                };
+                let id = SbtHeader::group_id(bytes)
+                    .ok_or(bad("the header was not packed from a program group"))?;
+                let g = *self
+                    .shared
+                    .by_id
+                    .get(&id)
+                    .ok_or(bad("the header's program group is not in this pipeline"))?;
+                if self.shared.groups[g].kind() != kind {
+                    return Err(bad("the header's program group is of another kind"));
+                }
+                Ok(g)
+            })
+            .collect()
+    }
+
+    /// Launches `width * height * depth` ray-generation programs in parallel (`optixLaunch`).
+    /// The parameters are copied first (guide §10). Each launch index runs independently; one
+    /// that raises an exception ends there, runs the exception program if the SBT has one, and
+    /// is counted in the report. Without an exception record, the first five exceptions are
+    /// logged (as the built-in exception program prints them).
+    pub fn launch(
+        &self,
+        params: &P,
+        sbt: &ShaderBindingTable,
+        width: u32,
+        height: u32,
+        depth: u32,
+    ) -> Result<LaunchReport, LaunchError>
+    where
+        P: Clone + Sync,
+    {
+        let total = width as u64 * height as u64 * depth as u64;
+        if total > 1 << 30 {
+            return Err(LaunchError::TooLarge {
+                width,
+                height,
+                depth,
+            });
+        }
+        if sbt.raygen.count() == 0 {
+            return Err(LaunchError::NoRaygenRecord);
+        }
+        let raygen = self.resolve(&sbt.raygen, "raygen", ProgramGroupKind::RayGen)?[0];
+        let miss_groups = self.resolve(&sbt.miss, "miss", ProgramGroupKind::Miss)?;
+        let hit_groups = self.resolve(&sbt.hitgroup, "hitgroup", ProgramGroupKind::HitGroup)?;
+        let exception_group = match &sbt.exception {
+            Some(r) if r.count() > 0 => {
+                Some(self.resolve(r, "exception", ProgramGroupKind::Exception)?[0])
+            }
+            _ => None,
+        };
+        // The copy of guide §10: programs see this, not the caller's value.
+        let params = params.clone();
+        let shared = LaunchShared {
+            pipeline: &self.shared,
+            params: &params,
+            sbt,
+            miss_groups: &miss_groups,
+            hit_groups: &hit_groups,
+            exception_group,
+            dims: [width, height, depth],
+        };
+        let (w, h) = (width as u64, height as u64);
+        let index_of = |i: usize| {
+            let i = i as u64;
+            [(i % w) as u32, ((i / w) % h) as u32, (i / (w * h)) as u32]
+        };
+        // Each chunk keeps its first five exceptions; chunks are combined in index order.
+        let (count, first): (u64, Vec<([u32; 3], Exception)>) = (0..total as usize)
+            .into_par_iter()
+            .with_min_len(64)
+            .fold(
+                || (0u64, Vec::new()),
+                |(mut n, mut first), i| {
+                    let index = index_of(i);
+                    if let Some(e) = run_raygen(&shared, index, raygen) {
+                        n += 1;
+                        if first.len() < 5 {
+                            first.push((index, e));
+                        }
+                    }
+                    (n, first)
+                },
+            )
+            .reduce(
+                || (0u64, Vec::new()),
+                |(n1, mut f1), (n2, f2)| {
+                    f1.extend(f2);
+                    f1.truncate(5);
+                    (n1 + n2, f1)
+                },
+            );
+        if exception_group.is_none() || self.shared.validation_mode {
+            for (index, e) in &first {
+                self.shared.context.log(
+                    crate::LogLevel::Error,
+                    "EXCEPTION",
+                    &format!("launch index {index:?}: {e}"),
+                );
+            }
+        }
+        Ok(LaunchReport {
+            exceptions: count,
+            first_exceptions: first,
+        })
+    }
+}
+
+impl<P> Clone for Pipeline<P> {
+    fn clone(&self) -> Self {
+        Pipeline {
+            shared: self.shared.clone(),
+        }
+    }
+}

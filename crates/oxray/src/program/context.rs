@@ -1,0 +1,410 @@
+//! The device context of each program kind (guide §13): launch index and dimensions, launch
+//! parameters, SBT data, payload, ray and hit queries, and tracing where the kind may trace.
+
+use crate::exception::{Exception, ExceptionCode, Interrupt, InterruptKind, ProgramResult};
+use crate::pipeline::PipelineShared;
+use crate::program::trace::{self, HitState, RayState, TraceRay};
+use crate::query::HitKind;
+use crate::sbt::{ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
+use bytemuck::Pod;
+use glam::Vec3;
+
+/// What every program of one launch shares.
+pub(crate) struct LaunchShared<'a, P> {
+    pub pipeline: &'a PipelineShared<P>,
+    pub params: &'a P,
+    pub sbt: &'a ShaderBindingTable,
+    /// Pipeline group index of every miss and hit-group record.
+    pub miss_groups: &'a [usize],
+    pub hit_groups: &'a [usize],
+    /// Pipeline group index of the exception record, if any.
+    pub exception_group: Option<usize>,
+    pub dims: [u32; 3],
+}
+
+/// Where a program runs: its launch, launch index and SBT record.
+pub(crate) struct Frame<'a, P> {
+    pub launch: &'a LaunchShared<'a, P>,
+    pub index: [u32; 3],
+    /// Bytes of the current program's SBT record.
+    pub record: &'a [u8],
+    /// Trace nesting depth of the program (0 for ray generation).
+    pub depth: u32,
+}
+
+impl<P> Clone for Frame<'_, P> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<P> Copy for Frame<'_, P> {}
+
+impl<'a, P> Frame<'a, P> {
+    fn sbt_data<T: Pod>(&self) -> Option<T> {
+        let d = self
+            .record
+            .get(SBT_RECORD_HEADER_SIZE..SBT_RECORD_HEADER_SIZE + std::mem::size_of::<T>())?;
+        Some(bytemuck::pod_read_unaligned(d))
+    }
+
+    fn throw(&self, code: i32, details: &[u32]) -> ProgramResult {
+        // Only user codes may be thrown; anything else is clamped into the user range's
+        // complement so it cannot impersonate a built-in exception.
+        let code = if (0..=ExceptionCode::MAX_USER).contains(&code) {
+            code
+        } else {
+            ExceptionCode::MAX_USER
+        };
+        Err(Interrupt::exception(ExceptionCode(code), details))
+    }
+}
+
+macro_rules! common_queries {
+    () => {
+        /// `optixGetLaunchIndex`.
+        pub fn launch_index(&self) -> [u32; 3] {
+            self.frame.index
+        }
+
+        /// `optixGetLaunchDimensions`.
+        pub fn launch_dimensions(&self) -> [u32; 3] {
+            self.frame.launch.dims
+        }
+
+        /// The launch parameters (copied at launch, guide §10).
+        pub fn params(&self) -> &P {
+            self.frame.launch.params
+        }
+
+        /// The data of this program's SBT record (`optixGetSbtDataPointer`), read as `T`;
+        /// `None` if the record is shorter than the header plus `T`.
+        pub fn sbt_data<T: Pod>(&self) -> Option<T> {
+            self.frame.sbt_data()
+        }
+
+        /// The raw bytes of this program's SBT record after the 32-byte header.
+        pub fn sbt_data_bytes(&self) -> &[u8] {
+            &self.frame.record[SBT_RECORD_HEADER_SIZE..]
+        }
+    };
+}
+
+macro_rules! throw_fn {
+    () => {
+        /// `optixThrowException`: raises user exception `code` (in `0..2^30`; other values are
+        /// clamped to `2^30 - 1`) with up to eight detail words. The launch index ends and the
+        /// exception program runs; pass the result on with `?` or `return`.
+        pub fn throw_exception(&self, code: i32, details: &[u32]) -> ProgramResult {
+            self.frame.throw(code, details)
+        }
+    };
+}
+
+macro_rules! ray_queries {
+    ($ray:ident) => {
+        /// `optixGetWorldRayOrigin`.
+        pub fn world_ray_origin(&self) -> Vec3 {
+            self.$ray.origin
+        }
+        /// `optixGetWorldRayDirection`.
+        pub fn world_ray_direction(&self) -> Vec3 {
+            self.$ray.direction
+        }
+        /// `optixGetRayTmin`: the trace's tmin.
+        pub fn ray_tmin(&self) -> f32 {
+            self.$ray.tmin
+        }
+        /// `optixGetRayTime` (0 in a pipeline without motion blur).
+        pub fn ray_time(&self) -> f32 {
+            self.$ray.time
+        }
+        /// `optixGetRayFlags`.
+        pub fn ray_flags(&self) -> crate::program::RayFlags {
+            self.$ray.flags
+        }
+        /// `optixGetRayVisibilityMask`.
+        pub fn ray_visibility_mask(&self) -> u8 {
+            self.$ray.mask
+        }
+    };
+}
+
+macro_rules! payload_fns {
+    () => {
+        /// `optixGetPayload_i`. Words past the trace's payload read as 0.
+        pub fn payload(&self, i: usize) -> u32 {
+            self.payload.get(i).copied().unwrap_or(0)
+        }
+        /// `optixSetPayload_i`. Words past the trace's payload are ignored.
+        pub fn set_payload(&mut self, i: usize, v: u32) {
+            if let Some(p) = self.payload.get_mut(i) {
+                *p = v;
+            }
+        }
+        /// Payload word `i` as an `f32`.
+        pub fn payload_f32(&self, i: usize) -> f32 {
+            f32::from_bits(self.payload(i))
+        }
+        /// Sets payload word `i` to an `f32`.
+        pub fn set_payload_f32(&mut self, i: usize, v: f32) {
+            self.set_payload(i, v.to_bits())
+        }
+        /// The payload words of the current trace.
+        pub fn payload_words(&self) -> &[u32] {
+            self.payload
+        }
+    };
+}
+
+macro_rules! hit_queries {
+    ($hit:ident) => {
+        /// `optixGetPrimitiveIndex`: index within the build input plus its offset.
+        pub fn primitive_index(&self) -> u32 {
+            self.$hit.primitive_index
+        }
+        /// `optixGetSbtGASIndex`.
+        pub fn sbt_gas_index(&self) -> u32 {
+            self.$hit.sbt_gas_index
+        }
+        /// `optixGetInstanceId`: `!0` when the traced handle is a GAS (guide §13.7; the OptiX
+        /// 9.0 header says 0, oxray follows the guide).
+        pub fn instance_id(&self) -> u32 {
+            !0
+        }
+        /// `optixGetInstanceIndex`: 0 when the traced handle is a GAS.
+        pub fn instance_index(&self) -> u32 {
+            0
+        }
+        /// `optixGetHitKind`.
+        pub fn hit_kind(&self) -> HitKind {
+            self.$hit.hit_kind
+        }
+        /// `optixIsFrontFaceHit`: a triangle's front face.
+        pub fn is_front_face_hit(&self) -> bool {
+            self.$hit.hit_kind.is_triangle_front_face()
+        }
+        /// `optixIsBackFaceHit`: a triangle's back face.
+        pub fn is_back_face_hit(&self) -> bool {
+            self.$hit.hit_kind.is_triangle_back_face()
+        }
+        /// `optixIsTriangleHit`.
+        pub fn is_triangle_hit(&self) -> bool {
+            self.$hit.hit_kind.0 >= 0xFE
+        }
+        /// `optixGetAttribute_i` (0 past the reported attributes).
+        pub fn attribute(&self, i: usize) -> u32 {
+            self.$hit.attributes.get(i).copied().unwrap_or(0)
+        }
+        /// `optixGetTriangleBarycentrics`: attributes 0 and 1 as floats.
+        pub fn triangle_barycentrics(&self) -> [f32; 2] {
+            [
+                f32::from_bits(self.attribute(0)),
+                f32::from_bits(self.attribute(1)),
+            ]
+        }
+    };
+}
+
+/// The context of a ray-generation program.
+pub struct RayGenCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+}
+
+impl<P> RayGenCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+
+    /// `optixTrace`: traces a ray with `payload` as the payload words (copied in, and out when
+    /// the trace returns). An exception raised by the trace comes back as an [`Interrupt`] to
+    /// pass on with `?`.
+    pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
+        trace::trace(self.frame, ray, payload)
+    }
+}
+
+/// The context of a closest-hit program.
+pub struct ClosestHitCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) ray: RayState,
+    pub(crate) hit: HitState,
+    pub(crate) payload: &'a mut [u32],
+}
+
+impl<P> ClosestHitCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    ray_queries!(ray);
+    payload_fns!();
+    hit_queries!(hit);
+
+    /// `optixGetRayTmax`: the distance of the closest hit.
+    pub fn ray_tmax(&self) -> f32 {
+        self.hit.t
+    }
+
+    /// `optixTrace` from a closest-hit program (recursion, up to the pipeline's depth).
+    pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
+        trace::trace(self.frame, ray, payload)
+    }
+}
+
+/// The context of an any-hit program.
+pub struct AnyHitCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) ray: RayState,
+    pub(crate) hit: HitState,
+    pub(crate) payload: &'a mut [u32],
+}
+
+impl<P> AnyHitCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    ray_queries!(ray);
+    payload_fns!();
+    hit_queries!(hit);
+
+    /// `optixGetRayTmax`: the candidate's distance.
+    pub fn ray_tmax(&self) -> f32 {
+        self.hit.t
+    }
+
+    /// `optixIgnoreIntersection`: the candidate is not a hit and the interval stays. Return it
+    /// from the program (`return ctx.ignore_intersection();`); write the payload before.
+    pub fn ignore_intersection(&self) -> ProgramResult {
+        Err(Interrupt(InterruptKind::IgnoreIntersection))
+    }
+
+    /// `optixTerminateRay`: the candidate is accepted and traversal ends; the closest-hit
+    /// program then runs. Return it from the program.
+    pub fn terminate_ray(&self) -> ProgramResult {
+        Err(Interrupt(InterruptKind::TerminateRay))
+    }
+}
+
+/// The context of a miss program.
+pub struct MissCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) ray: RayState,
+    pub(crate) payload: &'a mut [u32],
+}
+
+impl<P> MissCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    ray_queries!(ray);
+    payload_fns!();
+
+    /// `optixGetRayTmax`: the trace's tmax.
+    pub fn ray_tmax(&self) -> f32 {
+        self.ray.tmax
+    }
+
+    /// `optixTrace` from a miss program.
+    pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
+        trace::trace(self.frame, ray, payload)
+    }
+}
+
+/// The context of an intersection program: the candidate custom primitive and the current
+/// interval.
+pub struct IntersectionCtx<'a, 'v, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) ray: RayState,
+    pub(crate) tmax: f32,
+    pub(crate) prim: HitState,
+    pub(crate) aabb: crate::Aabb,
+    pub(crate) reporter: &'v mut dyn trace::Reporter<P>,
+}
+
+impl<P> IntersectionCtx<'_, '_, P> {
+    common_queries!();
+    throw_fn!();
+    ray_queries!(ray);
+
+    /// `optixGetRayTmax`: the closest accepted hit so far, or the trace's tmax.
+    pub fn ray_tmax(&self) -> f32 {
+        self.tmax
+    }
+    /// The object-space ray origin (the world ray: no transforms above a GAS root).
+    pub fn object_ray_origin(&self) -> Vec3 {
+        self.ray.origin
+    }
+    /// The object-space ray direction.
+    pub fn object_ray_direction(&self) -> Vec3 {
+        self.ray.direction
+    }
+    /// `optixGetPrimitiveIndex`.
+    pub fn primitive_index(&self) -> u32 {
+        self.prim.primitive_index
+    }
+    /// `optixGetSbtGASIndex`.
+    pub fn sbt_gas_index(&self) -> u32 {
+        self.prim.sbt_gas_index
+    }
+    /// The primitive's bounding box from the build input.
+    pub fn primitive_aabb(&self) -> crate::Aabb {
+        self.aabb
+    }
+    /// `optixGetPayload_i`.
+    pub fn payload(&self, i: usize) -> u32 {
+        self.reporter.payload_ref().get(i).copied().unwrap_or(0)
+    }
+    /// `optixSetPayload_i`.
+    pub fn set_payload(&mut self, i: usize, v: u32) {
+        if let Some(p) = self.reporter.payload().get_mut(i) {
+            *p = v;
+        }
+    }
+
+    /// `optixReportIntersection`: reports a hit at `t` with hit kind `hit_kind` (low 7 bits)
+    /// and up to 8 attribute words. Outside `[tmin, tmax]` it is ignored and `Ok(false)` comes
+    /// back; otherwise the any-hit program runs: `Ok(false)` if it ignored the hit, `Ok(true)`
+    /// if the hit was accepted (the interval then ends at `t`). If the any-hit program
+    /// terminated the ray, an [`Interrupt`] comes back: pass it on with `?`.
+    pub fn report_intersection(
+        &mut self,
+        t: f32,
+        hit_kind: u8,
+        attributes: &[u32],
+    ) -> Result<bool, Interrupt> {
+        if !(t >= self.ray.tmin && t <= self.tmax) {
+            return Ok(false);
+        }
+        let mut hit = self.prim;
+        hit.t = t;
+        hit.hit_kind = HitKind::custom(hit_kind);
+        let n = attributes.len().min(8);
+        hit.attributes = [0; 8];
+        hit.attributes[..n].copy_from_slice(&attributes[..n]);
+        let accepted = self.reporter.report(self.frame, &self.ray, &hit)?;
+        if accepted {
+            self.tmax = t;
+        }
+        Ok(accepted)
+    }
+}
+
+/// The context of an exception program.
+pub struct ExceptionCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) exception: Exception,
+}
+
+impl<P> ExceptionCtx<'_, P> {
+    common_queries!();
+
+    /// `optixGetExceptionCode`.
+    pub fn exception_code(&self) -> ExceptionCode {
+        self.exception.code
+    }
+
+    /// `optixGetExceptionDetail_i`: 0 past the details given.
+    pub fn exception_detail(&self, i: usize) -> u32 {
+        self.exception.details().get(i).copied().unwrap_or(0)
+    }
+
+    /// The whole exception.
+    pub fn exception(&self) -> &Exception {
+        &self.exception
+    }
+}

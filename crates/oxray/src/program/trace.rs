@@ -1,0 +1,617 @@
+//! `optixTrace` on the CPU: the rules of guide §13.2–§13.7 and §13.13 applied to the candidates
+//! the traversal kernel finds, with the hit group of each chosen by the §7.3 formula.
+
+use crate::accel::options::GeometryFlags;
+use crate::accel::Gas;
+use crate::exception::{Exception, ExceptionCode, Interrupt, InterruptKind, ProgramResult};
+use crate::geometry::triangle::TriangleHit;
+use crate::pipeline::PrimitiveTypeFlags;
+use crate::program::context::{
+    AnyHitCtx, ClosestHitCtx, ExceptionCtx, Frame, IntersectionCtx, LaunchShared, MissCtx,
+    RayGenCtx,
+};
+use crate::program::group::GroupPrograms;
+use crate::query::HitKind;
+use crate::sbt::hit_group_index;
+use crate::traversal::{
+    traverse_gas, Decision, GasVisitor, PreparedRay, Primitives, Ray, TraversalStack,
+};
+use crate::BuildInputKind;
+use bitflags::bitflags;
+use glam::Vec3;
+use std::sync::Arc;
+
+bitflags! {
+    /// Ray flags of a trace (`OptixRayFlags`, guide §13.2). Values match OptiX's.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct RayFlags: u32 {
+        /// No any-hit program runs; overrides instance and geometry flags.
+        const DISABLE_ANYHIT = 1 << 0;
+        /// The any-hit program runs even where geometry or instance flags disable it.
+        const ENFORCE_ANYHIT = 1 << 1;
+        /// The first accepted hit ends traversal and becomes the closest hit.
+        const TERMINATE_ON_FIRST_HIT = 1 << 2;
+        /// No closest-hit program runs (the miss program still does on a miss).
+        const DISABLE_CLOSESTHIT = 1 << 3;
+        /// Back faces of triangles are not hit.
+        const CULL_BACK_FACING_TRIANGLES = 1 << 4;
+        /// Front faces of triangles are not hit.
+        const CULL_FRONT_FACING_TRIANGLES = 1 << 5;
+        /// Primitives whose any-hit is disabled are not hit.
+        const CULL_DISABLED_ANYHIT = 1 << 6;
+        /// Primitives whose any-hit is enabled are not hit.
+        const CULL_ENFORCED_ANYHIT = 1 << 7;
+        /// Accepted for compatibility; oxray has no opacity micromaps yet.
+        const FORCE_OPACITY_MICROMAP_2_STATE = 1 << 10;
+    }
+}
+
+/// What a trace starts from (`OptixTraversableHandle`): nothing (the null handle, which only
+/// runs the miss program) or an acceleration structure, kept alive by the handle.
+#[derive(Clone, Default)]
+pub struct TraversableHandle(Option<Arc<Gas>>);
+
+impl TraversableHandle {
+    /// The null handle.
+    pub const NULL: TraversableHandle = TraversableHandle(None);
+
+    /// Whether this is the null handle.
+    pub fn is_null(&self) -> bool {
+        self.0.is_none()
+    }
+}
+
+impl From<Arc<Gas>> for TraversableHandle {
+    fn from(g: Arc<Gas>) -> Self {
+        TraversableHandle(Some(g))
+    }
+}
+
+impl From<Gas> for TraversableHandle {
+    fn from(g: Gas) -> Self {
+        TraversableHandle(Some(Arc::new(g)))
+    }
+}
+
+impl std::fmt::Debug for TraversableHandle {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.0 {
+            None => f.write_str("TraversableHandle(null)"),
+            Some(g) => write!(
+                f,
+                "TraversableHandle(GAS of {} primitives)",
+                g.num_primitives()
+            ),
+        }
+    }
+}
+
+/// The arguments of a trace (`optixTrace`), with OptiX's defaults: `tmin = 0`,
+/// `tmax = +inf`, time 0, visibility mask `0xFF`, no flags, SBT offset 0, stride 1, miss
+/// index 0.
+#[derive(Clone, Debug)]
+pub struct TraceRay<'h> {
+    /// Where traversal starts.
+    pub handle: &'h TraversableHandle,
+    /// Origin.
+    pub origin: Vec3,
+    /// Direction.
+    pub direction: Vec3,
+    /// Start of the interval (must be >= 0).
+    pub tmin: f32,
+    /// End of the interval.
+    pub tmax: f32,
+    /// Time, for motion blur.
+    pub time: f32,
+    /// Visibility mask; only the low 8 bits count.
+    pub visibility_mask: u32,
+    /// Ray flags.
+    pub flags: RayFlags,
+    /// SBT offset (ray type); only the low 4 bits count.
+    pub sbt_offset: u32,
+    /// SBT stride (ray-type count); only the low 4 bits count.
+    pub sbt_stride: u32,
+    /// Miss record index.
+    pub miss_index: u32,
+}
+
+impl<'h> TraceRay<'h> {
+    /// A ray with the defaults above.
+    pub fn new(handle: &'h TraversableHandle, origin: Vec3, direction: Vec3) -> Self {
+        TraceRay {
+            handle,
+            origin,
+            direction,
+            tmin: 0.0,
+            tmax: f32::INFINITY,
+            time: 0.0,
+            visibility_mask: 0xFF,
+            flags: RayFlags::empty(),
+            sbt_offset: 0,
+            sbt_stride: 1,
+            miss_index: 0,
+        }
+    }
+
+    /// Sets the interval.
+    pub fn interval(mut self, tmin: f32, tmax: f32) -> Self {
+        (self.tmin, self.tmax) = (tmin, tmax);
+        self
+    }
+
+    /// Sets the ray flags.
+    pub fn flags(mut self, flags: RayFlags) -> Self {
+        self.flags = flags;
+        self
+    }
+
+    /// Sets the SBT offset, stride and miss index.
+    pub fn sbt(mut self, offset: u32, stride: u32, miss_index: u32) -> Self {
+        (self.sbt_offset, self.sbt_stride, self.miss_index) = (offset, stride, miss_index);
+        self
+    }
+
+    /// Sets the visibility mask.
+    pub fn visibility_mask(mut self, mask: u32) -> Self {
+        self.visibility_mask = mask;
+        self
+    }
+
+    /// Sets the time.
+    pub fn time(mut self, time: f32) -> Self {
+        self.time = time;
+        self
+    }
+}
+
+/// The ray as hit and miss programs see it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RayState {
+    pub origin: Vec3,
+    pub direction: Vec3,
+    pub tmin: f32,
+    pub tmax: f32,
+    pub time: f32,
+    pub flags: RayFlags,
+    pub mask: u8,
+}
+
+/// A candidate or accepted hit.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct HitState {
+    pub t: f32,
+    pub primitive_index: u32,
+    pub sbt_gas_index: u32,
+    pub hit_kind: HitKind,
+    pub attributes: [u32; 8],
+    /// Hit-group record index.
+    pub record: usize,
+}
+
+/// What an intersection program reports to.
+pub(crate) trait Reporter<P> {
+    /// Runs the any-hit rules on a reported hit: whether it was accepted, or an interrupt
+    /// (terminate or exception).
+    fn report(
+        &mut self,
+        frame: Frame<'_, P>,
+        ray: &RayState,
+        hit: &HitState,
+    ) -> Result<bool, Interrupt>;
+    /// The trace's payload.
+    fn payload(&mut self) -> &mut [u32];
+    /// The trace's payload, read-only.
+    fn payload_ref(&self) -> &[u32];
+}
+
+struct PipelineVisitor<'a, 'p, P> {
+    frame: Frame<'a, P>,
+    gas: &'a Gas,
+    ray: RayState,
+    sbt_offset: u32,
+    sbt_stride: u32,
+    payload: &'p mut [u32],
+    best: Option<HitState>,
+    pending: Option<Interrupt>,
+}
+
+impl<'a, P> PipelineVisitor<'a, '_, P> {
+    fn record(&mut self, sbt_gas_index: u32) -> Option<usize> {
+        let rec = hit_group_index(0, sbt_gas_index, self.sbt_stride, self.sbt_offset);
+        if rec >= self.frame.launch.hit_groups.len() as u64 {
+            self.pending = Some(Interrupt::exception(
+                ExceptionCode::INVALID_HIT_SBT,
+                &[rec.min(u32::MAX as u64) as u32, sbt_gas_index],
+            ));
+            return None;
+        }
+        Some(rec as usize)
+    }
+
+    fn group(&self, record: usize) -> &'a GroupPrograms<P> {
+        let launch = self.frame.launch;
+        &launch.pipeline.groups[launch.hit_groups[record]]
+            .inner
+            .programs
+    }
+
+    fn record_bytes(&self, record: usize) -> &'a [u8] {
+        self.frame.launch.sbt.hitgroup.record(record).unwrap_or(&[])
+    }
+
+    /// The any-hit rules of §13.2 / §13.13 for one candidate in the interval.
+    fn candidate(&mut self, hit: HitState, gflags: GeometryFlags) -> Decision {
+        let flags = self.ray.flags;
+        let mut ah_on = !gflags.contains(GeometryFlags::DISABLE_ANYHIT);
+        if flags.contains(RayFlags::DISABLE_ANYHIT) {
+            ah_on = false;
+        } else if flags.contains(RayFlags::ENFORCE_ANYHIT) {
+            ah_on = true;
+        }
+        if (flags.contains(RayFlags::CULL_DISABLED_ANYHIT) && !ah_on)
+            || (flags.contains(RayFlags::CULL_ENFORCED_ANYHIT) && ah_on)
+        {
+            return Decision::Ignore;
+        }
+        let mut terminate = flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
+        if ah_on {
+            if let GroupPrograms::HitGroup {
+                any_hit: Some(ah), ..
+            } = self.group(hit.record)
+            {
+                let mut ctx = AnyHitCtx {
+                    frame: Frame {
+                        record: self.record_bytes(hit.record),
+                        ..self.frame
+                    },
+                    ray: self.ray,
+                    hit,
+                    payload: self.payload,
+                };
+                match ah(&mut ctx) {
+                    Ok(()) => {}
+                    Err(Interrupt(InterruptKind::IgnoreIntersection)) => return Decision::Ignore,
+                    Err(Interrupt(InterruptKind::TerminateRay)) => terminate = true,
+                    Err(e) => {
+                        self.pending = Some(e);
+                        return Decision::Abort;
+                    }
+                }
+            }
+        }
+        self.best = Some(hit);
+        if terminate {
+            Decision::AcceptAndTerminate
+        } else {
+            Decision::Accept
+        }
+    }
+}
+
+impl<P> GasVisitor for PipelineVisitor<'_, '_, P> {
+    fn triangle(&mut self, slot: u32, h: &TriangleHit) -> Decision {
+        let (primitive_index, sbt_gas_index, _) = self.gas.resolve(slot);
+        let gflags = self.gas.record_flags[sbt_gas_index as usize];
+        if !gflags.contains(GeometryFlags::DISABLE_TRIANGLE_FACE_CULLING) {
+            let flags = self.ray.flags;
+            if (flags.contains(RayFlags::CULL_BACK_FACING_TRIANGLES) && !h.front_face)
+                || (flags.contains(RayFlags::CULL_FRONT_FACING_TRIANGLES) && h.front_face)
+            {
+                return Decision::Ignore;
+            }
+        }
+        let Some(record) = self.record(sbt_gas_index) else {
+            return Decision::Abort;
+        };
+        let mut attributes = [0u32; 8];
+        attributes[0] = h.u.to_bits();
+        attributes[1] = h.v.to_bits();
+        let hit = HitState {
+            t: h.t,
+            primitive_index,
+            sbt_gas_index,
+            hit_kind: if h.front_face {
+                HitKind::TRIANGLE_FRONT_FACE
+            } else {
+                HitKind::TRIANGLE_BACK_FACE
+            },
+            attributes,
+            record,
+        };
+        self.candidate(hit, gflags)
+    }
+
+    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32) -> (Option<f32>, bool) {
+        let (primitive_index, sbt_gas_index, _) = self.gas.resolve(slot);
+        let Some(record) = self.record(sbt_gas_index) else {
+            return (None, true);
+        };
+        let GroupPrograms::HitGroup {
+            intersection: Some(is),
+            ..
+        } = self.group(record)
+        else {
+            return (None, false);
+        };
+        let before = self.best.map(|h| h.t);
+        let prim = HitState {
+            t: tmax,
+            primitive_index,
+            sbt_gas_index,
+            hit_kind: HitKind(0),
+            attributes: [0; 8],
+            record,
+        };
+        let frame = Frame {
+            record: self.record_bytes(record),
+            ..self.frame
+        };
+        let ray = RayState { tmin, ..self.ray };
+        let aabb = self.gas.aabbs[slot as usize];
+        let mut ctx = IntersectionCtx {
+            frame,
+            ray,
+            tmax,
+            prim,
+            aabb,
+            reporter: self,
+        };
+        let result = is(&mut ctx);
+        let stop = match result {
+            Ok(()) => false,
+            Err(Interrupt(InterruptKind::TerminateRay)) => true,
+            Err(Interrupt(InterruptKind::IgnoreIntersection)) => false,
+            Err(e) => {
+                self.pending = Some(e);
+                true
+            }
+        };
+        let after = self.best.map(|h| h.t);
+        let t = if after != before { after } else { None };
+        (t, stop)
+    }
+}
+
+impl<P> Reporter<P> for PipelineVisitor<'_, '_, P> {
+    fn report(
+        &mut self,
+        _frame: Frame<'_, P>,
+        _ray: &RayState,
+        hit: &HitState,
+    ) -> Result<bool, Interrupt> {
+        let gflags = self.gas.record_flags[hit.sbt_gas_index as usize];
+        match self.candidate(*hit, gflags) {
+            Decision::Ignore => Ok(false),
+            Decision::Accept => Ok(true),
+            Decision::AcceptAndTerminate => Err(Interrupt(InterruptKind::TerminateRay)),
+            Decision::Abort => Err(self
+                .pending
+                .take()
+                .unwrap_or(Interrupt(InterruptKind::TerminateRay))),
+        }
+    }
+
+    fn payload(&mut self) -> &mut [u32] {
+        self.payload
+    }
+
+    fn payload_ref(&self) -> &[u32] {
+        self.payload
+    }
+}
+
+/// `optixTrace` from a program running in `frame`.
+pub(crate) fn trace<P>(
+    frame: Frame<'_, P>,
+    args: &TraceRay<'_>,
+    payload: &mut [u32],
+) -> ProgramResult {
+    let launch = frame.launch;
+    let pipe = launch.pipeline;
+    let n = payload.len();
+    if n > pipe.compile.num_payload_values as usize {
+        return Err(Interrupt::exception(
+            ExceptionCode::PAYLOAD_TYPE_MISMATCH,
+            &[n as u32, pipe.compile.num_payload_values],
+        ));
+    }
+    let depth = frame.depth + 1;
+    if depth > pipe.link.max_trace_depth {
+        return Err(Interrupt::exception(
+            ExceptionCode::TRACE_DEPTH_EXCEEDED,
+            &[],
+        ));
+    }
+    let ray = Ray::with_interval(args.origin, args.direction, args.tmin, args.tmax);
+    if pipe.validation_mode && ray.validate().is_err() {
+        let o = args.origin.to_array().map(f32::to_bits);
+        let d = args.direction.to_array().map(f32::to_bits);
+        return Err(Interrupt::exception(
+            ExceptionCode::INVALID_RAY,
+            &[
+                o[0],
+                o[1],
+                o[2],
+                d[0],
+                d[1],
+                d[2],
+                args.tmin.to_bits(),
+                args.tmax.to_bits(),
+            ],
+        ));
+    }
+    let state = RayState {
+        origin: args.origin,
+        direction: args.direction,
+        tmin: args.tmin,
+        tmax: args.tmax,
+        time: if pipe.compile.uses_motion_blur {
+            args.time
+        } else {
+            0.0
+        },
+        flags: args.flags,
+        mask: (args.visibility_mask & 0xFF) as u8,
+    };
+    // Copy-in / copy-out (guide §14): programs work on a private copy.
+    let mut words = [0u32; 32];
+    words[..n].copy_from_slice(payload);
+    let frame = Frame { depth, ..frame };
+    trace_into(frame, args, &state, &ray, &mut words[..n])?;
+    payload.copy_from_slice(&words[..n]);
+    Ok(())
+}
+
+fn trace_into<P>(
+    frame: Frame<'_, P>,
+    args: &TraceRay<'_>,
+    state: &RayState,
+    ray: &Ray,
+    payload: &mut [u32],
+) -> ProgramResult {
+    let launch = frame.launch;
+    let pipe = launch.pipeline;
+    let mut best = None;
+    if let Some(gas) = args.handle.0.as_deref() {
+        use crate::pipeline::TraversableGraphFlags as G;
+        let graph = pipe.compile.traversable_graph_flags;
+        if !graph.is_empty() && !graph.contains(G::ALLOW_SINGLE_GAS) {
+            return Err(Interrupt::exception(
+                ExceptionCode::UNSUPPORTED_SINGLE_LEVEL_GAS,
+                &[],
+            ));
+        }
+        let kinds = pipe.compile.uses_primitive_type_flags;
+        let needed = match gas.kind {
+            BuildInputKind::Triangles => PrimitiveTypeFlags::TRIANGLE,
+            BuildInputKind::CustomPrimitives => PrimitiveTypeFlags::CUSTOM,
+        };
+        if !kinds.is_empty() && !kinds.contains(needed) {
+            return Err(Interrupt::exception(
+                ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE,
+                &[],
+            ));
+        }
+        if let Some(prepared) = PreparedRay::new(ray) {
+            let mut v = PipelineVisitor {
+                frame,
+                gas,
+                ray: *state,
+                sbt_offset: args.sbt_offset,
+                sbt_stride: args.sbt_stride,
+                payload: &mut *payload,
+                best: None,
+                pending: None,
+            };
+            let prims = match gas.kind {
+                BuildInputKind::Triangles => Primitives::Triangles(&gas.triangles),
+                BuildInputKind::CustomPrimitives => Primitives::Aabbs(&gas.aabbs),
+            };
+            let mut stack = TraversalStack::new();
+            traverse_gas(
+                &gas.bvh.nodes,
+                prims,
+                &prepared,
+                ray.tmin,
+                ray.tmax,
+                &mut v,
+                &mut stack,
+            );
+            if let Some(e) = v.pending {
+                return Err(e);
+            }
+            best = v.best;
+        }
+    }
+    match best {
+        Some(hit) => {
+            if state.flags.contains(RayFlags::DISABLE_CLOSESTHIT) {
+                return Ok(());
+            }
+            let g = &pipe.groups[launch.hit_groups[hit.record]].inner.programs;
+            if let GroupPrograms::HitGroup {
+                closest_hit: Some(ch),
+                ..
+            } = g
+            {
+                let mut ctx = ClosestHitCtx {
+                    frame: Frame {
+                        record: launch.sbt.hitgroup.record(hit.record).unwrap_or(&[]),
+                        ..frame
+                    },
+                    ray: *state,
+                    hit,
+                    payload,
+                };
+                return only_exceptions(ch(&mut ctx));
+            }
+            Ok(())
+        }
+        None => {
+            let idx = args.miss_index as usize;
+            let Some(&g) = launch.miss_groups.get(idx) else {
+                return Err(Interrupt::exception(
+                    ExceptionCode::INVALID_MISS_SBT,
+                    &[args.miss_index],
+                ));
+            };
+            if let GroupPrograms::Miss(Some(ms)) = &pipe.groups[g].inner.programs {
+                let mut ctx = MissCtx {
+                    frame: Frame {
+                        record: launch.sbt.miss.record(idx).unwrap_or(&[]),
+                        ..frame
+                    },
+                    ray: *state,
+                    payload,
+                };
+                return only_exceptions(ms(&mut ctx));
+            }
+            Ok(())
+        }
+    }
+}
+
+/// Closest-hit and miss programs cannot ignore or terminate; only exceptions pass.
+fn only_exceptions(r: ProgramResult) -> ProgramResult {
+    match r {
+        Err(Interrupt(InterruptKind::Exception(e))) => Err(Interrupt(InterruptKind::Exception(e))),
+        _ => Ok(()),
+    }
+}
+
+/// Runs the ray-generation program of one launch index, then the exception program if an
+/// exception ended it. Returns the exception, if any.
+pub(crate) fn run_raygen<P>(
+    launch: &LaunchShared<'_, P>,
+    index: [u32; 3],
+    raygen_group: usize,
+) -> Option<Exception> {
+    let frame = Frame {
+        launch,
+        index,
+        record: launch.sbt.raygen.record(0).unwrap_or(&[]),
+        depth: 0,
+    };
+    let GroupPrograms::RayGen(rg) = &launch.pipeline.groups[raygen_group].inner.programs else {
+        return None;
+    };
+    let mut ctx = RayGenCtx { frame };
+    let Err(Interrupt(InterruptKind::Exception(e))) = rg(&mut ctx) else {
+        return None;
+    };
+    if let Some(region) = &launch.sbt.exception {
+        if let Some(&g) = launch.exception_group.as_ref() {
+            if let GroupPrograms::Exception(ex) = &launch.pipeline.groups[g].inner.programs {
+                let mut ctx = ExceptionCtx {
+                    frame: Frame {
+                        record: region.record(0).unwrap_or(&[]),
+                        ..frame
+                    },
+                    exception: e,
+                };
+                ex(&mut ctx);
+            }
+        }
+    }
+    Some(e)
+}

@@ -1,0 +1,176 @@
+// Each example declares `mod common;`, so the helper module is included once per example.
+#![allow(clippy::duplicate_mod)]
+
+//! Runs every example, writes its PNG, and checks the image: analytic statistics, a golden image
+//! (with a tolerance), and bit-identical output with one and four threads.
+
+#[path = "../examples/custom_sphere.rs"]
+mod custom_sphere;
+#[path = "../examples/cutouts.rs"]
+mod cutouts;
+#[path = "../examples/hello.rs"]
+mod hello;
+#[path = "../examples/triangle.rs"]
+mod triangle;
+
+use std::path::PathBuf;
+
+type Render = fn(u32, u32) -> Result<Vec<[u8; 4]>, Box<dyn std::error::Error>>;
+
+const W: u32 = 128;
+const H: u32 = 96;
+
+fn golden_path(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/golden")
+        .join(format!("{name}.png"))
+}
+
+fn read_png(path: &std::path::Path) -> (u32, u32, Vec<[u8; 4]>) {
+    let dec = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = dec.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    let px = buf[..info.buffer_size()]
+        .chunks_exact(4)
+        .map(|c| [c[0], c[1], c[2], c[3]])
+        .collect();
+    (info.width, info.height, px)
+}
+
+/// Renders with 1 and 4 threads (must agree bit for bit), writes the PNG next to the build
+/// output, compares with the golden image (at most 0.5% of pixels may differ, by at most 8 per
+/// channel; set OXRAY_UPDATE_GOLDEN=1 to rewrite it) and returns the pixels.
+fn run(name: &str, render: Render) -> Vec<[u8; 4]> {
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let four = rayon::ThreadPoolBuilder::new()
+        .num_threads(4)
+        .build()
+        .unwrap();
+    // Errors are turned into strings inside the pools: `Box<dyn Error>` is not `Send`.
+    let a = one
+        .install(|| render(W, H).map_err(|e| e.to_string()))
+        .unwrap();
+    let b = four
+        .install(|| render(W, H).map_err(|e| e.to_string()))
+        .unwrap();
+    assert_eq!(a, b, "{name}: output differs between 1 and 4 threads");
+    assert_eq!(a.len(), (W * H) as usize);
+
+    let out = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../target/test-examples")
+        .join(format!("{name}.png"));
+    std::fs::create_dir_all(out.parent().unwrap()).unwrap();
+    let file = std::io::BufWriter::new(std::fs::File::create(&out).unwrap());
+    let mut enc = png::Encoder::new(file, W, H);
+    enc.set_color(png::ColorType::Rgba);
+    enc.set_depth(png::BitDepth::Eight);
+    enc.write_header()
+        .unwrap()
+        .write_image_data(bytemuck::cast_slice(&a))
+        .unwrap();
+    let (w, h, written) = read_png(&out);
+    assert_eq!((w, h), (W, H));
+    assert_eq!(
+        written, a,
+        "{name}: the PNG does not hold the rendered pixels"
+    );
+
+    let golden = golden_path(name);
+    if std::env::var_os("OXRAY_UPDATE_GOLDEN").is_some() {
+        std::fs::copy(&out, &golden).unwrap();
+    }
+    let (gw, gh, g) = read_png(&golden);
+    assert_eq!((gw, gh), (W, H), "{name}: golden image size");
+    let differing = a
+        .iter()
+        .zip(&g)
+        .filter(|(p, q)| p.iter().zip(q.iter()).any(|(x, y)| x.abs_diff(*y) > 8))
+        .count();
+    assert!(
+        differing * 200 <= a.len(),
+        "{name}: {differing} of {} pixels differ from {}",
+        a.len(),
+        golden.display()
+    );
+    a
+}
+
+fn at(px: &[[u8; 4]], x: u32, y: u32) -> [u8; 4] {
+    px[(y * W + x) as usize]
+}
+
+#[test]
+fn hello_fills_every_pixel_with_the_raygen_record_colour() {
+    let px = run("hello", |w, h| hello::render(w, h, [0.462, 0.725, 0.0]));
+    assert!(px.iter().all(|&p| p == [118, 185, 0, 255]));
+}
+
+#[test]
+fn triangle_covers_its_projected_area_with_barycentric_colours() {
+    let px = run("triangle", triangle::render);
+    let bg = [77, 26, 51, 255];
+    assert_eq!(at(&px, 0, 0), bg);
+    assert_eq!(at(&px, W - 1, H - 1), bg);
+    // The triangle (base 1, height 1 at distance 2, field of view 1 x 1 at distance 1)
+    // covers 1/2 * (1/2)^2 / (aspect * 1) of the image... computed exactly:
+    let covered = px.iter().filter(|&&p| p != bg).count() as f64;
+    let expected = 0.5 * 0.5 * 0.5 / ((W as f64 / H as f64) * 1.0) * (W * H) as f64 / 1.0;
+    assert!(
+        (covered / expected - 1.0).abs() < 0.05,
+        "covered {covered}, expected {expected}"
+    );
+    // Near each corner the colour is dominated by that vertex's channel.
+    let centre = at(&px, W / 2, H / 2);
+    assert!(
+        centre[0] > 40 && centre[1] > 40 && centre[2] > 40,
+        "{centre:?}"
+    );
+}
+
+#[test]
+fn custom_sphere_is_a_disc_shaded_by_its_normals() {
+    let px = run("custom_sphere", custom_sphere::render);
+    let bg = [26, 26, 26, 255];
+    assert_eq!(at(&px, 0, 0), bg);
+    // Seen from distance 5, a sphere of radius 1.5 subtends asin(1.5 / 5); the image plane is at
+    // distance 2.5 with half-height 1.
+    let r_img = 2.5 * (1.5f64 / 5.0).asin().tan() * (H as f64 / 2.0);
+    let expected = std::f64::consts::PI * r_img * r_img;
+    let covered = px.iter().filter(|&&p| p != bg).count() as f64;
+    assert!(
+        (covered / expected - 1.0).abs() < 0.05,
+        "covered {covered}, expected {expected}"
+    );
+    // At the centre the normal faces the camera (-z): blue channel 0, red and green 0.5.
+    let c = at(&px, W / 2, H / 2);
+    assert!(
+        c[2] < 10 && (c[0] as i32 - 128).abs() < 12 && (c[1] as i32 - 128).abs() < 12,
+        "{c:?}"
+    );
+}
+
+#[test]
+fn cutouts_show_the_back_quad_through_the_any_hit_holes() {
+    let px = run("cutouts", cutouts::render);
+    let front = [230, 128, 26, 255];
+    let back = [26, 77, 230, 255];
+    // Pixel of the centre of checker cell (i, j) of the front quad: the quad spans [-1, 1] at
+    // distance 4, the image plane is at distance 2 with half-height 1.
+    let pixel = |c: f32| c / 4.0 * 2.0;
+    for i in 0..cutouts::CELLS as i32 {
+        for j in 0..cutouts::CELLS as i32 {
+            let cx = -1.0 + (i as f32 + 0.5) * 2.0 / cutouts::CELLS;
+            let cy = -1.0 + (j as f32 + 0.5) * 2.0 / cutouts::CELLS;
+            let sx = pixel(cx) / (W as f32 / H as f32);
+            let x = ((sx + 1.0) * 0.5 * W as f32) as u32;
+            let y = ((1.0 - pixel(cy)) * 0.5 * H as f32) as u32;
+            let want = if (i + j) % 2 == 0 { front } else { back };
+            assert_eq!(at(&px, x, y), want, "cell ({i}, {j}) at pixel ({x}, {y})");
+        }
+    }
+}
