@@ -125,6 +125,9 @@ pub struct BenchResult {
     pub mrays_by_flags: [f64; 3],
     /// Fraction of coherent and incoherent rays that hit.
     pub hit_rate: [f64; 2],
+    /// Mrays/s of the coherent rays traced through the programmable pipeline (trivial
+    /// closest-hit and miss programs).
+    pub pipeline_mrays: f64,
 }
 
 /// Runs the benchmark on a mesh with `runs` repetitions of each measurement.
@@ -133,7 +136,7 @@ pub fn run(
     mesh: &Mesh,
     runs: usize,
     rays: &BenchRays,
-) -> Result<BenchResult, oxray::BuildError> {
+) -> Result<BenchResult, Box<dyn std::error::Error>> {
     let mut res = BenchResult {
         name: name.to_string(),
         triangles: mesh.triangles.len(),
@@ -184,6 +187,8 @@ pub fn run(
         let s = time(&mut || gas.occluded_batch(set, o).expect("lengths match"));
         res.mrays[2 * k + 1] = n as f64 / s / 1e6;
     }
+    let shared = std::sync::Arc::new(gases[0].clone());
+    res.pipeline_mrays = pipeline_mrays(&shared, &rays.coherent, runs)?;
     for (k, g) in gases.iter().enumerate() {
         let n = rays.incoherent.len();
         let h = &mut hits[..n];
@@ -266,4 +271,88 @@ pub fn export_hits(
         )?;
     }
     Ok(())
+}
+
+/// Launch parameters of the pipeline benchmark.
+#[derive(Clone)]
+struct PipelineParams<'a> {
+    rays: &'a [Ray],
+    handle: oxray::TraversableHandle,
+    out: &'a oxray::OutputBuffer<f32>,
+}
+
+/// Mrays/s of a launch that traces `rays` (one per launch index) through the programmable
+/// pipeline, with a closest-hit program that returns t and a miss program that returns +inf:
+/// the pipeline's overhead over [`Gas::intersect_batch`] on the same rays.
+pub fn pipeline_mrays(
+    gas: &std::sync::Arc<Gas>,
+    rays: &[Ray],
+    runs: usize,
+) -> Result<f64, Box<dyn std::error::Error>> {
+    use oxray::{
+        DeviceContext, HitGroupDesc, Module, OutputBuffer, Pipeline, PipelineCompileOptions,
+        PipelineLinkOptions, ProgramGroup, SbtRegion, ShaderBindingTable, TraceRay,
+    };
+    let out = OutputBuffer::<f32>::new(rays.len());
+    let module = Module::<PipelineParams>::new()
+        .raygen("__raygen__bench", |ctx| {
+            let [x, _, _] = ctx.launch_index();
+            let p = ctx.params();
+            let r = &p.rays[x as usize];
+            let mut payload = [0u32; 1];
+            ctx.trace(
+                &TraceRay::new(&p.handle, r.origin, r.direction).interval(r.tmin, r.tmax),
+                &mut payload,
+            )?;
+            p.out.write(x as usize, f32::from_bits(payload[0]));
+            Ok(())
+        })?
+        .closest_hit("__closesthit__t", |ctx| {
+            let t = ctx.ray_tmax();
+            ctx.set_payload_f32(0, t);
+            Ok(())
+        })?
+        .miss("__miss__inf", |ctx| {
+            ctx.set_payload_f32(0, f32::INFINITY);
+            Ok(())
+        })?;
+    let rg = ProgramGroup::raygen(&module, "__raygen__bench")?;
+    let ms = ProgramGroup::miss(Some((&module, "__miss__inf")))?;
+    let hg = ProgramGroup::hit_group(HitGroupDesc {
+        closest_hit: Some((&module, "__closesthit__t")),
+        ..Default::default()
+    })?;
+    let pipeline = Pipeline::new(
+        &DeviceContext::new(),
+        &PipelineCompileOptions {
+            num_payload_values: 1,
+            ..Default::default()
+        },
+        &PipelineLinkOptions { max_trace_depth: 1 },
+        &[rg.clone(), ms.clone(), hg.clone()],
+    )?;
+    let sbt = ShaderBindingTable {
+        raygen: SbtRegion::from_headers(&[rg.pack_header()]),
+        miss: SbtRegion::from_headers(&[ms.pack_header()]),
+        hitgroup: SbtRegion::from_headers(&[hg.pack_header()]),
+        ..Default::default()
+    };
+    let params = PipelineParams {
+        rays,
+        handle: gas.clone().into(),
+        out: &out,
+    };
+    let launch = || {
+        pipeline
+            .launch(&params, &sbt, rays.len() as u32, 1, 1)
+            .map(|_| ())
+    };
+    launch()?;
+    let mut times = Vec::new();
+    for _ in 0..runs {
+        let t = Instant::now();
+        launch()?;
+        times.push(t.elapsed().as_secs_f64());
+    }
+    Ok(rays.len() as f64 / median(times) / 1e6)
 }

@@ -240,6 +240,9 @@ pub enum PipelineError {
     /// `max_trace_depth` must be at most 31 (guide §12).
     #[error("max_trace_depth {0} exceeds 31")]
     TraceDepthTooLarge(u32),
+    /// A callables group needs a direct or a continuation callable (or both).
+    #[error("a callables program group needs a direct or a continuation callable")]
+    EmptyCallables,
     /// A pipeline needs at least one program group.
     #[error("a pipeline needs at least one program group")]
     NoProgramGroups,

@@ -38,8 +38,15 @@ impl ExceptionCode {
     /// `OPTIX_EXCEPTION_CODE_INVALID_RAY` (validation mode): NaN or infinite origin or
     /// direction, negative tmin, or tmin > tmax.
     pub const INVALID_RAY: ExceptionCode = ExceptionCode(-9);
+    /// `OPTIX_EXCEPTION_CODE_CALLABLE_PARAMETER_MISMATCH`: a callable was called with other
+    /// argument or return types than it was registered with.
+    pub const CALLABLE_PARAMETER_MISMATCH: ExceptionCode = ExceptionCode(-10);
     /// `OPTIX_EXCEPTION_CODE_CALLABLE_INVALID_SBT`: the callable index is past the records.
     pub const CALLABLE_INVALID_SBT: ExceptionCode = ExceptionCode(-12);
+    /// `OPTIX_EXCEPTION_CODE_CALLABLE_NO_DC_SBT_RECORD`: the record has no direct callable.
+    pub const CALLABLE_NO_DC_SBT_RECORD: ExceptionCode = ExceptionCode(-13);
+    /// `OPTIX_EXCEPTION_CODE_CALLABLE_NO_CC_SBT_RECORD`: the record has no continuation callable.
+    pub const CALLABLE_NO_CC_SBT_RECORD: ExceptionCode = ExceptionCode(-14);
     /// `OPTIX_EXCEPTION_CODE_PAYLOAD_TYPE_MISMATCH`: more payload words than the pipeline has.
     pub const PAYLOAD_TYPE_MISMATCH: ExceptionCode = ExceptionCode(-33);
 
@@ -92,6 +99,9 @@ impl std::fmt::Display for Exception {
                 "single GAS not allowed by the graph flags"
             }
             ExceptionCode::CALLABLE_INVALID_SBT => "invalid callable SBT index",
+            ExceptionCode::CALLABLE_PARAMETER_MISMATCH => "callable parameter mismatch",
+            ExceptionCode::CALLABLE_NO_DC_SBT_RECORD => "no direct callable in the record",
+            ExceptionCode::CALLABLE_NO_CC_SBT_RECORD => "no continuation callable in the record",
             ExceptionCode::PAYLOAD_TYPE_MISMATCH => "payload size mismatch",
             c if c.is_user() => "user exception",
             _ => "exception",

@@ -67,8 +67,9 @@ pub use pipeline::{
     PrimitiveTypeFlags, TraversableGraphFlags,
 };
 pub use program::{
-    AnyHitCtx, ClosestHitCtx, ExceptionCtx, HitGroupDesc, IntersectionCtx, MissCtx, Module,
-    ProgramGroup, ProgramGroupKind, ProgramKind, RayFlags, RayGenCtx, TraceRay, TraversableHandle,
+    AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx,
+    HitGroupDesc, IntersectionCtx, MissCtx, Module, ProgramGroup, ProgramGroupKind, ProgramKind,
+    RayFlags, RayGenCtx, TraceRay, TraversableHandle,
 };
 pub use query::{
     CandidateAction, CustomHit, CustomIntersector, CustomPrimitive, Hit, HitKind,

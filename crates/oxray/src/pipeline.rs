@@ -272,6 +272,8 @@ impl<P> Pipeline<P> {
         let raygen = self.resolve(&sbt.raygen, "raygen", ProgramGroupKind::RayGen)?[0];
         let miss_groups = self.resolve(&sbt.miss, "miss", ProgramGroupKind::Miss)?;
         let hit_groups = self.resolve(&sbt.hitgroup, "hitgroup", ProgramGroupKind::HitGroup)?;
+        let callable_groups =
+            self.resolve(&sbt.callables, "callables", ProgramGroupKind::Callables)?;
         let exception_group = match &sbt.exception {
             Some(r) if r.count() > 0 => {
                 Some(self.resolve(r, "exception", ProgramGroupKind::Exception)?[0])
@@ -287,6 +289,7 @@ impl<P> Pipeline<P> {
             miss_groups: &miss_groups,
             hit_groups: &hit_groups,
             exception_group,
+            callable_groups: &callable_groups,
             dims: [width, height, depth],
         };
         let (w, h) = (width as u64, height as u64);

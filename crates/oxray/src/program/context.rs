@@ -19,6 +19,8 @@ pub(crate) struct LaunchShared<'a, P> {
     pub hit_groups: &'a [usize],
     /// Pipeline group index of the exception record, if any.
     pub exception_group: Option<usize>,
+    /// Pipeline group index of every callables record.
+    pub callable_groups: &'a [usize],
     pub dims: [u32; 3],
 }
 
@@ -30,6 +32,8 @@ pub(crate) struct Frame<'a, P> {
     pub record: &'a [u8],
     /// Trace nesting depth of the program (0 for ray generation).
     pub depth: u32,
+    /// Callable nesting depth.
+    pub calls: u32,
 }
 
 impl<P> Clone for Frame<'_, P> {
@@ -96,6 +100,35 @@ macro_rules! throw_fn {
         /// exception program runs; pass the result on with `?` or `return`.
         pub fn throw_exception(&self, code: i32, details: &[u32]) -> ProgramResult {
             self.frame.throw(code, details)
+        }
+    };
+}
+
+macro_rules! direct_call_fn {
+    () => {
+        /// `optixDirectCall`: runs the direct callable of callables record `sbt_index` with
+        /// `args`, returning its result. `A` and `R` must be the types it was registered with
+        /// (otherwise `CALLABLE_PARAMETER_MISMATCH`); a bad index raises `CALLABLE_INVALID_SBT`.
+        pub fn direct_call<A: 'static, R: 'static>(
+            &self,
+            sbt_index: u32,
+            args: A,
+        ) -> Result<R, Interrupt> {
+            trace::direct_call(self.frame, sbt_index, args)
+        }
+    };
+}
+
+macro_rules! continuation_call_fn {
+    () => {
+        /// `optixContinuationCall`: runs the continuation callable of callables record
+        /// `sbt_index` with `args`; it may trace.
+        pub fn continuation_call<A: 'static, R: 'static>(
+            &self,
+            sbt_index: u32,
+            args: A,
+        ) -> Result<R, Interrupt> {
+            trace::continuation_call(self.frame, sbt_index, args)
         }
     };
 }
@@ -213,6 +246,8 @@ pub struct RayGenCtx<'a, P> {
 impl<P> RayGenCtx<'_, P> {
     common_queries!();
     throw_fn!();
+    direct_call_fn!();
+    continuation_call_fn!();
 
     /// `optixTrace`: traces a ray with `payload` as the payload words (copied in, and out when
     /// the trace returns). An exception raised by the trace comes back as an [`Interrupt`] to
@@ -233,6 +268,8 @@ pub struct ClosestHitCtx<'a, P> {
 impl<P> ClosestHitCtx<'_, P> {
     common_queries!();
     throw_fn!();
+    direct_call_fn!();
+    continuation_call_fn!();
     ray_queries!(ray);
     payload_fns!();
     hit_queries!(hit);
@@ -259,6 +296,7 @@ pub struct AnyHitCtx<'a, P> {
 impl<P> AnyHitCtx<'_, P> {
     common_queries!();
     throw_fn!();
+    direct_call_fn!();
     ray_queries!(ray);
     payload_fns!();
     hit_queries!(hit);
@@ -291,6 +329,8 @@ pub struct MissCtx<'a, P> {
 impl<P> MissCtx<'_, P> {
     common_queries!();
     throw_fn!();
+    direct_call_fn!();
+    continuation_call_fn!();
     ray_queries!(ray);
     payload_fns!();
 
@@ -319,6 +359,7 @@ pub struct IntersectionCtx<'a, 'v, P> {
 impl<P> IntersectionCtx<'_, '_, P> {
     common_queries!();
     throw_fn!();
+    direct_call_fn!();
     ray_queries!(ray);
 
     /// `optixGetRayTmax`: the closest accepted hit so far, or the trace's tmax.
@@ -357,7 +398,7 @@ impl<P> IntersectionCtx<'_, '_, P> {
     }
 
     /// `optixReportIntersection`: reports a hit at `t` with hit kind `hit_kind` (low 7 bits)
-    /// and up to 8 attribute words. Outside `[tmin, tmax]` it is ignored and `Ok(false)` comes
+    /// and up to `num_attribute_values` attribute words. Outside `[tmin, tmax]` it is ignored and `Ok(false)` comes
     /// back; otherwise the any-hit program runs: `Ok(false)` if it ignored the hit, `Ok(true)`
     /// if the hit was accepted (the interval then ends at `t`). If the any-hit program
     /// terminated the ray, an [`Interrupt`] comes back: pass it on with `?`.
@@ -373,7 +414,16 @@ impl<P> IntersectionCtx<'_, '_, P> {
         let mut hit = self.prim;
         hit.t = t;
         hit.hit_kind = HitKind::custom(hit_kind);
-        let n = attributes.len().min(8);
+        // Attributes past the pipeline's `num_attribute_values` (at least 2, at most 8) are
+        // dropped, as they would not fit the registers OptiX reserves.
+        let limit = self
+            .frame
+            .launch
+            .pipeline
+            .compile
+            .num_attribute_values
+            .clamp(2, 8) as usize;
+        let n = attributes.len().min(limit);
         hit.attributes = [0; 8];
         hit.attributes[..n].copy_from_slice(&attributes[..n]);
         let accepted = self.reporter.report(self.frame, &self.ray, &hit)?;
@@ -406,5 +456,33 @@ impl<P> ExceptionCtx<'_, P> {
     /// The whole exception.
     pub fn exception(&self) -> &Exception {
         &self.exception
+    }
+}
+
+/// The context of a direct callable: no payload, no tracing (guide §15).
+pub struct DirectCallableCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+}
+
+impl<P> DirectCallableCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+}
+
+/// The context of a continuation callable: it may trace and call other callables (guide §15).
+pub struct ContinuationCallableCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+}
+
+impl<P> ContinuationCallableCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+    continuation_call_fn!();
+
+    /// `optixTrace` from a continuation callable.
+    pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
+        trace::trace(self.frame, ray, payload)
     }
 }

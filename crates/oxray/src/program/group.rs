@@ -2,8 +2,8 @@
 
 use crate::error::PipelineError;
 use crate::program::module::{
-    AnyHitFn, ClosestHitFn, ExceptionFn, IntersectionFn, MissFn, Module, Program, ProgramKind,
-    RayGenFn,
+    AnyHitFn, ClosestHitFn, ContinuationCallableFn, DirectCallableFn, ExceptionFn, IntersectionFn,
+    MissFn, Module, Program, ProgramKind, RayGenFn,
 };
 use crate::sbt::SbtHeader;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -22,6 +22,8 @@ pub enum ProgramGroupKind {
     Exception,
     /// Closest-hit, any-hit and intersection programs, each optional.
     HitGroup,
+    /// A direct and/or a continuation callable sharing one SBT record.
+    Callables,
 }
 
 pub(crate) enum GroupPrograms<P> {
@@ -32,6 +34,10 @@ pub(crate) enum GroupPrograms<P> {
         closest_hit: Option<ClosestHitFn<P>>,
         any_hit: Option<AnyHitFn<P>>,
         intersection: Option<IntersectionFn<P>>,
+    },
+    Callables {
+        direct: Option<DirectCallableFn<P>>,
+        continuation: Option<ContinuationCallableFn<P>>,
     },
 }
 
@@ -150,6 +156,34 @@ impl<P> ProgramGroup<P> {
         }))
     }
 
+    /// A callables group: a direct callable, a continuation callable, or both (one SBT record).
+    pub fn callables(
+        direct: Option<(&Module<P>, &str)>,
+        continuation: Option<(&Module<P>, &str)>,
+    ) -> Result<Self, PipelineError> {
+        if direct.is_none() && continuation.is_none() {
+            return Err(PipelineError::EmptyCallables);
+        }
+        let direct = match direct {
+            None => None,
+            Some((m, name)) => match m.get(name) {
+                Some(Program::DirectCallable(f)) => Some(f.clone()),
+                _ => return Err(unknown(name, ProgramKind::DirectCallable)),
+            },
+        };
+        let continuation = match continuation {
+            None => None,
+            Some((m, name)) => match m.get(name) {
+                Some(Program::ContinuationCallable(f)) => Some(f.clone()),
+                _ => return Err(unknown(name, ProgramKind::ContinuationCallable)),
+            },
+        };
+        Ok(Self::new(GroupPrograms::Callables {
+            direct,
+            continuation,
+        }))
+    }
+
     /// The group's kind.
     pub fn kind(&self) -> ProgramGroupKind {
         match &self.inner.programs {
@@ -157,6 +191,7 @@ impl<P> ProgramGroup<P> {
             GroupPrograms::Miss(_) => ProgramGroupKind::Miss,
             GroupPrograms::Exception(_) => ProgramGroupKind::Exception,
             GroupPrograms::HitGroup { .. } => ProgramGroupKind::HitGroup,
+            GroupPrograms::Callables { .. } => ProgramGroupKind::Callables,
         }
     }
 

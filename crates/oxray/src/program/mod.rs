@@ -9,7 +9,10 @@ mod group;
 mod module;
 mod trace;
 
-pub use context::{AnyHitCtx, ClosestHitCtx, ExceptionCtx, IntersectionCtx, MissCtx, RayGenCtx};
+pub use context::{
+    AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx,
+    IntersectionCtx, MissCtx, RayGenCtx,
+};
 pub use group::{HitGroupDesc, ProgramGroup, ProgramGroupKind};
 pub use module::{Module, ProgramKind};
 pub use trace::{RayFlags, TraceRay, TraversableHandle};

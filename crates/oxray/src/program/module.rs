@@ -1,10 +1,13 @@
 //! Modules: programs registered under OptiX-style entry names.
 
 use crate::error::PipelineError;
+use crate::exception::Interrupt;
 use crate::exception::ProgramResult;
 use crate::program::context::{
-    AnyHitCtx, ClosestHitCtx, ExceptionCtx, IntersectionCtx, MissCtx, RayGenCtx,
+    AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx,
+    IntersectionCtx, MissCtx, RayGenCtx,
 };
+use std::any::Any;
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -67,6 +70,16 @@ pub(crate) type MissFn<P> = Arc<dyn Fn(&mut MissCtx<'_, P>) -> ProgramResult + S
 pub(crate) type IntersectionFn<P> =
     Arc<dyn Fn(&mut IntersectionCtx<'_, '_, P>) -> ProgramResult + Send + Sync>;
 pub(crate) type ExceptionFn<P> = Arc<dyn Fn(&mut ExceptionCtx<'_, P>) + Send + Sync>;
+/// A callable behind type erasure: `slot` is the caller's `(Option<A>, Option<R>)`; a slot of
+/// other types is a parameter mismatch (`Ok(false)`).
+pub(crate) type DirectCallableFn<P> = Arc<
+    dyn Fn(&mut DirectCallableCtx<'_, P>, &mut dyn Any) -> Result<bool, Interrupt> + Send + Sync,
+>;
+pub(crate) type ContinuationCallableFn<P> = Arc<
+    dyn Fn(&mut ContinuationCallableCtx<'_, P>, &mut dyn Any) -> Result<bool, Interrupt>
+        + Send
+        + Sync,
+>;
 
 /// A registered program.
 pub(crate) enum Program<P> {
@@ -76,6 +89,8 @@ pub(crate) enum Program<P> {
     Miss(MissFn<P>),
     Intersection(IntersectionFn<P>),
     Exception(ExceptionFn<P>),
+    DirectCallable(DirectCallableFn<P>),
+    ContinuationCallable(ContinuationCallableFn<P>),
 }
 
 impl<P> Clone for Program<P> {
@@ -87,6 +102,8 @@ impl<P> Clone for Program<P> {
             Program::Miss(f) => Program::Miss(f.clone()),
             Program::Intersection(f) => Program::Intersection(f.clone()),
             Program::Exception(f) => Program::Exception(f.clone()),
+            Program::DirectCallable(f) => Program::DirectCallable(f.clone()),
+            Program::ContinuationCallable(f) => Program::ContinuationCallable(f.clone()),
         }
     }
 }
@@ -201,6 +218,58 @@ impl<P> Module<P> {
             name,
             ProgramKind::Exception,
             Program::Exception(Arc::new(f)),
+        )
+    }
+
+    /// Registers a direct callable (`__direct_callable__*`) taking `A` and returning `R`
+    /// (guide §15). Callers must use the same types; a mismatch raises
+    /// `CALLABLE_PARAMETER_MISMATCH`.
+    pub fn direct_callable<A: 'static, R: 'static>(
+        self,
+        name: &str,
+        f: impl Fn(&mut DirectCallableCtx<'_, P>, A) -> Result<R, Interrupt> + Send + Sync + 'static,
+    ) -> Result<Self, PipelineError> {
+        let erased = move |ctx: &mut DirectCallableCtx<'_, P>, slot: &mut dyn Any| {
+            let Some(slot) = slot.downcast_mut::<(Option<A>, Option<R>)>() else {
+                return Ok(false);
+            };
+            let Some(args) = slot.0.take() else {
+                return Ok(false);
+            };
+            slot.1 = Some(f(ctx, args)?);
+            Ok(true)
+        };
+        self.add(
+            name,
+            ProgramKind::DirectCallable,
+            Program::DirectCallable(Arc::new(erased)),
+        )
+    }
+
+    /// Registers a continuation callable (`__continuation_callable__*`) taking `A` and
+    /// returning `R`; unlike a direct callable it may trace.
+    pub fn continuation_callable<A: 'static, R: 'static>(
+        self,
+        name: &str,
+        f: impl Fn(&mut ContinuationCallableCtx<'_, P>, A) -> Result<R, Interrupt>
+            + Send
+            + Sync
+            + 'static,
+    ) -> Result<Self, PipelineError> {
+        let erased = move |ctx: &mut ContinuationCallableCtx<'_, P>, slot: &mut dyn Any| {
+            let Some(slot) = slot.downcast_mut::<(Option<A>, Option<R>)>() else {
+                return Ok(false);
+            };
+            let Some(args) = slot.0.take() else {
+                return Ok(false);
+            };
+            slot.1 = Some(f(ctx, args)?);
+            Ok(true)
+        };
+        self.add(
+            name,
+            ProgramKind::ContinuationCallable,
+            Program::ContinuationCallable(Arc::new(erased)),
         )
     }
 

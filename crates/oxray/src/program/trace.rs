@@ -7,8 +7,8 @@ use crate::exception::{Exception, ExceptionCode, Interrupt, InterruptKind, Progr
 use crate::geometry::triangle::TriangleHit;
 use crate::pipeline::PrimitiveTypeFlags;
 use crate::program::context::{
-    AnyHitCtx, ClosestHitCtx, ExceptionCtx, Frame, IntersectionCtx, LaunchShared, MissCtx,
-    RayGenCtx,
+    AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx, Frame,
+    IntersectionCtx, LaunchShared, MissCtx, RayGenCtx,
 };
 use crate::program::group::GroupPrograms;
 use crate::query::HitKind;
@@ -507,16 +507,17 @@ fn trace_into<P>(
                 BuildInputKind::Triangles => Primitives::Triangles(&gas.triangles),
                 BuildInputKind::CustomPrimitives => Primitives::Aabbs(&gas.aabbs),
             };
-            let mut stack = TraversalStack::new();
-            traverse_gas(
-                &gas.bvh.nodes,
-                prims,
-                &prepared,
-                ray.tmin,
-                ray.tmax,
-                &mut v,
-                &mut stack,
-            );
+            with_stack(|stack| {
+                traverse_gas(
+                    &gas.bvh.nodes,
+                    prims,
+                    &prepared,
+                    ray.tmin,
+                    ray.tmax,
+                    &mut v,
+                    stack,
+                )
+            });
             if let Some(e) = v.pending {
                 return Err(e);
             }
@@ -591,6 +592,7 @@ pub(crate) fn run_raygen<P>(
         index,
         record: launch.sbt.raygen.record(0).unwrap_or(&[]),
         depth: 0,
+        calls: 0,
     };
     let GroupPrograms::RayGen(rg) = &launch.pipeline.groups[raygen_group].inner.programs else {
         return None;
@@ -614,4 +616,115 @@ pub(crate) fn run_raygen<P>(
         }
     }
     Some(e)
+}
+
+/// Deepest nesting of callables before `STACK_OVERFLOW` is raised (so that runaway recursion
+/// ends the launch index instead of the process).
+pub(crate) const MAX_CALL_DEPTH: u32 = 64;
+
+fn callable_group<P>(frame: &Frame<'_, P>, sbt_index: u32) -> Result<(usize, u32), Interrupt> {
+    if frame.calls >= MAX_CALL_DEPTH {
+        return Err(Interrupt::exception(ExceptionCode::STACK_OVERFLOW, &[]));
+    }
+    match frame.launch.callable_groups.get(sbt_index as usize) {
+        Some(&g) => Ok((g, frame.calls + 1)),
+        None => Err(Interrupt::exception(
+            ExceptionCode::CALLABLE_INVALID_SBT,
+            &[sbt_index],
+        )),
+    }
+}
+
+/// `optixDirectCall`.
+pub(crate) fn direct_call<P, A: 'static, R: 'static>(
+    frame: Frame<'_, P>,
+    sbt_index: u32,
+    args: A,
+) -> Result<R, Interrupt> {
+    let (g, calls) = callable_group(&frame, sbt_index)?;
+    let launch = frame.launch;
+    let GroupPrograms::Callables {
+        direct: Some(dc), ..
+    } = &launch.pipeline.groups[g].inner.programs
+    else {
+        return Err(Interrupt::exception(
+            ExceptionCode::CALLABLE_NO_DC_SBT_RECORD,
+            &[sbt_index],
+        ));
+    };
+    let mut ctx = DirectCallableCtx {
+        frame: Frame {
+            record: launch
+                .sbt
+                .callables
+                .record(sbt_index as usize)
+                .unwrap_or(&[]),
+            calls,
+            ..frame
+        },
+    };
+    let mut slot: (Option<A>, Option<R>) = (Some(args), None);
+    let ok = dc(&mut ctx, &mut slot)?;
+    match (ok, slot.1) {
+        (true, Some(r)) => Ok(r),
+        _ => Err(Interrupt::exception(
+            ExceptionCode::CALLABLE_PARAMETER_MISMATCH,
+            &[sbt_index],
+        )),
+    }
+}
+
+/// `optixContinuationCall`.
+pub(crate) fn continuation_call<P, A: 'static, R: 'static>(
+    frame: Frame<'_, P>,
+    sbt_index: u32,
+    args: A,
+) -> Result<R, Interrupt> {
+    let (g, calls) = callable_group(&frame, sbt_index)?;
+    let launch = frame.launch;
+    let GroupPrograms::Callables {
+        continuation: Some(cc),
+        ..
+    } = &launch.pipeline.groups[g].inner.programs
+    else {
+        return Err(Interrupt::exception(
+            ExceptionCode::CALLABLE_NO_CC_SBT_RECORD,
+            &[sbt_index],
+        ));
+    };
+    let mut ctx = ContinuationCallableCtx {
+        frame: Frame {
+            record: launch
+                .sbt
+                .callables
+                .record(sbt_index as usize)
+                .unwrap_or(&[]),
+            calls,
+            ..frame
+        },
+    };
+    let mut slot: (Option<A>, Option<R>) = (Some(args), None);
+    let ok = cc(&mut ctx, &mut slot)?;
+    match (ok, slot.1) {
+        (true, Some(r)) => Ok(r),
+        _ => Err(Interrupt::exception(
+            ExceptionCode::CALLABLE_PARAMETER_MISMATCH,
+            &[sbt_index],
+        )),
+    }
+}
+
+thread_local! {
+    static STACK: std::cell::RefCell<TraversalStack> = std::cell::RefCell::new(TraversalStack::new());
+}
+
+/// Runs `f` with this thread's traversal stack, so that a trace does not initialise a stack of
+/// its own. Programs that may trace (ray generation, closest hit, miss, continuation callables)
+/// never run during a traversal, so the stack is free whenever a trace starts; should a program
+/// nest work on the same thread anyway (through its own thread pool), a fresh stack is used.
+fn with_stack<R>(f: impl FnOnce(&mut TraversalStack) -> R) -> R {
+    STACK.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut stack) => f(&mut stack),
+        Err(_) => f(&mut TraversalStack::new()),
+    })
 }
