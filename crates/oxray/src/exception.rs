@@ -3,7 +3,10 @@
 use bitflags::bitflags;
 
 bitflags! {
-    /// Which exceptions a pipeline checks for (`OptixExceptionFlags`).
+    /// Which exceptions a pipeline checks for (`OptixExceptionFlags`). On the CPU oxray checks
+    /// trace depth, SBT indices and callable nesting whatever the flags, and user exceptions are
+    /// always raised: the checks cost next to nothing there and turn what OptiX leaves
+    /// undefined into exceptions. The flags are kept for backends where they cost.
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
     pub struct ExceptionFlags: u32 {
         /// Continuation-stack overflow (`OPTIX_EXCEPTION_FLAG_STACK_OVERFLOW`).

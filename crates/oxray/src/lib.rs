@@ -35,6 +35,19 @@
 //! index sums the records of earlier inputs (§7.3.2), hits lie in the closed interval
 //! `[tmin, tmax]`, triangles report hit kind `0xFE`/`0xFF` for front/back faces, and
 //! triangle intersection is watertight.
+//!
+//! On top sits the programmable pipeline of OptiX (guide chapters 6, 7, 10, 13, 15): a
+//! [`Module`] registers Rust programs under entry names (`__raygen__*`, `__closesthit__*`,
+//! `__anyhit__*`, `__miss__*`, `__intersection__*`, `__exception__*`, `__direct_callable__*`,
+//! `__continuation_callable__*`); [`ProgramGroup`]s made from them are linked into a
+//! [`Pipeline`] and named by the records of a [`ShaderBindingTable`]; [`Pipeline::launch`] runs
+//! the ray-generation program over a 1-, 2- or 3-D grid on all cores. Each program kind receives
+//! its own context ([`RayGenCtx`], [`ClosestHitCtx`], [`AnyHitCtx`], [`MissCtx`],
+//! [`IntersectionCtx`], [`ExceptionCtx`], [`DirectCallableCtx`], [`ContinuationCallableCtx`])
+//! with exactly the device functions the guide's §13 table allows it. Device functions that
+//! never return in OptiX (a trace that raises, `optixThrowException`,
+//! `optixIgnoreIntersection`, `optixTerminateRay`) give an [`Interrupt`] that the program passes
+//! on with `?` or `return`. See `examples/` (`hello`, `triangle`, `custom_sphere`, `cutouts`).
 
 #![warn(missing_docs)]
 // Lane and axis loops index several arrays in step; iterator chains would hide that.

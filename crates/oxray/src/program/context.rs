@@ -182,6 +182,20 @@ macro_rules! payload_fns {
         pub fn set_payload_f32(&mut self, i: usize, v: f32) {
             self.set_payload(i, v.to_bits())
         }
+        /// Payload words `i..i + 3` as a vector of three `f32`.
+        pub fn payload_vec3(&self, i: usize) -> Vec3 {
+            Vec3::new(
+                self.payload_f32(i),
+                self.payload_f32(i + 1),
+                self.payload_f32(i + 2),
+            )
+        }
+        /// Sets payload words `i..i + 3` to a vector of three `f32`.
+        pub fn set_payload_vec3(&mut self, i: usize, v: Vec3) {
+            for (k, c) in v.to_array().into_iter().enumerate() {
+                self.set_payload_f32(i + k, c);
+            }
+        }
         /// The payload words of the current trace.
         pub fn payload_words(&self) -> &[u32] {
             self.payload
@@ -304,6 +318,14 @@ impl<P> AnyHitCtx<'_, P> {
     /// `optixGetRayTmax`: the candidate's distance.
     pub fn ray_tmax(&self) -> f32 {
         self.hit.t
+    }
+    /// The object-space ray origin (the world ray: no transforms above a GAS root).
+    pub fn object_ray_origin(&self) -> Vec3 {
+        self.ray.origin
+    }
+    /// The object-space ray direction.
+    pub fn object_ray_direction(&self) -> Vec3 {
+        self.ray.direction
     }
 
     /// `optixIgnoreIntersection`: the candidate is not a hit and the interval stays. Return it
