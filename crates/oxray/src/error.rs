@@ -167,6 +167,64 @@ pub enum BuildError {
         /// Vertices in the input.
         num_vertices: u32,
     },
+    /// Instance build inputs belong in an IAS, not a GAS (guide §5).
+    #[error("build input {index} holds instances: instances are built into an IAS, not a GAS")]
+    InstancesInGas {
+        /// The input.
+        index: usize,
+    },
+    /// An IAS takes exactly one build input (guide §5.4).
+    #[error("an instance acceleration structure takes exactly one build input, not {count}")]
+    IasInputCount {
+        /// Inputs given.
+        count: usize,
+    },
+    /// An IAS's input must hold instances.
+    #[error("an instance acceleration structure needs an instance input, not {found}")]
+    NotInstances {
+        /// Kind given.
+        found: BuildInputKind,
+    },
+    /// An IAS holds at most 2^28 instances (guide §12).
+    #[error("{count} instances exceed the limit of {limit} per instance acceleration structure")]
+    TooManyInstances {
+        /// Instances given.
+        count: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// An instance field has bits set above its limit (guide §5.4, §12: they must be zero).
+    #[error("instance {instance}: {field} {value:#x} has bits above its {bits}-bit limit")]
+    InstanceFieldOutOfRange {
+        /// The instance.
+        instance: u32,
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: u32,
+        /// Bits allowed.
+        bits: u32,
+    },
+    /// `DISABLE_ANYHIT` and `ENFORCE_ANYHIT` exclude each other.
+    #[error("instance {instance}: flags DISABLE_ANYHIT and ENFORCE_ANYHIT are mutually exclusive")]
+    ConflictingInstanceFlags {
+        /// The instance.
+        instance: u32,
+    },
+    /// A transform is singular or not finite.
+    #[error("{}transform is singular or not finite", match instance { Some(i) => format!("instance {i}: "), None => String::new() })]
+    InvalidTransform {
+        /// The instance, or `None` for a static transform.
+        instance: Option<u32>,
+    },
+    /// The traversable graph may be at most 31 levels deep (guide §12).
+    #[error("traversable graph depth {depth} exceeds {limit}")]
+    GraphTooDeep {
+        /// The depth.
+        depth: u32,
+        /// The limit.
+        limit: u32,
+    },
     /// `primitiveIndexOffset + numPrimitives` must fit in 32 bits.
     #[error("{at}: primitive index offset {offset} + {count} primitives overflows 32 bits")]
     PrimitiveIndexOffsetOverflow {
@@ -180,6 +238,16 @@ pub enum BuildError {
 }
 
 impl BuildError {
+    /// Shorthand for an instance field with bits above its limit.
+    pub(crate) fn field(instance: u32, field: &'static str, value: u32, bits: u32) -> Self {
+        BuildError::InstanceFieldOutOfRange {
+            instance,
+            field,
+            value,
+            bits,
+        }
+    }
+
     /// The `OptixResult` code the guide gives for this error.
     pub fn code(&self) -> ErrorCode {
         match self {

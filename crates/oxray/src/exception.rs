@@ -28,6 +28,12 @@ impl ExceptionCode {
     pub const STACK_OVERFLOW: ExceptionCode = ExceptionCode(-1);
     /// `OPTIX_EXCEPTION_CODE_TRACE_DEPTH_EXCEEDED`.
     pub const TRACE_DEPTH_EXCEEDED: ExceptionCode = ExceptionCode(-2);
+    /// `OPTIX_EXCEPTION_CODE_TRAVERSAL_DEPTH_EXCEEDED`: the traversable graph is deeper than
+    /// the pipeline's `max_traversable_graph_depth`.
+    pub const TRAVERSAL_DEPTH_EXCEEDED: ExceptionCode = ExceptionCode(-3);
+    /// `OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE`: the traced graph is not allowed by
+    /// the pipeline's traversable-graph flags.
+    pub const TRAVERSAL_INVALID_TRAVERSABLE: ExceptionCode = ExceptionCode(-5);
     /// `OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_MISS_SBT`: the miss index is past the miss records.
     pub const INVALID_MISS_SBT: ExceptionCode = ExceptionCode(-6);
     /// `OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_HIT_SBT`: the hit-group index is past the records.
@@ -95,6 +101,10 @@ impl std::fmt::Display for Exception {
             ExceptionCode::STACK_OVERFLOW => "stack overflow",
             ExceptionCode::TRACE_DEPTH_EXCEEDED => "trace depth exceeded",
             ExceptionCode::INVALID_MISS_SBT => "invalid miss SBT index",
+            ExceptionCode::TRAVERSAL_DEPTH_EXCEEDED => "traversable graph too deep",
+            ExceptionCode::TRAVERSAL_INVALID_TRAVERSABLE => {
+                "traversable not allowed by the graph flags"
+            }
             ExceptionCode::INVALID_HIT_SBT => "invalid hit-group SBT index",
             ExceptionCode::INVALID_RAY => "invalid ray",
             ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE => "unsupported primitive type",

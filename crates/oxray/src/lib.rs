@@ -69,7 +69,10 @@ pub use accel::input::{
     SbtIndexSize, TriangleInput, VertexBuffer,
 };
 pub use accel::options::{BuildFlags, BuildOperation, BuildOptions, GeometryFlags};
-pub use accel::{compute_memory_usage, AccelBufferSizes, Gas, GasMemory};
+pub use accel::{
+    compute_memory_usage, AccelBufferSizes, Gas, GasMemory, Ias, Instance, InstanceFlags,
+    StaticTransform, Transform, TraversableHandle, TraversableKind,
+};
 pub use error::{BuildError, ErrorCode, LaunchError, PipelineError, QueryError};
 pub use exception::{Exception, ExceptionCode, ExceptionFlags, Interrupt, ProgramResult};
 pub use geometry::vertex::{IndexFormat, VertexFormat};
@@ -82,14 +85,14 @@ pub use pipeline::{
 pub use program::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx,
     HitGroupDesc, IntersectionCtx, MissCtx, Module, ProgramGroup, ProgramGroupKind, ProgramKind,
-    RayFlags, RayGenCtx, TraceRay, TraversableHandle,
+    RayFlags, RayGenCtx, TraceRay,
 };
 pub use query::{
     CandidateAction, CustomHit, CustomIntersector, CustomPrimitive, Hit, HitKind,
     NoCustomPrimitives,
 };
 pub use sbt::{SbtHeader, SbtRegion, ShaderBindingTable};
-pub use traversal::{Ray, RayError, TraversalStack};
+pub use traversal::{Ray, RayError};
 
 /// The README's example, compiled and run as a doctest.
 #[cfg(doctest)]

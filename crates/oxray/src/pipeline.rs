@@ -150,6 +150,9 @@ impl Default for PipelineLinkOptions {
 pub(crate) struct PipelineShared<P> {
     pub compile: PipelineCompileOptions,
     pub link: PipelineLinkOptions,
+    /// Deepest traversable graph a trace may enter (`optixPipelineSetStackSize`'s last
+    /// argument); 31 unless set.
+    pub max_traversable_graph_depth: u32,
     pub validation_mode: bool,
     pub groups: Vec<ProgramGroup<P>>,
     by_id: HashMap<u64, usize>,
@@ -205,6 +208,7 @@ impl<P> Pipeline<P> {
             shared: Arc::new(PipelineShared {
                 compile: *compile,
                 link: *link,
+                max_traversable_graph_depth: crate::accel::MAX_TRAVERSABLE_GRAPH_DEPTH,
                 validation_mode: context.is_validation_mode(),
                 groups: groups.to_vec(),
                 by_id,

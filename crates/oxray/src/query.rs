@@ -7,7 +7,7 @@ use crate::error::QueryError;
 use crate::geometry::triangle::TriangleHit;
 use crate::geometry::Aabb;
 use crate::traversal::{
-    traverse_gas, Decision, GasVisitor, PreparedRay, Primitives, Ray, TraversalStack,
+    traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef, Path, Ray, SceneVisitor,
 };
 use rayon::prelude::*;
 
@@ -55,6 +55,11 @@ pub struct Hit {
     pub build_input: u32,
     /// Front or back face of a triangle, or the custom hit kind.
     pub hit_kind: HitKind,
+    /// User id of the instance nearest to the hit geometry; `!0` without instances (guide
+    /// §13.7).
+    pub instance_id: u32,
+    /// Position of that instance in its IAS's build input; 0 without instances.
+    pub instance_index: u32,
 }
 
 /// A custom primitive handed to an intersection closure.
@@ -117,16 +122,18 @@ pub enum CandidateAction {
     Terminate,
 }
 
-struct QueryVisitor<'a, C, F> {
-    gas: &'a Gas,
-    ray: &'a Ray,
+struct QueryVisitor<'s, 'a, C, F> {
+    /// The GAS being traversed, and where it sits.
+    gas: Option<&'s Gas>,
+    path: Path<'s>,
+    object_ray: Ray,
     custom: &'a mut C,
     filter: F,
     first_hit_ends: bool,
     best: Option<Hit>,
 }
 
-impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'_, C, F> {
+impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'s, '_, C, F> {
     #[inline(always)]
     fn offer(&mut self, hit: Hit) -> Decision {
         match (self.filter)(&hit) {
@@ -141,14 +148,44 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'_, C
             }
         }
     }
+
+    #[inline(always)]
+    fn instance(&self) -> (u32, u32) {
+        self.path
+            .instance
+            .map_or((!0, 0), |i| (i.instance_id, i.index))
+    }
+}
+
+impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> SceneVisitor<'s>
+    for QueryVisitor<'s, '_, C, F>
+{
+    fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
+        self.gas = Some(gas);
+        self.path = *path;
+        self.object_ray = *object_ray;
+    }
+
+    fn ray_mask(&self) -> u8 {
+        0xFF
+    }
 }
 
 impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
-    for QueryVisitor<'_, C, F>
+    for QueryVisitor<'_, '_, C, F>
 {
     #[inline(always)]
     fn triangle(&mut self, slot: u32, h: &TriangleHit) -> Decision {
-        let (primitive_index, sbt_gas_index, build_input) = self.gas.resolve(slot);
+        let Some(gas) = self.gas else {
+            return Decision::Ignore;
+        };
+        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
+        let (instance_id, instance_index) = self.instance();
+        // FLIP_TRIANGLE_FACING of the nearest instance swaps the faces (guide §5.4).
+        let flip = self
+            .path
+            .instance_flags()
+            .contains(crate::InstanceFlags::FLIP_TRIANGLE_FACING);
         self.offer(Hit {
             t: h.t,
             u: h.u,
@@ -156,26 +193,31 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
             primitive_index,
             sbt_gas_index,
             build_input,
-            hit_kind: if h.front_face {
+            hit_kind: if h.front_face != flip {
                 HitKind::TRIANGLE_FRONT_FACE
             } else {
                 HitKind::TRIANGLE_BACK_FACE
             },
+            instance_id,
+            instance_index,
         })
     }
 
-    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32) -> (Option<f32>, bool) {
-        let (primitive_index, sbt_gas_index, build_input) = self.gas.resolve(slot);
+    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32, _: &mut [Entry]) -> (Option<f32>, bool) {
+        let Some(gas) = self.gas else {
+            return (None, false);
+        };
+        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
         let prim = CustomPrimitive {
             primitive_index,
             sbt_gas_index,
             build_input,
-            aabb: self.gas.aabbs[slot as usize],
+            aabb: gas.aabbs[slot as usize],
         };
         let ray = Ray {
             tmin,
             tmax,
-            ..*self.ray
+            ..self.object_ray
         };
         let Some(c) = self.custom.intersect(&prim, &ray) else {
             return (None, false);
@@ -183,6 +225,7 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
         if !(c.t >= tmin && c.t <= tmax) {
             return (None, false);
         }
+        let (instance_id, instance_index) = self.instance();
         let hit = Hit {
             t: c.t,
             u: c.u,
@@ -191,6 +234,8 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
             sbt_gas_index,
             build_input,
             hit_kind: HitKind::custom(c.hit_kind),
+            instance_id,
+            instance_index,
         };
         match self.offer(hit) {
             Decision::Ignore | Decision::Abort => (None, false),
@@ -204,169 +249,158 @@ fn accept_all(_: &Hit) -> CandidateAction {
     CandidateAction::Accept
 }
 
-impl Gas {
-    fn query<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction>(
-        &self,
-        ray: &Ray,
-        custom: &mut C,
-        filter: F,
-        first_hit_ends: bool,
-        stack: &mut TraversalStack,
-    ) -> Option<Hit> {
-        let prepared = PreparedRay::new(ray)?;
-        let mut v = QueryVisitor {
-            gas: self,
-            ray,
-            custom,
-            filter,
-            first_hit_ends,
-            best: None,
-        };
-        let prims = match self.kind {
-            crate::BuildInputKind::Triangles => Primitives::Triangles(&self.triangles),
-            crate::BuildInputKind::CustomPrimitives => Primitives::Aabbs(&self.aabbs),
-        };
-        traverse_gas(
-            &self.bvh.nodes,
-            prims,
-            &prepared,
-            ray.tmin,
-            ray.tmax,
-            &mut v,
-            stack,
-        );
-        v.best
-    }
-
-    /// The closest hit in `[ray.tmin, ray.tmax]`, or `None`. Custom primitives are not hit (use
-    /// [`intersect_with`](Self::intersect_with)); an invalid ray (see [`Ray::validate`]) hits
-    /// nothing. Where two hits are at the same distance, which one is returned is fixed by the
-    /// structure, identical from run to run.
-    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.query(
-            ray,
-            &mut NoCustomPrimitives,
-            accept_all,
-            false,
-            &mut TraversalStack::new(),
-        )
-    }
-
-    /// The closest hit, with custom primitives intersected by `custom`.
-    pub fn intersect_with<C: CustomIntersector>(&self, ray: &Ray, custom: &mut C) -> Option<Hit> {
-        self.query(ray, custom, accept_all, false, &mut TraversalStack::new())
-    }
-
-    /// The closest hit that `filter` accepts: an any-hit program in closure form. The filter sees
-    /// each candidate within the current interval (in no particular order, possibly more than
-    /// once per primitive) and may accept, ignore, or accept and terminate.
-    ///
-    /// ```
-    /// # use oxray::{BuildOptions, CandidateAction, Gas, Ray, TriangleInput, VertexBuffer, NoCustomPrimitives};
-    /// # use glam::Vec3;
-    /// // Two parallel triangles; ignore the first primitive to see the one behind it.
-    /// let v = [[-1.0f32, -1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 1.0, 1.0],
-    ///          [-1.0, -1.0, 2.0], [1.0, -1.0, 2.0], [0.0, 1.0, 2.0]];
-    /// let gas = Gas::build(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
-    /// let ray = Ray::new(Vec3::ZERO, Vec3::Z);
-    /// let hit = gas.intersect_filtered(&ray, &mut NoCustomPrimitives, |h| {
-    ///     if h.primitive_index == 0 { CandidateAction::Ignore } else { CandidateAction::Accept }
-    /// });
-    /// assert_eq!(hit.unwrap().t, 2.0);
-    /// # Ok::<(), oxray::BuildError>(())
-    /// ```
-    pub fn intersect_filtered<C: CustomIntersector>(
-        &self,
-        ray: &Ray,
-        custom: &mut C,
-        filter: impl FnMut(&Hit) -> CandidateAction,
-    ) -> Option<Hit> {
-        self.query(ray, custom, filter, false, &mut TraversalStack::new())
-    }
-
-    /// Whether anything lies in `[ray.tmin, ray.tmax]` (a shadow or visibility ray): traversal
-    /// stops at the first hit found, which need not be the closest.
-    pub fn occluded(&self, ray: &Ray) -> bool {
-        self.query(
-            ray,
-            &mut NoCustomPrimitives,
-            accept_all,
-            true,
-            &mut TraversalStack::new(),
-        )
-        .is_some()
-    }
-
-    /// Whether anything lies in the ray's interval, with custom primitives intersected by
-    /// `custom`.
-    pub fn occluded_with<C: CustomIntersector>(&self, ray: &Ray, custom: &mut C) -> bool {
-        self.query(ray, custom, accept_all, true, &mut TraversalStack::new())
-            .is_some()
-    }
-
-    /// Closest hits of a batch of rays, in parallel on the current rayon pool. The results are
-    /// the same as [`intersect`](Self::intersect) ray by ray, whatever the number of threads.
-    pub fn intersect_batch(
-        &self,
-        rays: &[Ray],
-        hits: &mut [Option<Hit>],
-    ) -> Result<(), QueryError> {
-        self.batch(rays, hits, |gas, ray, stack| {
-            gas.query(ray, &mut NoCustomPrimitives, accept_all, false, stack)
-        })
-    }
-
-    /// Occlusion of a batch of rays, in parallel.
-    pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) -> Result<(), QueryError> {
-        self.batch(rays, occluded, |gas, ray, stack| {
-            gas.query(ray, &mut NoCustomPrimitives, accept_all, true, stack)
-                .is_some()
-        })
-    }
-
-    /// Closest hits of a batch, with custom primitives intersected by `custom` (called from
-    /// several threads at once).
-    pub fn intersect_batch_with<C>(
-        &self,
-        rays: &[Ray],
-        hits: &mut [Option<Hit>],
-        custom: &C,
-    ) -> Result<(), QueryError>
-    where
-        C: Fn(&CustomPrimitive, &Ray) -> Option<CustomHit> + Sync,
-    {
-        self.batch(rays, hits, |gas, ray, stack| {
-            gas.query(
-                ray,
-                &mut |p: &CustomPrimitive, r: &Ray| custom(p, r),
-                accept_all,
-                false,
-                stack,
-            )
-        })
-    }
-
-    fn batch<T: Send>(
-        &self,
-        rays: &[Ray],
-        out: &mut [T],
-        f: impl Fn(&Gas, &Ray, &mut TraversalStack) -> T + Sync,
-    ) -> Result<(), QueryError> {
-        if rays.len() != out.len() {
-            return Err(QueryError::LengthMismatch {
-                rays: rays.len(),
-                outputs: out.len(),
-            });
-        }
-        const CHUNK: usize = 256;
-        rays.par_chunks(CHUNK)
-            .zip(out.par_chunks_mut(CHUNK))
-            .for_each(|(rays, out)| {
-                let mut stack = TraversalStack::new();
-                for (r, o) in rays.iter().zip(out) {
-                    *o = f(self, r, &mut stack);
-                }
-            });
-        Ok(())
-    }
+/// Runs one query from `root` with this thread's stack.
+fn query<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction>(
+    root: NodeRef<'s>,
+    ray: &Ray,
+    custom: &mut C,
+    filter: F,
+    first_hit_ends: bool,
+) -> Option<Hit> {
+    ray.validate().ok()?;
+    let mut v = QueryVisitor {
+        gas: None,
+        path: Path::ROOT,
+        object_ray: *ray,
+        custom,
+        filter,
+        first_hit_ends,
+        best: None,
+    };
+    with_stack(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
+    v.best
 }
+
+/// The queries every traversable offers: closest hit, occlusion, filtered, and batches.
+macro_rules! query_api {
+    ($t:ty, $root:expr) => {
+        impl $t {
+            /// The closest hit in `[ray.tmin, ray.tmax]`, or `None`. Custom primitives are not hit (use
+            /// [`intersect_with`](Self::intersect_with)); an invalid ray (see [`Ray::validate`]) hits
+            /// nothing. Where two hits are at the same distance, which one is returned is fixed by the
+            /// structure, identical from run to run.
+            pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+                query($root(self), ray, &mut NoCustomPrimitives, accept_all, false)
+            }
+
+            /// The closest hit, with custom primitives intersected by `custom`.
+            pub fn intersect_with<C: CustomIntersector>(
+                &self,
+                ray: &Ray,
+                custom: &mut C,
+            ) -> Option<Hit> {
+                query($root(self), ray, custom, accept_all, false)
+            }
+
+            /// The closest hit that `filter` accepts: an any-hit program in closure form. The filter sees
+            /// each candidate within the current interval (in no particular order, possibly more than
+            /// once per primitive) and may accept, ignore, or accept and terminate.
+            ///
+            /// ```
+            /// # use oxray::{BuildOptions, CandidateAction, Gas, Ray, TriangleInput, VertexBuffer, NoCustomPrimitives};
+            /// # use glam::Vec3;
+            /// // Two parallel triangles; ignore the first primitive to see the one behind it.
+            /// let v = [[-1.0f32, -1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 1.0, 1.0],
+            ///          [-1.0, -1.0, 2.0], [1.0, -1.0, 2.0], [0.0, 1.0, 2.0]];
+            /// let gas = Gas::build(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+            /// let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+            /// let hit = gas.intersect_filtered(&ray, &mut NoCustomPrimitives, |h| {
+            ///     if h.primitive_index == 0 { CandidateAction::Ignore } else { CandidateAction::Accept }
+            /// });
+            /// assert_eq!(hit.unwrap().t, 2.0);
+            /// # Ok::<(), oxray::BuildError>(())
+            /// ```
+            pub fn intersect_filtered<C: CustomIntersector>(
+                &self,
+                ray: &Ray,
+                custom: &mut C,
+                filter: impl FnMut(&Hit) -> CandidateAction,
+            ) -> Option<Hit> {
+                query($root(self), ray, custom, filter, false)
+            }
+
+            /// Whether anything lies in `[ray.tmin, ray.tmax]` (a shadow or visibility ray): traversal
+            /// stops at the first hit found, which need not be the closest.
+            pub fn occluded(&self, ray: &Ray) -> bool {
+                query($root(self), ray, &mut NoCustomPrimitives, accept_all, true).is_some()
+            }
+
+            /// Whether anything lies in the ray's interval, with custom primitives intersected by
+            /// `custom`.
+            pub fn occluded_with<C: CustomIntersector>(&self, ray: &Ray, custom: &mut C) -> bool {
+                query($root(self), ray, custom, accept_all, true).is_some()
+            }
+
+            /// Closest hits of a batch of rays, in parallel on the current rayon pool. The results are
+            /// the same as [`intersect`](Self::intersect) ray by ray, whatever the number of threads.
+            pub fn intersect_batch(
+                &self,
+                rays: &[Ray],
+                hits: &mut [Option<Hit>],
+            ) -> Result<(), QueryError> {
+                self.batch(rays, hits, |root, ray| {
+                    query(root, ray, &mut NoCustomPrimitives, accept_all, false)
+                })
+            }
+
+            /// Occlusion of a batch of rays, in parallel.
+            pub fn occluded_batch(
+                &self,
+                rays: &[Ray],
+                occluded: &mut [bool],
+            ) -> Result<(), QueryError> {
+                self.batch(rays, occluded, |root, ray| {
+                    query(root, ray, &mut NoCustomPrimitives, accept_all, true).is_some()
+                })
+            }
+
+            /// Closest hits of a batch, with custom primitives intersected by `custom` (called from
+            /// several threads at once).
+            pub fn intersect_batch_with<C>(
+                &self,
+                rays: &[Ray],
+                hits: &mut [Option<Hit>],
+                custom: &C,
+            ) -> Result<(), QueryError>
+            where
+                C: Fn(&CustomPrimitive, &Ray) -> Option<CustomHit> + Sync,
+            {
+                self.batch(rays, hits, |root, ray| {
+                    query(
+                        root,
+                        ray,
+                        &mut |p: &CustomPrimitive, r: &Ray| custom(p, r),
+                        accept_all,
+                        false,
+                    )
+                })
+            }
+
+            fn batch<T: Send>(
+                &self,
+                rays: &[Ray],
+                out: &mut [T],
+                f: impl Fn(NodeRef<'_>, &Ray) -> T + Sync,
+            ) -> Result<(), QueryError> {
+                if rays.len() != out.len() {
+                    return Err(QueryError::LengthMismatch {
+                        rays: rays.len(),
+                        outputs: out.len(),
+                    });
+                }
+                const CHUNK: usize = 256;
+                rays.par_chunks(CHUNK)
+                    .zip(out.par_chunks_mut(CHUNK))
+                    .for_each(|(rays, out)| {
+                        for (r, o) in rays.iter().zip(out) {
+                            *o = f($root(self), r);
+                        }
+                    });
+                Ok(())
+            }
+        }
+    };
+}
+
+query_api!(Gas, NodeRef::Gas);
+query_api!(crate::Ias, NodeRef::Ias);

@@ -13,6 +13,13 @@ use bytemuck::Zeroable;
 use glam::Vec3;
 use rayon::prelude::*;
 
+/// The primitives of a GAS.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum GasKind {
+    Triangles,
+    CustomPrimitives,
+}
+
 /// What the structure keeps of each build input.
 #[derive(Clone, Debug)]
 pub(crate) struct InputRecord {
@@ -56,7 +63,7 @@ pub struct GasMemory {
 /// ```
 #[derive(Clone, Debug)]
 pub struct Gas {
-    pub(crate) kind: BuildInputKind,
+    pub(crate) kind: GasKind,
     pub(crate) build_flags: BuildFlags,
     pub(crate) bvh: Bvh4,
     /// Triangles in blocks of four, in leaf-slot order (triangle GAS): slot `s` is lane `s % 4`
@@ -125,7 +132,10 @@ impl Gas {
         };
 
         let mut gas = Gas {
-            kind: summary.kind,
+            kind: match summary.kind {
+                BuildInputKind::Triangles => GasKind::Triangles,
+                _ => GasKind::CustomPrimitives,
+            },
             build_flags: options.flags,
             bvh: Bvh4 { nodes: Vec::new() },
             triangles: Vec::new(),
@@ -138,13 +148,13 @@ impl Gas {
             num_primitives: summary.num_primitives,
         };
 
-        match summary.kind {
-            BuildInputKind::Triangles => {
+        match gas.kind {
+            GasKind::Triangles => {
                 let mut per_input: Vec<Vec<[Vec3; 3]>> = inputs
                     .iter()
                     .map(|input| match input {
                         BuildInput::Triangles(t) => decode_triangles(t),
-                        BuildInput::CustomPrimitives(_) => unreachable!("inputs are homogeneous"),
+                        _ => unreachable!("inputs are homogeneous"),
                     })
                     .collect();
                 let tris: Vec<[Vec3; 3]> = if per_input.len() == 1 {
@@ -173,7 +183,7 @@ impl Gas {
                     .collect();
                 (gas.triangles, gas.slot_prim) = pack_triangles(&mut gas.bvh, &global, &tris);
             }
-            BuildInputKind::CustomPrimitives => {
+            GasKind::CustomPrimitives => {
                 let boxes: Vec<Aabb> = inputs
                     .iter()
                     .flat_map(|input| match input {
@@ -190,7 +200,7 @@ impl Gas {
                                 Aabb::new(Vec3::new(f[0], f[1], f[2]), Vec3::new(f[3], f[4], f[5]))
                             })
                         }
-                        BuildInput::Triangles(_) => unreachable!("inputs are homogeneous"),
+                        _ => unreachable!("inputs are homogeneous"),
                     })
                     .collect();
                 let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
@@ -219,7 +229,10 @@ impl Gas {
 
     /// The kind of primitives.
     pub fn kind(&self) -> BuildInputKind {
-        self.kind
+        match self.kind {
+            GasKind::Triangles => BuildInputKind::Triangles,
+            GasKind::CustomPrimitives => BuildInputKind::CustomPrimitives,
+        }
     }
 
     /// The flags it was built with.

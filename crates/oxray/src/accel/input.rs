@@ -365,6 +365,10 @@ pub enum BuildInput<'a> {
     Triangles(TriangleInput<'a>),
     /// Custom primitives bounded by AABBs.
     CustomPrimitives(CustomPrimitiveInput<'a>),
+    /// Instances, for an IAS (`OPTIX_BUILD_INPUT_TYPE_INSTANCES`).
+    Instances(&'a [crate::Instance]),
+    /// Instances by reference, for an IAS (`OPTIX_BUILD_INPUT_TYPE_INSTANCE_POINTERS`).
+    InstancePointers(&'a [&'a crate::Instance]),
 }
 
 impl<'a> From<TriangleInput<'a>> for BuildInput<'a> {
@@ -386,6 +390,10 @@ pub enum BuildInputKind {
     Triangles,
     /// Custom primitives.
     CustomPrimitives,
+    /// Instances.
+    Instances,
+    /// Instance pointers.
+    InstancePointers,
 }
 
 impl std::fmt::Display for BuildInputKind {
@@ -393,6 +401,8 @@ impl std::fmt::Display for BuildInputKind {
         f.write_str(match self {
             BuildInputKind::Triangles => "triangles",
             BuildInputKind::CustomPrimitives => "custom primitives",
+            BuildInputKind::Instances => "instances",
+            BuildInputKind::InstancePointers => "instance pointers",
         })
     }
 }
@@ -403,6 +413,8 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(_) => BuildInputKind::Triangles,
             BuildInput::CustomPrimitives(_) => BuildInputKind::CustomPrimitives,
+            BuildInput::Instances(_) => BuildInputKind::Instances,
+            BuildInput::InstancePointers(_) => BuildInputKind::InstancePointers,
         }
     }
 
@@ -411,14 +423,17 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(t) => t.num_primitives(),
             BuildInput::CustomPrimitives(c) => c.aabbs.count,
+            BuildInput::Instances(i) => i.len().min(u32::MAX as usize) as u32,
+            BuildInput::InstancePointers(i) => i.len().min(u32::MAX as usize) as u32,
         }
     }
 
-    /// The per-record geometry flags.
+    /// The per-record geometry flags (none for instances).
     pub fn flags(&self) -> &[GeometryFlags] {
         match self {
             BuildInput::Triangles(t) => t.flags,
             BuildInput::CustomPrimitives(c) => c.flags,
+            BuildInput::Instances(_) | BuildInput::InstancePointers(_) => &[],
         }
     }
 
@@ -427,6 +442,7 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(t) => t.sbt_index_offsets.as_ref(),
             BuildInput::CustomPrimitives(c) => c.sbt_index_offsets.as_ref(),
+            BuildInput::Instances(_) | BuildInput::InstancePointers(_) => None,
         }
     }
 
@@ -435,6 +451,7 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(t) => t.primitive_index_offset,
             BuildInput::CustomPrimitives(c) => c.primitive_index_offset,
+            BuildInput::Instances(_) | BuildInput::InstancePointers(_) => 0,
         }
     }
 }

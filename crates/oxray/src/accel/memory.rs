@@ -66,7 +66,7 @@ fn output_bound(s: &InputSummary, num_inputs: usize) -> usize {
     // ceil(c / 4) <= c blocks, so at most one block (and four slots) per triangle.
     let (per_prim, slots) = match s.kind {
         super::input::BuildInputKind::Triangles => (std::mem::size_of::<Triangle4>(), 4),
-        super::input::BuildInputKind::CustomPrimitives => (std::mem::size_of::<Aabb>(), 1),
+        _ => (std::mem::size_of::<Aabb>(), 1),
     };
     // Slot-to-primitive map, and per-primitive SBT offsets (kept only when some input has more
     // than one record, but bounded here by counts alone).

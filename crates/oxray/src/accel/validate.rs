@@ -35,6 +35,14 @@ pub(crate) fn validate_structure(
     if options.operation == BuildOperation::Update {
         return Err(BuildError::Unsupported("BuildOperation::Update"));
     }
+    if let Some(index) = inputs.iter().position(|i| {
+        matches!(
+            i.kind(),
+            BuildInputKind::Instances | BuildInputKind::InstancePointers
+        )
+    }) {
+        return Err(BuildError::InstancesInGas { index });
+    }
     let kind = first.kind();
     if let Some((index, other)) = inputs.iter().enumerate().find(|(_, i)| i.kind() != kind) {
         return Err(BuildError::MixedInputTypes {
@@ -116,6 +124,9 @@ pub(crate) fn validate_structure(
                         }
                     }
                 }
+            }
+            BuildInput::Instances(_) | BuildInput::InstancePointers(_) => {
+                unreachable!("instance inputs were refused above")
             }
             BuildInput::CustomPrimitives(c) => {
                 let a = &c.aabbs;

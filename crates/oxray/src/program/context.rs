@@ -213,14 +213,53 @@ macro_rules! hit_queries {
         pub fn sbt_gas_index(&self) -> u32 {
             self.$hit.sbt_gas_index
         }
-        /// `optixGetInstanceId`: `!0` when the traced handle is a GAS (guide §13.7; the OptiX
-        /// 9.0 header says 0, oxray follows the guide).
+        /// `optixGetInstanceId`: the user id of the instance nearest to the geometry; `!0` when
+        /// there is no instance (a GAS traced directly: guide §13.7; the OptiX 9.0 header says
+        /// 0, oxray follows the guide).
         pub fn instance_id(&self) -> u32 {
-            !0
+            self.$hit.place.instance_id
         }
-        /// `optixGetInstanceIndex`: 0 when the traced handle is a GAS.
+        /// `optixGetInstanceIndex`: that instance's position in its IAS's build input; 0 when
+        /// there is no instance.
         pub fn instance_index(&self) -> u32 {
-            0
+            self.$hit.place.instance_index
+        }
+        /// `optixGetTransformListSize`: transforms (instances and static transforms) between
+        /// world and object space.
+        pub fn transform_list_size(&self) -> u32 {
+            self.$hit.place.levels
+        }
+        /// `optixGetObjectToWorldTransformMatrix`: the composed object-to-world transform.
+        pub fn object_to_world_transform(&self) -> crate::Transform {
+            self.$hit.place.object_to_world
+        }
+        /// `optixGetWorldToObjectTransformMatrix`: the composed world-to-object transform.
+        pub fn world_to_object_transform(&self) -> crate::Transform {
+            self.$hit.place.world_to_object
+        }
+        /// `optixTransformPointFromObjectToWorldSpace`.
+        pub fn transform_point_to_world(&self, p: Vec3) -> Vec3 {
+            self.$hit.place.object_to_world.transform_point(p)
+        }
+        /// `optixTransformVectorFromObjectToWorldSpace`.
+        pub fn transform_vector_to_world(&self, v: Vec3) -> Vec3 {
+            self.$hit.place.object_to_world.transform_vector(v)
+        }
+        /// `optixTransformNormalFromObjectToWorldSpace` (inverse transpose).
+        pub fn transform_normal_to_world(&self, n: Vec3) -> Vec3 {
+            crate::Transform::transform_normal_with_inverse(&self.$hit.place.world_to_object, n)
+        }
+        /// `optixTransformPointFromWorldToObjectSpace`.
+        pub fn transform_point_to_object(&self, p: Vec3) -> Vec3 {
+            self.$hit.place.world_to_object.transform_point(p)
+        }
+        /// `optixTransformVectorFromWorldToObjectSpace`.
+        pub fn transform_vector_to_object(&self, v: Vec3) -> Vec3 {
+            self.$hit.place.world_to_object.transform_vector(v)
+        }
+        /// `optixTransformNormalFromWorldToObjectSpace` (inverse transpose).
+        pub fn transform_normal_to_object(&self, n: Vec3) -> Vec3 {
+            crate::Transform::transform_normal_with_inverse(&self.$hit.place.object_to_world, n)
         }
         /// `optixGetHitKind`.
         pub fn hit_kind(&self) -> HitKind {
@@ -319,13 +358,13 @@ impl<P> AnyHitCtx<'_, P> {
     pub fn ray_tmax(&self) -> f32 {
         self.hit.t
     }
-    /// The object-space ray origin (the world ray: no transforms above a GAS root).
+    /// `optixGetObjectRayOrigin`: the ray in the object space of the hit geometry.
     pub fn object_ray_origin(&self) -> Vec3 {
-        self.ray.origin
+        self.hit.place.object_origin
     }
-    /// The object-space ray direction.
+    /// `optixGetObjectRayDirection` (not normalised: t is the same in both spaces).
     pub fn object_ray_direction(&self) -> Vec3 {
-        self.ray.direction
+        self.hit.place.object_direction
     }
 
     /// `optixIgnoreIntersection`: the candidate is not a hit and the interval stays. Return it
@@ -388,13 +427,21 @@ impl<P> IntersectionCtx<'_, '_, P> {
     pub fn ray_tmax(&self) -> f32 {
         self.tmax
     }
-    /// The object-space ray origin (the world ray: no transforms above a GAS root).
+    /// `optixGetObjectRayOrigin`: the ray in the object space of the primitive.
     pub fn object_ray_origin(&self) -> Vec3 {
-        self.ray.origin
+        self.prim.place.object_origin
     }
-    /// The object-space ray direction.
+    /// `optixGetObjectRayDirection` (not normalised: t is the same in both spaces).
     pub fn object_ray_direction(&self) -> Vec3 {
-        self.ray.direction
+        self.prim.place.object_direction
+    }
+    /// `optixGetInstanceId` (`!0` without instances).
+    pub fn instance_id(&self) -> u32 {
+        self.prim.place.instance_id
+    }
+    /// `optixGetInstanceIndex` (0 without instances).
+    pub fn instance_index(&self) -> u32 {
+        self.prim.place.instance_index
     }
     /// `optixGetPrimitiveIndex`.
     pub fn primitive_index(&self) -> u32 {

@@ -15,7 +15,7 @@ pub use context::{
 };
 pub use group::{HitGroupDesc, ProgramGroup, ProgramGroupKind};
 pub use module::{Module, ProgramKind};
-pub use trace::{RayFlags, TraceRay, TraversableHandle};
+pub use trace::{RayFlags, TraceRay};
 
 pub(crate) use context::LaunchShared;
 pub(crate) use trace::run_raygen;

@@ -2,7 +2,8 @@
 //! the traversal kernel finds, with the hit group of each chosen by the §7.3 formula.
 
 use crate::accel::options::GeometryFlags;
-use crate::accel::Gas;
+use crate::accel::GasKind;
+use crate::accel::{Gas, Traversable, TraversableHandle};
 use crate::exception::{Exception, ExceptionCode, Interrupt, InterruptKind, ProgramResult};
 use crate::geometry::triangle::TriangleHit;
 use crate::pipeline::PrimitiveTypeFlags;
@@ -14,12 +15,11 @@ use crate::program::group::GroupPrograms;
 use crate::query::HitKind;
 use crate::sbt::hit_group_index;
 use crate::traversal::{
-    traverse_gas, Decision, GasVisitor, PreparedRay, Primitives, Ray, TraversalStack,
+    traverse_node, with_stack, Decision, Entry, GasVisitor, Path, Ray, SceneVisitor,
 };
-use crate::BuildInputKind;
+use crate::InstanceFlags;
 use bitflags::bitflags;
 use glam::Vec3;
-use std::sync::Arc;
 
 bitflags! {
     /// Ray flags of a trace (`OptixRayFlags`, guide §13.2). Values match OptiX's.
@@ -43,46 +43,6 @@ bitflags! {
         const CULL_ENFORCED_ANYHIT = 1 << 7;
         /// Accepted for compatibility; oxray has no opacity micromaps yet.
         const FORCE_OPACITY_MICROMAP_2_STATE = 1 << 10;
-    }
-}
-
-/// What a trace starts from (`OptixTraversableHandle`): nothing (the null handle, which only
-/// runs the miss program) or an acceleration structure, kept alive by the handle.
-#[derive(Clone, Default)]
-pub struct TraversableHandle(Option<Arc<Gas>>);
-
-impl TraversableHandle {
-    /// The null handle.
-    pub const NULL: TraversableHandle = TraversableHandle(None);
-
-    /// Whether this is the null handle.
-    pub fn is_null(&self) -> bool {
-        self.0.is_none()
-    }
-}
-
-impl From<Arc<Gas>> for TraversableHandle {
-    fn from(g: Arc<Gas>) -> Self {
-        TraversableHandle(Some(g))
-    }
-}
-
-impl From<Gas> for TraversableHandle {
-    fn from(g: Gas) -> Self {
-        TraversableHandle(Some(Arc::new(g)))
-    }
-}
-
-impl std::fmt::Debug for TraversableHandle {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match &self.0 {
-            None => f.write_str("TraversableHandle(null)"),
-            Some(g) => write!(
-                f,
-                "TraversableHandle(GAS of {} primitives)",
-                g.num_primitives()
-            ),
-        }
     }
 }
 
@@ -186,6 +146,36 @@ pub(crate) struct HitState {
     pub attributes: [u32; 8],
     /// Hit-group record index.
     pub record: usize,
+    /// Where the hit geometry sits: nearest instance and composed transforms.
+    pub place: Placement,
+}
+
+/// The instance nearest to a hit and the transforms between its object space and world space.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Placement {
+    pub instance_id: u32,
+    pub instance_index: u32,
+    /// Levels of transforms between world and object space.
+    pub levels: u32,
+    pub object_to_world: crate::Transform,
+    pub world_to_object: crate::Transform,
+    /// Object-space ray.
+    pub object_origin: Vec3,
+    pub object_direction: Vec3,
+}
+
+impl Placement {
+    fn world(ray: &RayState) -> Self {
+        Placement {
+            instance_id: !0,
+            instance_index: 0,
+            levels: 0,
+            object_to_world: crate::Transform::IDENTITY,
+            world_to_object: crate::Transform::IDENTITY,
+            object_origin: ray.origin,
+            object_direction: ray.direction,
+        }
+    }
 }
 
 /// What an intersection program reports to.
@@ -204,9 +194,12 @@ pub(crate) trait Reporter<P> {
     fn payload_ref(&self) -> &[u32];
 }
 
-struct PipelineVisitor<'a, 'p, P> {
+struct PipelineVisitor<'a, 'p, 's, P> {
     frame: Frame<'a, P>,
-    gas: &'a Gas,
+    /// The GAS being traversed and where it sits.
+    gas: Option<&'s Gas>,
+    path: Path<'s>,
+    place: Placement,
     ray: RayState,
     sbt_offset: u32,
     sbt_stride: u32,
@@ -215,9 +208,14 @@ struct PipelineVisitor<'a, 'p, P> {
     pending: Option<Interrupt>,
 }
 
-impl<'a, P> PipelineVisitor<'a, '_, P> {
+impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
     fn record(&mut self, sbt_gas_index: u32) -> Option<usize> {
-        let rec = hit_group_index(0, sbt_gas_index, self.sbt_stride, self.sbt_offset);
+        let rec = hit_group_index(
+            self.path.sbt_offset,
+            sbt_gas_index,
+            self.sbt_stride,
+            self.sbt_offset,
+        );
         if rec >= self.frame.launch.hit_groups.len() as u64 {
             self.pending = Some(Interrupt::exception(
                 ExceptionCode::INVALID_HIT_SBT,
@@ -239,18 +237,38 @@ impl<'a, P> PipelineVisitor<'a, '_, P> {
         self.frame.launch.sbt.hitgroup.record(record).unwrap_or(&[])
     }
 
-    /// The any-hit rules of §13.2 / §13.13 for one candidate in the interval.
-    fn candidate(&mut self, hit: HitState, gflags: GeometryFlags) -> Decision {
+    /// The any-hit rules of §13.2 / §13.13 for one candidate in the interval: geometry flags,
+    /// overridden by the nearest instance's, overridden by the ray's (§5.1, §5.4).
+    /// Whether any-hit is enabled for geometry with these flags: geometry flags, overridden by
+    /// the nearest instance's, overridden by the ray's (§5.1, §5.4, §13.2).
+    fn any_hit_enabled(&self, gflags: GeometryFlags) -> bool {
         let flags = self.ray.flags;
+        let iflags = self.path.instance_flags();
         let mut ah_on = !gflags.contains(GeometryFlags::DISABLE_ANYHIT);
+        if iflags.contains(InstanceFlags::DISABLE_ANYHIT) {
+            ah_on = false;
+        } else if iflags.contains(InstanceFlags::ENFORCE_ANYHIT) {
+            ah_on = true;
+        }
         if flags.contains(RayFlags::DISABLE_ANYHIT) {
             ah_on = false;
         } else if flags.contains(RayFlags::ENFORCE_ANYHIT) {
             ah_on = true;
         }
-        if (flags.contains(RayFlags::CULL_DISABLED_ANYHIT) && !ah_on)
+        ah_on
+    }
+
+    /// `CULL_DISABLED_ANYHIT` / `CULL_ENFORCED_ANYHIT`: the primitive is not a candidate at all.
+    fn culled_by_any_hit_state(&self, ah_on: bool) -> bool {
+        let flags = self.ray.flags;
+        (flags.contains(RayFlags::CULL_DISABLED_ANYHIT) && !ah_on)
             || (flags.contains(RayFlags::CULL_ENFORCED_ANYHIT) && ah_on)
-        {
+    }
+
+    fn candidate(&mut self, hit: HitState, gflags: GeometryFlags) -> Decision {
+        let flags = self.ray.flags;
+        let ah_on = self.any_hit_enabled(gflags);
+        if self.culled_by_any_hit_state(ah_on) {
             return Decision::Ignore;
         }
         let mut terminate = flags.contains(RayFlags::TERMINATE_ON_FIRST_HIT);
@@ -288,14 +306,60 @@ impl<'a, P> PipelineVisitor<'a, '_, P> {
     }
 }
 
-impl<P> GasVisitor for PipelineVisitor<'_, '_, P> {
+impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
+    fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
+        self.gas = Some(gas);
+        if path.len == 0 {
+            self.path = *path;
+            self.place = Placement::world(&self.ray);
+            return;
+        }
+        self.path = *path;
+        let mut o2w = crate::Transform::IDENTITY;
+        let mut w2o = crate::Transform::IDENTITY;
+        for level in path.levels() {
+            o2w = o2w.then_after(level.object_to_world());
+            w2o = level.world_to_object().then_after(&w2o);
+        }
+        self.place = Placement {
+            instance_id: path.instance.map_or(!0, |i| i.instance_id),
+            instance_index: path.instance.map_or(0, |i| i.index),
+            levels: path.len as u32,
+            object_to_world: o2w,
+            world_to_object: w2o,
+            object_origin: object_ray.origin,
+            object_direction: object_ray.direction,
+        };
+    }
+
+    fn ray_mask(&self) -> u8 {
+        self.ray.mask
+    }
+
+    fn graph_too_deep(&mut self) {
+        self.pending = Some(Interrupt::exception(
+            ExceptionCode::TRAVERSAL_DEPTH_EXCEEDED,
+            &[],
+        ));
+    }
+}
+
+impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
     fn triangle(&mut self, slot: u32, h: &TriangleHit) -> Decision {
-        let (primitive_index, sbt_gas_index, _) = self.gas.resolve(slot);
-        let gflags = self.gas.record_flags[sbt_gas_index as usize];
-        if !gflags.contains(GeometryFlags::DISABLE_TRIANGLE_FACE_CULLING) {
+        let Some(gas) = self.gas else {
+            return Decision::Ignore;
+        };
+        let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
+        let gflags = gas.record_flags[sbt_gas_index as usize];
+        let iflags = self.path.instance_flags();
+        // Facing: counter-clockwise is front unless the nearest instance flips it (§5.4).
+        let front = h.front_face != iflags.contains(InstanceFlags::FLIP_TRIANGLE_FACING);
+        let no_culling = gflags.contains(GeometryFlags::DISABLE_TRIANGLE_FACE_CULLING)
+            || iflags.contains(InstanceFlags::DISABLE_TRIANGLE_FACE_CULLING);
+        if !no_culling {
             let flags = self.ray.flags;
-            if (flags.contains(RayFlags::CULL_BACK_FACING_TRIANGLES) && !h.front_face)
-                || (flags.contains(RayFlags::CULL_FRONT_FACING_TRIANGLES) && h.front_face)
+            if (flags.contains(RayFlags::CULL_BACK_FACING_TRIANGLES) && !front)
+                || (flags.contains(RayFlags::CULL_FRONT_FACING_TRIANGLES) && front)
             {
                 return Decision::Ignore;
             }
@@ -310,19 +374,23 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, P> {
             t: h.t,
             primitive_index,
             sbt_gas_index,
-            hit_kind: if h.front_face {
+            hit_kind: if front {
                 HitKind::TRIANGLE_FRONT_FACE
             } else {
                 HitKind::TRIANGLE_BACK_FACE
             },
             attributes,
             record,
+            place: self.place,
         };
         self.candidate(hit, gflags)
     }
 
-    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32) -> (Option<f32>, bool) {
-        let (primitive_index, sbt_gas_index, _) = self.gas.resolve(slot);
+    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32, _: &mut [Entry]) -> (Option<f32>, bool) {
+        let Some(gas) = self.gas else {
+            return (None, false);
+        };
+        let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
         let Some(record) = self.record(sbt_gas_index) else {
             return (None, true);
         };
@@ -333,6 +401,12 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, P> {
         else {
             return (None, false);
         };
+        // A primitive culled by its any-hit state never reaches its intersection program.
+        if self
+            .culled_by_any_hit_state(self.any_hit_enabled(gas.record_flags[sbt_gas_index as usize]))
+        {
+            return (None, false);
+        }
         let before = self.best.map(|h| h.t);
         let prim = HitState {
             t: tmax,
@@ -341,13 +415,14 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, P> {
             hit_kind: HitKind(0),
             attributes: [0; 8],
             record,
+            place: self.place,
         };
         let frame = Frame {
             record: self.record_bytes(record),
             ..self.frame
         };
         let ray = RayState { tmin, ..self.ray };
-        let aabb = self.gas.aabbs[slot as usize];
+        let aabb = gas.aabbs[slot as usize];
         let mut ctx = IntersectionCtx {
             frame,
             ray,
@@ -372,14 +447,16 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, P> {
     }
 }
 
-impl<P> Reporter<P> for PipelineVisitor<'_, '_, P> {
+impl<P> Reporter<P> for PipelineVisitor<'_, '_, '_, P> {
     fn report(
         &mut self,
         _frame: Frame<'_, P>,
         _ray: &RayState,
         hit: &HitState,
     ) -> Result<bool, Interrupt> {
-        let gflags = self.gas.record_flags[hit.sbt_gas_index as usize];
+        let gflags = self.gas.map_or(GeometryFlags::empty(), |g| {
+            g.record_flags[hit.sbt_gas_index as usize]
+        });
         match self.candidate(*hit, gflags) {
             Decision::Ignore => Ok(false),
             Decision::Accept => Ok(true),
@@ -398,6 +475,59 @@ impl<P> Reporter<P> for PipelineVisitor<'_, '_, P> {
     fn payload_ref(&self) -> &[u32] {
         self.payload
     }
+}
+
+/// The pipeline's traversable-graph and primitive-type flags (§5.9.1, §6.3) against the graph
+/// under `root`.
+fn check_graph<P>(
+    pipe: &crate::pipeline::PipelineShared<P>,
+    root: &Traversable,
+    handle: &TraversableHandle,
+) -> ProgramResult {
+    use crate::pipeline::TraversableGraphFlags as G;
+    let graph = pipe.compile.traversable_graph_flags;
+    if !graph.is_empty() {
+        let allowed = match root {
+            Traversable::Gas(_) => graph.contains(G::ALLOW_SINGLE_GAS),
+            // One level of instances over GASes without transforms.
+            Traversable::Ias(ias) => {
+                graph.contains(G::ALLOW_SINGLE_LEVEL_INSTANCING)
+                    && ias
+                        .instances
+                        .iter()
+                        .all(|i| matches!(i.child.0, None | Some(Traversable::Gas(_))))
+            }
+            Traversable::Static(_) => false,
+        };
+        if !allowed {
+            let code = if matches!(root, Traversable::Gas(_)) {
+                ExceptionCode::UNSUPPORTED_SINGLE_LEVEL_GAS
+            } else {
+                ExceptionCode::TRAVERSAL_INVALID_TRAVERSABLE
+            };
+            return Err(Interrupt::exception(code, &[]));
+        }
+    }
+    if handle.graph_depth() > pipe.max_traversable_graph_depth {
+        return Err(Interrupt::exception(
+            ExceptionCode::TRAVERSAL_DEPTH_EXCEEDED,
+            &[],
+        ));
+    }
+    if let Traversable::Gas(gas) = root {
+        let kinds = pipe.compile.uses_primitive_type_flags;
+        let needed = match gas.kind {
+            GasKind::Triangles => PrimitiveTypeFlags::TRIANGLE,
+            GasKind::CustomPrimitives => PrimitiveTypeFlags::CUSTOM,
+        };
+        if !kinds.is_empty() && !kinds.contains(needed) {
+            return Err(Interrupt::exception(
+                ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE,
+                &[],
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// `optixTrace` from a program running in `frame`.
@@ -472,57 +602,25 @@ fn trace_into<P>(
     let launch = frame.launch;
     let pipe = launch.pipeline;
     let mut best = None;
-    if let Some(gas) = args.handle.0.as_deref() {
-        use crate::pipeline::TraversableGraphFlags as G;
-        let graph = pipe.compile.traversable_graph_flags;
-        if !graph.is_empty() && !graph.contains(G::ALLOW_SINGLE_GAS) {
-            return Err(Interrupt::exception(
-                ExceptionCode::UNSUPPORTED_SINGLE_LEVEL_GAS,
-                &[],
-            ));
-        }
-        let kinds = pipe.compile.uses_primitive_type_flags;
-        let needed = match gas.kind {
-            BuildInputKind::Triangles => PrimitiveTypeFlags::TRIANGLE,
-            BuildInputKind::CustomPrimitives => PrimitiveTypeFlags::CUSTOM,
+    if let Some(root) = args.handle.0.as_ref() {
+        check_graph(pipe, root, args.handle)?;
+        let mut v = PipelineVisitor {
+            frame,
+            gas: None,
+            path: Path::ROOT,
+            place: Placement::world(state),
+            ray: *state,
+            sbt_offset: args.sbt_offset,
+            sbt_stride: args.sbt_stride,
+            payload: &mut *payload,
+            best: None,
+            pending: None,
         };
-        if !kinds.is_empty() && !kinds.contains(needed) {
-            return Err(Interrupt::exception(
-                ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE,
-                &[],
-            ));
+        with_stack(|stack| traverse_node(root.into(), &Path::ROOT, ray, &mut v, stack));
+        if let Some(e) = v.pending {
+            return Err(e);
         }
-        if let Some(prepared) = PreparedRay::new(ray) {
-            let mut v = PipelineVisitor {
-                frame,
-                gas,
-                ray: *state,
-                sbt_offset: args.sbt_offset,
-                sbt_stride: args.sbt_stride,
-                payload: &mut *payload,
-                best: None,
-                pending: None,
-            };
-            let prims = match gas.kind {
-                BuildInputKind::Triangles => Primitives::Triangles(&gas.triangles),
-                BuildInputKind::CustomPrimitives => Primitives::Aabbs(&gas.aabbs),
-            };
-            with_stack(|stack| {
-                traverse_gas(
-                    &gas.bvh.nodes,
-                    prims,
-                    &prepared,
-                    ray.tmin,
-                    ray.tmax,
-                    &mut v,
-                    stack,
-                )
-            });
-            if let Some(e) = v.pending {
-                return Err(e);
-            }
-            best = v.best;
-        }
+        best = v.best;
     }
     match best {
         Some(hit) => {
@@ -712,19 +810,4 @@ pub(crate) fn continuation_call<P, A: 'static, R: 'static>(
             &[sbt_index],
         )),
     }
-}
-
-thread_local! {
-    static STACK: std::cell::RefCell<TraversalStack> = std::cell::RefCell::new(TraversalStack::new());
-}
-
-/// Runs `f` with this thread's traversal stack, so that a trace does not initialise a stack of
-/// its own. Programs that may trace (ray generation, closest hit, miss, continuation callables)
-/// never run during a traversal, so the stack is free whenever a trace starts; should a program
-/// nest work on the same thread anyway (through its own thread pool), a fresh stack is used.
-fn with_stack<R>(f: impl FnOnce(&mut TraversalStack) -> R) -> R {
-    STACK.with(|cell| match cell.try_borrow_mut() {
-        Ok(mut stack) => f(&mut stack),
-        Err(_) => f(&mut TraversalStack::new()),
-    })
 }

@@ -25,8 +25,15 @@ pub(crate) trait GasVisitor {
     /// A triangle hit within the current interval, at leaf slot `slot`.
     fn triangle(&mut self, slot: u32, hit: &crate::geometry::triangle::TriangleHit) -> Decision;
     /// A custom primitive whose box the ray enters within `[tmin, tmax]`. Returns the t of the
-    /// closest hit it accepted (the new tmax), and whether traversal must end.
-    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32) -> (Option<f32>, bool);
+    /// closest hit it accepted (the new tmax), and whether traversal must end. `spare` is the
+    /// unused part of the traversal stack, for a nested traversal (an instance's child).
+    fn custom(
+        &mut self,
+        slot: u32,
+        tmin: f32,
+        tmax: f32,
+        spare: &mut [Entry],
+    ) -> (Option<f32>, bool);
 }
 
 /// The primitives of a GAS in leaf-slot order.
@@ -37,32 +44,35 @@ pub(crate) enum Primitives<'a> {
     Aabbs(&'a [Aabb]),
 }
 
+/// One entry of the traversal stack.
 #[derive(Clone, Copy, Default)]
-struct Entry {
+pub(crate) struct Entry {
     child: u32,
     count: u32,
     dist: f32,
 }
 
-/// Scratch space for traversal: a stack deep enough for any BVH oxray builds. Reusing one across
-/// the rays of a batch saves initialising it per ray.
-pub struct TraversalStack {
-    entries: [Entry; TRAVERSAL_STACK_SIZE],
+/// Entries of the per-thread stack: enough for the deepest graph (31 levels) of the deepest BVHs
+/// oxray builds.
+pub(crate) const STACK_ENTRIES: usize = 32 * TRAVERSAL_STACK_SIZE;
+
+thread_local! {
+    static STACK: std::cell::RefCell<Vec<Entry>> = const { std::cell::RefCell::new(Vec::new()) };
 }
 
-impl Default for TraversalStack {
-    fn default() -> Self {
-        TraversalStack {
-            entries: [Entry::default(); TRAVERSAL_STACK_SIZE],
+/// Runs `f` with this thread's traversal stack (allocated once per thread, so traversal
+/// allocates nothing per ray). Should work nest on the same thread while the stack is in use
+/// (a program running its own thread pool inside a traversal), a fresh stack is used.
+pub(crate) fn with_stack<R>(f: impl FnOnce(&mut [Entry]) -> R) -> R {
+    STACK.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut stack) => {
+            if stack.len() < STACK_ENTRIES {
+                stack.resize(STACK_ENTRIES, Entry::default());
+            }
+            f(&mut stack)
         }
-    }
-}
-
-impl TraversalStack {
-    /// A new stack.
-    pub fn new() -> Self {
-        Self::default()
-    }
+        Err(_) => f(&mut vec![Entry::default(); STACK_ENTRIES]),
+    })
 }
 
 /// Tests a ray against the four boxes of a node; returns the entry distances and a hit mask.
@@ -126,7 +136,7 @@ fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 
 }
 
 /// Walks the BVH from the root, nearest child first, calling the visitor for every candidate in
-/// the shrinking interval. Returns the final tmax.
+/// the shrinking interval. Returns the final tmax and whether the visitor ended traversal.
 #[inline(always)]
 pub(crate) fn traverse_gas<V: GasVisitor>(
     nodes: &[Bvh4Node],
@@ -135,9 +145,8 @@ pub(crate) fn traverse_gas<V: GasVisitor>(
     tmin: f32,
     mut tmax: f32,
     visitor: &mut V,
-    stack: &mut TraversalStack,
-) -> f32 {
-    let stack = &mut stack.entries;
+    stack: &mut [Entry],
+) -> (f32, bool) {
     let mut sp = 0usize;
     let mut box_tmax = tmax * TMAX_SLACK;
     let mut cur = Entry {
@@ -220,8 +229,8 @@ pub(crate) fn traverse_gas<V: GasVisitor>(
                                     tmax = h.t;
                                     box_tmax = tmax * TMAX_SLACK;
                                 }
-                                Decision::AcceptAndTerminate => return h.t,
-                                Decision::Abort => return tmax,
+                                Decision::AcceptAndTerminate => return (h.t, true),
+                                Decision::Abort => return (tmax, true),
                             }
                         }
                         slot += 4;
@@ -230,13 +239,15 @@ pub(crate) fn traverse_gas<V: GasVisitor>(
                 Primitives::Aabbs(boxes) => {
                     for (slot, b) in boxes[start..start + count].iter().enumerate() {
                         if ray.hits_box(b, tmin, tmax) {
-                            let (t, stop) = visitor.custom((start + slot) as u32, tmin, tmax);
+                            let spare = &mut stack[sp..];
+                            let (t, stop) =
+                                visitor.custom((start + slot) as u32, tmin, tmax, spare);
                             if let Some(t) = t {
                                 tmax = min_ignore_nan(tmax, t);
                                 box_tmax = tmax * TMAX_SLACK;
                             }
                             if stop {
-                                return tmax;
+                                return (tmax, true);
                             }
                         }
                     }
@@ -246,7 +257,7 @@ pub(crate) fn traverse_gas<V: GasVisitor>(
         // Pop the next entry that may still hold a hit.
         loop {
             if sp == 0 {
-                return tmax;
+                return (tmax, false);
             }
             sp -= 1;
             cur = stack[sp];

@@ -2,8 +2,8 @@
 
 mod gas;
 mod ray;
+mod scene;
 
-pub use gas::TraversalStack;
-pub(crate) use gas::{traverse_gas, Decision, GasVisitor, Primitives};
-pub(crate) use ray::PreparedRay;
+pub(crate) use gas::{with_stack, Decision, Entry, GasVisitor};
 pub use ray::{Ray, RayError};
+pub(crate) use scene::{traverse_node, NodeRef, Path, SceneVisitor};
