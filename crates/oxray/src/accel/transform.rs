@@ -101,7 +101,7 @@ impl Transform {
     pub fn inverse(&self) -> Option<Transform> {
         let a = self.to_affine();
         let det = a.matrix3.determinant();
-        if !(det.is_finite() && det != 0.0) || !self.0.iter().all(|x| x.is_finite()) {
+        if !(det.is_finite() && det != 0.0 && self.0.iter().all(|x| x.is_finite())) {
             return None;
         }
         let inv = Self::from_affine(&a.inverse());
