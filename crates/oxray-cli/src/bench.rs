@@ -356,3 +356,128 @@ pub fn pipeline_mrays(
     }
     Ok(rays.len() as f64 / median(times) / 1e6)
 }
+
+/// Results of the instancing benchmark.
+#[derive(Clone, Debug, Default)]
+pub struct InstanceBenchResult {
+    /// Instances.
+    pub instances: usize,
+    /// Triangles of the instanced mesh.
+    pub mesh_triangles: usize,
+    /// Median IAS build time (ms).
+    pub build_ms: f64,
+    /// Mrays/s of camera rays (closest hit).
+    pub coherent_mrays: f64,
+    /// Mrays/s of random rays through the scene (closest hit).
+    pub incoherent_mrays: f64,
+    /// Fraction of camera rays that hit.
+    pub hit_rate: f64,
+}
+
+/// Builds an IAS of `n` randomly rotated and scaled copies of `mesh` on a cubic grid and traces
+/// `side * side` camera rays and as many random rays through it.
+pub fn instances(
+    mesh: &Mesh,
+    n: usize,
+    side: u32,
+    runs: usize,
+) -> Result<InstanceBenchResult, Box<dyn std::error::Error>> {
+    use glam::{Affine3A, Quat};
+    use oxray::{Ias, Instance, Transform};
+    let gas = std::sync::Arc::new(build_gas(mesh, BuildFlags::empty())?);
+    let (c, r) = center_radius(mesh);
+    let per_side = (n as f64).cbrt().ceil() as usize;
+    let spacing = 2.5 * r;
+    let mut rng = Rng::new(11);
+    let instances: Vec<Instance> = (0..n)
+        .map(|i| {
+            let g = Vec3::new(
+                (i % per_side) as f32,
+                ((i / per_side) % per_side) as f32,
+                (i / (per_side * per_side)) as f32,
+            );
+            let q = Quat::from_euler(
+                glam::EulerRot::XYZ,
+                rng.next_f32() * 6.3,
+                rng.next_f32() * 6.3,
+                rng.next_f32() * 6.3,
+            );
+            let s = 0.6 + 0.6 * rng.next_f32();
+            let t = Affine3A::from_scale_rotation_translation(Vec3::splat(s), q, g * spacing)
+                * Affine3A::from_translation(-c);
+            Instance::new(gas.clone().into())
+                .transform(Transform::from_affine(&t))
+                .instance_id(i as u32)
+        })
+        .collect();
+    let mut times = Vec::new();
+    let mut ias = None;
+    for _ in 0..runs {
+        let t = Instant::now();
+        ias = Some(Ias::build(
+            &oxray::BuildOptions::default(),
+            &[(&instances[..]).into()],
+        )?);
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    let ias = ias.expect("runs >= 1");
+    let bounds = ias.bounds();
+    let (bc, br) = (bounds.center(), bounds.extent().length() * 0.5);
+    // Camera rays from outside the grid's corner towards its centre.
+    let eye = bc + Vec3::new(0.6, 0.45, -1.0).normalize() * (1.8 * br);
+    let fwd = (bc - eye).normalize();
+    let right = fwd.cross(Vec3::Y).normalize();
+    let up = right.cross(fwd);
+    let tan = (40f32.to_radians() * 0.5).tan();
+    let camera: Vec<Ray> = (0..side * side)
+        .map(|k| {
+            let (x, y) = (k % side, k / side);
+            let sx = ((x as f32 + 0.5) / side as f32 * 2.0 - 1.0) * tan;
+            let sy = (1.0 - (y as f32 + 0.5) / side as f32 * 2.0) * tan;
+            Ray::new(eye, (fwd + right * sx + up * sy).normalize())
+        })
+        .collect();
+    let random: Vec<Ray> = (0..side * side)
+        .map(|_| {
+            let o = bounds.min
+                + bounds.extent() * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let d = Vec3::new(
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+            );
+            Ray::new(
+                o,
+                if d == Vec3::ZERO {
+                    Vec3::X
+                } else {
+                    d.normalize()
+                },
+            )
+        })
+        .collect();
+    let mut hits = vec![None; camera.len()];
+    let time = |rays: &[Ray], hits: &mut [Option<oxray::Hit>]| {
+        ias.intersect_batch(rays, hits).expect("lengths match");
+        median(
+            (0..runs)
+                .map(|_| {
+                    let t = Instant::now();
+                    ias.intersect_batch(rays, hits).expect("lengths match");
+                    t.elapsed().as_secs_f64()
+                })
+                .collect(),
+        )
+    };
+    let coherent = camera.len() as f64 / time(&camera, &mut hits) / 1e6;
+    let hit_rate = hits.iter().filter(|h| h.is_some()).count() as f64 / hits.len() as f64;
+    let incoherent = random.len() as f64 / time(&random, &mut hits) / 1e6;
+    Ok(InstanceBenchResult {
+        instances: n,
+        mesh_triangles: mesh.triangles.len(),
+        build_ms: median(times),
+        coherent_mrays: coherent,
+        incoherent_mrays: incoherent,
+        hit_rate,
+    })
+}

@@ -37,6 +37,9 @@ enum Command {
         /// Also write each mesh and its rays here, for scripts/bench_embree.py.
         #[arg(long)]
         export: Option<PathBuf>,
+        /// Also build an IAS of this many instances of the first mesh and trace through it.
+        #[arg(long)]
+        instances: Option<usize>,
     },
 }
 
@@ -64,6 +67,7 @@ fn run(cli: Cli) -> Result<()> {
             side,
             runs,
             export,
+            instances,
         } => {
             if side == 0 || side > 16384 {
                 bail!("--side must be in 1..=16384, got {side}");
@@ -130,6 +134,26 @@ fn run(cli: Cli) -> Result<()> {
                     r.triangles as f64 / r.build_ms[0] / 1e3,
                     100.0 * r.hit_rate[0],
                     100.0 * r.hit_rate[1]
+                );
+            }
+            if let (Some(n), Some((name, mesh))) = (instances, sets.first()) {
+                if n == 0 || n > 1 << 28 {
+                    bail!("--instances must be in 1..=2^28, got {n}");
+                }
+                let r = pool
+                    .install(|| bench::instances(mesh, n, side, runs).map_err(|e| e.to_string()))
+                    .map_err(anyhow::Error::msg)?;
+                println!();
+                println!("| instanced mesh | instances | triangles (instanced) | IAS build ms | camera closest Mrays/s | random closest Mrays/s | camera hit rate |");
+                println!("|---|---:|---:|---:|---:|---:|---:|");
+                println!(
+                    "| {name} | {} | {} | {:.1} | {:.2} | {:.2} | {:.1}% |",
+                    r.instances,
+                    r.mesh_triangles as u64 * r.instances as u64,
+                    r.build_ms,
+                    r.coherent_mrays,
+                    r.incoherent_mrays,
+                    100.0 * r.hit_rate
                 );
             }
             Ok(())

@@ -10,6 +10,8 @@ mod custom_sphere;
 mod cutouts;
 #[path = "../examples/hello.rs"]
 mod hello;
+#[path = "../examples/instancing.rs"]
+mod instancing;
 #[path = "../examples/triangle.rs"]
 mod triangle;
 
@@ -172,5 +174,56 @@ fn cutouts_show_the_back_quad_through_the_any_hit_holes() {
             let want = if (i + j) % 2 == 0 { front } else { back };
             assert_eq!(at(&px, x, y), want, "cell ({i}, {j}) at pixel ({x}, {y})");
         }
+    }
+}
+
+#[test]
+fn instancing_shows_every_instance_in_its_own_record_colour() {
+    // No golden image: the mesh is the bunny when ../shared/data is present, else a sphere.
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let four = rayon::ThreadPoolBuilder::new()
+        .num_threads(4)
+        .build()
+        .unwrap();
+    let a = one
+        .install(|| instancing::render(W * 2, H * 2).map_err(|e| e.to_string()))
+        .unwrap();
+    let b = four
+        .install(|| instancing::render(W * 2, H * 2).map_err(|e| e.to_string()))
+        .unwrap();
+    assert_eq!(a, b, "output differs between 1 and 4 threads");
+    // Each instance's colour (record i) is hue i; classify lit pixels by their hue.
+    let n = instancing::GRID * instancing::GRID;
+    let mut counts = vec![0usize; n];
+    for p in &a {
+        let c = [p[0] as f32, p[1] as f32, p[2] as f32];
+        let max = c.iter().cloned().fold(0.0, f32::max);
+        if max < 60.0 {
+            continue; // background or deep shadow
+        }
+        let best = (0..n)
+            .min_by(|&i, &j| {
+                let d = |k: usize| {
+                    let hue = k as f32 / n as f32 * std::f32::consts::TAU;
+                    let want = [
+                        0.55 + 0.45 * hue.cos(),
+                        0.55 + 0.45 * (hue + 2.1).cos(),
+                        0.55 + 0.45 * (hue + 4.2).cos(),
+                    ];
+                    let wm = want.iter().cloned().fold(0.0, f32::max);
+                    (0..3)
+                        .map(|ch| (c[ch] / max - want[ch] / wm).powi(2))
+                        .sum::<f32>()
+                };
+                d(i).total_cmp(&d(j))
+            })
+            .unwrap();
+        counts[best] += 1;
+    }
+    for (i, &c) in counts.iter().enumerate() {
+        assert!(c > 50, "instance {i} shows in only {c} pixels: {counts:?}");
     }
 }

@@ -281,6 +281,11 @@ macro_rules! hit_queries {
         pub fn attribute(&self, i: usize) -> u32 {
             self.$hit.attributes.get(i).copied().unwrap_or(0)
         }
+        /// `optixGetTriangleVertexData`: the object-space vertices of the hit triangle (zeros
+        /// for a custom primitive).
+        pub fn triangle_vertex_data(&self) -> [Vec3; 3] {
+            self.$hit.vertices.map(Vec3::from)
+        }
         /// `optixGetTriangleBarycentrics`: attributes 0 and 1 as floats.
         pub fn triangle_barycentrics(&self) -> [f32; 2] {
             [

@@ -148,6 +148,8 @@ pub(crate) struct HitState {
     pub record: usize,
     /// Where the hit geometry sits: nearest instance and composed transforms.
     pub place: Placement,
+    /// Object-space vertices of a triangle hit (zero for custom primitives).
+    pub vertices: [[f32; 3]; 3],
 }
 
 /// The instance nearest to a hit and the transforms between its object space and world space.
@@ -315,11 +317,15 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
             return;
         }
         self.path = *path;
-        let mut o2w = crate::Transform::IDENTITY;
-        let mut w2o = crate::Transform::IDENTITY;
-        for level in path.levels() {
-            o2w = o2w.then_after(level.object_to_world());
-            w2o = level.world_to_object().then_after(&w2o);
+        // One level (the common IAS over GASes) needs no composition.
+        let (mut o2w, mut w2o) = (crate::Transform::IDENTITY, crate::Transform::IDENTITY);
+        if let (1, Some(level)) = (path.len, path.levels().next()) {
+            (o2w, w2o) = (*level.object_to_world(), *level.world_to_object());
+        } else {
+            for level in path.levels() {
+                o2w = o2w.then_after(level.object_to_world());
+                w2o = level.world_to_object().then_after(&w2o);
+            }
         }
         self.place = Placement {
             instance_id: path.instance.map_or(!0, |i| i.instance_id),
@@ -382,6 +388,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             attributes,
             record,
             place: self.place,
+            vertices: gas.triangles[slot as usize / 4].get(slot as usize % 4),
         };
         self.candidate(hit, gflags)
     }
@@ -416,6 +423,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             attributes: [0; 8],
             record,
             place: self.place,
+            vertices: [[0.0; 3]; 3],
         };
         let frame = Frame {
             record: self.record_bytes(record),
