@@ -11,6 +11,8 @@ pub enum ErrorCode {
     InvalidValue = 7001,
     /// `OPTIX_ERROR_INVALID_INPUT`.
     InvalidInput = 7200,
+    /// `OPTIX_ERROR_VALIDATION_FAILURE`.
+    ValidationFailure = 7053,
     /// `OPTIX_ERROR_INVALID_LAUNCH_PARAMETER`.
     InvalidLaunchParameter = 7201,
     /// `OPTIX_ERROR_NOT_SUPPORTED`.
@@ -354,6 +356,15 @@ pub enum LaunchError {
     /// The SBT has no ray-generation record.
     #[error("the SBT has no ray-generation record")]
     NoRaygenRecord,
+    /// Validation mode (guide §4.3): a launch index raised a built-in exception. The launch ran
+    /// to the end; this is the first such exception by launch index.
+    #[error("validation failure at launch index {index:?}: {exception}")]
+    ValidationFailure {
+        /// The launch index.
+        index: [u32; 3],
+        /// The exception.
+        exception: crate::exception::Exception,
+    },
     /// A record's header does not name a program group of this pipeline, or names one of the
     /// wrong kind for its region.
     #[error("SBT {region} record {index}: {reason}")]
@@ -370,6 +381,9 @@ pub enum LaunchError {
 impl LaunchError {
     /// The `OptixResult` code the guide gives for this error.
     pub fn code(&self) -> ErrorCode {
-        ErrorCode::InvalidLaunchParameter
+        match self {
+            LaunchError::ValidationFailure { .. } => ErrorCode::ValidationFailure,
+            _ => ErrorCode::InvalidLaunchParameter,
+        }
     }
 }

@@ -49,7 +49,9 @@ impl DeviceContext {
     }
 
     /// Validation mode (guide §4.3): launches also check rays (NaN or infinite components,
-    /// negative tmin, tmin > tmax raise `INVALID_RAY`) and report every exception to the log.
+    /// negative tmin, tmin > tmax raise `INVALID_RAY`), report every exception to the log, and
+    /// fail with [`LaunchError::ValidationFailure`](crate::LaunchError::ValidationFailure) when a
+    /// launch index raised a built-in (non-user) exception.
     pub fn validation_mode(mut self, on: bool) -> Self {
         self.validation_mode = on;
         self
@@ -262,14 +264,15 @@ impl<P> Pipeline<P> {
     where
         P: Clone + Sync,
     {
-        let total = width as u64 * height as u64 * depth as u64;
-        if total > 1 << 30 {
-            return Err(LaunchError::TooLarge {
+        let total = (width as u64)
+            .checked_mul(height as u64)
+            .and_then(|x| x.checked_mul(depth as u64))
+            .filter(|&t| t <= 1 << 30)
+            .ok_or(LaunchError::TooLarge {
                 width,
                 height,
                 depth,
-            });
-        }
+            })?;
         if sbt.raygen.count() == 0 {
             return Err(LaunchError::NoRaygenRecord);
         }
@@ -333,6 +336,15 @@ impl<P> Pipeline<P> {
                     "EXCEPTION",
                     &format!("launch index {index:?}: {e}"),
                 );
+            }
+        }
+        // §4.3: in validation mode the first non-user exception fails the launch.
+        if self.shared.validation_mode {
+            if let Some((index, e)) = first.iter().find(|(_, e)| !e.code.is_user()) {
+                return Err(LaunchError::ValidationFailure {
+                    index: *index,
+                    exception: *e,
+                });
             }
         }
         Ok(LaunchReport {

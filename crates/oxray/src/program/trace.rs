@@ -208,6 +208,8 @@ struct PipelineVisitor<'a, 'p, 's, P> {
     payload: &'p mut [u32],
     best: Option<HitState>,
     pending: Option<Interrupt>,
+    /// An any-hit program terminated the ray during a report.
+    terminated: bool,
 }
 
 impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
@@ -440,7 +442,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             reporter: self,
         };
         let result = is(&mut ctx);
-        let stop = match result {
+        let mut stop = match result {
             Ok(()) => false,
             Err(Interrupt(InterruptKind::TerminateRay)) => true,
             Err(Interrupt(InterruptKind::IgnoreIntersection)) => false,
@@ -449,6 +451,8 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
                 true
             }
         };
+        // A terminate or exception from a report ends traversal even if the program dropped it.
+        stop |= self.terminated || self.pending.is_some();
         let after = self.best.map(|h| h.t);
         let t = if after != before { after } else { None };
         (t, stop)
@@ -468,10 +472,15 @@ impl<P> Reporter<P> for PipelineVisitor<'_, '_, '_, P> {
         match self.candidate(*hit, gflags) {
             Decision::Ignore => Ok(false),
             Decision::Accept => Ok(true),
-            Decision::AcceptAndTerminate => Err(Interrupt(InterruptKind::TerminateRay)),
+            Decision::AcceptAndTerminate => {
+                // Remembered, so that an intersection program that drops the interrupt still
+                // cannot continue traversal: in OptiX the report never returns.
+                self.terminated = true;
+                Err(Interrupt(InterruptKind::TerminateRay))
+            }
+            // The exception stays pending for the same reason.
             Decision::Abort => Err(self
                 .pending
-                .take()
                 .unwrap_or(Interrupt(InterruptKind::TerminateRay))),
         }
     }
@@ -623,6 +632,7 @@ fn trace_into<P>(
             payload: &mut *payload,
             best: None,
             pending: None,
+            terminated: false,
         };
         with_stack(|stack| traverse_node(root.into(), &Path::ROOT, ray, &mut v, stack));
         if let Some(e) = v.pending {
