@@ -203,27 +203,8 @@ macro_rules! payload_fns {
     };
 }
 
-macro_rules! hit_queries {
+macro_rules! transform_queries {
     ($hit:ident) => {
-        /// `optixGetPrimitiveIndex`: index within the build input plus its offset.
-        pub fn primitive_index(&self) -> u32 {
-            self.$hit.primitive_index
-        }
-        /// `optixGetSbtGASIndex`.
-        pub fn sbt_gas_index(&self) -> u32 {
-            self.$hit.sbt_gas_index
-        }
-        /// `optixGetInstanceId`: the user id of the instance nearest to the geometry; `!0` when
-        /// there is no instance (a GAS traced directly: guide §13.7; the OptiX 9.0 header says
-        /// 0, oxray follows the guide).
-        pub fn instance_id(&self) -> u32 {
-            self.$hit.place.instance_id
-        }
-        /// `optixGetInstanceIndex`: that instance's position in its IAS's build input; 0 when
-        /// there is no instance.
-        pub fn instance_index(&self) -> u32 {
-            self.$hit.place.instance_index
-        }
         /// `optixGetTransformListSize`: transforms (instances and static transforms) between
         /// world and object space.
         pub fn transform_list_size(&self) -> u32 {
@@ -261,6 +242,31 @@ macro_rules! hit_queries {
         pub fn transform_normal_to_object(&self, n: Vec3) -> Vec3 {
             crate::Transform::transform_normal_with_inverse(&self.$hit.place.object_to_world, n)
         }
+    };
+}
+
+macro_rules! hit_queries {
+    ($hit:ident) => {
+        /// `optixGetPrimitiveIndex`: index within the build input plus its offset.
+        pub fn primitive_index(&self) -> u32 {
+            self.$hit.primitive_index
+        }
+        /// `optixGetSbtGASIndex`.
+        pub fn sbt_gas_index(&self) -> u32 {
+            self.$hit.sbt_gas_index
+        }
+        /// `optixGetInstanceId`: the user id of the instance nearest to the geometry; `!0` when
+        /// there is no instance (a GAS traced directly: guide §13.7; the OptiX 9.0 header says
+        /// 0, oxray follows the guide).
+        pub fn instance_id(&self) -> u32 {
+            self.$hit.place.instance_id
+        }
+        /// `optixGetInstanceIndex`: that instance's position in its IAS's build input; 0 when
+        /// there is no instance.
+        pub fn instance_index(&self) -> u32 {
+            self.$hit.place.instance_index
+        }
+        transform_queries!($hit);
         /// `optixGetHitKind`.
         pub fn hit_kind(&self) -> HitKind {
             self.$hit.hit_kind
@@ -440,6 +446,8 @@ impl<P> IntersectionCtx<'_, '_, P> {
     pub fn object_ray_direction(&self) -> Vec3 {
         self.prim.place.object_direction
     }
+    transform_queries!(prim);
+
     /// `optixGetInstanceId` (`!0` without instances).
     pub fn instance_id(&self) -> u32 {
         self.prim.place.instance_id

@@ -312,6 +312,20 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
 
 impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
     fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
+        // The pipeline's primitive types (§6.3), wherever in the graph the GAS sits.
+        let kinds = self.frame.launch.pipeline.compile.uses_primitive_type_flags;
+        let needed = match gas.kind {
+            GasKind::Triangles => PrimitiveTypeFlags::TRIANGLE,
+            GasKind::CustomPrimitives => PrimitiveTypeFlags::CUSTOM,
+        };
+        if !kinds.is_empty() && !kinds.contains(needed) {
+            self.pending = Some(Interrupt::exception(
+                ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE,
+                &[],
+            ));
+            self.gas = None;
+            return;
+        }
         self.gas = Some(gas);
         if path.len == 0 {
             self.path = *path;
@@ -355,7 +369,11 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
 impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
     fn triangle(&mut self, slot: u32, h: &TriangleHit) -> Decision {
         let Some(gas) = self.gas else {
-            return Decision::Ignore;
+            return if self.pending.is_some() {
+                Decision::Abort
+            } else {
+                Decision::Ignore
+            };
         };
         let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
         let gflags = gas.record_flags[sbt_gas_index as usize];
@@ -397,7 +415,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
 
     fn custom(&mut self, slot: u32, tmin: f32, tmax: f32, _: &mut [Entry]) -> (Option<f32>, bool) {
         let Some(gas) = self.gas else {
-            return (None, false);
+            return (None, self.pending.is_some());
         };
         let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
         let Some(record) = self.record(sbt_gas_index) else {
@@ -530,19 +548,6 @@ fn check_graph<P>(
             ExceptionCode::TRAVERSAL_DEPTH_EXCEEDED,
             &[],
         ));
-    }
-    if let Traversable::Gas(gas) = root {
-        let kinds = pipe.compile.uses_primitive_type_flags;
-        let needed = match gas.kind {
-            GasKind::Triangles => PrimitiveTypeFlags::TRIANGLE,
-            GasKind::CustomPrimitives => PrimitiveTypeFlags::CUSTOM,
-        };
-        if !kinds.is_empty() && !kinds.contains(needed) {
-            return Err(Interrupt::exception(
-                ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE,
-                &[],
-            ));
-        }
     }
     Ok(())
 }
