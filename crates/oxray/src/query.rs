@@ -125,7 +125,9 @@ pub enum CandidateAction {
 struct QueryVisitor<'s, 'a, C, F> {
     /// The GAS being traversed, and where it sits.
     gas: Option<&'s Gas>,
-    path: Path<'s>,
+    /// The instance nearest to the current GAS (a reference, not a copy of the whole path:
+    /// entering a GAS happens once per ray and instance).
+    instance: Option<&'s crate::accel::InstanceRecord>,
     object_ray: Ray,
     custom: &'a mut C,
     filter: F,
@@ -151,9 +153,7 @@ impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'
 
     #[inline(always)]
     fn instance(&self) -> (u32, u32) {
-        self.path
-            .instance
-            .map_or((!0, 0), |i| (i.instance_id, i.index))
+        self.instance.map_or((!0, 0), |i| (i.instance_id, i.index))
     }
 }
 
@@ -162,7 +162,7 @@ impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> SceneVisitor<'
 {
     fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
         self.gas = Some(gas);
-        self.path = *path;
+        self.instance = path.instance;
         self.object_ray = *object_ray;
     }
 
@@ -183,9 +183,8 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
         let (instance_id, instance_index) = self.instance();
         // FLIP_TRIANGLE_FACING of the nearest instance swaps the faces (guide §5.4).
         let flip = self
-            .path
-            .instance_flags()
-            .contains(crate::InstanceFlags::FLIP_TRIANGLE_FACING);
+            .instance
+            .is_some_and(|i| i.flags.contains(crate::InstanceFlags::FLIP_TRIANGLE_FACING));
         self.offer(Hit {
             t: h.t,
             u: h.u,
@@ -260,7 +259,7 @@ fn query<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction>(
     ray.validate().ok()?;
     let mut v = QueryVisitor {
         gas: None,
-        path: Path::ROOT,
+        instance: None,
         object_ray: *ray,
         custom,
         filter,

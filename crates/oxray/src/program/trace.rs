@@ -200,7 +200,10 @@ struct PipelineVisitor<'a, 'p, 's, P> {
     frame: Frame<'a, P>,
     /// The GAS being traversed and where it sits.
     gas: Option<&'s Gas>,
-    path: Path<'s>,
+    /// SBT offsets summed over the instances above the GAS (§7.3.1).
+    instance_sbt_offset: u32,
+    /// The instance nearest to the GAS, whose flags count (§5.4).
+    instance: Option<&'s crate::accel::InstanceRecord>,
     place: Placement,
     ray: RayState,
     sbt_offset: u32,
@@ -215,7 +218,7 @@ struct PipelineVisitor<'a, 'p, 's, P> {
 impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
     fn record(&mut self, sbt_gas_index: u32) -> Option<usize> {
         let rec = hit_group_index(
-            self.path.sbt_offset,
+            self.instance_sbt_offset,
             sbt_gas_index,
             self.sbt_stride,
             self.sbt_offset,
@@ -247,7 +250,7 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
     /// the nearest instance's, overridden by the ray's (§5.1, §5.4, §13.2).
     fn any_hit_enabled(&self, gflags: GeometryFlags) -> bool {
         let flags = self.ray.flags;
-        let iflags = self.path.instance_flags();
+        let iflags = self.instance.map_or(InstanceFlags::empty(), |i| i.flags);
         let mut ah_on = !gflags.contains(GeometryFlags::DISABLE_ANYHIT);
         if iflags.contains(InstanceFlags::DISABLE_ANYHIT) {
             ah_on = false;
@@ -328,11 +331,11 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
         }
         self.gas = Some(gas);
         if path.len == 0 {
-            self.path = *path;
+            (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
             self.place = Placement::world(&self.ray);
             return;
         }
-        self.path = *path;
+        (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
         // One level (the common IAS over GASes) needs no composition.
         let (mut o2w, mut w2o) = (crate::Transform::IDENTITY, crate::Transform::IDENTITY);
         if let (1, Some(level)) = (path.len, path.levels().next()) {
@@ -377,7 +380,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
         };
         let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
         let gflags = gas.record_flags[sbt_gas_index as usize];
-        let iflags = self.path.instance_flags();
+        let iflags = self.instance.map_or(InstanceFlags::empty(), |i| i.flags);
         // Facing: counter-clockwise is front unless the nearest instance flips it (§5.4).
         let front = h.front_face != iflags.contains(InstanceFlags::FLIP_TRIANGLE_FACING);
         let no_culling = gflags.contains(GeometryFlags::DISABLE_TRIANGLE_FACE_CULLING)
@@ -629,7 +632,8 @@ fn trace_into<P>(
         let mut v = PipelineVisitor {
             frame,
             gas: None,
-            path: Path::ROOT,
+            instance_sbt_offset: 0,
+            instance: None,
             place: Placement::world(state),
             ray: *state,
             sbt_offset: args.sbt_offset,

@@ -8,7 +8,6 @@ use super::ray::{PreparedRay, Ray};
 use crate::accel::MAX_TRAVERSABLE_GRAPH_DEPTH;
 use crate::accel::{Gas, GasKind, Ias, InstanceRecord, StaticTransform, Transform, Traversable};
 use crate::geometry::triangle::TriangleHit;
-use crate::InstanceFlags;
 
 /// One transform on the way from the root to a GAS.
 #[derive(Clone, Copy)]
@@ -73,10 +72,6 @@ impl<'s> Path<'s> {
         self.levels[..self.len].iter().flatten()
     }
 
-    /// Flags of the nearest instance (none without instances).
-    pub fn instance_flags(&self) -> InstanceFlags {
-        self.instance.map_or(InstanceFlags::empty(), |i| i.flags)
-    }
 }
 
 /// A visitor of a whole graph: a [`GasVisitor`] told which GAS it is in and where.
