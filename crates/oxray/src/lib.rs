@@ -85,7 +85,7 @@ pub use pipeline::{
 pub use program::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx,
     HitGroupDesc, IntersectionCtx, MissCtx, Module, ProgramGroup, ProgramGroupKind, ProgramKind,
-    RayFlags, RayGenCtx, TraceRay,
+    RayFlags, RayGenCtx, TraceRay, TransformListEntry, TransformListKind,
 };
 pub use query::{
     CandidateAction, CustomHit, CustomIntersector, CustomPrimitive, Hit, HitKind,

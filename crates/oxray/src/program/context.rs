@@ -6,8 +6,34 @@ use crate::pipeline::PipelineShared;
 use crate::program::trace::{self, HitState, RayState, TraceRay};
 use crate::query::HitKind;
 use crate::sbt::{ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
+use crate::traversal::{Level, Path};
 use bytemuck::Pod;
 use glam::Vec3;
+
+/// What a transform-list entry is (`OptixTransformType`, with the instance's ids).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TransformListKind {
+    /// An instance of an IAS.
+    Instance {
+        /// Its user id.
+        instance_id: u32,
+        /// Its position in the IAS's build input.
+        instance_index: u32,
+    },
+    /// A static transform.
+    StaticTransform,
+}
+
+/// One entry of the transform list of the current hit (guide §13.11).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransformListEntry {
+    /// What the entry is.
+    pub kind: TransformListKind,
+    /// Its object-to-world transform.
+    pub object_to_world: crate::Transform,
+    /// Its world-to-object transform.
+    pub world_to_object: crate::Transform,
+}
 
 /// What every program of one launch shares.
 pub(crate) struct LaunchShared<'a, P> {
@@ -205,6 +231,27 @@ macro_rules! payload_fns {
 
 macro_rules! transform_queries {
     ($hit:ident) => {
+        /// Entry `i` of the transform list (`optixGetTransformListHandle` and the queries on
+        /// its handle): index 0 is the level nearest the root. `None` past the list.
+        pub fn transform_list_entry(&self, i: u32) -> Option<TransformListEntry> {
+            let level = self.path.levels().nth(i as usize)?;
+            Some(match level {
+                Level::Instance(inst) => TransformListEntry {
+                    kind: TransformListKind::Instance {
+                        instance_id: inst.instance_id,
+                        instance_index: inst.index,
+                    },
+                    object_to_world: inst.object_to_world,
+                    world_to_object: inst.world_to_object,
+                },
+                Level::Static(st) => TransformListEntry {
+                    kind: TransformListKind::StaticTransform,
+                    object_to_world: st.transform,
+                    world_to_object: st.inverse,
+                },
+            })
+        }
+
         /// `optixGetTransformListSize`: transforms (instances and static transforms) between
         /// world and object space.
         pub fn transform_list_size(&self) -> u32 {
@@ -327,6 +374,7 @@ pub struct ClosestHitCtx<'a, P> {
     pub(crate) ray: RayState,
     pub(crate) hit: HitState,
     pub(crate) payload: &'a mut [u32],
+    pub(crate) path: &'a Path<'a>,
 }
 
 impl<P> ClosestHitCtx<'_, P> {
@@ -355,6 +403,7 @@ pub struct AnyHitCtx<'a, P> {
     pub(crate) ray: RayState,
     pub(crate) hit: HitState,
     pub(crate) payload: &'a mut [u32],
+    pub(crate) path: &'a Path<'a>,
 }
 
 impl<P> AnyHitCtx<'_, P> {
@@ -426,6 +475,7 @@ pub struct IntersectionCtx<'a, 'v, P> {
     pub(crate) prim: HitState,
     pub(crate) aabb: crate::Aabb,
     pub(crate) reporter: &'v mut dyn trace::Reporter<P>,
+    pub(crate) path: &'v Path<'v>,
 }
 
 impl<P> IntersectionCtx<'_, '_, P> {

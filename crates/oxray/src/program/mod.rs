@@ -11,7 +11,7 @@ mod trace;
 
 pub use context::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx,
-    IntersectionCtx, MissCtx, RayGenCtx,
+    IntersectionCtx, MissCtx, RayGenCtx, TransformListEntry, TransformListKind,
 };
 pub use group::{HitGroupDesc, ProgramGroup, ProgramGroupKind};
 pub use module::{Module, ProgramKind};

@@ -204,6 +204,10 @@ struct PipelineVisitor<'a, 'p, 's, P> {
     instance_sbt_offset: u32,
     /// The instance nearest to the GAS, whose flags count (§5.4).
     instance: Option<&'s crate::accel::InstanceRecord>,
+    /// The transform list of the current GAS (copied only when there are instances).
+    path: Path<'s>,
+    /// The transform list of the closest accepted hit.
+    best_path: Path<'s>,
     place: Placement,
     ray: RayState,
     sbt_offset: u32,
@@ -292,6 +296,7 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
                     ray: self.ray,
                     hit,
                     payload: self.payload,
+                    path: &self.path,
                 };
                 match ah(&mut ctx) {
                     Ok(()) => {}
@@ -305,6 +310,11 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
             }
         }
         self.best = Some(hit);
+        if self.path.len > 0 {
+            self.best_path = self.path;
+        } else {
+            self.best_path.len = 0;
+        }
         if terminate {
             Decision::AcceptAndTerminate
         } else {
@@ -332,10 +342,12 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
         self.gas = Some(gas);
         if path.len == 0 {
             (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
+            self.path.len = 0;
             self.place = Placement::world(&self.ray);
             return;
         }
         (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
+        self.path = *path;
         // One level (the common IAS over GASes) needs no composition.
         let (mut o2w, mut w2o) = (crate::Transform::IDENTITY, crate::Transform::IDENTITY);
         if let (1, Some(level)) = (path.len, path.levels().next()) {
@@ -454,6 +466,8 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
         };
         let ray = RayState { tmin, ..self.ray };
         let aabb = gas.aabbs[slot as usize];
+        // A copy: the context also borrows the visitor, to report to it.
+        let path = self.path;
         let mut ctx = IntersectionCtx {
             frame,
             ray,
@@ -461,6 +475,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             prim,
             aabb,
             reporter: self,
+            path: &path,
         };
         let result = is(&mut ctx);
         let mut stop = match result {
@@ -627,6 +642,7 @@ fn trace_into<P>(
     let launch = frame.launch;
     let pipe = launch.pipeline;
     let mut best = None;
+    let mut best_path = Path::ROOT;
     if let Some(root) = args.handle.0.as_ref() {
         check_graph(pipe, root, args.handle)?;
         let mut v = PipelineVisitor {
@@ -634,6 +650,8 @@ fn trace_into<P>(
             gas: None,
             instance_sbt_offset: 0,
             instance: None,
+            path: Path::ROOT,
+            best_path: Path::ROOT,
             place: Placement::world(state),
             ray: *state,
             sbt_offset: args.sbt_offset,
@@ -648,6 +666,7 @@ fn trace_into<P>(
             return Err(e);
         }
         best = v.best;
+        best_path = v.best_path;
     }
     match best {
         Some(hit) => {
@@ -668,6 +687,7 @@ fn trace_into<P>(
                     ray: *state,
                     hit,
                     payload,
+                    path: &best_path,
                 };
                 return only_exceptions(ch(&mut ctx));
             }

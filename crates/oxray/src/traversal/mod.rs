@@ -6,4 +6,4 @@ mod scene;
 
 pub(crate) use gas::{with_stack, Decision, Entry, GasVisitor};
 pub use ray::{Ray, RayError};
-pub(crate) use scene::{traverse_node, NodeRef, Path, SceneVisitor};
+pub(crate) use scene::{traverse_node, Level, NodeRef, Path, SceneVisitor};

@@ -71,7 +71,6 @@ impl<'s> Path<'s> {
     pub fn levels(&self) -> impl DoubleEndedIterator<Item = &Level<'s>> {
         self.levels[..self.len].iter().flatten()
     }
-
 }
 
 /// A visitor of a whole graph: a [`GasVisitor`] told which GAS it is in and where.
