@@ -106,7 +106,7 @@ fn run(cli: Cli) -> Result<()> {
                 side * side
             );
             println!(
-                "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | coherent closest | coherent any | incoherent closest | incoherent any | incoherent closest by build (default / fast-build / fast-trace) | pipeline coherent closest |"
+                "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | coherent closest | coherent any | incoherent closest | incoherent any | incoherent closest by build (default / fast-build / fast-trace) | pipeline coherent closest vs the same rays as queries, alternated |"
             );
             println!("|---|---:|---|---|---:|---:|---:|---:|---|---:|");
             for (name, mesh) in &sets {
@@ -121,12 +121,14 @@ fn run(cli: Cli) -> Result<()> {
                     .install(|| bench::run(name, mesh, runs, &rays).map_err(|e| e.to_string()))
                     .map_err(anyhow::Error::msg)?;
                 println!(
-                    "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.2} |",
+                    "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) |",
                     r.name, r.triangles, r.build_ms[0], r.build_ms[1], r.build_ms[2],
                     r.sah[0], r.sah[1], r.sah[2],
                     r.mrays[0], r.mrays[1], r.mrays[2], r.mrays[3],
                     r.mrays_by_flags[0], r.mrays_by_flags[1], r.mrays_by_flags[2],
-                    r.pipeline_mrays,
+                    r.pipeline_mrays.0,
+                    r.pipeline_mrays.1,
+                    100.0 * r.pipeline_mrays.0 / r.pipeline_mrays.1,
                 );
                 eprintln!(
                     "  {}: {:.1} Mtris/s build, hit rate coherent {:.1}%, incoherent {:.1}%",

@@ -3,7 +3,7 @@
 
 use crate::exception::{Exception, ExceptionCode, Interrupt, InterruptKind, ProgramResult};
 use crate::pipeline::PipelineShared;
-use crate::program::trace::{self, HitState, RayState, TraceRay};
+use crate::program::trace::{self, HitState, Placement, RayState, TraceRay};
 use crate::query::HitKind;
 use crate::sbt::{ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
 use crate::traversal::{Level, Path};
@@ -234,7 +234,7 @@ macro_rules! transform_queries {
         /// Entry `i` of the transform list (`optixGetTransformListHandle` and the queries on
         /// its handle): index 0 is the level nearest the root. `None` past the list.
         pub fn transform_list_entry(&self, i: u32) -> Option<TransformListEntry> {
-            let level = self.path.levels().nth(i as usize)?;
+            let level = self.path?.levels().nth(i as usize)?;
             Some(match level {
                 Level::Instance(inst) => TransformListEntry {
                     kind: TransformListKind::Instance {
@@ -255,39 +255,39 @@ macro_rules! transform_queries {
         /// `optixGetTransformListSize`: transforms (instances and static transforms) between
         /// world and object space.
         pub fn transform_list_size(&self) -> u32 {
-            self.$hit.place.levels
+            self.place.levels
         }
         /// `optixGetObjectToWorldTransformMatrix`: the composed object-to-world transform.
         pub fn object_to_world_transform(&self) -> crate::Transform {
-            self.$hit.place.object_to_world
+            self.place.object_to_world
         }
         /// `optixGetWorldToObjectTransformMatrix`: the composed world-to-object transform.
         pub fn world_to_object_transform(&self) -> crate::Transform {
-            self.$hit.place.world_to_object
+            self.place.world_to_object
         }
         /// `optixTransformPointFromObjectToWorldSpace`.
         pub fn transform_point_to_world(&self, p: Vec3) -> Vec3 {
-            self.$hit.place.object_to_world.transform_point(p)
+            self.place.object_to_world.transform_point(p)
         }
         /// `optixTransformVectorFromObjectToWorldSpace`.
         pub fn transform_vector_to_world(&self, v: Vec3) -> Vec3 {
-            self.$hit.place.object_to_world.transform_vector(v)
+            self.place.object_to_world.transform_vector(v)
         }
         /// `optixTransformNormalFromObjectToWorldSpace` (inverse transpose).
         pub fn transform_normal_to_world(&self, n: Vec3) -> Vec3 {
-            crate::Transform::transform_normal_with_inverse(&self.$hit.place.world_to_object, n)
+            crate::Transform::transform_normal_with_inverse(&self.place.world_to_object, n)
         }
         /// `optixTransformPointFromWorldToObjectSpace`.
         pub fn transform_point_to_object(&self, p: Vec3) -> Vec3 {
-            self.$hit.place.world_to_object.transform_point(p)
+            self.place.world_to_object.transform_point(p)
         }
         /// `optixTransformVectorFromWorldToObjectSpace`.
         pub fn transform_vector_to_object(&self, v: Vec3) -> Vec3 {
-            self.$hit.place.world_to_object.transform_vector(v)
+            self.place.world_to_object.transform_vector(v)
         }
         /// `optixTransformNormalFromWorldToObjectSpace` (inverse transpose).
         pub fn transform_normal_to_object(&self, n: Vec3) -> Vec3 {
-            crate::Transform::transform_normal_with_inverse(&self.$hit.place.object_to_world, n)
+            crate::Transform::transform_normal_with_inverse(&self.place.object_to_world, n)
         }
     };
 }
@@ -306,12 +306,12 @@ macro_rules! hit_queries {
         /// there is no instance (a GAS traced directly: guide §13.7; the OptiX 9.0 header says
         /// 0, oxray follows the guide).
         pub fn instance_id(&self) -> u32 {
-            self.$hit.place.instance_id
+            self.place.instance_id
         }
         /// `optixGetInstanceIndex`: that instance's position in its IAS's build input; 0 when
         /// there is no instance.
         pub fn instance_index(&self) -> u32 {
-            self.$hit.place.instance_index
+            self.place.instance_index
         }
         transform_queries!($hit);
         /// `optixGetHitKind`.
@@ -337,7 +337,11 @@ macro_rules! hit_queries {
         /// `optixGetTriangleVertexData`: the object-space vertices of the hit triangle (zeros
         /// for a custom primitive).
         pub fn triangle_vertex_data(&self) -> [Vec3; 3] {
-            self.$hit.vertices.map(Vec3::from)
+            let slot = self.$hit.slot as usize;
+            match self.gas.and_then(|g| g.triangles.get(slot / 4)) {
+                Some(block) => block.get(slot % 4).map(Vec3::from),
+                None => [Vec3::ZERO; 3],
+            }
         }
         /// `optixGetTriangleBarycentrics`: attributes 0 and 1 as floats.
         pub fn triangle_barycentrics(&self) -> [f32; 2] {
@@ -374,7 +378,9 @@ pub struct ClosestHitCtx<'a, P> {
     pub(crate) ray: RayState,
     pub(crate) hit: HitState,
     pub(crate) payload: &'a mut [u32],
-    pub(crate) path: &'a Path<'a>,
+    pub(crate) path: Option<&'a Path<'a>>,
+    pub(crate) gas: Option<&'a crate::Gas>,
+    pub(crate) place: &'a Placement,
 }
 
 impl<P> ClosestHitCtx<'_, P> {
@@ -403,7 +409,9 @@ pub struct AnyHitCtx<'a, P> {
     pub(crate) ray: RayState,
     pub(crate) hit: HitState,
     pub(crate) payload: &'a mut [u32],
-    pub(crate) path: &'a Path<'a>,
+    pub(crate) path: Option<&'a Path<'a>>,
+    pub(crate) gas: Option<&'a crate::Gas>,
+    pub(crate) place: &'a Placement,
 }
 
 impl<P> AnyHitCtx<'_, P> {
@@ -420,11 +428,11 @@ impl<P> AnyHitCtx<'_, P> {
     }
     /// `optixGetObjectRayOrigin`: the ray in the object space of the hit geometry.
     pub fn object_ray_origin(&self) -> Vec3 {
-        self.hit.place.object_origin
+        self.place.object_origin
     }
     /// `optixGetObjectRayDirection` (not normalised: t is the same in both spaces).
     pub fn object_ray_direction(&self) -> Vec3 {
-        self.hit.place.object_direction
+        self.place.object_direction
     }
 
     /// `optixIgnoreIntersection`: the candidate is not a hit and the interval stays. Return it
@@ -475,7 +483,8 @@ pub struct IntersectionCtx<'a, 'v, P> {
     pub(crate) prim: HitState,
     pub(crate) aabb: crate::Aabb,
     pub(crate) reporter: &'v mut dyn trace::Reporter<P>,
-    pub(crate) path: &'v Path<'v>,
+    pub(crate) path: Option<&'v Path<'v>>,
+    pub(crate) place: &'v Placement,
 }
 
 impl<P> IntersectionCtx<'_, '_, P> {
@@ -490,21 +499,21 @@ impl<P> IntersectionCtx<'_, '_, P> {
     }
     /// `optixGetObjectRayOrigin`: the ray in the object space of the primitive.
     pub fn object_ray_origin(&self) -> Vec3 {
-        self.prim.place.object_origin
+        self.place.object_origin
     }
     /// `optixGetObjectRayDirection` (not normalised: t is the same in both spaces).
     pub fn object_ray_direction(&self) -> Vec3 {
-        self.prim.place.object_direction
+        self.place.object_direction
     }
     transform_queries!(prim);
 
     /// `optixGetInstanceId` (`!0` without instances).
     pub fn instance_id(&self) -> u32 {
-        self.prim.place.instance_id
+        self.place.instance_id
     }
     /// `optixGetInstanceIndex` (0 without instances).
     pub fn instance_index(&self) -> u32 {
-        self.prim.place.instance_index
+        self.place.instance_index
     }
     /// `optixGetPrimitiveIndex`.
     pub fn primitive_index(&self) -> u32 {

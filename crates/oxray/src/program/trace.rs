@@ -146,10 +146,8 @@ pub(crate) struct HitState {
     pub attributes: [u32; 8],
     /// Hit-group record index.
     pub record: usize,
-    /// Where the hit geometry sits: nearest instance and composed transforms.
-    pub place: Placement,
-    /// Object-space vertices of a triangle hit (zero for custom primitives).
-    pub vertices: [[f32; 3]; 3],
+    /// Leaf slot of the primitive in its GAS (`u32::MAX` for none), for vertex fetches.
+    pub slot: u32,
 }
 
 /// The instance nearest to a hit and the transforms between its object space and world space.
@@ -204,10 +202,15 @@ struct PipelineVisitor<'a, 'p, 's, P> {
     instance_sbt_offset: u32,
     /// The instance nearest to the GAS, whose flags count (§5.4).
     instance: Option<&'s crate::accel::InstanceRecord>,
-    /// The transform list of the current GAS (copied only when there are instances).
-    path: Path<'s>,
+    /// The transform list of the current GAS (kept only when there are transforms: `None`
+    /// costs nothing to set up for a GAS root).
+    path: Option<Path<'s>>,
     /// The transform list of the closest accepted hit.
-    best_path: Path<'s>,
+    best_path: Option<Path<'s>>,
+    /// The GAS of the closest accepted hit.
+    best_gas: Option<&'s Gas>,
+    /// Where the closest accepted hit's geometry sits.
+    best_place: Placement,
     place: Placement,
     ray: RayState,
     sbt_offset: u32,
@@ -296,7 +299,9 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
                     ray: self.ray,
                     hit,
                     payload: self.payload,
-                    path: &self.path,
+                    path: self.path.as_ref(),
+                    gas: self.gas,
+                    place: &self.place,
                 };
                 match ah(&mut ctx) {
                     Ok(()) => {}
@@ -310,10 +315,10 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
             }
         }
         self.best = Some(hit);
-        if self.path.len > 0 {
-            self.best_path = self.path;
-        } else {
-            self.best_path.len = 0;
+        self.best_path = self.path;
+        self.best_gas = self.gas;
+        if self.path.is_some() {
+            self.best_place = self.place;
         }
         if terminate {
             Decision::AcceptAndTerminate
@@ -342,12 +347,12 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
         self.gas = Some(gas);
         if path.len == 0 {
             (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
-            self.path.len = 0;
+            self.path = None;
             self.place = Placement::world(&self.ray);
             return;
         }
         (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
-        self.path = *path;
+        self.path = Some(*path);
         // One level (the common IAS over GASes) needs no composition.
         let (mut o2w, mut w2o) = (crate::Transform::IDENTITY, crate::Transform::IDENTITY);
         if let (1, Some(level)) = (path.len, path.levels().next()) {
@@ -422,8 +427,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             },
             attributes,
             record,
-            place: self.place,
-            vertices: gas.triangles[slot as usize / 4].get(slot as usize % 4),
+            slot,
         };
         self.candidate(hit, gflags)
     }
@@ -457,8 +461,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             hit_kind: HitKind(0),
             attributes: [0; 8],
             record,
-            place: self.place,
-            vertices: [[0.0; 3]; 3],
+            slot: u32::MAX,
         };
         let frame = Frame {
             record: self.record_bytes(record),
@@ -466,8 +469,9 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
         };
         let ray = RayState { tmin, ..self.ray };
         let aabb = gas.aabbs[slot as usize];
-        // A copy: the context also borrows the visitor, to report to it.
+        // Copies: the context also borrows the visitor, to report to it.
         let path = self.path;
+        let place = self.place;
         let mut ctx = IntersectionCtx {
             frame,
             ray,
@@ -475,7 +479,8 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             prim,
             aabb,
             reporter: self,
-            path: &path,
+            path: path.as_ref(),
+            place: &place,
         };
         let result = is(&mut ctx);
         let mut stop = match result {
@@ -623,13 +628,11 @@ pub(crate) fn trace<P>(
         flags: args.flags,
         mask: (args.visibility_mask & 0xFF) as u8,
     };
-    // Copy-in / copy-out (guide §14): programs work on a private copy.
-    let mut words = [0u32; 32];
-    words[..n].copy_from_slice(payload);
+    // Copy-in / copy-out (guide §14) needs no copy here: the caller is suspended for the whole
+    // trace, so programs may work on its words directly and it sees them only on return. (If the
+    // trace raises, the launch index ends and the words are not looked at again.)
     let frame = Frame { depth, ..frame };
-    trace_into(frame, args, &state, &ray, &mut words[..n])?;
-    payload.copy_from_slice(&words[..n]);
-    Ok(())
+    trace_into(frame, args, &state, &ray, payload)
 }
 
 fn trace_into<P>(
@@ -641,8 +644,6 @@ fn trace_into<P>(
 ) -> ProgramResult {
     let launch = frame.launch;
     let pipe = launch.pipeline;
-    let mut best = None;
-    let mut best_path = Path::ROOT;
     if let Some(root) = args.handle.0.as_ref() {
         check_graph(pipe, root, args.handle)?;
         let mut v = PipelineVisitor {
@@ -650,8 +651,10 @@ fn trace_into<P>(
             gas: None,
             instance_sbt_offset: 0,
             instance: None,
-            path: Path::ROOT,
-            best_path: Path::ROOT,
+            path: None,
+            best_path: None,
+            best_gas: None,
+            best_place: Placement::world(state),
             place: Placement::world(state),
             ray: *state,
             sbt_offset: args.sbt_offset,
@@ -665,55 +668,63 @@ fn trace_into<P>(
         if let Some(e) = v.pending {
             return Err(e);
         }
-        best = v.best;
-        best_path = v.best_path;
+        if let Some(hit) = v.best {
+            // The closest-hit program runs with the visitor's state in place: the hit's transform
+            // list is large, and copying it out would cost every trace.
+            return v.closest_hit(state, &hit);
+        }
     }
-    match best {
-        Some(hit) => {
-            if state.flags.contains(RayFlags::DISABLE_CLOSESTHIT) {
-                return Ok(());
-            }
-            let g = &pipe.groups[launch.hit_groups[hit.record]].inner.programs;
-            if let GroupPrograms::HitGroup {
-                closest_hit: Some(ch),
-                ..
-            } = g
-            {
-                let mut ctx = ClosestHitCtx {
-                    frame: Frame {
-                        record: launch.sbt.hitgroup.record(hit.record).unwrap_or(&[]),
-                        ..frame
-                    },
-                    ray: *state,
-                    hit,
-                    payload,
-                    path: &best_path,
-                };
-                return only_exceptions(ch(&mut ctx));
-            }
-            Ok(())
+    let idx = args.miss_index as usize;
+    let Some(&g) = launch.miss_groups.get(idx) else {
+        return Err(Interrupt::exception(
+            ExceptionCode::INVALID_MISS_SBT,
+            &[args.miss_index],
+        ));
+    };
+    if let GroupPrograms::Miss(Some(ms)) = &pipe.groups[g].inner.programs {
+        let mut ctx = MissCtx {
+            frame: Frame {
+                record: launch.sbt.miss.record(idx).unwrap_or(&[]),
+                ..frame
+            },
+            ray: *state,
+            payload,
+        };
+        return only_exceptions(ms(&mut ctx));
+    }
+    Ok(())
+}
+
+impl<P> PipelineVisitor<'_, '_, '_, P> {
+    /// Runs the closest-hit program of the accepted hit (unless the ray disables it).
+    fn closest_hit(&mut self, state: &RayState, hit: &HitState) -> ProgramResult {
+        if state.flags.contains(RayFlags::DISABLE_CLOSESTHIT) {
+            return Ok(());
         }
-        None => {
-            let idx = args.miss_index as usize;
-            let Some(&g) = launch.miss_groups.get(idx) else {
-                return Err(Interrupt::exception(
-                    ExceptionCode::INVALID_MISS_SBT,
-                    &[args.miss_index],
-                ));
-            };
-            if let GroupPrograms::Miss(Some(ms)) = &pipe.groups[g].inner.programs {
-                let mut ctx = MissCtx {
-                    frame: Frame {
-                        record: launch.sbt.miss.record(idx).unwrap_or(&[]),
-                        ..frame
-                    },
-                    ray: *state,
-                    payload,
-                };
-                return only_exceptions(ms(&mut ctx));
-            }
-            Ok(())
-        }
+        let launch = self.frame.launch;
+        let g = &launch.pipeline.groups[launch.hit_groups[hit.record]]
+            .inner
+            .programs;
+        let GroupPrograms::HitGroup {
+            closest_hit: Some(ch),
+            ..
+        } = g
+        else {
+            return Ok(());
+        };
+        let mut ctx = ClosestHitCtx {
+            frame: Frame {
+                record: launch.sbt.hitgroup.record(hit.record).unwrap_or(&[]),
+                ..self.frame
+            },
+            ray: *state,
+            hit: *hit,
+            payload: self.payload,
+            path: self.best_path.as_ref(),
+            gas: self.best_gas,
+            place: &self.best_place,
+        };
+        only_exceptions(ch(&mut ctx))
     }
 }
 
