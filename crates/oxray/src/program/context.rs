@@ -259,35 +259,35 @@ macro_rules! transform_queries {
         }
         /// `optixGetObjectToWorldTransformMatrix`: the composed object-to-world transform.
         pub fn object_to_world_transform(&self) -> crate::Transform {
-            self.place.object_to_world
+            self.place.object_to_world()
         }
         /// `optixGetWorldToObjectTransformMatrix`: the composed world-to-object transform.
         pub fn world_to_object_transform(&self) -> crate::Transform {
-            self.place.world_to_object
+            self.place.world_to_object()
         }
         /// `optixTransformPointFromObjectToWorldSpace`.
         pub fn transform_point_to_world(&self, p: Vec3) -> Vec3 {
-            self.place.object_to_world.transform_point(p)
+            self.place.object_to_world().transform_point(p)
         }
         /// `optixTransformVectorFromObjectToWorldSpace`.
         pub fn transform_vector_to_world(&self, v: Vec3) -> Vec3 {
-            self.place.object_to_world.transform_vector(v)
+            self.place.object_to_world().transform_vector(v)
         }
         /// `optixTransformNormalFromObjectToWorldSpace` (inverse transpose).
         pub fn transform_normal_to_world(&self, n: Vec3) -> Vec3 {
-            crate::Transform::transform_normal_with_inverse(&self.place.world_to_object, n)
+            crate::Transform::transform_normal_with_inverse(&self.place.world_to_object(), n)
         }
         /// `optixTransformPointFromWorldToObjectSpace`.
         pub fn transform_point_to_object(&self, p: Vec3) -> Vec3 {
-            self.place.world_to_object.transform_point(p)
+            self.place.world_to_object().transform_point(p)
         }
         /// `optixTransformVectorFromWorldToObjectSpace`.
         pub fn transform_vector_to_object(&self, v: Vec3) -> Vec3 {
-            self.place.world_to_object.transform_vector(v)
+            self.place.world_to_object().transform_vector(v)
         }
         /// `optixTransformNormalFromWorldToObjectSpace` (inverse transpose).
         pub fn transform_normal_to_object(&self, n: Vec3) -> Vec3 {
-            crate::Transform::transform_normal_with_inverse(&self.place.object_to_world, n)
+            crate::Transform::transform_normal_with_inverse(&self.place.object_to_world(), n)
         }
     };
 }

@@ -157,21 +157,31 @@ pub(crate) struct Placement {
     pub instance_index: u32,
     /// Levels of transforms between world and object space.
     pub levels: u32,
-    pub object_to_world: crate::Transform,
-    pub world_to_object: crate::Transform,
+    /// Object-to-world and world-to-object transforms; `None` for identity (no transforms,
+    /// which keeps setting up a trace of a GAS cheap).
+    pub transforms: Option<[crate::Transform; 2]>,
     /// Object-space ray.
     pub object_origin: Vec3,
     pub object_direction: Vec3,
 }
 
 impl Placement {
+    /// The object-to-world transform.
+    pub fn object_to_world(&self) -> crate::Transform {
+        self.transforms.map_or(crate::Transform::IDENTITY, |t| t[0])
+    }
+
+    /// The world-to-object transform.
+    pub fn world_to_object(&self) -> crate::Transform {
+        self.transforms.map_or(crate::Transform::IDENTITY, |t| t[1])
+    }
+
     fn world(ray: &RayState) -> Self {
         Placement {
             instance_id: !0,
             instance_index: 0,
             levels: 0,
-            object_to_world: crate::Transform::IDENTITY,
-            world_to_object: crate::Transform::IDENTITY,
+            transforms: None,
             object_origin: ray.origin,
             object_direction: ray.direction,
         }
@@ -367,8 +377,7 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
             instance_id: path.instance.map_or(!0, |i| i.instance_id),
             instance_index: path.instance.map_or(0, |i| i.index),
             levels: path.len as u32,
-            object_to_world: o2w,
-            world_to_object: w2o,
+            transforms: Some([o2w, w2o]),
             object_origin: object_ray.origin,
             object_direction: object_ray.direction,
         };
