@@ -313,6 +313,9 @@ pub enum PipelineError {
     /// A callables group needs a direct or a continuation callable (or both).
     #[error("a callables program group needs a direct or a continuation callable")]
     EmptyCallables,
+    /// `max_traversable_graph_depth` must be in `1..=31` (guide §12).
+    #[error("max_traversable_graph_depth {0} is not in 1..=31")]
+    InvalidGraphDepth(u32),
     /// A pipeline needs at least one program group.
     #[error("a pipeline needs at least one program group")]
     NoProgramGroups,

@@ -354,6 +354,33 @@ impl<P> Pipeline<P> {
     }
 }
 
+impl<P> Clone for PipelineShared<P> {
+    fn clone(&self) -> Self {
+        PipelineShared {
+            compile: self.compile,
+            link: self.link,
+            max_traversable_graph_depth: self.max_traversable_graph_depth,
+            validation_mode: self.validation_mode,
+            groups: self.groups.clone(),
+            by_id: self.by_id.clone(),
+            context: self.context.clone(),
+        }
+    }
+}
+
+impl<P> Pipeline<P> {
+    /// Sets the deepest traversable graph a trace may enter (the last argument of
+    /// `optixPipelineSetStackSize`, guide §6.8; at most 31, the default). A trace of a deeper
+    /// graph raises `TRAVERSAL_DEPTH_EXCEEDED`. Clones of this pipeline keep their setting.
+    pub fn set_max_traversable_graph_depth(&mut self, depth: u32) -> Result<(), PipelineError> {
+        if depth == 0 || depth > crate::accel::MAX_TRAVERSABLE_GRAPH_DEPTH {
+            return Err(PipelineError::InvalidGraphDepth(depth));
+        }
+        std::sync::Arc::make_mut(&mut self.shared).max_traversable_graph_depth = depth;
+        Ok(())
+    }
+}
+
 impl<P> Clone for Pipeline<P> {
     fn clone(&self) -> Self {
         Pipeline {

@@ -165,3 +165,60 @@ fn nested_instances_and_static_transforms_are_listed_root_first_13_11() {
         }
     }
 }
+
+/// §6.8 / §12: a trace of a graph deeper than the pipeline's `max_traversable_graph_depth`
+/// raises `TRAVERSAL_DEPTH_EXCEEDED`; the depth must be in 1..=31.
+#[test]
+fn max_traversable_graph_depth_is_enforced_6_8() {
+    use oxray::ExceptionCode;
+    let module = Module::<TraversableHandle>::new()
+        .raygen("__raygen__rg", |ctx| {
+            let mut payload = [0u32; 1];
+            ctx.trace(
+                &TraceRay::new(ctx.params(), Vec3::new(0.1, 0.1, -10.0), Vec3::Z),
+                &mut payload,
+            )
+        })
+        .unwrap();
+    let rg = ProgramGroup::raygen(&module, "__raygen__rg").unwrap();
+    let ms = ProgramGroup::miss(None).unwrap();
+    let mut pipeline = Pipeline::new(
+        &DeviceContext::new(),
+        &PipelineCompileOptions::default(),
+        &PipelineLinkOptions { max_trace_depth: 1 },
+        &[rg.clone(), ms.clone()],
+    )
+    .unwrap();
+    let sbt = ShaderBindingTable {
+        raygen: SbtRegion::from_headers(&[rg.pack_header()]),
+        miss: SbtRegion::from_headers(&[ms.pack_header()]),
+        ..Default::default()
+    };
+    // IAS -> GAS: two levels.
+    let ias: TraversableHandle = Ias::build(
+        &BuildOptions::default(),
+        &[(&[Instance::new(triangle().into())][..]).into()],
+    )
+    .unwrap()
+    .into();
+    assert_eq!(
+        pipeline.launch(&ias, &sbt, 1, 1, 1).unwrap().exceptions,
+        1,
+        "no hit group: an exception"
+    );
+    pipeline.set_max_traversable_graph_depth(1).unwrap();
+    let report = pipeline.launch(&ias, &sbt, 1, 1, 1).unwrap();
+    assert_eq!(
+        report.first_exceptions[0].1.code,
+        ExceptionCode::TRAVERSAL_DEPTH_EXCEEDED
+    );
+    // A GAS (one level) is within the limit: traversal runs and finds no hit-group record.
+    let gas: TraversableHandle = triangle().into();
+    let report = pipeline.launch(&gas, &sbt, 1, 1, 1).unwrap();
+    assert_eq!(
+        report.first_exceptions.first().map(|e| e.1.code),
+        Some(ExceptionCode::INVALID_HIT_SBT)
+    );
+    assert!(pipeline.set_max_traversable_graph_depth(0).is_err());
+    assert!(pipeline.set_max_traversable_graph_depth(32).is_err());
+}
