@@ -325,9 +325,11 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
             }
         }
         self.best = Some(hit);
-        self.best_path = self.path;
         self.best_gas = self.gas;
+        // The transform list and placement only change below transforms; copying them (the
+        // list is large) is skipped for a GAS root, where they stay at their initial values.
         if self.path.is_some() {
+            self.best_path = self.path;
             self.best_place = self.place;
         }
         if terminate {
