@@ -31,10 +31,12 @@
 
 mod layout;
 mod payload;
+mod pipeline;
 mod scene;
 
 pub use layout::{ChunkInfo, SbtLayout};
 pub use payload::{payload_words, read_payload, write_payload};
+pub use pipeline::{SceneLaunchError, ScenePipeline};
 pub use scene::{
     GasDesc, GasId, GeomId, Geometry, GeometryInstance, HitGroupData, IasId, Material, MaterialId,
     Scene, UtilError, UtilInstance,

@@ -92,7 +92,7 @@ impl<P> Material<P> {
 /// The data of every hit-group record the scene writes: the user values of the material, the
 /// geometry instance and the GAS.
 #[repr(C)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Pod, Zeroable)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
 pub struct HitGroupData {
     /// The material's user value.
     pub material: u32,
@@ -559,6 +559,29 @@ impl<P> Scene<P> {
             });
         }
         Ok(())
+    }
+
+    /// Rebuilds whatever is dirty: GASes, then the layout, then IASes (beyond the design, which
+    /// leaves rebuilding to the user).
+    pub fn rebuild_dirty(&mut self) -> Result<(), UtilError> {
+        for i in 0..self.gases.len() {
+            if self.gases[i].dirty || self.gases[i].built.is_none() {
+                self.build_gas(GasId(i as u32))?;
+            }
+        }
+        self.sbt_layout()?;
+        for i in 0..self.iases.len() {
+            if self.iases[i].dirty || self.iases[i].built.is_none() {
+                self.build_ias(IasId(i as u32))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The handle of a built, clean IAS.
+    pub fn ias_handle(&self, id: IasId) -> Option<TraversableHandle> {
+        let e = self.iases.get(id.0 as usize)?;
+        (!e.dirty).then(|| e.built.clone()).flatten()
     }
 
     /// Whether the hit-group SBT must be regenerated (after layout, material or user-data
