@@ -29,11 +29,13 @@
 
 #![warn(missing_docs)]
 
+mod context;
 mod layout;
 mod payload;
 mod pipeline;
 mod scene;
 
+pub use context::Context;
 pub use layout::{ChunkInfo, SbtLayout};
 pub use payload::{payload_words, read_payload, write_payload};
 pub use pipeline::{SceneLaunchError, ScenePipeline};
