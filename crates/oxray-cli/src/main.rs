@@ -19,6 +19,31 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Cast a file of rays (little-endian f32[8]: ox, oy, oz, tmin, dx, dy, dz, tmax) at a
+    /// mesh; write hits (f32 t, u32 primitive, f32 u, f32 v; t = +inf and primitive 0xFFFFFFFF
+    /// on a miss) or, with --occlusion, one u32 0/1 per ray. Primitive indices are triangles in
+    /// file order (polygons fan-triangulated, strips unrolled).
+    Raycast {
+        /// The mesh (.obj, .ply).
+        mesh: PathBuf,
+        /// The ray file.
+        #[arg(long)]
+        rays: PathBuf,
+        /// Where to write the results.
+        #[arg(long)]
+        out: PathBuf,
+        /// Any hit instead of closest hit.
+        #[arg(long)]
+        occlusion: bool,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+    /// Triangle and instance counts and BVH statistics of a mesh.
+    Info {
+        /// The mesh (.obj, .ply).
+        mesh: PathBuf,
+    },
     /// Build time and Mrays/s (closest and any hit; coherent and incoherent rays) on meshes.
     /// Without MESH, the bunny and igea from ../shared/data when present, else a generated
     /// icosphere.
@@ -61,6 +86,32 @@ fn default_meshes() -> Vec<PathBuf> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Raycast {
+            mesh,
+            rays,
+            out,
+            occlusion,
+            threads,
+        } => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.unwrap_or(0))
+                .build()
+                .context("cannot start the worker threads")?;
+            let r = pool.install(|| oxray_cli::raycast::raycast(&mesh, &rays, &out, occlusion))?;
+            println!(
+                "{} rays, {} {} ({:.2} Mrays/s on {} threads)",
+                r.rays,
+                r.hits,
+                if occlusion { "occluded" } else { "hits" },
+                r.mrays_per_s,
+                pool.current_num_threads()
+            );
+            Ok(())
+        }
+        Command::Info { mesh } => {
+            println!("{}", oxray_cli::raycast::info(&mesh)?);
+            Ok(())
+        }
         Command::Bench {
             meshes,
             threads,
