@@ -802,81 +802,58 @@ fn callable_group<P>(frame: &Frame<'_, P>, sbt_index: u32) -> Result<(usize, u32
     }
 }
 
-/// `optixDirectCall`.
-pub(crate) fn direct_call<P, A: 'static, R: 'static>(
-    frame: Frame<'_, P>,
-    sbt_index: u32,
-    args: A,
-) -> Result<R, Interrupt> {
-    let (g, calls) = callable_group(&frame, sbt_index)?;
-    let launch = frame.launch;
-    let GroupPrograms::Callables {
-        direct: Some(dc), ..
-    } = &launch.pipeline.groups[g].inner.programs
-    else {
-        return Err(Interrupt::exception(
-            ExceptionCode::CALLABLE_NO_DC_SBT_RECORD,
-            &[sbt_index],
-        ));
+/// Defines a call into the callables region: the two kinds differ only in which program of
+/// the record runs, its context type, and the exception for a record without it.
+macro_rules! callable_call {
+    ($(#[$doc:meta])* $name:ident, $field:ident, $ctx:ident, $missing:expr) => {
+        $(#[$doc])*
+        pub(crate) fn $name<P, A: 'static, R: 'static>(
+            frame: Frame<'_, P>,
+            sbt_index: u32,
+            args: A,
+        ) -> Result<R, Interrupt> {
+            let (g, calls) = callable_group(&frame, sbt_index)?;
+            let launch = frame.launch;
+            let GroupPrograms::Callables {
+                $field: Some(program),
+                ..
+            } = &launch.pipeline.groups[g].inner.programs
+            else {
+                return Err(Interrupt::exception($missing, &[sbt_index]));
+            };
+            let record = launch.sbt.callables.record(sbt_index as usize).unwrap_or(&[]);
+            let mut ctx = $ctx {
+                frame: Frame {
+                    record,
+                    calls,
+                    ..frame
+                },
+            };
+            // The erased program fills the result half of the caller's (args, result) slot.
+            let mut slot: (Option<A>, Option<R>) = (Some(args), None);
+            let ok = program(&mut ctx, &mut slot)?;
+            match (ok, slot.1) {
+                (true, Some(r)) => Ok(r),
+                _ => Err(Interrupt::exception(
+                    ExceptionCode::CALLABLE_PARAMETER_MISMATCH,
+                    &[sbt_index],
+                )),
+            }
+        }
     };
-    let mut ctx = DirectCallableCtx {
-        frame: Frame {
-            record: launch
-                .sbt
-                .callables
-                .record(sbt_index as usize)
-                .unwrap_or(&[]),
-            calls,
-            ..frame
-        },
-    };
-    let mut slot: (Option<A>, Option<R>) = (Some(args), None);
-    let ok = dc(&mut ctx, &mut slot)?;
-    match (ok, slot.1) {
-        (true, Some(r)) => Ok(r),
-        _ => Err(Interrupt::exception(
-            ExceptionCode::CALLABLE_PARAMETER_MISMATCH,
-            &[sbt_index],
-        )),
-    }
 }
 
-/// `optixContinuationCall`.
-pub(crate) fn continuation_call<P, A: 'static, R: 'static>(
-    frame: Frame<'_, P>,
-    sbt_index: u32,
-    args: A,
-) -> Result<R, Interrupt> {
-    let (g, calls) = callable_group(&frame, sbt_index)?;
-    let launch = frame.launch;
-    let GroupPrograms::Callables {
-        continuation: Some(cc),
-        ..
-    } = &launch.pipeline.groups[g].inner.programs
-    else {
-        return Err(Interrupt::exception(
-            ExceptionCode::CALLABLE_NO_CC_SBT_RECORD,
-            &[sbt_index],
-        ));
-    };
-    let mut ctx = ContinuationCallableCtx {
-        frame: Frame {
-            record: launch
-                .sbt
-                .callables
-                .record(sbt_index as usize)
-                .unwrap_or(&[]),
-            calls,
-            ..frame
-        },
-    };
-    let mut slot: (Option<A>, Option<R>) = (Some(args), None);
-    let ok = cc(&mut ctx, &mut slot)?;
-    match (ok, slot.1) {
-        (true, Some(r)) => Ok(r),
-        _ => Err(Interrupt::exception(
-            ExceptionCode::CALLABLE_PARAMETER_MISMATCH,
-            &[sbt_index],
-        )),
-    }
-}
+callable_call!(
+    /// `optixDirectCall`.
+    direct_call,
+    direct,
+    DirectCallableCtx,
+    ExceptionCode::CALLABLE_NO_DC_SBT_RECORD
+);
+callable_call!(
+    /// `optixContinuationCall`.
+    continuation_call,
+    continuation,
+    ContinuationCallableCtx,
+    ExceptionCode::CALLABLE_NO_CC_SBT_RECORD
+);
