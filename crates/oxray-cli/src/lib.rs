@@ -5,3 +5,4 @@
 pub mod bench;
 pub mod mesh;
 pub mod raycast;
+pub mod render;

@@ -19,6 +19,25 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Render the built-in Cornell box with the path tracer (scene files come in a later
+    /// version).
+    Render {
+        /// Output image (.png).
+        #[arg(short, long, default_value = "cornell.png")]
+        output: PathBuf,
+        /// Image size, WxH.
+        #[arg(long, default_value = "512x512")]
+        size: String,
+        /// Samples per pixel.
+        #[arg(long, default_value_t = 64)]
+        spp: u32,
+        /// Bounces at most.
+        #[arg(long, default_value_t = 8)]
+        max_depth: u32,
+        /// Worker threads (default: all cores).
+        #[arg(long)]
+        threads: Option<usize>,
+    },
     /// Cast a file of rays (little-endian f32[8]: ox, oy, oz, tmin, dx, dy, dz, tmax) at a
     /// mesh; write hits (f32 t, u32 primitive, f32 u, f32 v; t = +inf and primitive 0xFFFFFFFF
     /// on a miss) or, with --occlusion, one u32 0/1 per ray. Primitive indices are triangles in
@@ -86,6 +105,41 @@ fn default_meshes() -> Vec<PathBuf> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Render {
+            output,
+            size,
+            spp,
+            max_depth,
+            threads,
+        } => {
+            let (w, h) = size
+                .split_once('x')
+                .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+                .filter(|&(w, h)| w > 0 && h > 0 && w <= 16384 && h <= 16384)
+                .with_context(|| format!("--size must be WxH within 1..=16384, got {size:?}"))?;
+            if spp == 0 || spp > 1 << 16 {
+                bail!("--spp must be in 1..=65536, got {spp}");
+            }
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.unwrap_or(0))
+                .build()
+                .context("cannot start the worker threads")?;
+            let start = std::time::Instant::now();
+            let pixels = pool
+                .install(|| {
+                    oxray_cli::render::render_cornell(w, h, spp, max_depth.clamp(1, 64))
+                        .map_err(|e| e.to_string())
+                })
+                .map_err(anyhow::Error::msg)?;
+            oxray_cli::render::write_png(&output, w, h, &pixels)
+                .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", output.display()))?;
+            println!(
+                "wrote {} ({w}x{h}, {spp} spp) in {:.1} s",
+                output.display(),
+                start.elapsed().as_secs_f64()
+            );
+            Ok(())
+        }
         Command::Raycast {
             mesh,
             rays,
