@@ -230,14 +230,7 @@ impl<P> Module<P> {
         f: impl Fn(&mut DirectCallableCtx<'_, P>, A) -> Result<R, Interrupt> + Send + Sync + 'static,
     ) -> Result<Self, PipelineError> {
         let erased = move |ctx: &mut DirectCallableCtx<'_, P>, slot: &mut dyn Any| {
-            let Some(slot) = slot.downcast_mut::<(Option<A>, Option<R>)>() else {
-                return Ok(false);
-            };
-            let Some(args) = slot.0.take() else {
-                return Ok(false);
-            };
-            slot.1 = Some(f(ctx, args)?);
-            Ok(true)
+            fill_slot(slot, |args| f(ctx, args))
         };
         self.add(
             name,
@@ -257,14 +250,7 @@ impl<P> Module<P> {
             + 'static,
     ) -> Result<Self, PipelineError> {
         let erased = move |ctx: &mut ContinuationCallableCtx<'_, P>, slot: &mut dyn Any| {
-            let Some(slot) = slot.downcast_mut::<(Option<A>, Option<R>)>() else {
-                return Ok(false);
-            };
-            let Some(args) = slot.0.take() else {
-                return Ok(false);
-            };
-            slot.1 = Some(f(ctx, args)?);
-            Ok(true)
+            fill_slot(slot, |args| f(ctx, args))
         };
         self.add(
             name,
@@ -276,4 +262,20 @@ impl<P> Module<P> {
     pub(crate) fn get(&self, name: &str) -> Option<&Program<P>> {
         self.programs.get(name)
     }
+}
+
+/// Runs a typed callable on the caller's `(Option<A>, Option<R>)` slot behind type erasure:
+/// `Ok(false)` if the slot holds other types (a parameter mismatch).
+fn fill_slot<A: 'static, R: 'static>(
+    slot: &mut dyn Any,
+    call: impl FnOnce(A) -> Result<R, Interrupt>,
+) -> Result<bool, Interrupt> {
+    let Some(slot) = slot.downcast_mut::<(Option<A>, Option<R>)>() else {
+        return Ok(false);
+    };
+    let Some(args) = slot.0.take() else {
+        return Ok(false);
+    };
+    slot.1 = Some(call(args)?);
+    Ok(true)
 }
