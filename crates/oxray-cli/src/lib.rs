@@ -3,6 +3,8 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod gpu;
 pub mod mesh;
 pub mod raycast;
 pub mod render;
+pub mod scene;

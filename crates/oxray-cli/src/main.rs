@@ -3,7 +3,11 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use oxray_cli::bench::{self, BenchRays};
+use glam::Vec3;
 use oxray_cli::mesh::Mesh;
+use oxray_cli::render::lights::Environment;
+use oxray_cli::render::RenderOptions;
+use oxray_cli::scene::SceneDesc;
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
@@ -19,11 +23,13 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render the built-in Cornell box with the path tracer (scene files come in a later
-    /// version).
+    /// Render a scene with the path tracer: glTF 2.0 (.gltf, .glb), OBJ (+MTL) or PLY. Without
+    /// SCENE, the built-in Cornell box.
     Render {
-        /// Output image (.png).
-        #[arg(short, long, default_value = "cornell.png")]
+        /// The scene file; omit for the built-in Cornell box.
+        scene: Option<PathBuf>,
+        /// Output image: .png (tone-mapped sRGB) or .exr (linear).
+        #[arg(short, long, default_value = "render.png")]
         output: PathBuf,
         /// Image size, WxH.
         #[arg(long, default_value = "512x512")]
@@ -31,12 +37,25 @@ enum Command {
         /// Samples per pixel.
         #[arg(long, default_value_t = 64)]
         spp: u32,
-        /// Bounces at most.
+        /// Path vertices at most.
         #[arg(long, default_value_t = 8)]
         max_depth: u32,
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Which of the scene's cameras to use (default: the first, else one framing the scene).
+        #[arg(long)]
+        camera: Option<usize>,
+        /// Environment light: "sky" (procedural daylight, the default for scene files), "none",
+        /// a constant grey level such as "0.5", or an equirectangular .hdr or .exr map.
+        #[arg(long)]
+        env: Option<String>,
+        /// Multiplies the environment's radiance.
+        #[arg(long, default_value_t = 1.0)]
+        env_intensity: f32,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
     },
     /// Cast a file of rays (little-endian f32[8]: ox, oy, oz, tmin, dx, dy, dz, tmax) at a
     /// mesh; write hits (f32 t, u32 primitive, f32 u, f32 v; t = +inf and primitive 0xFFFFFFFF
@@ -57,6 +76,10 @@ enum Command {
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
+        /// Where to trace: the CPU, or GPU 0 through CUDA (the GAS is built on the CPU either
+        /// way; without CUDA, --backend cuda is an error).
+        #[arg(long, value_enum, default_value_t)]
+        backend: oxray_cli::gpu::Backend,
     },
     /// Triangle and instance counts and BVH statistics of a mesh.
     Info {
@@ -81,9 +104,14 @@ enum Command {
         /// Also write each mesh and its rays here, for scripts/bench_embree.py.
         #[arg(long)]
         export: Option<PathBuf>,
-        /// Also build an IAS of this many instances of the first mesh and trace through it.
+        /// Also build an IAS of this many instances of the first mesh and trace through it
+        /// (CPU backend only).
         #[arg(long)]
         instances: Option<usize>,
+        /// cpu: the CPU table. cuda: the same ray sets on GPU 0 next to the CPU, with hit
+        /// agreement (without CUDA, an error).
+        #[arg(long, value_enum, default_value_t)]
+        backend: oxray_cli::gpu::Backend,
     },
 }
 
@@ -106,11 +134,16 @@ fn default_meshes() -> Vec<PathBuf> {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Render {
+            scene,
             output,
             size,
             spp,
             max_depth,
             threads,
+            camera,
+            env,
+            env_intensity,
+            quiet,
         } => {
             let (w, h) = size
                 .split_once('x')
@@ -120,22 +153,74 @@ fn run(cli: Cli) -> Result<()> {
             if spp == 0 || spp > 1 << 16 {
                 bail!("--spp must be in 1..=65536, got {spp}");
             }
+            if !(env_intensity.is_finite() && env_intensity >= 0.0) {
+                bail!("--env-intensity must be a finite number >= 0, got {env_intensity}");
+            }
+            let ext = output
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(|e| e.to_ascii_lowercase());
+            if !matches!(ext.as_deref(), Some("png") | Some("exr")) {
+                bail!(
+                    "cannot write {}: unknown image format (expected .png or .exr)",
+                    output.display()
+                );
+            }
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
                 .build()
                 .context("cannot start the worker threads")?;
             let start = std::time::Instant::now();
-            let pixels = pool
-                .install(|| {
-                    oxray_cli::render::render_cornell(w, h, spp, max_depth.clamp(1, 64))
-                        .map_err(|e| e.to_string())
+            let (desc, default_env) = match &scene {
+                Some(path) => (pool.install(|| SceneDesc::load(path))?, "sky"),
+                None => (oxray_cli::scene::cornell_box(), "none"),
+            };
+            for w in &desc.warnings {
+                eprintln!("warning: {w}");
+            }
+            let environment = match env.as_deref().unwrap_or(default_env) {
+                "sky" => Environment::sky(env_intensity),
+                "none" => Environment::uniform(Vec3::ZERO),
+                other => match other.parse::<f32>() {
+                    Ok(v) if v.is_finite() && v >= 0.0 => {
+                        Environment::uniform(Vec3::splat(v * env_intensity))
+                    }
+                    _ => Environment::load(Path::new(other), env_intensity)
+                        .map_err(anyhow::Error::msg)?,
+                },
+            };
+            let loaded = start.elapsed().as_secs_f64();
+            let opts = RenderOptions {
+                width: w,
+                height: h,
+                spp,
+                max_depth: max_depth.clamp(1, 64),
+                camera,
+            };
+            let bar = if quiet {
+                indicatif::ProgressBar::hidden()
+            } else {
+                indicatif::ProgressBar::new(spp as u64)
+            };
+            bar.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{elapsed_precise} [{bar:40}] {pos}/{len} spp, ETA {eta}",
+                )
+                .expect("a valid template")
+                .progress_chars("=> "),
+            );
+            let image = pool.install(|| {
+                oxray_cli::render::render(&desc, &environment, &opts, |done| {
+                    bar.set_position(done as u64)
                 })
-                .map_err(anyhow::Error::msg)?;
-            oxray_cli::render::write_png(&output, w, h, &pixels)
-                .map_err(|e| anyhow::anyhow!("cannot write {}: {e}", output.display()))?;
+            })?;
+            bar.finish_and_clear();
+            image.save(&output).map_err(anyhow::Error::msg)?;
             println!(
-                "wrote {} ({w}x{h}, {spp} spp) in {:.1} s",
+                "wrote {} ({w}x{h}, {spp} spp, {} triangles, {} instances): loaded in {loaded:.1} s, total {:.1} s",
                 output.display(),
+                desc.triangle_count(),
+                desc.instances.len(),
                 start.elapsed().as_secs_f64()
             );
             Ok(())
@@ -146,11 +231,27 @@ fn run(cli: Cli) -> Result<()> {
             out,
             occlusion,
             threads,
+            backend,
         } => {
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
                 .build()
                 .context("cannot start the worker threads")?;
+            if backend == oxray_cli::gpu::Backend::Cuda {
+                let ctx = oxray_cli::gpu::open()?;
+                let r = pool
+                    .install(|| oxray_cli::gpu::raycast(&ctx, &mesh, &rays, &out, occlusion))?;
+                println!(
+                    "{} rays, {} {} ({:.2} Mrays/s kernel, {:.2} Mrays/s with transfers on {})",
+                    r.rays,
+                    r.hits,
+                    if occlusion { "occluded" } else { "hits" },
+                    r.kernel_mrays_per_s,
+                    r.transfer_mrays_per_s,
+                    oxray_cli::gpu::describe(&ctx)
+                );
+                return Ok(());
+            }
             let r = pool.install(|| oxray_cli::raycast::raycast(&mesh, &rays, &out, occlusion))?;
             println!(
                 "{} rays, {} {} ({:.2} Mrays/s on {} threads)",
@@ -173,6 +274,7 @@ fn run(cli: Cli) -> Result<()> {
             runs,
             export,
             instances,
+            backend,
         } => {
             if side == 0 || side > 16384 {
                 bail!("--side must be in 1..=16384, got {side}");
@@ -180,6 +282,13 @@ fn run(cli: Cli) -> Result<()> {
             if runs == 0 {
                 bail!("--runs must be at least 1");
             }
+            let cuda = match backend {
+                oxray_cli::gpu::Backend::Cpu => None,
+                oxray_cli::gpu::Backend::Cuda if instances.is_some() => {
+                    bail!("--instances needs --backend cpu (the CUDA backend traces GASes only)")
+                }
+                oxray_cli::gpu::Backend::Cuda => Some(oxray_cli::gpu::open()?),
+            };
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
                 .build()
@@ -210,10 +319,15 @@ fn run(cli: Cli) -> Result<()> {
                 pool.current_num_threads(),
                 side * side
             );
-            println!(
-                "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | coherent closest | coherent any | incoherent closest | incoherent any | incoherent closest by build (default / fast-build / fast-trace) | pipeline coherent closest vs the same rays as queries, alternated |"
-            );
-            println!("|---|---:|---|---|---:|---:|---:|---:|---|---:|");
+            if let Some(ctx) = &cuda {
+                println!("GPU: {}", oxray_cli::gpu::describe(ctx));
+                println!("{}", oxray_cli::gpu::BENCH_HEADER);
+            } else {
+                println!(
+                    "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | coherent closest | coherent any | incoherent closest | incoherent any | incoherent closest by build (default / fast-build / fast-trace) | pipeline coherent closest vs the same rays as queries, alternated |"
+                );
+                println!("|---|---:|---|---|---:|---:|---:|---:|---|---:|");
+            }
             for (name, mesh) in &sets {
                 let rays = BenchRays::new(mesh, side);
                 if let Some(dir) = &export {
@@ -221,6 +335,14 @@ fn run(cli: Cli) -> Result<()> {
                     bench::export(dir, name, mesh, &rays)
                         .and_then(|_| bench::export_hits(dir, name, &gas, &rays))
                         .with_context(|| format!("cannot write to {}", dir.display()))?;
+                }
+                if let Some(ctx) = &cuda {
+                    let rows = pool
+                        .install(|| oxray_cli::gpu::bench_mesh(ctx, name, mesh, &rays, runs))?;
+                    for row in rows {
+                        println!("{row}");
+                    }
+                    continue;
                 }
                 let r = pool
                     .install(|| bench::run(name, mesh, runs, &rays).map_err(|e| e.to_string()))

@@ -1,6 +1,6 @@
-//! Triangle-mesh loaders: OBJ (through `tobj`) and PLY (ASCII and binary, faces and triangle
-//! strips). Primitive indices follow the file: polygons are fan-triangulated in place and strips
-//! are unrolled in order.
+//! Triangle-mesh loaders: OBJ (through `tobj`), PLY (ASCII and binary, faces and triangle
+//! strips) and glTF (flattened into world space). Primitive indices follow the file: polygons are
+//! fan-triangulated in place and strips are unrolled in order.
 
 use std::path::Path;
 use thiserror::Error;
@@ -26,7 +26,7 @@ pub enum MeshError {
         source: std::io::Error,
     },
     /// The file's extension names no supported format.
-    #[error("{path}: unknown mesh format (expected .obj or .ply)")]
+    #[error("{path}: unknown mesh format (expected .obj, .ply, .gltf or .glb)")]
     UnknownFormat {
         /// The file.
         path: String,
@@ -47,6 +47,17 @@ pub enum MeshError {
         /// What is wrong.
         message: String,
     },
+    /// The glTF scene loader failed (its message names the file).
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
+    /// The flattened scene has more vertices or triangles than a mesh can index.
+    #[error("{path}: the scene flattens to more than {limit} vertices or triangles")]
+    TooLarge {
+        /// The file.
+        path: String,
+        /// The limit.
+        limit: u64,
+    },
     /// A face refers to a vertex that does not exist.
     #[error(
         "{path}: triangle {triangle} refers to vertex {index} but there are {vertices} vertices"
@@ -64,7 +75,13 @@ pub enum MeshError {
 }
 
 impl Mesh {
-    /// Loads an `.obj` or `.ply` file.
+    /// Loads an `.obj`, `.ply`, `.gltf` or `.glb` file.
+    ///
+    /// A glTF scene is flattened into one world-space mesh: every node with a mesh (in the order
+    /// of the file's `nodes` array, restricted to the scene that would be rendered) contributes
+    /// each of its mesh's primitives in order, each primitive its triangles in order. So primitive
+    /// index `k` of the result is the `k`-th triangle in that order. Materials, textures and
+    /// cameras are not loaded, and the scene loader's warnings are dropped.
     pub fn load(path: &Path) -> Result<Mesh, MeshError> {
         let name = path.display().to_string();
         let ext = path
@@ -82,6 +99,10 @@ impl Mesh {
                     path: name.clone(),
                     message,
                 })?
+            }
+            Some("gltf") | Some("glb") => {
+                let scene = crate::scene::gltf::load_impl(path, false)?;
+                flatten(&scene, &name)?
             }
             _ => return Err(MeshError::UnknownFormat { path: name }),
         };
@@ -184,6 +205,50 @@ impl Mesh {
     }
 }
 
+/// Most vertices or triangles a flattened scene may have: indices are `u32`, and instancing lets a
+/// small file describe far more geometry than fits in memory once copied per instance.
+const MAX_FLAT: u64 = 1 << 28;
+
+/// Copies every instance's primitives into one world-space mesh, in instance order, then
+/// primitive order (see [`Mesh::load`]).
+fn flatten(scene: &crate::scene::SceneDesc, name: &str) -> Result<Mesh, MeshError> {
+    let prims = || {
+        scene.instances.iter().flat_map(|inst| {
+            let prims = scene
+                .meshes
+                .get(inst.mesh as usize)
+                .map(|m| m.primitives.as_slice());
+            prims.unwrap_or(&[]).iter().map(move |p| (inst, p))
+        })
+    };
+    let (mut vertices, mut triangles) = (0u64, 0u64);
+    for (_, p) in prims() {
+        vertices += p.positions.len() as u64;
+        triangles += p.triangles.len() as u64;
+    }
+    if vertices > MAX_FLAT || triangles > MAX_FLAT {
+        return Err(MeshError::TooLarge {
+            path: name.to_string(),
+            limit: MAX_FLAT,
+        });
+    }
+    let mut mesh = Mesh {
+        positions: Vec::with_capacity(vertices as usize),
+        triangles: Vec::with_capacity(triangles as usize),
+    };
+    for (inst, p) in prims() {
+        let base = mesh.positions.len() as u32;
+        mesh.positions.extend(p.positions.iter().map(|&v| {
+            inst.transform
+                .transform_point3(glam::Vec3::from(v))
+                .to_array()
+        }));
+        mesh.triangles
+            .extend(p.triangles.iter().map(|t| t.map(|i| base + i)));
+    }
+    Ok(mesh)
+}
+
 fn normalize(p: [f32; 3]) -> [f32; 3] {
     let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
     [p[0] / l, p[1] / l, p[2] / l]
@@ -196,16 +261,21 @@ fn load_obj(path: &Path, name: &str) -> Result<Mesh, MeshError> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, _) = tobj::load_obj(path, &opts).map_err(|e| match e {
-        tobj::LoadError::OpenFileFailed => MeshError::Io {
-            path: name.to_string(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "cannot open file"),
-        },
-        e => MeshError::Obj {
+    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+        path: name.to_string(),
+        source,
+    })?;
+    // Material libraries are not read: only the geometry is needed, and tobj's MTL parser panics
+    // on some malformed files (a colour with fewer than three numbers).
+    check_obj_indices(&bytes).map_err(|message| MeshError::Obj {
+        path: name.to_string(),
+        message,
+    })?;
+    let (models, _) = tobj::load_obj_buf(&mut &bytes[..], &opts, |_| Ok(Default::default()))
+        .map_err(|e| MeshError::Obj {
             path: name.to_string(),
             message: e.to_string(),
-        },
-    })?;
+        })?;
     let mut mesh = Mesh::default();
     for m in models {
         let base = mesh.positions.len() as u32;
@@ -219,6 +289,38 @@ fn load_obj(path: &Path, name: &str) -> Result<Mesh, MeshError> {
         );
     }
     Ok(mesh)
+}
+
+/// Rejects OBJ face, line and point indices that no file can satisfy: positive indices larger
+/// than the file, and negative (relative) ones reaching before the first vertex, texture
+/// coordinate or normal. tobj turns both into huge offsets whose arithmetic overflows (a panic).
+pub(crate) fn check_obj_indices(bytes: &[u8]) -> Result<(), String> {
+    let limit = bytes.len() as u128;
+    // Vertices, texture coordinates and normals read so far.
+    let mut counts = [0u128; 3];
+    for (n, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        let line = String::from_utf8_lossy(line);
+        let mut words = line.split_whitespace();
+        match words.next() {
+            Some("v") => counts[0] += 1,
+            Some("vt") => counts[1] += 1,
+            Some("vn") => counts[2] += 1,
+            Some("f" | "l" | "p") => {
+                for w in words {
+                    for (k, part) in w.split('/').enumerate().take(3) {
+                        let Ok(x) = part.parse::<i128>() else {
+                            continue;
+                        };
+                        if x > 0 && x as u128 > limit || x < 0 && x.unsigned_abs() > counts[k] {
+                            return Err(format!("line {}: index {x} is out of range", n + 1));
+                        }
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -3,7 +3,7 @@
 
 use crate::bench::build_gas;
 use crate::mesh::Mesh;
-use oxray::{BuildFlags, Ray};
+use oxray::{BuildFlags, Gas, Hit, Ray};
 use std::path::Path;
 use std::time::Instant;
 use thiserror::Error;
@@ -82,6 +82,47 @@ pub fn parse_rays(bytes: &[u8], path: &str) -> Result<Vec<Ray>, RaycastError> {
         .collect())
 }
 
+/// Loads the mesh and the ray file of a ray cast and builds the mesh's GAS (fast-trace
+/// flags), as `oxray raycast` does for every backend.
+pub fn load_inputs(mesh_path: &Path, rays_path: &Path) -> Result<(Gas, Vec<Ray>), RaycastError> {
+    let mesh = Mesh::load(mesh_path)?;
+    let rays = parse_rays(&read(rays_path)?, &rays_path.display().to_string())?;
+    let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE)?;
+    Ok((gas, rays))
+}
+
+/// Encodes closest hits in the hit file format: `t, primitive, u, v` per ray, with `t = +inf`
+/// and primitive `0xFFFF_FFFF` for a miss.
+pub fn encode_hits(hits: &[Option<Hit>]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(hits.len() * HIT_BYTES);
+    for h in hits {
+        let (t, p, u, v) = h.map_or((f32::INFINITY, u32::MAX, 0.0, 0.0), |h| {
+            (h.t, h.primitive_index, h.u, h.v)
+        });
+        out.extend_from_slice(&t.to_le_bytes());
+        out.extend_from_slice(&p.to_le_bytes());
+        out.extend_from_slice(&u.to_le_bytes());
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    out
+}
+
+/// Encodes occlusion results: one little-endian u32 per ray, 1 for occluded.
+pub fn encode_occlusion(occluded: &[bool]) -> Vec<u8> {
+    occluded
+        .iter()
+        .flat_map(|&o| (o as u32).to_le_bytes())
+        .collect()
+}
+
+/// Writes a result file.
+pub fn write_results(path: &Path, bytes: &[u8]) -> Result<(), RaycastError> {
+    std::fs::write(path, bytes).map_err(|source| RaycastError::Io {
+        path: path.display().to_string(),
+        source,
+    })
+}
+
 /// Casts the rays of `rays_path` at the mesh and writes the hits (or, with `occlusion`, one u32
 /// 0/1 per ray) to `out_path`. Primitive indices are triangle indices in file order.
 pub fn raycast(
@@ -90,40 +131,30 @@ pub fn raycast(
     out_path: &Path,
     occlusion: bool,
 ) -> Result<RaycastReport, RaycastError> {
-    let mesh = Mesh::load(mesh_path)?;
-    let rays = parse_rays(&read(rays_path)?, &rays_path.display().to_string())?;
-    let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE)?;
-    let mut out = Vec::with_capacity(rays.len() * if occlusion { 4 } else { HIT_BYTES });
-    let (hits, seconds) = if occlusion {
+    let (gas, rays) = load_inputs(mesh_path, rays_path)?;
+    let (out, hits, seconds) = if occlusion {
         let mut occ = vec![false; rays.len()];
         let t = Instant::now();
         gas.occluded_batch(&rays, &mut occ).expect("lengths match");
         let s = t.elapsed().as_secs_f64();
-        for &o in &occ {
-            out.extend_from_slice(&(o as u32).to_le_bytes());
-        }
-        (occ.iter().filter(|&&o| o).count(), s)
+        (
+            encode_occlusion(&occ),
+            occ.iter().filter(|&&o| o).count(),
+            s,
+        )
     } else {
         let mut hits = vec![None; rays.len()];
         let t = Instant::now();
         gas.intersect_batch(&rays, &mut hits)
             .expect("lengths match");
         let s = t.elapsed().as_secs_f64();
-        for h in &hits {
-            let (t, p, u, v) = h.map_or((f32::INFINITY, u32::MAX, 0.0, 0.0), |h| {
-                (h.t, h.primitive_index, h.u, h.v)
-            });
-            out.extend_from_slice(&t.to_le_bytes());
-            out.extend_from_slice(&p.to_le_bytes());
-            out.extend_from_slice(&u.to_le_bytes());
-            out.extend_from_slice(&v.to_le_bytes());
-        }
-        (hits.iter().filter(|h| h.is_some()).count(), s)
+        (
+            encode_hits(&hits),
+            hits.iter().filter(|h| h.is_some()).count(),
+            s,
+        )
     };
-    std::fs::write(out_path, out).map_err(|source| RaycastError::Io {
-        path: out_path.display().to_string(),
-        source,
-    })?;
+    write_results(out_path, &out)?;
     Ok(RaycastReport {
         rays: rays.len(),
         hits,

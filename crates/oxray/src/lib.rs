@@ -70,8 +70,8 @@ pub use accel::input::{
 };
 pub use accel::options::{BuildFlags, BuildOperation, BuildOptions, GeometryFlags};
 pub use accel::{
-    compute_memory_usage, AccelBufferSizes, Gas, GasMemory, Ias, Instance, InstanceFlags,
-    StaticTransform, Transform, TraversableHandle, TraversableKind,
+    compute_memory_usage, AccelBufferSizes, ExportedTriangle, Gas, GasExport, GasMemory, Ias,
+    Instance, InstanceFlags, StaticTransform, Transform, TraversableHandle, TraversableKind,
 };
 pub use error::{BuildError, ErrorCode, LaunchError, PipelineError, QueryError};
 pub use exception::{Exception, ExceptionCode, ExceptionFlags, Interrupt, ProgramResult};

@@ -2,6 +2,7 @@
 //! acceleration structure (GAS) itself.
 
 pub mod bvh;
+mod export;
 mod gas;
 mod handle;
 mod ias;
@@ -12,6 +13,7 @@ pub mod options;
 mod transform;
 pub(crate) mod validate;
 
+pub use export::{ExportedTriangle, GasExport};
 pub(crate) use gas::GasKind;
 pub use gas::{Gas, GasMemory};
 pub(crate) use handle::Traversable;

@@ -1,0 +1,450 @@
+//! Light sources for next-event estimation: emissive triangles, picked in proportion to their
+//! power, and an environment (an equirectangular radiance map, procedural sky or loaded from a
+//! file), picked by importance over its texels.
+
+use super::bsdf::luminance;
+use super::texture;
+use crate::scene::SceneDesc;
+use glam::{Vec2, Vec3};
+use std::f32::consts::{PI, TAU};
+use std::path::Path;
+
+/// One emissive triangle in world space.
+#[derive(Clone, Copy, Debug)]
+pub struct LightTriangle {
+    /// First vertex.
+    pub p0: Vec3,
+    /// Edges from `p0`.
+    pub e1: Vec3,
+    /// Second edge.
+    pub e2: Vec3,
+    /// Unit normal out of the front face.
+    pub normal: Vec3,
+    /// Texture coordinates of the vertices (zero without a UV set).
+    pub uv: [Vec2; 3],
+    /// Material index.
+    pub material: u32,
+    /// Whether it emits from both faces (else from the front face, `e1 x e2`, only).
+    pub two_sided: bool,
+}
+
+/// The emissive triangles of a scene.
+#[derive(Clone, Debug, Default)]
+pub struct TriangleLights {
+    /// The triangles.
+    pub triangles: Vec<LightTriangle>,
+    /// Cumulative power, normalised so that the last entry is 1.
+    cdf: Vec<f32>,
+    /// Total power (area times mean emitted luminance).
+    pub total_power: f32,
+    /// Per material, its mean emitted luminance (0 for non-emitters): a triangle's selection
+    /// probability per unit area is `weight / total_power`.
+    pub material_weight: Vec<f32>,
+}
+
+impl TriangleLights {
+    /// Collects every emissive triangle of every instance.
+    pub fn new(scene: &SceneDesc) -> TriangleLights {
+        let tex_mean: Vec<Vec3> = scene
+            .textures
+            .iter()
+            .map(|t| texture::mean_srgb(t).truncate())
+            .collect();
+        let material_weight: Vec<f32> = scene
+            .materials
+            .iter()
+            .map(|m| {
+                let mut e = Vec3::from(m.emissive);
+                if let Some(t) = m.emissive_texture {
+                    e *= tex_mean
+                        .get(t.texture as usize)
+                        .copied()
+                        .unwrap_or(Vec3::ONE);
+                }
+                let w = luminance(e);
+                if w.is_finite() && w > 0.0 {
+                    w
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let mut triangles = Vec::new();
+        let mut power = Vec::new();
+        for inst in &scene.instances {
+            let Some(mesh) = scene.meshes.get(inst.mesh as usize) else {
+                continue;
+            };
+            for prim in &mesh.primitives {
+                let w = material_weight
+                    .get(prim.material as usize)
+                    .copied()
+                    .unwrap_or(0.0);
+                if w <= 0.0 {
+                    continue;
+                }
+                for t in &prim.triangles {
+                    let p = t.map(|i| {
+                        inst.transform
+                            .transform_point3(prim.positions[i as usize].into())
+                    });
+                    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+                    let area = 0.5 * e1.cross(e2).length();
+                    // A mirroring placement turns the winding order around.
+                    let normal =
+                        e1.cross(e2).normalize_or_zero() * inst.transform.determinant().signum();
+                    if !(area > 0.0 && area.is_finite()) {
+                        continue;
+                    }
+                    let uv = t.map(|i| prim.uvs.get(i as usize).map_or(Vec2::ZERO, |&u| u.into()));
+                    triangles.push(LightTriangle {
+                        p0: p[0],
+                        normal,
+                        e1,
+                        e2,
+                        uv,
+                        material: prim.material,
+                        two_sided: scene.materials[prim.material as usize].double_sided,
+                    });
+                    power.push(area * w);
+                }
+            }
+        }
+        let mut cdf = Vec::with_capacity(power.len());
+        let mut acc = 0.0f64;
+        for p in &power {
+            acc += *p as f64;
+            cdf.push(acc as f32);
+        }
+        let total_power = acc as f32;
+        for c in &mut cdf {
+            *c /= total_power;
+        }
+        TriangleLights {
+            triangles,
+            cdf,
+            total_power,
+            material_weight,
+        }
+    }
+
+    /// Whether there is any emissive triangle.
+    pub fn is_empty(&self) -> bool {
+        self.triangles.is_empty()
+    }
+
+    /// Picks a triangle in proportion to its power and a uniform point on it: the triangle, the
+    /// point, its barycentrics (for texture lookups) and the pdf per unit area of the whole
+    /// choice.
+    pub fn sample(&self, u: [f32; 3]) -> Option<(&LightTriangle, Vec3, [f32; 2], f32)> {
+        let i = self
+            .cdf
+            .partition_point(|&c| c <= u[0])
+            .min(self.triangles.len().checked_sub(1)?);
+        let tri = &self.triangles[i];
+        let (mut b1, mut b2) = (u[1], u[2]);
+        if b1 + b2 > 1.0 {
+            (b1, b2) = (1.0 - b1, 1.0 - b2);
+        }
+        let p = tri.p0 + tri.e1 * b1 + tri.e2 * b2;
+        Some((tri, p, [b1, b2], self.area_pdf(tri.material)))
+    }
+
+    /// The pdf per unit area with which [`TriangleLights::sample`] picks a point on a triangle
+    /// of material `material`.
+    pub fn area_pdf(&self, material: u32) -> f32 {
+        if self.total_power <= 0.0 {
+            return 0.0;
+        }
+        self.material_weight
+            .get(material as usize)
+            .copied()
+            .unwrap_or(0.0)
+            / self.total_power
+    }
+}
+
+/// An environment: radiance by direction from an equirectangular map (+Y up; u = 0.5 looks
+/// down -Z), with a sampling distribution proportional to luminance times solid angle.
+#[derive(Clone, Debug)]
+pub struct Environment {
+    width: usize,
+    height: usize,
+    texels: Vec<Vec3>,
+    /// Per row, the cumulative distribution over its columns.
+    conditional: Vec<f32>,
+    /// Cumulative distribution over rows.
+    marginal: Vec<f32>,
+    /// Sum of the sampling weights (0: the environment is black and never sampled).
+    total: f32,
+}
+
+impl Environment {
+    /// An environment from an equirectangular map of `width` x `height` linear texels.
+    pub fn from_texels(width: usize, height: usize, texels: Vec<Vec3>, scale: f32) -> Self {
+        let texels: Vec<Vec3> = texels
+            .into_iter()
+            .map(|t| {
+                let t = t * scale;
+                if t.is_finite() {
+                    t.max(Vec3::ZERO)
+                } else {
+                    Vec3::ZERO
+                }
+            })
+            .collect();
+        let mut conditional = vec![0.0; width * height];
+        let mut marginal = vec![0.0; height];
+        let mut total = 0.0f64;
+        for y in 0..height {
+            let sin_theta = (PI * (y as f32 + 0.5) / height as f32).sin();
+            let mut row = 0.0f64;
+            for x in 0..width {
+                row += (luminance(texels[y * width + x]) * sin_theta) as f64;
+                conditional[y * width + x] = row as f32;
+            }
+            if row > 0.0 {
+                for c in &mut conditional[y * width..(y + 1) * width] {
+                    *c /= row as f32;
+                }
+            }
+            total += row;
+            marginal[y] = total as f32;
+        }
+        if total > 0.0 {
+            for m in &mut marginal {
+                *m /= total as f32;
+            }
+        }
+        Environment {
+            width,
+            height,
+            texels,
+            conditional,
+            marginal,
+            total: total as f32,
+        }
+    }
+
+    /// A procedural daylight sky: a blue gradient over a dim ground and a small sun.
+    pub fn sky(scale: f32) -> Self {
+        let (w, h) = (512usize, 256usize);
+        let sun = Vec3::new(-0.45, 0.7, 0.55).normalize();
+        let cos_sun = (1.2f32).to_radians().cos();
+        let mut texels = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let d = texel_direction(x, y, w, h);
+                let up = d.y;
+                let c = if up >= 0.0 {
+                    let t = up.powf(0.4);
+                    Vec3::new(0.85, 0.9, 1.0).lerp(Vec3::new(0.25, 0.45, 0.95), t)
+                } else {
+                    Vec3::new(0.35, 0.32, 0.28) * (1.0 + up).max(0.3)
+                };
+                let s = if d.dot(sun) >= cos_sun {
+                    Vec3::new(2000.0, 1850.0, 1600.0)
+                } else {
+                    Vec3::ZERO
+                };
+                texels.push(c + s);
+            }
+        }
+        Environment::from_texels(w, h, texels, scale)
+    }
+
+    /// A uniform environment.
+    pub fn uniform(radiance: Vec3) -> Self {
+        Environment::from_texels(1, 1, vec![radiance], 1.0)
+    }
+
+    /// Loads an equirectangular map from a Radiance `.hdr` or OpenEXR `.exr` file.
+    pub fn load(path: &Path, scale: f32) -> Result<Self, String> {
+        let name = path.display();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase());
+        match ext.as_deref() {
+            Some("exr") => {
+                use exr::prelude::*;
+                let img = read_first_rgba_layer_from_file(
+                    path,
+                    |res, _| {
+                        let (w, h) = (res.width(), res.height());
+                        (w, h, vec![Vec3::ZERO; w * h])
+                    },
+                    |(w, _, px): &mut (usize, usize, Vec<Vec3>),
+                     pos,
+                     (r, g, b, _a): (f32, f32, f32, f32)| {
+                        px[pos.y() * *w + pos.x()] = Vec3::new(r, g, b);
+                    },
+                )
+                .map_err(|e| format!("{name}: cannot read the environment: {e}"))?;
+                let (w, h, px) = img.layer_data.channel_data.pixels;
+                if w == 0 || h == 0 {
+                    return Err(format!("{name}: the environment map is empty"));
+                }
+                Ok(Environment::from_texels(w, h, px, scale))
+            }
+            Some("hdr") => {
+                let img = image::open(path)
+                    .map_err(|e| format!("{name}: cannot read the environment: {e}"))?
+                    .into_rgb32f();
+                let (w, h) = (img.width() as usize, img.height() as usize);
+                let px = img.pixels().map(|p| Vec3::from(p.0)).collect();
+                Ok(Environment::from_texels(w, h, px, scale))
+            }
+            _ => Err(format!(
+                "{name}: unknown environment format (expected .hdr or .exr)"
+            )),
+        }
+    }
+
+    fn texel_of(&self, d: Vec3) -> usize {
+        let u = 0.5 + d.x.atan2(-d.z) / TAU;
+        let v = d.y.clamp(-1.0, 1.0).acos() / PI;
+        let x = ((u * self.width as f32) as usize).min(self.width - 1);
+        let y = ((v * self.height as f32) as usize).min(self.height - 1);
+        y * self.width + x
+    }
+
+    /// Radiance arriving from direction `d` (unit).
+    pub fn radiance(&self, d: Vec3) -> Vec3 {
+        if !d.is_finite() {
+            return Vec3::ZERO;
+        }
+        self.texels[self.texel_of(d)]
+    }
+
+    /// Whether the environment emits anything.
+    pub fn is_black(&self) -> bool {
+        self.total <= 0.0
+    }
+
+    /// The solid-angle pdf of [`Environment::sample`] drawing `d`.
+    pub fn pdf(&self, d: Vec3) -> f32 {
+        if self.total <= 0.0 || !d.is_finite() {
+            return 0.0;
+        }
+        let i = self.texel_of(d);
+        let y = i / self.width;
+        // The texel's probability is spread uniformly over its (u, v) rectangle, whose solid
+        // angle density is 2 pi^2 sin(theta) at the direction itself.
+        let centre = (PI * (y as f32 + 0.5) / self.height as f32).sin();
+        let p_texel = luminance(self.texels[i]) * centre / self.total;
+        let sin_theta = (1.0 - d.y * d.y).max(0.0).sqrt().max(1e-6);
+        p_texel * (self.width * self.height) as f32 / (2.0 * PI * PI * sin_theta)
+    }
+
+    /// Draws a direction in proportion to radiance; returns it with its radiance and pdf.
+    pub fn sample(&self, u: [f32; 2]) -> Option<(Vec3, Vec3, f32)> {
+        if self.total <= 0.0 {
+            return None;
+        }
+        let y = self
+            .marginal
+            .partition_point(|&c| c <= u[0])
+            .min(self.height - 1);
+        let row = &self.conditional[y * self.width..(y + 1) * self.width];
+        let x = row.partition_point(|&c| c <= u[1]).min(self.width - 1);
+        // Reuse each number's position inside its bin as the offset inside the texel, so that
+        // the density is constant over the texel, as `pdf` assumes.
+        let within = |cdf: &[f32], i: usize, u: f32| {
+            let lo = if i == 0 { 0.0 } else { cdf[i - 1] };
+            let hi = cdf[i];
+            if hi > lo {
+                ((u - lo) / (hi - lo)).clamp(0.0, 0.999_999)
+            } else {
+                0.5
+            }
+        };
+        let fy = within(&self.marginal, y, u[0]);
+        let fx = within(row, x, u[1]);
+        let d = direction_at(
+            (x as f32 + fx) / self.width as f32,
+            (y as f32 + fy) / self.height as f32,
+        );
+        let pdf = self.pdf(d);
+        (pdf > 0.0).then(|| (d, self.radiance(d), pdf))
+    }
+}
+
+fn direction_at(u: f32, v: f32) -> Vec3 {
+    let phi = (u - 0.5) * TAU;
+    let theta = v * PI;
+    let s = theta.sin();
+    Vec3::new(s * phi.sin(), theta.cos(), -s * phi.cos())
+}
+
+fn texel_direction(x: usize, y: usize, w: usize, h: usize) -> Vec3 {
+    direction_at((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::cornell_box;
+
+    #[test]
+    fn direction_mapping_round_trips() {
+        let env = Environment::from_texels(64, 32, vec![Vec3::ONE; 64 * 32], 1.0);
+        for (x, y) in [(0, 0), (13, 7), (63, 31), (32, 16)] {
+            let d = texel_direction(x, y, 64, 32);
+            assert_eq!(env.texel_of(d), y * 64 + x);
+        }
+    }
+
+    #[test]
+    fn environment_pdf_integrates_to_one_and_matches_sampling() {
+        let env = Environment::sky(1.0);
+        // Integral of the pdf over the sphere by stratified uniform directions.
+        let n = 400_000;
+        let mut integral = 0.0f64;
+        let mut rng = super::super::bsdf::Rng::new(9, 9, 9);
+        for _ in 0..n {
+            let z = 1.0 - 2.0 * rng.uniform();
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let phi = TAU * rng.uniform();
+            integral += env.pdf(Vec3::new(r * phi.cos(), z, r * phi.sin())) as f64;
+        }
+        integral *= 4.0 * PI as f64 / n as f64;
+        assert!((integral - 1.0).abs() < 0.05, "{integral}");
+        // Importance sampling estimates the irradiance-free integral of radiance the same way.
+        let mut is = Vec3::ZERO;
+        for _ in 0..n {
+            let (_, l, pdf) = env.sample([rng.uniform(), rng.uniform()]).unwrap();
+            is += l / pdf;
+        }
+        is /= n as f32;
+        let mut uni = Vec3::ZERO;
+        for y in 0..env.height {
+            let sin_theta = (PI * (y as f32 + 0.5) / env.height as f32).sin();
+            for x in 0..env.width {
+                uni += env.texels[y * env.width + x] * sin_theta;
+            }
+        }
+        uni *= 2.0 * PI * PI / (env.width * env.height) as f32;
+        assert!(
+            (is - uni).abs().max_element() / uni.max_element() < 0.03,
+            "{is} vs {uni}"
+        );
+    }
+
+    #[test]
+    fn cornell_light_is_the_only_emitter() {
+        let lights = TriangleLights::new(&cornell_box());
+        assert_eq!(lights.triangles.len(), 2);
+        let area: f32 = lights
+            .triangles
+            .iter()
+            .map(|t| 0.5 * t.e1.cross(t.e2).length())
+            .sum();
+        // Area pdf of a uniform choice over the light: 1 / area.
+        let pdf = lights.area_pdf(3);
+        assert!((pdf * area - 1.0).abs() < 1e-4, "{pdf} {area}");
+        assert_eq!(lights.area_pdf(0), 0.0);
+        let (_, p, _, _) = lights.sample([0.7, 0.3, 0.9]).unwrap();
+        assert!((p.y - 554.0 / 555.0).abs() < 1e-5);
+    }
+}

@@ -1,0 +1,287 @@
+//! `oxray render`: a physically based path tracer written as oxray programs, over scenes built
+//! with the oxray-util layer (one GAS per mesh, one IAS instance per placement, the hit-group
+//! SBT laid out by the scene).
+//!
+//! Materials follow glTF's metallic-roughness model (Lambert plus GGX), with smooth dielectrics
+//! for transmissive materials, emission, normal maps, and alpha cutouts (MASK) or stochastic
+//! transparency (BLEND) in an any-hit program that both ray types run. Light transport: next-event
+//! estimation on emissive triangles (chosen by power) and on the environment (chosen by
+//! importance), combined with BSDF sampling by multiple importance sampling; Russian roulette.
+//! Emitters emit from both faces. Each launch adds one sample per pixel, so progress is reported
+//! per pass and the result does not depend on the thread count.
+
+pub mod bsdf;
+pub mod lights;
+pub mod output;
+pub mod programs;
+pub mod texture;
+
+use crate::scene::{AlphaMode, Camera, Primitive, SceneDesc};
+use glam::{Mat4, Vec3};
+use lights::{Environment, TriangleLights};
+use oxray::{
+    BuildFlags, DeviceContext, GeometryFlags, HitGroupDesc, OutputBuffer, PipelineCompileOptions,
+    PipelineLinkOptions, ProgramGroup, Transform,
+};
+use oxray_util::{
+    GasDesc, Geometry, GeometryInstance, Material, Scene, ScenePipeline, UtilInstance,
+};
+use programs::{CameraFrame, Params, RAY_TYPES};
+use thiserror::Error;
+
+pub use output::Image;
+
+/// Render settings.
+#[derive(Clone, Debug)]
+pub struct RenderOptions {
+    /// Image width in pixels.
+    pub width: u32,
+    /// Image height in pixels.
+    pub height: u32,
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Path vertices at most.
+    pub max_depth: u32,
+    /// Which of the scene's cameras to use; `None`: the first, or a camera framing the scene.
+    pub camera: Option<usize>,
+}
+
+/// Why a render failed.
+#[derive(Debug, Error)]
+pub enum RenderError {
+    /// The scene cannot be rendered as given.
+    #[error("{0}")]
+    Scene(String),
+    /// Building acceleration structures or the SBT failed.
+    #[error(transparent)]
+    Build(#[from] oxray_util::UtilError),
+    /// Creating or launching the pipeline failed.
+    #[error(transparent)]
+    Launch(#[from] oxray_util::SceneLaunchError),
+    /// A program could not be registered.
+    #[error(transparent)]
+    Pipeline(#[from] oxray::PipelineError),
+}
+
+/// Where the camera looks from, for `opts`: the scene's camera, else one that frames the
+/// scene's bounds from the front, slightly above and to the right.
+pub fn camera_frame(scene: &SceneDesc, opts: &RenderOptions) -> Result<CameraFrame, RenderError> {
+    let camera = match opts.camera {
+        Some(i) => *scene.cameras.get(i).ok_or_else(|| {
+            RenderError::Scene(format!(
+                "camera {i} does not exist (the scene has {})",
+                scene.cameras.len()
+            ))
+        })?,
+        None => match scene.cameras.first() {
+            Some(c) => *c,
+            None => framing_camera(scene)?,
+        },
+    };
+    let m = camera.to_world;
+    let origin = m.transform_point3(Vec3::ZERO);
+    let forward = m.transform_vector3(-Vec3::Z).normalize_or_zero();
+    let up0 = m.transform_vector3(Vec3::Y);
+    let right = forward.cross(up0).normalize_or_zero();
+    let up = right.cross(forward);
+    if !origin.is_finite() || right == Vec3::ZERO || !(camera.yfov > 0.0 && camera.yfov < 3.1) {
+        return Err(RenderError::Scene(
+            "the scene's camera is degenerate".into(),
+        ));
+    }
+    let half_h = (camera.yfov * 0.5).tan();
+    let half_w = half_h * opts.width as f32 / opts.height as f32;
+    Ok(CameraFrame {
+        origin,
+        forward,
+        right: right * half_w,
+        up: up * half_h,
+    })
+}
+
+fn framing_camera(scene: &SceneDesc) -> Result<Camera, RenderError> {
+    let (lo, hi) = scene
+        .bounds()
+        .ok_or_else(|| RenderError::Scene("the scene has no finite geometry".into()))?;
+    let centre = (lo + hi) * 0.5;
+    let radius = ((hi - lo) * 0.5).length().max(1e-6);
+    let yfov = 40f32.to_radians();
+    let dir = Vec3::new(0.35, 0.3, 1.0).normalize();
+    Ok(Camera::look_at(
+        centre + dir * (radius / (yfov * 0.5).sin() * 1.05),
+        centre,
+        yfov,
+    ))
+}
+
+fn transform_of(m: &Mat4) -> Option<Transform> {
+    let c = m.to_cols_array_2d();
+    let rows: [f32; 12] = std::array::from_fn(|i| c[i % 4][i / 4]);
+    let t = Transform(rows);
+    (rows.iter().all(|x| x.is_finite()) && m.determinant().abs() > 1e-30).then_some(t)
+}
+
+/// Renders `scene` with the environment `env`; `progress` is called after each pass with the
+/// number of samples done. Returns the mean radiance per pixel, linear RGB.
+pub fn render(
+    scene: &SceneDesc,
+    env: &Environment,
+    opts: &RenderOptions,
+    mut progress: impl FnMut(u32),
+) -> Result<Image, RenderError> {
+    scene.validate().map_err(RenderError::Scene)?;
+    let camera = camera_frame(scene, opts)?;
+    // Everything the launch parameters borrow outlives the scene that holds the programs.
+    let prims: Vec<&Primitive> = scene
+        .meshes
+        .iter()
+        .flat_map(|m| m.primitives.iter().filter(|p| !p.triangles.is_empty()))
+        .collect();
+    let lights = TriangleLights::new(scene);
+    let accum = OutputBuffer::new(opts.width as usize * opts.height as usize);
+    let module = programs::module()?;
+    let radiance_opaque = ProgramGroup::hit_group(HitGroupDesc {
+        closest_hit: Some((&module, "__closesthit__radiance")),
+        ..Default::default()
+    })?;
+    let radiance_alpha = ProgramGroup::hit_group(HitGroupDesc {
+        closest_hit: Some((&module, "__closesthit__radiance")),
+        any_hit: Some((&module, "__anyhit__alpha")),
+        ..Default::default()
+    })?;
+    // Shadow rays end at the first opaque hit and need no program there.
+    let shadow_opaque = ProgramGroup::hit_group(HitGroupDesc::default())?;
+    let shadow_alpha = ProgramGroup::hit_group(HitGroupDesc {
+        any_hit: Some((&module, "__anyhit__alpha")),
+        ..Default::default()
+    })?;
+
+    let mut util: Scene<Params> = Scene::new();
+    let mats: Vec<_> = scene
+        .materials
+        .iter()
+        .enumerate()
+        .map(|(i, m)| {
+            let groups = if m.alpha_mode == AlphaMode::Opaque {
+                vec![Some(radiance_opaque.clone()), Some(shadow_opaque.clone())]
+            } else {
+                vec![Some(radiance_alpha.clone()), Some(shadow_alpha.clone())]
+            };
+            util.add_material(Material::new(groups, i as u32))
+        })
+        .collect();
+    let mut next_prim = 0u32;
+    let mut gas_of_mesh = Vec::with_capacity(scene.meshes.len());
+    for mesh in &scene.meshes {
+        let mut children = Vec::new();
+        for prim in mesh.primitives.iter().filter(|p| !p.triangles.is_empty()) {
+            let m = prim.material as usize;
+            let flags = if scene.materials[m].alpha_mode == AlphaMode::Opaque {
+                GeometryFlags::DISABLE_ANYHIT
+            } else {
+                GeometryFlags::REQUIRE_SINGLE_ANYHIT_CALL
+            };
+            let geom = GeometryInstance::new(
+                Geometry::Triangles {
+                    vertices: prim.positions.clone(),
+                    indices: prim.triangles.clone(),
+                },
+                1,
+            )
+            .material(0, 0, mats[m])
+            .flags(0, flags)
+            .user_data(next_prim);
+            next_prim += 1;
+            children.push(util.add_geometry(geom));
+        }
+        gas_of_mesh.push(
+            (!children.is_empty()).then(|| util.add_gas(GasDesc::new(children, vec![RAY_TYPES]))),
+        );
+    }
+    let mut instances = Vec::new();
+    for (i, inst) in scene.instances.iter().enumerate() {
+        let Some(gas) = gas_of_mesh[inst.mesh as usize] else {
+            continue;
+        };
+        let Some(transform) = transform_of(&inst.transform) else {
+            // A singular or non-finite placement cannot be traced; such an instance has no
+            // visible surface anyway.
+            continue;
+        };
+        let mut u = UtilInstance::new(gas, 0);
+        u.transform = transform;
+        u.instance_id = i as u32 & 0x0FFF_FFFF;
+        instances.push(u);
+    }
+    if instances.is_empty() {
+        return Err(RenderError::Scene(
+            "the scene has no visible instance".into(),
+        ));
+    }
+    // One untransformed instance (an OBJ or PLY file, the Cornell box) is traced as its GAS:
+    // the instance level would only add a transform per ray. Its SBT offset is 0 either way,
+    // as the scene's only chunk starts the hit-group table.
+    let single = (instances.len() == 1 && instances[0].transform == Transform::IDENTITY)
+        .then(|| instances[0].gas);
+    let ias = util.add_ias(instances, BuildFlags::PREFER_FAST_TRACE);
+    util.rebuild_dirty()?;
+    let handle = match single {
+        Some(gas) => util.gas_handle(gas),
+        None => util.ias_handle(ias),
+    }
+    .ok_or_else(|| RenderError::Scene("the scene could not be built".into()))?;
+
+    let p_env = match (lights.is_empty(), env.is_black()) {
+        (_, true) => 0.0,
+        (true, false) => 1.0,
+        (false, false) => 0.5,
+    };
+    let eps = scene
+        .bounds()
+        .map_or(1e-4, |(lo, hi)| (hi - lo).max_element() * 1e-5)
+        .max(1e-7);
+    let pipeline = ScenePipeline::new(
+        &DeviceContext::new(),
+        PipelineCompileOptions {
+            num_payload_values: programs::WORDS as u32,
+            ..Default::default()
+        },
+        PipelineLinkOptions { max_trace_depth: 2 },
+        ProgramGroup::raygen(&module, "__raygen__camera")?,
+        vec![
+            ProgramGroup::miss(Some((&module, "__miss__environment")))?,
+            ProgramGroup::miss(Some((&module, "__miss__shadow")))?,
+        ],
+    );
+    let max_depth = opts.max_depth.max(1);
+    for sample in 0..opts.spp {
+        let params = Params {
+            accum: &accum,
+            handle: handle.clone(),
+            scene,
+            prims: &prims,
+            lights: &lights,
+            env,
+            p_env,
+            camera,
+            sample,
+            max_depth,
+            eps,
+        };
+        pipeline.launch(&mut util, &params, opts.width, opts.height, 1)?;
+        progress(sample + 1);
+    }
+    let pixels = accum
+        .to_vec()
+        .into_iter()
+        .map(|[r, g, b, n]| {
+            let k = 1.0 / n.max(1.0);
+            [r * k, g * k, b * k, 1.0]
+        })
+        .collect();
+    Ok(Image {
+        width: opts.width,
+        height: opts.height,
+        pixels,
+    })
+}

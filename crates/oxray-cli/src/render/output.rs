@@ -1,0 +1,127 @@
+//! Rendered images and their files: PNG (tone-mapped sRGB) and OpenEXR (linear).
+
+use std::path::Path;
+
+/// A linear RGBA image, row-major from the top row.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear radiance; alpha is 1.
+    pub pixels: Vec<[f32; 4]>,
+}
+
+/// The ACES filmic curve (Narkowicz's fit): keeps highlights from clipping harshly.
+fn tone_map(x: f32) -> f32 {
+    let x = x.max(0.0);
+    ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0)
+}
+
+fn srgb_encode(x: f32) -> u8 {
+    let s = if x <= 0.0031308 {
+        12.92 * x
+    } else {
+        1.055 * x.powf(1.0 / 2.4) - 0.055
+    };
+    (s.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
+impl Image {
+    /// The image as tone-mapped 8-bit sRGB RGBA.
+    pub fn to_srgb8(&self) -> Vec<u8> {
+        self.pixels
+            .iter()
+            .flat_map(|p| {
+                [
+                    srgb_encode(tone_map(p[0])),
+                    srgb_encode(tone_map(p[1])),
+                    srgb_encode(tone_map(p[2])),
+                    255,
+                ]
+            })
+            .collect()
+    }
+
+    /// Writes the image; the extension picks the format: `.exr` is linear half-float-free
+    /// 32-bit RGBA, anything else a tone-mapped sRGB PNG.
+    pub fn save(&self, path: &Path) -> Result<(), String> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase());
+        let name = path.display();
+        match ext.as_deref() {
+            Some("exr") => self
+                .write_exr(path)
+                .map_err(|e| format!("cannot write {name}: {e}")),
+            Some("png") => self
+                .write_png(path)
+                .map_err(|e| format!("cannot write {name}: {e}")),
+            _ => Err(format!(
+                "cannot write {name}: unknown image format (expected .png or .exr)"
+            )),
+        }
+    }
+
+    fn write_png(&self, path: &Path) -> Result<(), Box<dyn std::error::Error>> {
+        let file = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut enc = png::Encoder::new(file, self.width, self.height);
+        enc.set_color(png::ColorType::Rgba);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.write_header()?.write_image_data(&self.to_srgb8())?;
+        Ok(())
+    }
+
+    fn write_exr(&self, path: &Path) -> Result<(), Box<dyn std::error::Error>> {
+        let w = self.width as usize;
+        exr::prelude::write_rgba_file(path, w, self.height as usize, |x, y| {
+            let p = self.pixels[y * w + x];
+            (p[0], p[1], p[2], p[3])
+        })?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tone_curve_is_monotonic_and_bounded() {
+        let mut last = 0.0;
+        for i in 0..1000 {
+            let y = tone_map(i as f32 * 0.05);
+            assert!(y >= last && y <= 1.0);
+            last = y;
+        }
+        assert_eq!(tone_map(0.0), 0.0);
+        assert_eq!(srgb_encode(1.0), 255);
+    }
+
+    #[test]
+    fn exr_round_trips_linear_values() {
+        let img = Image {
+            width: 3,
+            height: 2,
+            pixels: (0..6).map(|i| [i as f32 * 1.5, 0.25, 100.0, 1.0]).collect(),
+        };
+        let path = std::env::temp_dir().join(format!("oxray-exr-{}.exr", std::process::id()));
+        img.save(&path).unwrap();
+        let back = exr::prelude::read_first_rgba_layer_from_file(
+            &path,
+            |res, _| vec![[0f32; 4]; res.width() * res.height()],
+            |px: &mut Vec<[f32; 4]>, pos, (r, g, b, a): (f32, f32, f32, f32)| {
+                px[pos.y() * 3 + pos.x()] = [r, g, b, a];
+            },
+        )
+        .unwrap();
+        std::fs::remove_file(&path).ok();
+        assert_eq!(back.layer_data.channel_data.pixels, img.pixels);
+        assert!(img
+            .save(Path::new("x.bmp"))
+            .unwrap_err()
+            .contains("unknown image format"));
+    }
+}

@@ -1,0 +1,496 @@
+//! The path tracer's oxray programs: a ray-generation program that walks each path, closest-hit
+//! programs that shade (emission with multiple importance sampling, next-event estimation on
+//! emissive triangles and the environment through the shadow ray type, BSDF sampling, Russian
+//! roulette), an any-hit program for alpha cutouts (both ray types) and the miss programs.
+
+use super::bsdf::{hash, Rng, Surface};
+use super::lights::{Environment, TriangleLights};
+use super::texture::sample;
+use crate::scene::{AlphaMode, MaterialDesc, Primitive, SceneDesc, TextureRef};
+use glam::{Vec2, Vec3, Vec4};
+use oxray::{
+    AnyHitCtx, ClosestHitCtx, Module, OutputBuffer, ProgramResult, RayFlags, TraceRay,
+    TraversableHandle,
+};
+use oxray_util::HitGroupData;
+
+/// Ray type of camera and bounce rays.
+pub const RADIANCE: u32 = 0;
+/// Ray type of visibility rays towards lights.
+pub const SHADOW: u32 = 1;
+/// Ray types per material.
+pub const RAY_TYPES: u32 = 2;
+
+/// A pinhole camera as the ray-generation program uses it.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraFrame {
+    /// Eye position.
+    pub origin: Vec3,
+    /// Unit view direction.
+    pub forward: Vec3,
+    /// Right, scaled by the half-width of the image plane at distance 1.
+    pub right: Vec3,
+    /// Up, scaled by the half-height of the image plane at distance 1.
+    pub up: Vec3,
+}
+
+/// Launch parameters (one launch per sample pass).
+#[derive(Clone)]
+pub struct Params<'a> {
+    /// Radiance sums per pixel; the alpha channel counts samples.
+    pub accum: &'a OutputBuffer<[f32; 4]>,
+    /// The scene's root.
+    pub handle: TraversableHandle,
+    /// The scene (materials, textures, vertex attributes).
+    pub scene: &'a SceneDesc,
+    /// Primitive per geometry instance (its user value indexes this).
+    pub prims: &'a [&'a Primitive],
+    /// Emissive triangles.
+    pub lights: &'a TriangleLights,
+    /// The environment.
+    pub env: &'a Environment,
+    /// Probability that next-event estimation samples the environment rather than triangles.
+    pub p_env: f32,
+    /// The camera.
+    pub camera: CameraFrame,
+    /// Index of this pass's sample.
+    pub sample: u32,
+    /// Path length limit.
+    pub max_depth: u32,
+    /// Distance by which new rays leave a surface, along its normal.
+    pub eps: f32,
+}
+
+/// The radiance payload. The random state is word 0 in both ray types so that the any-hit
+/// program can draw from it.
+#[repr(C)]
+#[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct PathState {
+    seed: u32,
+    done: u32,
+    depth: u32,
+    /// Solid-angle pdf of the BSDF sample that made this ray; 0 for camera rays and specular
+    /// bounces (emission they find is counted in full).
+    pdf: f32,
+    radiance: [f32; 3],
+    throughput: [f32; 3],
+    origin: [f32; 3],
+    direction: [f32; 3],
+}
+
+/// Payload words of a radiance ray.
+pub const WORDS: usize = std::mem::size_of::<PathState>() / 4;
+
+fn load(words: &[u32]) -> PathState {
+    bytemuck::pod_read_unaligned(bytemuck::cast_slice(&words[..WORDS]))
+}
+
+fn store(s: &PathState, mut set: impl FnMut(usize, u32)) {
+    for (i, &w) in bytemuck::cast_slice::<PathState, u32>(std::slice::from_ref(s))
+        .iter()
+        .enumerate()
+    {
+        set(i, w);
+    }
+}
+
+fn power_heuristic(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a2 + b2 > 0.0 {
+        a2 / (a2 + b2)
+    } else {
+        0.0
+    }
+}
+
+fn tex(p: &Params, r: Option<TextureRef>, uv: Vec2, srgb: bool) -> Vec4 {
+    match r.and_then(|r| p.scene.textures.get(r.texture as usize)) {
+        Some(t) => sample(t, uv, srgb),
+        None => Vec4::ONE,
+    }
+}
+
+/// Emitted radiance of `m` at `uv`.
+fn emission(p: &Params, m: &MaterialDesc, uv: Vec2) -> Vec3 {
+    Vec3::from(m.emissive) * tex(p, m.emissive_texture, uv, true).truncate()
+}
+
+fn interpolate<T: Copy + Into<V>, V>(attr: &[T], t: [u32; 3], b: [f32; 3]) -> Option<V>
+where
+    V: std::ops::Mul<f32, Output = V> + std::ops::Add<Output = V>,
+{
+    if attr.is_empty() {
+        return None;
+    }
+    let a = |i: usize| -> V { attr[t[i] as usize].into() };
+    Some(a(0) * b[0] + a(1) * b[1] + a(2) * b[2])
+}
+
+/// Coverage in [0, 1] of an alpha-tested material at a hit.
+fn alpha_at(
+    p: &Params,
+    m: &MaterialDesc,
+    prim: &Primitive,
+    prim_index: u32,
+    bary: [f32; 2],
+) -> f32 {
+    let Some(&t) = prim.triangles.get(prim_index as usize) else {
+        return 1.0;
+    };
+    let b = [1.0 - bary[0] - bary[1], bary[0], bary[1]];
+    let uv: Vec2 = interpolate(&prim.uvs, t, b).unwrap_or(Vec2::ZERO);
+    m.base_color[3] * tex(p, m.base_color_texture, uv, true).w
+}
+
+/// `__anyhit__alpha`: cutouts for MASK materials, stochastic transparency for BLEND ones.
+fn any_hit_alpha(ctx: &mut AnyHitCtx<Params>) -> ProgramResult {
+    let p = ctx.params();
+    let data = ctx.sbt_data::<HitGroupData>().unwrap_or_default();
+    let (Some(m), Some(prim)) = (
+        p.scene.materials.get(data.material as usize),
+        p.prims.get(data.geometry as usize),
+    ) else {
+        return Ok(());
+    };
+    let alpha = alpha_at(
+        p,
+        m,
+        prim,
+        ctx.primitive_index(),
+        ctx.triangle_barycentrics(),
+    );
+    let keep = match m.alpha_mode {
+        AlphaMode::Opaque => true,
+        AlphaMode::Mask { cutoff } => alpha >= cutoff,
+        AlphaMode::Blend => {
+            // One decision per (path state, primitive, instance): the same surface point is
+            // either in or out for this ray, whatever the traversal order.
+            let h = hash(ctx.payload(0) ^ hash(ctx.primitive_index() ^ hash(ctx.instance_index())));
+            alpha > h as f32 * (1.0 / 4294967296.0)
+        }
+    };
+    if keep {
+        Ok(())
+    } else {
+        ctx.ignore_intersection()
+    }
+}
+
+struct Shading {
+    point: Vec3,
+    /// Geometric normal facing the incoming ray.
+    ng: Vec3,
+    /// Shading normal, in the hemisphere of `ng`.
+    ns: Vec3,
+    uv: Vec2,
+    /// Whether the ray hit the front face (the side the winding order makes outward).
+    front: bool,
+}
+
+fn shading(ctx: &ClosestHitCtx<Params>, m: &MaterialDesc, prim: &Primitive) -> Shading {
+    let p = ctx.params();
+    let dir = ctx.world_ray_direction();
+    let point = ctx.world_ray_origin() + dir * ctx.ray_tmax();
+    let [a, b, c] = ctx.triangle_vertex_data();
+    let ng = ctx
+        .transform_normal_to_world((b - a).cross(c - a))
+        .normalize_or(Vec3::Y);
+    let front = ng.dot(dir) < 0.0;
+    let ng = if front { ng } else { -ng };
+    let t = prim.triangles.get(ctx.primitive_index() as usize).copied();
+    let [b1, b2] = ctx.triangle_barycentrics();
+    let bary = [1.0 - b1 - b2, b1, b2];
+    let uv: Vec2 = t
+        .and_then(|t| interpolate(&prim.uvs, t, bary))
+        .unwrap_or(Vec2::ZERO);
+    let mut ns = t
+        .and_then(|t| interpolate::<[f32; 3], Vec3>(&prim.normals, t, bary))
+        .map(|n| ctx.transform_normal_to_world(n).normalize_or(ng))
+        .unwrap_or(ng);
+    if ns.dot(ng) < 0.0 {
+        ns = -ns;
+    }
+    if let (Some(nt), Some(t)) = (m.normal_texture, t) {
+        if !prim.uvs.is_empty() {
+            // Tangent frame from the triangle's positions and texture coordinates.
+            let uvs = t.map(|i| Vec2::from(prim.uvs[i as usize]));
+            let (d1, d2) = (uvs[1] - uvs[0], uvs[2] - uvs[0]);
+            let det = d1.x * d2.y - d2.x * d1.y;
+            if det.abs() > 1e-12 {
+                let (e1, e2) = (b - a, c - a);
+                let tangent = ctx.transform_vector_to_world((e1 * d2.y - e2 * d1.y) / det);
+                let tangent = (tangent - ns * ns.dot(tangent)).normalize_or_zero();
+                if tangent != Vec3::ZERO {
+                    let mut bitangent = ns.cross(tangent);
+                    if det < 0.0 {
+                        bitangent = -bitangent;
+                    }
+                    let n = tex(p, Some(nt), uv, false).truncate() * 2.0 - Vec3::ONE;
+                    let n = Vec3::new(n.x * m.normal_scale, n.y * m.normal_scale, n.z);
+                    let mapped = (tangent * n.x + bitangent * n.y + ns * n.z).normalize_or(ns);
+                    if mapped.dot(ng) > 0.0 {
+                        ns = mapped;
+                    }
+                }
+            }
+        }
+    }
+    if ns.dot(-dir) <= 0.0 {
+        ns = ng;
+    }
+    Shading {
+        point,
+        ng,
+        ns,
+        uv,
+        front,
+    }
+}
+
+fn offset(p: &Params, s: &Shading, dir: Vec3) -> Vec3 {
+    let scale = p.eps + s.point.abs().max_element() * 1e-6;
+    if dir.dot(s.ng) >= 0.0 {
+        s.point + s.ng * scale
+    } else {
+        s.point - s.ng * scale
+    }
+}
+
+/// Traces a shadow ray; true when nothing blocks it.
+fn visible(
+    ctx: &ClosestHitCtx<Params>,
+    seed: u32,
+    from: Vec3,
+    dir: Vec3,
+    tmax: f32,
+) -> Result<bool, oxray::Interrupt> {
+    let p = ctx.params();
+    let mut words = [seed, 0u32];
+    let ray = TraceRay::new(&p.handle, from, dir)
+        .interval(0.0, tmax)
+        .flags(RayFlags::TERMINATE_ON_FIRST_HIT | RayFlags::DISABLE_CLOSESTHIT)
+        .sbt(SHADOW, RAY_TYPES, SHADOW);
+    ctx.trace(&ray, &mut words)?;
+    Ok(words[1] != 0)
+}
+
+/// `__closesthit__radiance`: one path vertex.
+fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
+    let mut s = load(ctx.payload_words());
+    let p = ctx.params();
+    let data = ctx.sbt_data::<HitGroupData>().unwrap_or_default();
+    let (Some(m), Some(prim)) = (
+        p.scene.materials.get(data.material as usize),
+        p.prims.get(data.geometry as usize),
+    ) else {
+        s.done = 1;
+        store(&s, |i, w| ctx.set_payload(i, w));
+        return Ok(());
+    };
+    let sh = shading(ctx, m, prim);
+    let dir = ctx.world_ray_direction();
+    let wo = -dir;
+    let mut rng = Rng(s.seed);
+    let mut thr = Vec3::from(s.throughput);
+    let mut rad = Vec3::from(s.radiance);
+
+    // Emission, weighted against the light sample that could have found it.
+    // Single-sided materials emit from their front face only (the side glTF's winding order and
+    // the instance transform's handedness make outward).
+    let le = if sh.front || m.double_sided {
+        emission(p, m, sh.uv)
+    } else {
+        Vec3::ZERO
+    };
+    if le != Vec3::ZERO {
+        let w = if s.pdf > 0.0 {
+            let t = ctx.ray_tmax();
+            let cos_l = sh.ng.dot(wo).abs().max(1e-6);
+            let light_pdf = (1.0 - p.p_env) * p.lights.area_pdf(data.material) * t * t / cos_l;
+            power_heuristic(s.pdf, light_pdf)
+        } else {
+            1.0
+        };
+        rad += thr * le * w;
+    }
+    s.depth += 1;
+    if s.depth >= p.max_depth {
+        s.done = 1;
+    } else {
+        let base_tex = tex(p, m.base_color_texture, sh.uv, true);
+        let mr = tex(p, m.metallic_roughness_texture, sh.uv, false);
+        let base = Vec3::from_slice(&m.base_color[..3]) * base_tex.truncate();
+        let surf = Surface::new(
+            base,
+            m.metallic * mr.z,
+            m.roughness * mr.y,
+            m.transmission,
+            m.ior,
+        );
+
+        if !surf.dielectric {
+            rad += thr * next_event(ctx, &mut rng, &surf, &sh, wo)?;
+        }
+        match surf.sample(
+            sh.ns,
+            wo,
+            sh.front,
+            [rng.uniform(), rng.uniform(), rng.uniform()],
+        ) {
+            Some(b) if surf.dielectric || b.wi.dot(sh.ng) > 0.0 => {
+                thr *= b.weight;
+                s.pdf = b.pdf;
+                s.origin = offset(p, &sh, b.wi).to_array();
+                s.direction = b.wi.to_array();
+                if s.depth >= 2 {
+                    let q = thr.max_element().clamp(0.05, 1.0);
+                    if rng.uniform() >= q {
+                        s.done = 1;
+                    } else {
+                        thr /= q;
+                    }
+                }
+                if !thr.is_finite() {
+                    s.done = 1;
+                }
+            }
+            _ => s.done = 1,
+        }
+    }
+    s.seed = rng.0;
+    s.radiance = rad.to_array();
+    s.throughput = thr.to_array();
+    store(&s, |i, w| ctx.set_payload(i, w));
+    Ok(())
+}
+
+/// One light sample (a triangle or the environment) with its MIS weight against BSDF sampling.
+fn next_event(
+    ctx: &ClosestHitCtx<Params>,
+    rng: &mut Rng,
+    surf: &Surface,
+    sh: &Shading,
+    wo: Vec3,
+) -> Result<Vec3, oxray::Interrupt> {
+    let p = ctx.params();
+    let pick = rng.uniform();
+    let u = [rng.uniform(), rng.uniform(), rng.uniform()];
+    if pick < p.p_env {
+        let Some((wi, l, pdf)) = p.env.sample([u[0], u[1]]) else {
+            return Ok(Vec3::ZERO);
+        };
+        let pdf = pdf * p.p_env;
+        let (f, bsdf_pdf) = surf.eval(sh.ns, wo, wi);
+        if f == Vec3::ZERO || wi.dot(sh.ng) <= 0.0 {
+            return Ok(Vec3::ZERO);
+        }
+        if !visible(ctx, rng.0, offset(p, sh, wi), wi, f32::INFINITY)? {
+            return Ok(Vec3::ZERO);
+        }
+        return Ok(f * l * (power_heuristic(pdf, bsdf_pdf) / pdf));
+    }
+    let Some((tri, lp, [b1, b2], area_pdf)) = p.lights.sample(u) else {
+        return Ok(Vec3::ZERO);
+    };
+    let Some(lm) = p.scene.materials.get(tri.material as usize) else {
+        return Ok(Vec3::ZERO);
+    };
+    let from = offset(p, sh, lp - sh.point);
+    let to = lp - from;
+    let dist = to.length();
+    if dist.is_nan() || dist <= 0.0 {
+        return Ok(Vec3::ZERO);
+    }
+    let wi = to / dist;
+    let ln = tri.normal;
+    let cos_l = if tri.two_sided {
+        ln.dot(wi).abs()
+    } else {
+        -ln.dot(wi)
+    };
+    let (f, bsdf_pdf) = surf.eval(sh.ns, wo, wi);
+    if f == Vec3::ZERO || wi.dot(sh.ng) <= 0.0 || cos_l <= 1e-6 {
+        return Ok(Vec3::ZERO);
+    }
+    let uv = tri.uv[0] * (1.0 - b1 - b2) + tri.uv[1] * b1 + tri.uv[2] * b2;
+    let le = emission(p, lm, uv);
+    let pdf = (1.0 - p.p_env) * area_pdf * dist * dist / cos_l;
+    if le == Vec3::ZERO || pdf.is_nan() || pdf <= 0.0 {
+        return Ok(Vec3::ZERO);
+    }
+    // Stop short of the light itself.
+    if !visible(ctx, rng.0, from, wi, dist * (1.0 - 1e-4) - p.eps)? {
+        return Ok(Vec3::ZERO);
+    }
+    Ok(f * le * (power_heuristic(pdf, bsdf_pdf) / pdf))
+}
+
+/// The module with every program of the path tracer.
+pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
+    Module::<Params>::new()
+        .raygen("__raygen__camera", |ctx| {
+            let [x, y, _] = ctx.launch_index();
+            let [w, h, _] = ctx.launch_dimensions();
+            let p = ctx.params();
+            let pixel = y * w + x;
+            let mut rng = Rng::new(pixel, p.sample, 0x5eed);
+            let (jx, jy) = (rng.uniform(), rng.uniform());
+            let sx = 2.0 * (x as f32 + jx) / w as f32 - 1.0;
+            let sy = 1.0 - 2.0 * (y as f32 + jy) / h as f32;
+            let c = &p.camera;
+            let dir = (c.forward + c.right * sx + c.up * sy).normalize();
+            let mut s = PathState {
+                seed: rng.0,
+                throughput: [1.0; 3],
+                origin: c.origin.to_array(),
+                direction: dir.to_array(),
+                ..Default::default()
+            };
+            // Each trace either ends the path or adds a vertex, and vertices are capped.
+            for _ in 0..=p.max_depth {
+                let mut words = [0u32; WORDS];
+                store(&s, |i, w| words[i] = w);
+                let ray = TraceRay::new(&p.handle, s.origin.into(), s.direction.into())
+                    .sbt(RADIANCE, RAY_TYPES, RADIANCE);
+                ctx.trace(&ray, &mut words)?;
+                s = load(&words);
+                if s.done != 0 {
+                    break;
+                }
+            }
+            let r = Vec3::from(s.radiance);
+            // A non-finite sample (a degenerate input the guards missed) is dropped rather than
+            // poisoning the pixel; the count still advances, so it reads as black.
+            let r = if r.is_finite() { r } else { Vec3::ZERO };
+            let old = p.accum.read(pixel as usize).unwrap_or([0.0; 4]);
+            p.accum.write(
+                pixel as usize,
+                [old[0] + r.x, old[1] + r.y, old[2] + r.z, old[3] + 1.0],
+            );
+            Ok(())
+        })?
+        .closest_hit("__closesthit__radiance", closest_hit)?
+        .any_hit("__anyhit__alpha", any_hit_alpha)?
+        .miss("__miss__environment", |ctx| {
+            let mut s = load(ctx.payload_words());
+            let p = ctx.params();
+            let d = ctx.world_ray_direction();
+            let l = p.env.radiance(d);
+            if l != Vec3::ZERO {
+                let w = if s.pdf > 0.0 {
+                    power_heuristic(s.pdf, p.p_env * p.env.pdf(d))
+                } else {
+                    1.0
+                };
+                let r = Vec3::from(s.radiance) + Vec3::from(s.throughput) * l * w;
+                s.radiance = r.to_array();
+            }
+            s.done = 1;
+            store(&s, |i, w| ctx.set_payload(i, w));
+            Ok(())
+        })?
+        .miss("__miss__shadow", |ctx| {
+            ctx.set_payload(1, 1);
+            Ok(())
+        })
+}

@@ -1,0 +1,904 @@
+//! The glTF 2.0 loader: `.gltf` files with external or `data:` buffers and images, and `.glb`
+//! files with an embedded binary chunk.
+//!
+//! The `gltf` crate parses and validates the JSON, but some of its accessors index or unwrap
+//! without checking (a GLB header shorter than itself, an accessor with zero elements, an image
+//! with a buffer view and no MIME type, a POSITION accessor index beyond the accessor list).
+//! This loader therefore splits GLB files itself, checks the references that validation reads
+//! unchecked, checks every accessor's bounds, types and sizes before handing it to the crate's
+//! reader, and reads images and cameras from the JSON directly.
+
+use super::{
+    image, AlphaMode, Camera, InstanceDesc, MaterialDesc, MeshDesc, Primitive, SceneDesc,
+    SceneError, Texture, TextureRef, Wrap,
+};
+use ::gltf::json;
+use ::gltf::mesh::{Mode, Semantic};
+use ::gltf::{accessor::DataType, accessor::Dimensions, Accessor, Document};
+use glam::Mat4;
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::path::Path;
+
+/// Elements an accessor without a buffer view may declare: such an accessor is all zeros (plus
+/// sparse values), so its count is not bounded by any data, and a larger count would let a tiny
+/// file ask for gigabytes.
+const MAX_ZERO_FILLED: usize = 1 << 20;
+
+/// Decoded geometry a file may expand to, beyond [`EXPANSION`] times its own size: primitives
+/// that share one accessor each get a copy, so a small file could otherwise ask for unbounded
+/// memory.
+const BASE_BUDGET: usize = 256 << 20;
+
+/// See [`BASE_BUDGET`].
+const EXPANSION: usize = 64;
+
+/// Loads a `.gltf` or `.glb` file: the default scene (or the first, or every root node when the
+/// file has no scenes), its meshes, materials, textures and perspective cameras. Textures that
+/// cannot be read or decoded, unsupported primitive modes and orthographic cameras become
+/// warnings; malformed JSON, missing buffers and out-of-range data are errors.
+pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
+    load_impl(path, true)
+}
+
+/// [`load`], optionally without decoding textures (for callers that only need the geometry; the
+/// materials then have no texture references).
+pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneError> {
+    let name = path.display().to_string();
+    let bytes = std::fs::read(path).map_err(|e| SceneError::Io {
+        path: name.clone(),
+        message: e.to_string(),
+    })?;
+    let malformed = |message: String| SceneError::Malformed {
+        path: name.clone(),
+        message,
+    };
+    let (json_bytes, bin) = if bytes.starts_with(b"glTF") {
+        split_glb(&bytes).map_err(malformed)?
+    } else {
+        (&bytes[..], None)
+    };
+    let root = json::Root::from_slice(json_bytes)
+        .map_err(|e| malformed(format!("invalid glTF JSON: {e}")))?;
+    check_references(&root).map_err(malformed)?;
+    validate_json(&root).map_err(malformed)?;
+    let doc = Document::from_json_without_validation(root);
+    let base = path.parent().unwrap_or(Path::new("."));
+    let buffers = load_buffers(&doc, base, bin, &name)?;
+    let input_size = bytes.len() + buffers.iter().map(Vec::len).sum::<usize>();
+    let mut loader = Loader {
+        name: name.clone(),
+        doc: &doc,
+        buffers: &buffers,
+        budget: BASE_BUDGET.saturating_add(input_size.saturating_mul(EXPANSION)),
+        scene: SceneDesc::default(),
+    };
+    loader.materials(base, textures).map_err(malformed)?;
+    loader.meshes().map_err(malformed)?;
+    loader.nodes().map_err(malformed)?;
+    let scene = loader.scene;
+    scene.validate().map_err(malformed)?;
+    Ok(scene)
+}
+
+/// Splits a GLB file into its JSON chunk and optional binary chunk.
+fn split_glb(b: &[u8]) -> Result<(&[u8], Option<&[u8]>), String> {
+    let word = |o: usize| -> Option<usize> {
+        let s = b.get(o..o.checked_add(4)?)?;
+        Some(u32::from_le_bytes([s[0], s[1], s[2], s[3]]) as usize)
+    };
+    let (Some(version), Some(length)) = (word(4), word(8)) else {
+        return Err(format!(
+            "truncated GLB: {} bytes is shorter than its header",
+            b.len()
+        ));
+    };
+    if version != 2 {
+        return Err(format!("unsupported GLB version {version} (expected 2)"));
+    }
+    if length > b.len() {
+        return Err(format!(
+            "truncated GLB: the header says {length} bytes but the file has {}",
+            b.len()
+        ));
+    }
+    if length < 12 {
+        return Err(format!("bad GLB length {length}"));
+    }
+    let b = &b[..length];
+    let (mut json, mut bin) = (None, None);
+    let mut pos = 12;
+    while pos < length {
+        let (Some(len), Some(ty)) = (word(pos), b.get(pos + 4..pos + 8)) else {
+            return Err(format!(
+                "truncated GLB: chunk header at byte {pos} is cut off"
+            ));
+        };
+        let start = pos + 8;
+        let end = start
+            .checked_add(len)
+            .filter(|&e| e <= length)
+            .ok_or_else(|| {
+                format!("truncated GLB: chunk at byte {pos} ({len} bytes) extends past the end")
+            })?;
+        match ty {
+            b"JSON" if json.is_none() => json = Some(&b[start..end]),
+            b"BIN\0" if json.is_some() && bin.is_none() => bin = Some(&b[start..end]),
+            b"JSON" | b"BIN\0" => return Err(format!("unexpected GLB chunk at byte {pos}")),
+            // Unknown chunk types are skipped, as the specification asks.
+            _ => {}
+        }
+        pos = end;
+    }
+    let json = json.ok_or("GLB has no JSON chunk")?;
+    Ok((json, bin))
+}
+
+/// Checks the references that the `gltf` crate's validation dereferences before checking them.
+fn check_references(root: &json::Root) -> Result<(), String> {
+    for (mi, mesh) in root.meshes.iter().enumerate() {
+        for (pi, prim) in mesh.primitives.iter().enumerate() {
+            for (semantic, index) in &prim.attributes {
+                if index.value() >= root.accessors.len() {
+                    return Err(format!(
+                        "meshes[{mi}].primitives[{pi}].attributes: {} refers to missing accessor {}",
+                        match semantic {
+                            json::validation::Checked::Valid(s) => s.to_string(),
+                            json::validation::Checked::Invalid => "an attribute".into(),
+                        },
+                        index.value()
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Runs the `gltf` crate's validation and reports the first problem. A POSITION accessor without
+/// `min`/`max` is tolerated: the bounds are not needed and many exporters omit them.
+fn validate_json(root: &json::Root) -> Result<(), String> {
+    use json::validation::Validate;
+    let mut errors = Vec::new();
+    root.validate(root, json::Path::new, &mut |path, error| {
+        let path = path().to_string();
+        let bounds = path.ends_with(".min") || path.ends_with(".max");
+        if !(bounds && path.contains("POSITION")) {
+            errors.push(format!("{path}: {error}"));
+        }
+    });
+    match errors.len() {
+        0 => Ok(()),
+        1 => Err(format!("invalid glTF: {}", errors[0])),
+        n => Err(format!(
+            "invalid glTF: {} (and {} more problems)",
+            errors[0],
+            n - 1
+        )),
+    }
+}
+
+/// Reads every buffer: the GLB binary chunk, a `data:` URI or a file next to the glTF file.
+fn load_buffers(
+    doc: &Document,
+    base: &Path,
+    mut bin: Option<&[u8]>,
+    name: &str,
+) -> Result<Vec<Vec<u8>>, SceneError> {
+    let malformed = |message: String| SceneError::Malformed {
+        path: name.to_string(),
+        message,
+    };
+    let mut out = Vec::new();
+    for buffer in doc.buffers() {
+        let i = buffer.index();
+        let data = match buffer.source() {
+            ::gltf::buffer::Source::Bin => bin
+                .take()
+                .ok_or_else(|| {
+                    malformed(format!("buffer {i} refers to a missing GLB binary chunk"))
+                })?
+                .to_vec(),
+            ::gltf::buffer::Source::Uri(uri) => {
+                if let Some(data) = uri.strip_prefix("data:") {
+                    decode_data_uri(data)
+                        .map_err(|e| malformed(format!("buffer {i}: bad data URI ({e})")))?
+                } else {
+                    let file = base.join(uri_path(uri).map_err(|e| {
+                        malformed(format!("buffer {i}: unsupported URI {uri:?} ({e})"))
+                    })?);
+                    std::fs::read(&file).map_err(|e| SceneError::Io {
+                        path: name.to_string(),
+                        message: format!("buffer {i}: cannot read {} ({e})", file.display()),
+                    })?
+                }
+            }
+        };
+        if data.len() < buffer.length() {
+            return Err(malformed(format!(
+                "buffer {i} has {} bytes but its byteLength is {}",
+                data.len(),
+                buffer.length()
+            )));
+        }
+        out.push(data);
+    }
+    Ok(out)
+}
+
+/// Turns a relative URI into a relative path: percent-decoded, without scheme.
+fn uri_path(uri: &str) -> Result<String, String> {
+    if let Some(colon) = uri.find(':') {
+        let scheme = &uri[..colon];
+        // A one-letter "scheme" is a Windows drive letter, not a scheme.
+        if scheme.len() > 1
+            && scheme
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
+        {
+            return Err(format!("the {scheme}: scheme is not supported"));
+        }
+    }
+    let b = uri.as_bytes();
+    let mut out = Vec::with_capacity(b.len());
+    let mut i = 0;
+    while i < b.len() {
+        if b[i] == b'%' {
+            let hex = b
+                .get(i + 1..i + 3)
+                .and_then(|h| std::str::from_utf8(h).ok())
+                .and_then(|h| u8::from_str_radix(h, 16).ok())
+                .ok_or("bad percent escape")?;
+            out.push(hex);
+            i += 3;
+        } else {
+            out.push(b[i]);
+            i += 1;
+        }
+    }
+    String::from_utf8(out).map_err(|_| "the decoded path is not UTF-8".into())
+}
+
+/// Decodes the part of a `data:` URI after the scheme: `[mediatype][;base64],payload`.
+fn decode_data_uri(data: &str) -> Result<Vec<u8>, String> {
+    let (meta, payload) = data.split_once(',').ok_or("no comma")?;
+    if !meta.ends_with(";base64") {
+        return Err("only base64 data URIs are supported".into());
+    }
+    base64(payload)
+}
+
+/// Standard base64 (padding optional, whitespace ignored).
+fn base64(s: &str) -> Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(s.len() / 4 * 3 + 3);
+    let (mut acc, mut bits) = (0u32, 0u32);
+    for c in s.bytes() {
+        let v = match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' | b'-' => 62,
+            b'/' | b'_' => 63,
+            b'=' => break,
+            c if c.is_ascii_whitespace() => continue,
+            c => return Err(format!("invalid base64 character {:?}", c as char)),
+        };
+        acc = (acc << 6) | v as u32;
+        bits += 6;
+        if bits >= 8 {
+            bits -= 8;
+            out.push((acc >> bits) as u8);
+            acc &= (1 << bits) - 1;
+        }
+    }
+    Ok(out)
+}
+
+/// The accessor layouts a semantic accepts.
+#[derive(Clone, Copy)]
+enum Kind {
+    /// POSITION, NORMAL: VEC3 of FLOAT.
+    Vec3,
+    /// TEXCOORD_n: VEC2 of FLOAT, normalized UNSIGNED_BYTE or normalized UNSIGNED_SHORT.
+    Uv,
+    /// Indices: SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT.
+    Index,
+}
+
+impl Kind {
+    fn accepts(self, dims: Dimensions, ty: DataType) -> bool {
+        match self {
+            Kind::Vec3 => dims == Dimensions::Vec3 && ty == DataType::F32,
+            Kind::Uv => {
+                dims == Dimensions::Vec2
+                    && matches!(ty, DataType::F32 | DataType::U8 | DataType::U16)
+            }
+            Kind::Index => {
+                dims == Dimensions::Scalar
+                    && matches!(ty, DataType::U8 | DataType::U16 | DataType::U32)
+            }
+        }
+    }
+
+    fn describe(self) -> &'static str {
+        match self {
+            Kind::Vec3 => "VEC3 of FLOAT",
+            Kind::Uv => "VEC2 of FLOAT, UNSIGNED_BYTE or UNSIGNED_SHORT",
+            Kind::Index => "SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT",
+        }
+    }
+
+    /// Bytes one element takes once decoded.
+    fn decoded_size(self) -> usize {
+        match self {
+            Kind::Vec3 => 12,
+            Kind::Uv => 8,
+            Kind::Index => 4,
+        }
+    }
+}
+
+/// Where an accessor's data lives, after checking.
+enum Layout {
+    /// The crate's reader can read it: every byte it touches is inside its buffer.
+    Readable,
+    /// No buffer view and no sparse values: `count` zeros.
+    Zeros,
+}
+
+struct Loader<'a> {
+    name: String,
+    doc: &'a Document,
+    buffers: &'a [Vec<u8>],
+    /// Bytes of decoded geometry still allowed.
+    budget: usize,
+    scene: SceneDesc,
+}
+
+impl Loader<'_> {
+    fn warn(&mut self, message: String) {
+        self.scene
+            .warnings
+            .push(format!("{}: {message}", self.name));
+    }
+
+    /// Checks that `range` (relative to the view) of buffer view `view` lies inside its buffer,
+    /// and that elements of `elem` bytes at `stride` fit in it.
+    fn check_view(
+        &self,
+        view: &::gltf::buffer::View,
+        offset: usize,
+        count: usize,
+        elem: usize,
+        what: &str,
+    ) -> Result<(), String> {
+        let buffer_len = self.buffers.get(view.buffer().index()).map_or(0, Vec::len);
+        let view_end = view.offset().checked_add(view.length());
+        if view_end.is_none_or(|e| e > buffer_len) {
+            return Err(format!(
+                "{what}: buffer view {} (bytes {}..+{}) lies outside its {buffer_len}-byte buffer",
+                view.index(),
+                view.offset(),
+                view.length()
+            ));
+        }
+        let stride = view.stride().unwrap_or(elem);
+        if stride < elem {
+            return Err(format!(
+                "{what}: byteStride {stride} is smaller than the {elem}-byte element"
+            ));
+        }
+        let end = count
+            .checked_sub(1)
+            .and_then(|c| c.checked_mul(stride))
+            .and_then(|b| b.checked_add(elem))
+            .and_then(|b| b.checked_add(offset));
+        if end.is_none_or(|e| e > view.length()) {
+            return Err(format!(
+                "{what}: {count} elements at byte offset {offset} do not fit in buffer view {} ({} bytes)",
+                view.index(),
+                view.length()
+            ));
+        }
+        Ok(())
+    }
+
+    /// Checks an accessor's type, bounds and size before the crate's reader touches it, and
+    /// charges its decoded size to the budget.
+    fn check_accessor(&mut self, a: &Accessor, kind: Kind) -> Result<Layout, String> {
+        let what = format!("accessor {}", a.index());
+        if !kind.accepts(a.dimensions(), a.data_type()) {
+            return Err(format!(
+                "{what}: {:?} of {:?} where {} is expected",
+                a.dimensions(),
+                a.data_type(),
+                kind.describe()
+            ));
+        }
+        let count = a.count();
+        if count == 0 {
+            return Err(format!("{what} has no elements"));
+        }
+        match a.view() {
+            Some(view) => self.check_view(&view, a.offset(), count, a.size(), &what)?,
+            None if count > MAX_ZERO_FILLED => {
+                return Err(format!(
+                    "{what}: {count} elements without a buffer view (at most {MAX_ZERO_FILLED})"
+                ))
+            }
+            None => {}
+        }
+        let decoded = count.saturating_mul(kind.decoded_size());
+        if decoded > self.budget {
+            return Err(format!(
+                "{what}: the file expands to more geometry than its size allows"
+            ));
+        }
+        self.budget -= decoded;
+        let Some(sparse) = a.sparse() else {
+            return Ok(if a.view().is_some() {
+                Layout::Readable
+            } else {
+                Layout::Zeros
+            });
+        };
+        let n = sparse.count();
+        if n == 0 || n > count {
+            return Err(format!("{what}: sparse count {n} is not in 1..={count}"));
+        }
+        let indices = sparse.indices();
+        let index_size = indices.index_type().size();
+        self.check_view(
+            &indices.view(),
+            indices.offset(),
+            n,
+            index_size,
+            &format!("{what} sparse indices"),
+        )?;
+        let values = sparse.values();
+        self.check_view(
+            &values.view(),
+            values.offset(),
+            n,
+            a.size(),
+            &format!("{what} sparse values"),
+        )?;
+        Ok(Layout::Readable)
+    }
+
+    fn buffer(&self, b: ::gltf::Buffer) -> Option<&[u8]> {
+        self.buffers.get(b.index()).map(Vec::as_slice)
+    }
+
+    fn read_vec3(&mut self, a: &Accessor) -> Result<Vec<[f32; 3]>, String> {
+        match self.check_accessor(a, Kind::Vec3)? {
+            Layout::Zeros => Ok(vec![[0.0; 3]; a.count()]),
+            Layout::Readable => {
+                let it = ::gltf::accessor::Iter::<[f32; 3]>::new(a.clone(), |b| self.buffer(b))
+                    .ok_or_else(|| format!("accessor {} cannot be read", a.index()))?;
+                Ok(it.collect())
+            }
+        }
+    }
+
+    fn read_uv(&mut self, a: &Accessor) -> Result<Vec<[f32; 2]>, String> {
+        use ::gltf::accessor::Iter;
+        let layout = self.check_accessor(a, Kind::Uv)?;
+        if let Layout::Zeros = layout {
+            return Ok(vec![[0.0; 2]; a.count()]);
+        }
+        let err = || format!("accessor {} cannot be read", a.index());
+        let get = |b| self.buffer(b);
+        // Integer texture coordinates are normalized (the only form glTF allows for them).
+        Ok(match a.data_type() {
+            DataType::U8 => Iter::<[u8; 2]>::new(a.clone(), get)
+                .ok_or_else(err)?
+                .map(|[u, v]| [u as f32 / 255.0, v as f32 / 255.0])
+                .collect(),
+            DataType::U16 => Iter::<[u16; 2]>::new(a.clone(), get)
+                .ok_or_else(err)?
+                .map(|[u, v]| [u as f32 / 65535.0, v as f32 / 65535.0])
+                .collect(),
+            _ => Iter::<[f32; 2]>::new(a.clone(), get)
+                .ok_or_else(err)?
+                .collect(),
+        })
+    }
+
+    fn read_indices(&mut self, a: &Accessor) -> Result<Vec<u32>, String> {
+        use ::gltf::accessor::Iter;
+        let layout = self.check_accessor(a, Kind::Index)?;
+        if let Layout::Zeros = layout {
+            return Ok(vec![0; a.count()]);
+        }
+        let err = || format!("accessor {} cannot be read", a.index());
+        let get = |b| self.buffer(b);
+        Ok(match a.data_type() {
+            DataType::U8 => Iter::<u8>::new(a.clone(), get)
+                .ok_or_else(err)?
+                .map(u32::from)
+                .collect(),
+            DataType::U16 => Iter::<u16>::new(a.clone(), get)
+                .ok_or_else(err)?
+                .map(u32::from)
+                .collect(),
+            _ => Iter::<u32>::new(a.clone(), get).ok_or_else(err)?.collect(),
+        })
+    }
+
+    /// Converts every material, decoding the textures they use (in parallel).
+    fn materials(&mut self, base: &Path, textures: bool) -> Result<(), String> {
+        let root = self.doc.as_json();
+        // Texture slots used by the materials, in order, as (material, slot, texture, texCoord).
+        let mut materials = Vec::new();
+        let mut wanted: Vec<usize> = Vec::new();
+        for m in self.doc.materials() {
+            let pbr = m.pbr_metallic_roughness();
+            let refs = [
+                pbr.base_color_texture()
+                    .map(|t| (t.texture().index(), t.tex_coord())),
+                pbr.metallic_roughness_texture()
+                    .map(|t| (t.texture().index(), t.tex_coord())),
+                m.emissive_texture()
+                    .map(|t| (t.texture().index(), t.tex_coord())),
+                m.normal_texture()
+                    .map(|t| (t.texture().index(), t.tex_coord())),
+            ];
+            let mut slots = [None; 4];
+            for (slot, r) in refs.into_iter().enumerate() {
+                let Some((texture, set)) = r else { continue };
+                if set != 0 {
+                    self.warn(format!(
+                        "material {} uses texture coordinate set {set}; only set 0 is supported, so the texture is ignored",
+                        m.index().unwrap_or(0)
+                    ));
+                    continue;
+                }
+                if textures {
+                    slots[slot] = Some(texture);
+                    wanted.push(texture);
+                }
+            }
+            let emissive_strength = m.emissive_strength().unwrap_or(1.0);
+            let e = m.emissive_factor();
+            let alpha_mode = match m.alpha_mode() {
+                ::gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+                ::gltf::material::AlphaMode::Mask => AlphaMode::Mask {
+                    cutoff: m.alpha_cutoff().unwrap_or(0.5),
+                },
+                ::gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+            };
+            let ior = m.ior().unwrap_or(1.5);
+            let desc = MaterialDesc {
+                name: m
+                    .name()
+                    .map(str::to_string)
+                    .unwrap_or_else(|| format!("material {}", m.index().unwrap_or(0))),
+                base_color: pbr.base_color_factor(),
+                base_color_texture: None,
+                metallic: pbr.metallic_factor().clamp(0.0, 1.0),
+                roughness: pbr.roughness_factor().clamp(0.0, 1.0),
+                metallic_roughness_texture: None,
+                emissive: e.map(|c| c * emissive_strength),
+                emissive_texture: None,
+                normal_texture: None,
+                normal_scale: m.normal_texture().map_or(1.0, |n| n.scale()),
+                alpha_mode,
+                double_sided: m.double_sided(),
+                transmission: m
+                    .transmission()
+                    .map_or(0.0, |t| t.transmission_factor())
+                    .clamp(0.0, 1.0),
+                // KHR_materials_ior allows 0 to mean "infinite"; anything below 1 is not a
+                // physical dielectric, so fall back to the extension's default.
+                ior: if ior.is_finite() && ior >= 1.0 {
+                    ior
+                } else {
+                    1.5
+                },
+            };
+            materials.push((desc, slots));
+        }
+
+        // Decode each image once, whatever number of textures and samplers use it.
+        let mut images: Vec<usize> = wanted
+            .iter()
+            .filter_map(|&t| root.textures.get(t).map(|t| t.source.value()))
+            .collect();
+        images.sort_unstable();
+        images.dedup();
+        let sources: Vec<(usize, String, Result<Vec<u8>, String>)> = images
+            .iter()
+            .map(|&i| {
+                let (label, bytes) = self.image_bytes(i, base);
+                (i, label, bytes)
+            })
+            .collect();
+        let decoded: Vec<(usize, String, Result<Texture, String>)> = sources
+            .into_par_iter()
+            .map(|(i, label, bytes)| {
+                let tex = bytes.and_then(|b| {
+                    image::decode(&label, &b).map_err(|e| format!("cannot decode ({e})"))
+                });
+                (i, label, tex)
+            })
+            .collect();
+        let mut decoded_by_image: HashMap<usize, Option<Texture>> = HashMap::new();
+        for (i, label, tex) in decoded {
+            match tex {
+                Ok(t) => {
+                    decoded_by_image.insert(i, Some(t));
+                }
+                Err(e) => {
+                    self.warn(format!("texture {label}: {e}; rendering without it"));
+                    decoded_by_image.insert(i, None);
+                }
+            }
+        }
+
+        // One scene texture per (image, wrap_u, wrap_v).
+        let mut by_key: HashMap<(usize, Wrap, Wrap), u32> = HashMap::new();
+        let mut texture_ref = |t: usize, scene: &mut SceneDesc| -> Option<TextureRef> {
+            let tj = root.textures.get(t)?;
+            let image = tj.source.value();
+            let img = decoded_by_image.get(&image)?.as_ref()?;
+            let sampler = self.doc.textures().nth(t)?.sampler();
+            let (wu, wv) = (wrap(sampler.wrap_s()), wrap(sampler.wrap_t()));
+            let index = *by_key.entry((image, wu, wv)).or_insert_with(|| {
+                scene.textures.push(Texture {
+                    wrap_u: wu,
+                    wrap_v: wv,
+                    ..img.clone()
+                });
+                scene.textures.len() as u32 - 1
+            });
+            Some(TextureRef { texture: index })
+        };
+        let mut scene = std::mem::take(&mut self.scene);
+        for (mut desc, slots) in materials {
+            let mut r = slots.map(|s| s.and_then(|t| texture_ref(t, &mut scene)));
+            desc.base_color_texture = r[0].take();
+            desc.metallic_roughness_texture = r[1].take();
+            desc.emissive_texture = r[2].take();
+            desc.normal_texture = r[3].take();
+            scene.materials.push(desc);
+        }
+        scene.warnings.append(&mut self.scene.warnings);
+        self.scene = scene;
+        Ok(())
+    }
+
+    /// The bytes of image `i` and a label for messages; failing to get them is a warning.
+    fn image_bytes(&self, i: usize, base: &Path) -> (String, Result<Vec<u8>, String>) {
+        let Some(img) = self.doc.as_json().images.get(i) else {
+            return (format!("image {i}"), Err("missing image".into()));
+        };
+        if let Some(view) = &img.buffer_view {
+            let label = img.name.clone().unwrap_or_else(|| format!("image {i}"));
+            let Some(v) = self.doc.views().nth(view.value()) else {
+                return (label, Err("missing buffer view".into()));
+            };
+            let bytes = self
+                .buffers
+                .get(v.buffer().index())
+                .and_then(|b| b.get(v.offset()..v.offset().checked_add(v.length())?));
+            return match bytes {
+                Some(b) => (label, Ok(b.to_vec())),
+                None => (label, Err("buffer view lies outside its buffer".into())),
+            };
+        }
+        let Some(uri) = &img.uri else {
+            return (format!("image {i}"), Err("no uri or bufferView".into()));
+        };
+        if let Some(data) = uri.strip_prefix("data:") {
+            let label = img.name.clone().unwrap_or_else(|| format!("image {i}"));
+            return (
+                label,
+                decode_data_uri(data).map_err(|e| format!("bad data URI ({e})")),
+            );
+        }
+        let label = uri.clone();
+        let bytes = uri_path(uri)
+            .map_err(|e| format!("unsupported URI ({e})"))
+            .and_then(|p| std::fs::read(base.join(p)).map_err(|e| format!("cannot read ({e})")));
+        (label, bytes)
+    }
+
+    /// Converts every mesh; primitives without a material get a default one.
+    fn meshes(&mut self) -> Result<(), String> {
+        let mut default_material = None;
+        for mesh in self.doc.meshes() {
+            let mi = mesh.index();
+            let mut desc = MeshDesc {
+                name: mesh
+                    .name()
+                    .map(str::to_string)
+                    .unwrap_or_else(|| format!("mesh {mi}")),
+                primitives: Vec::new(),
+            };
+            let mut skipped = false;
+            for prim in mesh.primitives() {
+                let pi = prim.index();
+                let mode = prim.mode();
+                if !matches!(
+                    mode,
+                    Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+                ) {
+                    skipped = true;
+                    continue;
+                }
+                let at = |e: String| format!("mesh {mi} primitive {pi}: {e}");
+                let Some(pos) = prim.get(&Semantic::Positions) else {
+                    return Err(at("no POSITION attribute".into()));
+                };
+                let positions = self.read_vec3(&pos).map_err(at)?;
+                let n = positions.len();
+                let mut normals = match prim.get(&Semantic::Normals) {
+                    Some(a) => self.read_vec3(&a).map_err(at)?,
+                    None => Vec::new(),
+                };
+                if !normals.is_empty() && normals.len() != n {
+                    self.warn(at(format!(
+                        "{} normals for {n} positions; ignoring the normals",
+                        normals.len()
+                    )));
+                    normals.clear();
+                }
+                let mut uvs = match prim.get(&Semantic::TexCoords(0)) {
+                    Some(a) => self.read_uv(&a).map_err(at)?,
+                    None => Vec::new(),
+                };
+                if !uvs.is_empty() && uvs.len() != n {
+                    self.warn(at(format!(
+                        "{} texture coordinates for {n} positions; ignoring them",
+                        uvs.len()
+                    )));
+                    uvs.clear();
+                }
+                let indices = match prim.indices() {
+                    Some(a) => self.read_indices(&a).map_err(at)?,
+                    None => (0..n as u32).collect(),
+                };
+                let triangles = assemble(mode, &indices);
+                let material = match prim.material().index() {
+                    Some(m) => m as u32,
+                    None => *default_material.get_or_insert_with(|| {
+                        self.scene.materials.push(MaterialDesc::default());
+                        self.scene.materials.len() as u32 - 1
+                    }),
+                };
+                desc.primitives.push(Primitive {
+                    positions,
+                    normals,
+                    uvs,
+                    triangles,
+                    material,
+                });
+            }
+            if skipped {
+                self.warn(format!(
+                    "mesh {mi} ({}): point and line primitives are not supported; skipping them",
+                    desc.name
+                ));
+            }
+            self.scene.meshes.push(desc);
+        }
+        Ok(())
+    }
+
+    /// Walks the node hierarchy of the scene to render: instances for nodes with a mesh and
+    /// cameras for nodes with a perspective camera, both in node index order.
+    fn nodes(&mut self) -> Result<(), String> {
+        let doc = self.doc;
+        let root = doc.as_json();
+        let n = root.nodes.len();
+        let roots: Vec<usize> = match doc.default_scene().or_else(|| doc.scenes().next()) {
+            Some(s) => s.nodes().map(|n| n.index()).collect(),
+            None => {
+                let mut is_child = vec![false; n];
+                for node in &root.nodes {
+                    for c in node.children.iter().flatten() {
+                        is_child[c.value()] = true;
+                    }
+                }
+                (0..n).filter(|&i| !is_child[i]).collect()
+            }
+        };
+        // Iterative, and every node at most once: a malformed file with a cycle, or with a node
+        // shared between parents (which could multiply instances exponentially), is an error
+        // instead of a stack overflow or a hang.
+        let mut visited = vec![false; n];
+        let mut stack: Vec<(usize, Mat4)> =
+            roots.iter().rev().map(|&r| (r, Mat4::IDENTITY)).collect();
+        let mut instances = Vec::new();
+        let mut cameras = Vec::new();
+        while let Some((ni, parent)) = stack.pop() {
+            if std::mem::replace(&mut visited[ni], true) {
+                return Err(format!(
+                    "node {ni} appears twice in the node hierarchy (a cycle or a node with two parents)"
+                ));
+            }
+            let node = doc.nodes().nth(ni).ok_or(format!("missing node {ni}"))?;
+            let global = parent * Mat4::from_cols_array_2d(&node.transform().matrix());
+            if let Some(mesh) = node.mesh() {
+                instances.push((
+                    ni,
+                    InstanceDesc {
+                        mesh: mesh.index() as u32,
+                        transform: global,
+                    },
+                ));
+            }
+            if let Some(ci) = root.nodes[ni].camera.map(|c| c.value()) {
+                if let Some(cam) = self.camera(ci, global) {
+                    cameras.push((ni, cam));
+                }
+            }
+            for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+                stack.push((child.index(), global));
+            }
+        }
+        instances.sort_by_key(|(ni, _)| *ni);
+        cameras.sort_by_key(|(ni, _)| *ni);
+        self.scene.instances = instances.into_iter().map(|(_, i)| i).collect();
+        self.scene.cameras = cameras.into_iter().map(|(_, c)| c).collect();
+        Ok(())
+    }
+
+    /// A perspective camera placed by `to_world`, or `None` (with a warning) for an
+    /// orthographic or degenerate one.
+    fn camera(&mut self, ci: usize, to_world: Mat4) -> Option<Camera> {
+        let cam = self.doc.as_json().cameras.get(ci)?;
+        match (&cam.type_, &cam.perspective) {
+            (json::validation::Checked::Valid(json::camera::Type::Perspective), Some(p)) => {
+                if !(p.yfov > 0.0 && p.yfov < std::f32::consts::PI) {
+                    self.warn(format!(
+                        "camera {ci}: vertical field of view {} is not in (0, pi); skipping it",
+                        p.yfov
+                    ));
+                    return None;
+                }
+                Some(Camera {
+                    to_world,
+                    yfov: p.yfov,
+                    aspect: p.aspect_ratio.filter(|a| a.is_finite() && *a > 0.0),
+                })
+            }
+            _ => {
+                self.warn(format!(
+                    "camera {ci}: only perspective cameras are supported; skipping it"
+                ));
+                None
+            }
+        }
+    }
+}
+
+fn wrap(w: ::gltf::texture::WrappingMode) -> Wrap {
+    match w {
+        ::gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+        ::gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+        ::gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+    }
+}
+
+/// Turns an index list into triangles for a triangle mode, following the glTF specification's
+/// vertex order (strips alternate the winding, fans pivot on the first vertex). A trailing
+/// incomplete triangle is dropped.
+fn assemble(mode: Mode, idx: &[u32]) -> Vec<[u32; 3]> {
+    match mode {
+        Mode::TriangleStrip => (0..idx.len().saturating_sub(2))
+            .map(|i| {
+                if i % 2 == 0 {
+                    [idx[i], idx[i + 1], idx[i + 2]]
+                } else {
+                    [idx[i], idx[i + 2], idx[i + 1]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (1..idx.len().saturating_sub(1))
+            .map(|i| [idx[i], idx[i + 1], idx[0]])
+            .collect(),
+        _ => idx.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+    }
+}

@@ -1,0 +1,398 @@
+//! Renderable scenes: meshes, PBR materials, textures, instances, cameras and lights, in one
+//! format-neutral description that every loader (glTF, OBJ+MTL, PLY, the built-in Cornell box)
+//! produces and the path tracer consumes.
+
+mod cornell;
+pub mod gltf;
+mod image;
+pub mod obj;
+
+pub use cornell::cornell_box;
+
+use glam::{Mat4, Vec3};
+use std::path::Path;
+use thiserror::Error;
+
+/// A scene ready to render.
+#[derive(Clone, Debug, Default)]
+pub struct SceneDesc {
+    /// Meshes; instances refer to them by index.
+    pub meshes: Vec<MeshDesc>,
+    /// Materials; primitives refer to them by index.
+    pub materials: Vec<MaterialDesc>,
+    /// Textures; materials refer to them by index.
+    pub textures: Vec<Texture>,
+    /// Placements of meshes in the world (glTF nodes with a mesh; one identity instance per mesh
+    /// for OBJ and PLY).
+    pub instances: Vec<InstanceDesc>,
+    /// The scene's own cameras, first one used by default.
+    pub cameras: Vec<Camera>,
+    /// Problems that did not stop loading (a missing texture, an unsupported feature), one line
+    /// each, for the caller to print.
+    pub warnings: Vec<String>,
+}
+
+/// A mesh: one or more primitives, each with its own material.
+#[derive(Clone, Debug, Default)]
+pub struct MeshDesc {
+    /// A name for messages.
+    pub name: String,
+    /// The primitives.
+    pub primitives: Vec<Primitive>,
+}
+
+/// A triangle list with optional per-vertex attributes, all in the mesh's object space.
+#[derive(Clone, Debug, Default)]
+pub struct Primitive {
+    /// Vertex positions.
+    pub positions: Vec<[f32; 3]>,
+    /// Per-vertex normals (same length as `positions`), or empty for flat shading.
+    pub normals: Vec<[f32; 3]>,
+    /// Per-vertex texture coordinates (set 0), or empty.
+    pub uvs: Vec<[f32; 2]>,
+    /// Triangles as vertex-index triplets, every index `< positions.len()`.
+    pub triangles: Vec<[u32; 3]>,
+    /// Index into [`SceneDesc::materials`].
+    pub material: u32,
+}
+
+/// How a material's alpha is used (glTF `alphaMode`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum AlphaMode {
+    /// Alpha is ignored.
+    #[default]
+    Opaque,
+    /// Fully transparent below the cutoff, opaque otherwise.
+    Mask {
+        /// The cutoff (glTF default 0.5).
+        cutoff: f32,
+    },
+    /// Partial coverage: rendered as stochastic transparency.
+    Blend,
+}
+
+/// A texture reference (texture coordinate set 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TextureRef {
+    /// Index into [`SceneDesc::textures`].
+    pub texture: u32,
+}
+
+/// A metallic-roughness PBR material (the glTF 2.0 model) with transmission for dielectrics.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MaterialDesc {
+    /// A name for messages.
+    pub name: String,
+    /// Linear base colour and alpha.
+    pub base_color: [f32; 4],
+    /// Base colour texture (sRGB colour, linear alpha), multiplied with `base_color`.
+    pub base_color_texture: Option<TextureRef>,
+    /// Metalness in [0, 1].
+    pub metallic: f32,
+    /// Perceptual roughness in [0, 1].
+    pub roughness: f32,
+    /// Metallic (blue) and roughness (green) texture, multiplied with the factors.
+    pub metallic_roughness_texture: Option<TextureRef>,
+    /// Linear emitted radiance (glTF emissive factor times emissive strength).
+    pub emissive: [f32; 3],
+    /// Emissive texture (sRGB), multiplied with `emissive`.
+    pub emissive_texture: Option<TextureRef>,
+    /// Tangent-space normal map.
+    pub normal_texture: Option<TextureRef>,
+    /// Scale of the normal map's x and y.
+    pub normal_scale: f32,
+    /// Alpha handling.
+    pub alpha_mode: AlphaMode,
+    /// Whether back faces are shaded like front faces (glTF `doubleSided`).
+    pub double_sided: bool,
+    /// Specular transmission in [0, 1]: 1 makes a smooth dielectric (glass, water).
+    pub transmission: f32,
+    /// Index of refraction of a dielectric.
+    pub ior: f32,
+}
+
+impl Default for MaterialDesc {
+    fn default() -> Self {
+        MaterialDesc {
+            name: "default".into(),
+            base_color: [0.8, 0.8, 0.8, 1.0],
+            base_color_texture: None,
+            metallic: 0.0,
+            roughness: 0.5,
+            metallic_roughness_texture: None,
+            emissive: [0.0; 3],
+            emissive_texture: None,
+            normal_texture: None,
+            normal_scale: 1.0,
+            alpha_mode: AlphaMode::Opaque,
+            double_sided: true,
+            transmission: 0.0,
+            ior: 1.5,
+        }
+    }
+}
+
+/// How texture coordinates outside [0, 1] are treated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Wrap {
+    /// Tile.
+    #[default]
+    Repeat,
+    /// Tile, mirroring every other copy.
+    MirroredRepeat,
+    /// Clamp to the edge texel.
+    ClampToEdge,
+}
+
+/// An RGBA8 texture. Colour channels are stored as in the file; whether they are sRGB-encoded is
+/// decided by the material slot that uses the texture (base colour and emissive are sRGB, the
+/// others linear).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Texture {
+    /// A name for messages (usually the file name).
+    pub name: String,
+    /// Width in texels (at least 1).
+    pub width: u32,
+    /// Height in texels (at least 1).
+    pub height: u32,
+    /// Texels, row-major from the top row, `width * height` of them.
+    pub texels: Vec<[u8; 4]>,
+    /// Wrapping along u.
+    pub wrap_u: Wrap,
+    /// Wrapping along v.
+    pub wrap_v: Wrap,
+}
+
+impl Texture {
+    /// A 1x1 texture of one colour (the stand-in for a texture that could not be loaded).
+    pub fn solid(name: &str, rgba: [u8; 4]) -> Texture {
+        Texture {
+            name: name.into(),
+            width: 1,
+            height: 1,
+            texels: vec![rgba],
+            wrap_u: Wrap::Repeat,
+            wrap_v: Wrap::Repeat,
+        }
+    }
+}
+
+/// A placement of a mesh.
+#[derive(Clone, Debug, PartialEq)]
+pub struct InstanceDesc {
+    /// Index into [`SceneDesc::meshes`].
+    pub mesh: u32,
+    /// Object to world (glTF: the node's global transform).
+    pub transform: Mat4,
+}
+
+/// A pinhole camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Camera to world: the camera looks down its local -Z with +Y up (the glTF convention).
+    pub to_world: Mat4,
+    /// Vertical field of view in radians.
+    pub yfov: f32,
+    /// The aspect ratio (width / height) the scene asks for, if any.
+    pub aspect: Option<f32>,
+}
+
+impl Camera {
+    /// A camera at `eye` looking at `target`, with +Y up.
+    pub fn look_at(eye: Vec3, target: Vec3, yfov: f32) -> Camera {
+        let up = if (target - eye).normalize().cross(Vec3::Y).length() < 1e-3 {
+            Vec3::Z
+        } else {
+            Vec3::Y
+        };
+        Camera {
+            to_world: Mat4::look_at_rh(eye, target, up).inverse(),
+            yfov,
+            aspect: None,
+        }
+    }
+}
+
+/// Why a scene could not be loaded. Each message is one line naming the file.
+#[derive(Debug, Error)]
+pub enum SceneError {
+    /// The file could not be read.
+    #[error("{path}: {message}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The cause.
+        message: String,
+    },
+    /// The extension names no supported format.
+    #[error("{path}: unknown scene format (expected .gltf, .glb, .obj or .ply)")]
+    UnknownFormat {
+        /// The file.
+        path: String,
+    },
+    /// The file is malformed.
+    #[error("{path}: {message}")]
+    Malformed {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The scene has nothing to render.
+    #[error("{path}: the scene has no triangles")]
+    Empty {
+        /// The file.
+        path: String,
+    },
+}
+
+impl SceneDesc {
+    /// Loads a `.gltf`, `.glb`, `.obj` (with its `.mtl`) or `.ply` file.
+    pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
+        let name = path.display().to_string();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase());
+        let scene = match ext.as_deref() {
+            Some("gltf") | Some("glb") => gltf::load(path)?,
+            Some("obj") => obj::load(path)?,
+            Some("ply") => {
+                let mesh = crate::mesh::Mesh::load(path).map_err(|e| SceneError::Malformed {
+                    path: name.clone(),
+                    message: strip_path(&e.to_string(), &name),
+                })?;
+                SceneDesc::from_mesh(&name, mesh)
+            }
+            _ => return Err(SceneError::UnknownFormat { path: name }),
+        };
+        if scene.triangle_count() == 0 {
+            return Err(SceneError::Empty { path: name });
+        }
+        Ok(scene)
+    }
+
+    /// A scene of one untextured mesh with the default material.
+    pub fn from_mesh(name: &str, mesh: crate::mesh::Mesh) -> SceneDesc {
+        SceneDesc {
+            meshes: vec![MeshDesc {
+                name: name.into(),
+                primitives: vec![Primitive {
+                    positions: mesh.positions,
+                    triangles: mesh.triangles,
+                    ..Default::default()
+                }],
+            }],
+            materials: vec![MaterialDesc::default()],
+            instances: vec![InstanceDesc {
+                mesh: 0,
+                transform: Mat4::IDENTITY,
+            }],
+            ..Default::default()
+        }
+    }
+
+    /// Triangles over all instances.
+    pub fn triangle_count(&self) -> u64 {
+        self.instances
+            .iter()
+            .filter_map(|i| self.meshes.get(i.mesh as usize))
+            .flat_map(|m| &m.primitives)
+            .map(|p| p.triangles.len() as u64)
+            .sum()
+    }
+
+    /// World-space bounds over all instances, or `None` for an empty scene.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
+        for inst in &self.instances {
+            let Some(mesh) = self.meshes.get(inst.mesh as usize) else {
+                continue;
+            };
+            for p in mesh.primitives.iter().flat_map(|p| &p.positions) {
+                let w = inst.transform.transform_point3(Vec3::from(*p));
+                if w.is_finite() {
+                    lo = lo.min(w);
+                    hi = hi.max(w);
+                }
+            }
+        }
+        (lo.x <= hi.x).then_some((lo, hi))
+    }
+
+    /// Checks the invariants the renderer relies on: indices in range, attribute lengths,
+    /// material, texture and mesh references. Loaders call this last, so a malformed file is
+    /// reported instead of crashing the renderer.
+    pub fn validate(&self) -> Result<(), String> {
+        for (ti, t) in self.textures.iter().enumerate() {
+            if t.width == 0
+                || t.height == 0
+                || t.texels.len() as u64 != t.width as u64 * t.height as u64
+            {
+                return Err(format!("texture {ti} ({}) has inconsistent size", t.name));
+            }
+        }
+        let tex_ok =
+            |r: &Option<TextureRef>| r.is_none_or(|r| (r.texture as usize) < self.textures.len());
+        for (mi, m) in self.materials.iter().enumerate() {
+            if !(tex_ok(&m.base_color_texture)
+                && tex_ok(&m.metallic_roughness_texture)
+                && tex_ok(&m.emissive_texture)
+                && tex_ok(&m.normal_texture))
+            {
+                return Err(format!(
+                    "material {mi} ({}) refers to a missing texture",
+                    m.name
+                ));
+            }
+        }
+        for (mi, mesh) in self.meshes.iter().enumerate() {
+            for (pi, p) in mesh.primitives.iter().enumerate() {
+                let n = p.positions.len();
+                if !p.normals.is_empty() && p.normals.len() != n
+                    || !p.uvs.is_empty() && p.uvs.len() != n
+                {
+                    return Err(format!(
+                        "mesh {mi} ({}) primitive {pi}: attribute count differs from the {n} positions",
+                        mesh.name
+                    ));
+                }
+                if let Some(t) = p
+                    .triangles
+                    .iter()
+                    .position(|t| t.iter().any(|&i| i as usize >= n))
+                {
+                    return Err(format!(
+                        "mesh {mi} ({}) primitive {pi}: triangle {t} refers to a vertex beyond the {n} positions",
+                        mesh.name
+                    ));
+                }
+                if p.material as usize >= self.materials.len() {
+                    return Err(format!(
+                        "mesh {mi} ({}) primitive {pi}: material {} does not exist",
+                        mesh.name, p.material
+                    ));
+                }
+            }
+        }
+        for (ii, inst) in self.instances.iter().enumerate() {
+            if inst.mesh as usize >= self.meshes.len() {
+                return Err(format!(
+                    "instance {ii} refers to missing mesh {}",
+                    inst.mesh
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Drops a leading "path: " from a message that will be prefixed with the path again.
+fn strip_path(message: &str, path: &str) -> String {
+    message
+        .strip_prefix(path)
+        .and_then(|m| m.strip_prefix(": "))
+        .unwrap_or(message)
+        .to_string()
+}

@@ -1,0 +1,283 @@
+//! `--backend cpu|cuda` of `oxray raycast` and `oxray bench`, through the built binary.
+//!
+//! Where CUDA is unavailable (CI), `--backend cuda` must fail with exactly one `error:` line
+//! that names CUDA. Where a GPU is present, the CUDA results must equal the CPU backend's byte
+//! for byte. `OXRAY_REQUIRE_GPU=1` turns a missing GPU into a failure (for runs on a GPU
+//! machine), and `OXRAY_BIN` runs another `oxray` binary than the one Cargo built (for a test
+//! binary copied to such a machine).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn oxray() -> Command {
+    Command::new(
+        std::env::var_os("OXRAY_BIN").unwrap_or_else(|| env!("CARGO_BIN_EXE_oxray").into()),
+    )
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let p = std::env::temp_dir()
+        .join(format!("oxray-backend-test-{}", std::process::id()))
+        .join(name);
+    std::fs::create_dir_all(p.parent().unwrap()).unwrap();
+    p
+}
+
+fn s(p: &Path) -> String {
+    p.to_str().unwrap().to_string()
+}
+
+/// Whether this machine can run the CUDA backend, decided as the binary decides it.
+fn gpu_available() -> bool {
+    match oxray_cuda::CudaContext::new() {
+        Ok(ctx) => {
+            println!("GPU: {}", ctx.device().name);
+            true
+        }
+        Err(e) => {
+            assert!(
+                std::env::var_os("OXRAY_REQUIRE_GPU").is_none(),
+                "OXRAY_REQUIRE_GPU is set but CUDA is unavailable: {e}"
+            );
+            println!("no GPU ({e}): checking that --backend cuda fails cleanly");
+            false
+        }
+    }
+}
+
+/// A bumpy 24 x 24 height field over [-1, 1]^2 (1,152 triangles), as OBJ.
+fn heightfield_obj(test: &str) -> PathBuf {
+    let n = 24;
+    let mut text = String::new();
+    for j in 0..=n {
+        for i in 0..=n {
+            let (x, y) = (
+                -1.0 + 2.0 * i as f32 / n as f32,
+                -1.0 + 2.0 * j as f32 / n as f32,
+            );
+            let z = 0.2 * (3.1 * x).sin() * (2.3 * y).cos();
+            text += &format!("v {x} {y} {z}\n");
+        }
+    }
+    let v = |i: usize, j: usize| j * (n + 1) + i + 1;
+    for j in 0..n {
+        for i in 0..n {
+            text += &format!("f {} {} {}\n", v(i, j), v(i + 1, j), v(i + 1, j + 1));
+            text += &format!("f {} {} {}\n", v(i, j), v(i + 1, j + 1), v(i, j + 1));
+        }
+    }
+    let p = tmp(&format!("{test}/heightfield.obj"));
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// 4,096 slanted rays down onto the height field from irrational-ish offsets (so that none
+/// meets a shared edge exactly), some of which miss it, and some with a short `tmax`.
+fn rays_file(test: &str) -> PathBuf {
+    let mut bytes = Vec::new();
+    for k in 0..4096u32 {
+        let (i, j) = ((k % 64) as f32, (k / 64) as f32);
+        let o = [
+            -1.3 + 2.6 * (i + 0.3271) / 64.0,
+            -1.3 + 2.6 * (j + 0.5772) / 64.0,
+            2.0,
+        ];
+        let d = [0.11, -0.07, -1.0];
+        let tmax = if k % 7 == 0 { 1.9 } else { f32::INFINITY };
+        for x in [o[0], o[1], o[2], 0.0, d[0], d[1], d[2], tmax] {
+            bytes.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    let p = tmp(&format!("{test}-rays.bin"));
+    std::fs::write(&p, bytes).unwrap();
+    p
+}
+
+fn raycast(backend: &str, mesh: &Path, rays: &Path, out: &Path, occ: bool) -> Output {
+    let mut args = vec![
+        "raycast".to_string(),
+        s(mesh),
+        "--rays".into(),
+        s(rays),
+        "--out".into(),
+        s(out),
+        "--backend".into(),
+        backend.into(),
+    ];
+    if occ {
+        args.push("--occlusion".into());
+    }
+    oxray().args(&args).output().unwrap()
+}
+
+/// A failure with exactly one `error:` line on stderr, naming CUDA, and no panic.
+fn assert_clean_cuda_failure(out: &Output, what: &str) {
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{what}: {err}");
+    assert!(err.starts_with("error: "), "{what}: {err}");
+    assert_eq!(err.trim_end().lines().count(), 1, "{what}: {err}");
+    assert!(err.contains("CUDA"), "{what}: {err}");
+    assert!(!err.contains("panicked"), "{what}: {err}");
+}
+
+#[test]
+fn raycast_cuda_matches_the_cpu_or_fails_with_one_error_line() {
+    let gpu = gpu_available();
+    let (mesh, rays) = (heightfield_obj("raycast"), rays_file("raycast"));
+    for occ in [false, true] {
+        let cpu_out = tmp(&format!("cpu-{occ}.bin"));
+        let cuda_out = tmp(&format!("cuda-{occ}.bin"));
+        let cpu = raycast("cpu", &mesh, &rays, &cpu_out, occ);
+        assert!(
+            cpu.status.success(),
+            "{}",
+            String::from_utf8_lossy(&cpu.stderr)
+        );
+        let cpu_bytes = std::fs::read(&cpu_out).unwrap();
+        assert_eq!(cpu_bytes.len(), 4096 * if occ { 4 } else { 16 });
+        let cuda = raycast("cuda", &mesh, &rays, &cuda_out, occ);
+        if gpu {
+            let text = String::from_utf8_lossy(&cuda.stdout);
+            assert!(
+                cuda.status.success(),
+                "{}",
+                String::from_utf8_lossy(&cuda.stderr)
+            );
+            assert!(text.contains("Mrays/s kernel"), "{text}");
+            assert!(text.contains("Mrays/s with transfers"), "{text}");
+            // Same counts on the summary line, and the same bytes in the file.
+            let count = |o: &Output| {
+                String::from_utf8_lossy(&o.stdout)
+                    .split(" (")
+                    .next()
+                    .unwrap_or_default()
+                    .to_string()
+            };
+            assert_eq!(count(&cpu), count(&cuda));
+            let cuda_bytes = std::fs::read(&cuda_out).unwrap();
+            assert!(cuda_bytes == cpu_bytes, "occlusion {occ}: files differ");
+        } else {
+            assert_clean_cuda_failure(&cuda, &format!("raycast --occlusion {occ}"));
+            assert!(!cuda_out.exists(), "nothing is written on failure");
+        }
+    }
+    // The scene is not trivial: some rays hit, some miss.
+    let hits = std::fs::read(tmp("cpu-false.bin")).unwrap();
+    let prims: Vec<u32> = hits
+        .chunks_exact(16)
+        .map(|c| u32::from_le_bytes([c[4], c[5], c[6], c[7]]))
+        .collect();
+    let misses = prims.iter().filter(|&&p| p == u32::MAX).count();
+    assert!(misses > 100 && misses < 3000, "{misses} misses");
+}
+
+#[test]
+fn bench_cuda_compares_with_the_cpu_or_fails_with_one_error_line() {
+    let gpu = gpu_available();
+    let mesh = heightfield_obj("bench");
+    let out = oxray()
+        .args([
+            "bench",
+            &s(&mesh),
+            "--side",
+            "32",
+            "--runs",
+            "1",
+            "--backend",
+            "cuda",
+        ])
+        .output()
+        .unwrap();
+    if gpu {
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(text.contains("| GPU kernel Mrays/s |"), "{text}");
+        let rows: Vec<&str> = text
+            .lines()
+            .filter(|l| l.starts_with("| heightfield |"))
+            .collect();
+        assert_eq!(rows.len(), 4, "{text}");
+        for (row, (set, query)) in rows.iter().zip([
+            ("coherent", "closest"),
+            ("coherent", "any"),
+            ("incoherent", "closest"),
+            ("incoherent", "any"),
+        ]) {
+            assert!(row.contains(&format!("| {set} | {query} |")), "{row}");
+            assert!(row.ends_with("| 100.0000% |"), "{row}");
+        }
+    } else {
+        assert_clean_cuda_failure(&out, "bench");
+        assert!(out.stdout.is_empty(), "nothing is printed before the error");
+    }
+}
+
+#[test]
+fn bench_cuda_refuses_instances() {
+    let out = oxray()
+        .args([
+            "bench",
+            &s(&heightfield_obj("instances")),
+            "--side",
+            "8",
+            "--runs",
+            "1",
+            "--instances",
+            "4",
+            "--backend",
+            "cuda",
+        ])
+        .output()
+        .unwrap();
+    assert_clean_cuda_failure(&out, "bench --instances");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--backend cpu"));
+}
+
+#[test]
+fn unknown_backends_are_rejected_by_the_argument_parser() {
+    let (mesh, rays) = (heightfield_obj("bogus"), rays_file("bogus"));
+    let out_path = tmp("bogus.bin");
+    for args in [
+        vec![
+            "raycast".to_string(),
+            s(&mesh),
+            "--rays".into(),
+            s(&rays),
+            "--out".into(),
+            s(&out_path),
+            "--backend".into(),
+            "bogus".into(),
+        ],
+        vec![
+            "bench".to_string(),
+            s(&mesh),
+            "--backend".into(),
+            "bogus".into(),
+        ],
+    ] {
+        let out = oxray().args(&args).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(err.contains("invalid value 'bogus'"), "{err}");
+        assert!(err.contains("cpu") && err.contains("cuda"), "{err}");
+    }
+    assert!(!out_path.exists());
+}
+
+#[test]
+fn the_cpu_backend_is_the_default_and_explicit_cpu_is_the_same() {
+    let (mesh, rays) = (heightfield_obj("default"), rays_file("default"));
+    let (a, b) = (tmp("default.bin"), tmp("explicit.bin"));
+    let default = oxray()
+        .args(["raycast", &s(&mesh), "--rays", &s(&rays), "--out", &s(&a)])
+        .output()
+        .unwrap();
+    assert!(default.status.success());
+    assert!(String::from_utf8_lossy(&default.stdout).contains("threads)"));
+    assert!(raycast("cpu", &mesh, &rays, &b, false).status.success());
+    assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
+}

@@ -1,0 +1,514 @@
+//! Scene loaders: glTF (.gltf, .glb) and OBJ + MTL fixtures checked field by field, malformed
+//! files giving one-line errors, and the real scenes in `../shared/data` when present.
+
+use glam::{Mat4, Vec3};
+use oxray_cli::mesh::Mesh;
+use oxray_cli::scene::{AlphaMode, MaterialDesc, SceneDesc, SceneError, Wrap};
+use std::path::{Path, PathBuf};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+/// A file of the shared data set, or `None` (with a message) when the data set is absent.
+fn shared(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/data")
+        .join(rel);
+    if p.exists() {
+        Some(p)
+    } else {
+        println!("skipping: {} is absent", p.display());
+        None
+    }
+}
+
+/// A fresh directory for files a test writes.
+fn tmp_dir(test: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("oxray-loaders-{}-{test}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn close(a: Vec3, b: Vec3) -> bool {
+    (a - b).abs().max_element() < 1e-5
+}
+
+fn world(scene: &SceneDesc, instance: usize, p: [f32; 3]) -> Vec3 {
+    scene.instances[instance]
+        .transform
+        .transform_point3(Vec3::from(p))
+}
+
+/// The 2x2 fixture texture: red, green / blue, transparent white.
+const TEX2X2: [[u8; 4]; 4] = [
+    [255, 0, 0, 255],
+    [0, 255, 0, 255],
+    [0, 0, 255, 255],
+    [255, 255, 255, 0],
+];
+
+fn assert_one_line_error(err: &SceneError, file: &Path) {
+    let msg = err.to_string();
+    assert_eq!(msg.lines().count(), 1, "{msg}");
+    assert!(msg.contains(&file.display().to_string()), "{msg}");
+}
+
+#[test]
+fn gltf_with_data_uri_buffer_and_image() {
+    let s = SceneDesc::load(&data("triangle.gltf")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(s.meshes.len(), 1);
+    let p = &s.meshes[0].primitives[0];
+    assert_eq!(
+        p.positions,
+        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    );
+    assert_eq!(p.triangles, vec![[0, 1, 2]]);
+    assert!(p.normals.is_empty() && p.uvs.is_empty());
+    assert_eq!(s.instances.len(), 1);
+    assert_eq!(s.instances[0].transform, Mat4::IDENTITY);
+    assert_eq!(s.materials.len(), 1);
+    let m = &s.materials[0];
+    assert_eq!(m.name, "red");
+    assert_eq!(m.base_color, [1.0, 0.0, 0.0, 1.0]);
+    // glTF defaults.
+    assert_eq!((m.metallic, m.roughness), (1.0, 1.0));
+    assert_eq!(m.alpha_mode, AlphaMode::Opaque);
+    assert!(!m.double_sided);
+    let t = &s.textures[m.base_color_texture.unwrap().texture as usize];
+    assert_eq!((t.width, t.height), (2, 2));
+    assert_eq!(t.texels, TEX2X2);
+    assert_eq!((t.wrap_u, t.wrap_v), (Wrap::Repeat, Wrap::Repeat));
+    assert!(s.cameras.is_empty());
+}
+
+#[test]
+fn glb_with_embedded_buffer_and_image() {
+    let s = SceneDesc::load(&data("triangle.glb")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(s.triangle_count(), 1);
+    assert!(close(
+        world(&s, 0, [1.0, 0.0, 0.0]),
+        Vec3::new(1.0, 0.0, -1.0)
+    ));
+    let m = &s.materials[0];
+    assert_eq!(m.metallic, 0.0);
+    assert_eq!(m.base_color, [1.0; 4]);
+    let t = &s.textures[m.base_color_texture.unwrap().texture as usize];
+    assert_eq!(t.texels, TEX2X2);
+    // Mesh::load accepts .glb and flattens it into world space.
+    let mesh = Mesh::load(&data("triangle.glb")).unwrap();
+    assert_eq!(mesh.triangles, vec![[0, 1, 2]]);
+    assert_eq!(mesh.positions[1], [1.0, 0.0, -1.0]);
+}
+
+#[test]
+fn gltf_node_hierarchy_cameras_materials_and_warnings() {
+    let s = SceneDesc::load(&data("hierarchy.gltf")).unwrap();
+    // Nodes 0 (parent), 1 (child), 2 (strip) and 5 (fan) have meshes; node 6 is outside the scene.
+    assert_eq!(s.instances.len(), 4);
+    assert_eq!(
+        s.instances.iter().map(|i| i.mesh).collect::<Vec<_>>(),
+        [0, 0, 1, 2]
+    );
+    // Parent: scale 2, then 90 degrees about +Y, which takes +X to -Z.
+    assert!(close(
+        world(&s, 0, [1.0, 0.0, 0.0]),
+        Vec3::new(0.0, 0.0, -2.0)
+    ));
+    assert!(close(
+        world(&s, 0, [0.0, 1.0, 0.0]),
+        Vec3::new(0.0, 2.0, 0.0)
+    ));
+    // Child: translated by +X inside the parent.
+    assert!(close(
+        world(&s, 1, [0.0, 0.0, 0.0]),
+        Vec3::new(0.0, 0.0, -2.0)
+    ));
+    assert!(close(
+        world(&s, 1, [1.0, 0.0, 0.0]),
+        Vec3::new(0.0, 0.0, -4.0)
+    ));
+    // Strip node: a column-major matrix translating by +10 X, inside the parent.
+    assert!(close(
+        world(&s, 2, [0.0, 0.0, 0.0]),
+        Vec3::new(0.0, 0.0, -20.0)
+    ));
+    // Fan node: a root translated by -5 Y.
+    assert!(close(
+        world(&s, 3, [1.0, 1.0, 0.0]),
+        Vec3::new(1.0, -4.0, 0.0)
+    ));
+
+    let tri = &s.meshes[0].primitives[0];
+    assert_eq!(tri.triangles, vec![[0, 1, 2]]);
+    assert_eq!(tri.normals, vec![[0.0, 0.0, 1.0]; 3]);
+    assert_eq!(tri.uvs, vec![[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]);
+    // The strip keeps its winding; the points primitive is skipped.
+    assert_eq!(s.meshes[1].primitives.len(), 1);
+    assert_eq!(
+        s.meshes[1].primitives[0].triangles,
+        vec![[0, 1, 2], [1, 3, 2]]
+    );
+    assert_eq!(s.meshes[1].primitives[0].material, 1);
+    // Non-indexed fan, no material: the default material is appended.
+    let fan = &s.meshes[2].primitives[0];
+    assert_eq!(fan.triangles, vec![[1, 2, 0], [2, 3, 0]]);
+    assert_eq!(s.materials.len(), 3);
+    assert_eq!(fan.material, 2);
+    assert_eq!(s.materials[2], MaterialDesc::default());
+
+    assert_eq!(s.cameras.len(), 1);
+    let c = &s.cameras[0];
+    assert_eq!(c.yfov, 0.8);
+    assert_eq!(c.aspect, Some(1.5));
+    assert_eq!(c.to_world, Mat4::from_translation(Vec3::new(0.0, 1.0, 5.0)));
+
+    let m = &s.materials[0];
+    assert_eq!(m.name, "masked");
+    assert_eq!(m.base_color, [1.0, 0.5, 0.25, 1.0]);
+    assert_eq!((m.metallic, m.roughness), (0.25, 0.75));
+    assert_eq!(m.emissive, [4.0, 2.0, 0.0]);
+    assert_eq!(m.alpha_mode, AlphaMode::Mask { cutoff: 0.3 });
+    assert!(m.double_sided);
+    assert_eq!(m.normal_scale, 0.5);
+    // The normal map's image is missing: dropped, with a warning.
+    assert_eq!(m.normal_texture, None);
+    let t = &s.textures[m.base_color_texture.unwrap().texture as usize];
+    assert_eq!(t.texels, TEX2X2);
+    assert_eq!(
+        (t.wrap_u, t.wrap_v),
+        (Wrap::ClampToEdge, Wrap::MirroredRepeat)
+    );
+    let g = &s.materials[1];
+    assert_eq!((g.transmission, g.ior), (1.0, 1.33));
+    assert_eq!(g.alpha_mode, AlphaMode::Blend);
+    assert_eq!(g.base_color, [1.0; 4]);
+
+    assert_eq!(s.warnings.len(), 3, "{:#?}", s.warnings);
+    let has = |needle: &str| s.warnings.iter().any(|w| w.contains(needle));
+    assert!(
+        has("texture textures/missing.png: cannot read"),
+        "{:#?}",
+        s.warnings
+    );
+    assert!(has("point and line primitives"), "{:#?}", s.warnings);
+    assert!(has("camera 1: only perspective"), "{:#?}", s.warnings);
+    let name = data("hierarchy.gltf").display().to_string();
+    assert!(s
+        .warnings
+        .iter()
+        .all(|w| w.starts_with(&name) && !w.contains('\n')));
+}
+
+#[test]
+fn mesh_load_flattens_gltf_in_node_then_primitive_then_triangle_order() {
+    let mesh = Mesh::load(&data("hierarchy.gltf")).unwrap();
+    assert_eq!(mesh.triangles.len(), 6);
+    let corner = |t: usize, k: usize| Vec3::from(mesh.positions[mesh.triangles[t][k] as usize]);
+    // Triangle 0: the parent's; 1: the child's; 2 and 3: the strip; 4 and 5: the fan.
+    assert!(close(corner(0, 1), Vec3::new(0.0, 0.0, -2.0)));
+    assert!(close(corner(1, 1), Vec3::new(0.0, 0.0, -4.0)));
+    assert!(close(corner(2, 0), Vec3::new(0.0, 0.0, -20.0)));
+    assert!(close(corner(3, 1), Vec3::new(0.0, 2.0, -22.0)));
+    assert!(close(corner(4, 2), Vec3::new(0.0, -5.0, 0.0)));
+    assert!(close(corner(5, 1), Vec3::new(1.0, -4.0, 0.0)));
+}
+
+/// Writes `text` as `name` next to a copy of the PNG fixture and loads it.
+fn load_text(test: &str, name: &str, text: &str) -> (PathBuf, Result<SceneDesc, SceneError>) {
+    let dir = tmp_dir(test);
+    std::fs::copy(data("tex2x2.png"), dir.join("tex2x2.png")).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    let r = SceneDesc::load(&p);
+    (p, r)
+}
+
+fn hierarchy_text() -> String {
+    std::fs::read_to_string(data("hierarchy.gltf")).unwrap()
+}
+
+#[test]
+fn malformed_gltf_files_are_one_line_errors() {
+    let h = hierarchy_text();
+    let cases: Vec<(&str, String, &str)> = vec![
+        ("json", "{\"asset\": ".into(), "invalid glTF JSON"),
+        (
+            "missing_buffer",
+            h.replacen("data:application/octet-stream;base64,", "nowhere.bin#", 1),
+            "cannot read",
+        ),
+        (
+            "cycle",
+            h.replace(
+                "\"translation\": [\n    1,",
+                "\"children\": [0], \"translation\": [\n    1,",
+            ),
+            "appears twice",
+        ),
+        (
+            "index_out_of_range",
+            h.replacen(
+                "\"count\": 3,\n   \"type\": \"SCALAR\"",
+                "\"count\": 3,\n   \"type\": \"SCALAR\", \"byteOffset\": 1",
+                1,
+            ),
+            "do not fit",
+        ),
+        (
+            "huge_count",
+            h.replacen("\"count\": 4,", "\"count\": 2147483648,", 1),
+            "accessor 4",
+        ),
+        (
+            "wrong_component_type",
+            h.replacen("\"componentType\": 5126", "\"componentType\": 5123", 1),
+            "accessor 0",
+        ),
+        (
+            "bad_reference",
+            h.replacen("\"mesh\": 0", "\"mesh\": 99", 1),
+            "invalid glTF",
+        ),
+    ];
+    for (test, text, expect) in cases {
+        assert!(text != h, "{test}: the fixture edit did not apply");
+        let (p, r) = load_text(&format!("malformed-{test}"), "scene.gltf", &text);
+        let err = r.expect_err(test);
+        assert_one_line_error(&err, &p);
+        assert!(err.to_string().contains(expect), "{test}: {err}");
+    }
+}
+
+#[test]
+fn gltf_vertex_index_beyond_positions_fails_validation() {
+    // Point the strip's u8 indices at the bytes of a float 1.0 (00 00 80 3F): indices 128, 63.
+    let h = hierarchy_text();
+    let text = h.replacen(
+        "\"bufferView\": 5,",
+        "\"bufferView\": 0, \"byteOffset\": 12,",
+        1,
+    );
+    assert!(text != h, "the fixture edit did not apply");
+    let (p, r) = load_text("index-beyond", "scene.gltf", &text);
+    let err = r.unwrap_err();
+    assert_one_line_error(&err, &p);
+    assert!(
+        err.to_string().contains("refers to a vertex beyond"),
+        "{err}"
+    );
+}
+
+#[test]
+fn truncated_and_corrupt_glb_files_are_errors() {
+    let bytes = std::fs::read(data("triangle.glb")).unwrap();
+    let dir = tmp_dir("glb");
+    for (name, b) in [
+        ("short.glb", bytes[..10].to_vec()),
+        ("cut.glb", bytes[..bytes.len() - 100].to_vec()),
+        (
+            "version.glb",
+            [&bytes[..4], &[1, 0, 0, 0], &bytes[8..]].concat(),
+        ),
+        (
+            "length.glb",
+            [&bytes[..8], &[4, 0, 0, 0], &bytes[12..]].concat(),
+        ),
+    ] {
+        let p = dir.join(name);
+        std::fs::write(&p, &b).unwrap();
+        let err = SceneDesc::load(&p).expect_err(name);
+        assert_one_line_error(&err, &p);
+        let err = Mesh::load(&p).expect_err(name).to_string();
+        assert_eq!(err.lines().count(), 1, "{err}");
+    }
+}
+
+#[test]
+fn obj_with_mtl_materials_and_texture() {
+    let s = SceneDesc::load(&data("materials.obj")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let names: Vec<&str> = s.meshes.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["textured", "lamp", "veil", "glass", "plain"]);
+    assert_eq!(s.instances.len(), 5);
+    assert!(s.instances.iter().all(|i| i.transform == Mat4::IDENTITY));
+    // Quads fan-triangulated in file order.
+    let q = &s.meshes[0].primitives[0];
+    assert_eq!(q.triangles, vec![[0, 1, 2], [0, 2, 3]]);
+    assert_eq!(q.positions[2], [1.0, 1.0, 0.0]);
+    assert_eq!(q.normals, vec![[0.0, 0.0, 1.0]; 4]);
+    // v is flipped: OBJ counts from the bottom row, textures start at the top.
+    assert_eq!(q.uvs, vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]);
+    assert!(s.meshes[1].primitives[0].uvs.is_empty());
+
+    let mat = |mesh: usize| &s.materials[s.meshes[mesh].primitives[0].material as usize];
+    let t = mat(0);
+    assert_eq!(t.name, "textured");
+    assert_eq!(t.base_color, [0.5, 0.25, 1.0, 1.0]);
+    assert!((t.roughness - 0.02f32.sqrt()).abs() < 1e-6);
+    assert_eq!(t.metallic, 0.0);
+    let tex = &s.textures[t.base_color_texture.unwrap().texture as usize];
+    assert_eq!(tex.texels, TEX2X2);
+    assert_eq!(mat(1).emissive, [10.0, 9.0, 8.0]);
+    assert_eq!(mat(1).alpha_mode, AlphaMode::Opaque);
+    let veil = mat(2);
+    assert_eq!(veil.base_color, [0.2, 0.4, 0.6, 0.25]);
+    assert_eq!(veil.alpha_mode, AlphaMode::Blend);
+    assert_eq!(veil.transmission, 0.0);
+    let glass = mat(3);
+    assert_eq!((glass.transmission, glass.ior), (1.0, 1.5));
+    assert_eq!(glass.alpha_mode, AlphaMode::Opaque);
+    // An unknown material name gets the default material.
+    assert_eq!(*mat(4), MaterialDesc::default());
+}
+
+#[test]
+fn obj_with_missing_mtl_or_texture_warns_and_keeps_the_geometry() {
+    let obj = std::fs::read_to_string(data("materials.obj")).unwrap();
+    let text = obj.replace("mtllib materials.mtl", "mtllib absent.mtl");
+    let (p, r) = load_text("no-mtl", "scene.obj", &text);
+    let s = r.unwrap();
+    assert_eq!(s.triangle_count(), 9);
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(s.warnings[0].starts_with(&p.display().to_string()));
+    assert!(s.warnings[0].contains("absent.mtl"), "{:?}", s.warnings);
+    assert!(s.materials.iter().all(|m| *m == MaterialDesc::default()));
+
+    let dir = tmp_dir("no-texture");
+    let mtl = std::fs::read_to_string(data("materials.mtl")).unwrap();
+    std::fs::write(
+        dir.join("materials.mtl"),
+        mtl.replace("tex2x2.png", "gone.png"),
+    )
+    .unwrap();
+    std::fs::write(dir.join("materials.obj"), &obj).unwrap();
+    let s = SceneDesc::load(&dir.join("materials.obj")).unwrap();
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("texture gone.png"),
+        "{:?}",
+        s.warnings
+    );
+    assert_eq!(s.materials[0].base_color_texture, None);
+    assert_eq!(s.materials[0].base_color, [0.5, 0.25, 1.0, 1.0]);
+}
+
+/// tobj panics on a colour statement with fewer than three numbers; the loader drops such lines.
+#[test]
+fn regression_mtl_colour_with_two_numbers() {
+    let dir = tmp_dir("mtl-two-numbers");
+    std::fs::write(dir.join("a.mtl"), "newmtl a\nKd 1 1\nKe 2 3 4\n").unwrap();
+    std::fs::write(
+        dir.join("a.obj"),
+        "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl a\nf 1 2 3\n",
+    )
+    .unwrap();
+    let s = SceneDesc::load(&dir.join("a.obj")).unwrap();
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(s.warnings[0].contains("line 2"), "{:?}", s.warnings);
+    assert_eq!(s.materials[0].emissive, [2.0, 3.0, 4.0]);
+    assert_eq!(s.materials[0].base_color, [0.8, 0.8, 0.8, 1.0]);
+}
+
+#[test]
+fn shared_smallpine_loads_with_one_warning_for_the_empty_normal_map() {
+    let Some(p) = shared("gltf/smallpine/scene.gltf") else {
+        return;
+    };
+    let s = SceneDesc::load(&p).unwrap();
+    assert_eq!(s.materials.len(), 2);
+    assert_eq!(s.warnings.len(), 1, "{:#?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("M_TreeAtlas_normal.png"),
+        "{}",
+        s.warnings[0]
+    );
+    let leaves = s
+        .materials
+        .iter()
+        .find(|m| m.name == "M_TreeAtlas")
+        .unwrap();
+    assert_eq!(leaves.alpha_mode, AlphaMode::Blend);
+    assert_eq!(leaves.normal_texture, None);
+    let tex = &s.textures[leaves.base_color_texture.unwrap().texture as usize];
+    assert_eq!((tex.width, tex.height), (2048, 2048));
+    assert!(tex.texels.iter().any(|t| t[3] == 0));
+    assert!(tex.texels.iter().any(|t| t[3] == 255));
+    let trunk = s.materials.iter().find(|m| m.name == "Trunk").unwrap();
+    assert!(trunk.normal_texture.is_some());
+    assert_eq!(s.instances.len(), 2);
+    assert_eq!(s.triangle_count(), 1650);
+    let (lo, hi) = s.bounds().unwrap();
+    assert!(lo.is_finite() && hi.is_finite() && (hi - lo).min_element() > 0.0);
+}
+
+#[test]
+fn shared_balloon_loads() {
+    let Some(p) = shared("gltf/balloon/scene.gltf") else {
+        return;
+    };
+    let s = SceneDesc::load(&p).unwrap();
+    assert!(s.warnings.is_empty(), "{:#?}", s.warnings);
+    assert_eq!(s.materials.len(), 37);
+    // 17 images; one is used with two samplers, so it becomes two textures.
+    assert_eq!(s.textures.len(), 18);
+    assert_eq!(s.instances.len(), 37);
+    assert!(s.triangle_count() >= 35_000, "{}", s.triangle_count());
+    let (lo, hi) = s.bounds().unwrap();
+    assert!(lo.is_finite() && hi.is_finite() && (hi - lo).min_element() > 0.0);
+}
+
+#[test]
+fn shared_drone_loads() {
+    let Some(p) = shared("gltf/drone/scene.gltf") else {
+        return;
+    };
+    let s = SceneDesc::load(&p).unwrap();
+    assert!(s.warnings.is_empty(), "{:#?}", s.warnings);
+    assert_eq!(s.materials.len(), 3);
+    assert_eq!(s.textures.len(), 10);
+    assert!(
+        (1..=93).contains(&s.instances.len()),
+        "{}",
+        s.instances.len()
+    );
+    assert!(s.triangle_count() >= 30_000, "{}", s.triangle_count());
+    let body = s.materials.iter().find(|m| m.name == "body").unwrap();
+    assert!(body.emissive_texture.is_some());
+    let (lo, hi) = s.bounds().unwrap();
+    assert!(lo.is_finite() && hi.is_finite() && (hi - lo).min_element() > 0.0);
+    let mesh = Mesh::load(&p).unwrap();
+    assert_eq!(mesh.triangles.len() as u64, s.triangle_count());
+}
+
+#[test]
+fn shared_cornell_box_obj_materials() {
+    let Some(p) = shared("scenes/cornell_box/cornell_box.obj") else {
+        return;
+    };
+    let s = SceneDesc::load(&p).unwrap();
+    assert!(s.warnings.is_empty(), "{:#?}", s.warnings);
+    let by_name = |n: &str| s.materials.iter().find(|m| m.name == n).unwrap();
+    assert_eq!(by_name("Green").base_color, [0.0, 0.8, 0.0, 1.0]);
+    assert_eq!(by_name("Red").base_color, [0.8, 0.0, 0.0, 1.0]);
+    assert_eq!(by_name("Material.001").base_color, [0.8, 0.8, 0.8, 1.0]);
+    assert!(by_name("Metal").roughness < 0.1);
+    assert!(s.materials.iter().all(|m| m.transmission == 0.0));
+    // The light's material (if the file gives it one) emits.
+    if let Some(light) = s
+        .materials
+        .iter()
+        .find(|m| m.name.to_lowercase().contains("light"))
+    {
+        assert!(light.emissive.iter().any(|&e| e > 0.0));
+    }
+    assert_eq!(s.triangle_count(), 3968);
+    assert_eq!(
+        Mesh::load(&p).unwrap().triangles.len() as u64,
+        s.triangle_count()
+    );
+}

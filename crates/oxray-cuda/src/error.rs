@@ -1,0 +1,70 @@
+//! Errors of the CUDA backend.
+
+use thiserror::Error;
+
+/// Why a CUDA operation failed. Nothing in this crate panics when CUDA is absent: every way the
+/// driver, the device or the runtime compiler can be missing or fail is one of these.
+#[derive(Clone, Debug, Error, PartialEq, Eq)]
+pub enum CudaError {
+    /// The CUDA driver library (`libcuda.so` / `nvcuda.dll`) could not be loaded or initialised.
+    #[error("no CUDA driver found ({0})")]
+    NoDriver(String),
+    /// The driver is there but reports no usable device (or not the one asked for).
+    #[error("no CUDA device found ({0})")]
+    NoDevice(String),
+    /// The NVRTC runtime compiler library (`libnvrtc.so`) could not be loaded.
+    #[error("no NVRTC library found ({0})")]
+    NoNvrtc(String),
+    /// NVRTC rejected the trace kernels; `log` is the compiler's log.
+    #[error("NVRTC could not compile the trace kernels ({message}):\n{log}")]
+    Compile {
+        /// The NVRTC error.
+        message: String,
+        /// The compiler's log.
+        log: String,
+    },
+    /// A driver call failed: loading the module, allocating, copying or launching.
+    #[error("CUDA driver call failed while {during}: {message}")]
+    Driver {
+        /// What was being done.
+        during: &'static str,
+        /// The driver's error.
+        message: String,
+    },
+    /// The GAS holds custom primitives, whose intersection is a host closure; the CUDA backend
+    /// traces triangle GASes only.
+    #[error("the CUDA backend traces triangle GASes only; this GAS holds custom primitives")]
+    CustomPrimitives,
+    /// The GAS or the batch is too large for the device layout's 32-bit indices.
+    #[error("too large for the CUDA backend: {0}")]
+    TooLarge(String),
+    /// A batch's rays and outputs differ in length.
+    #[error("{rays} rays but room for {outputs} results")]
+    LengthMismatch {
+        /// Rays in the batch.
+        rays: usize,
+        /// Results the output holds.
+        outputs: usize,
+    },
+}
+
+impl CudaError {
+    /// Whether the error only says that this machine has no CUDA (no driver, no device, no
+    /// NVRTC): the caller may fall back to the CPU backend or skip.
+    pub fn is_unavailable(&self) -> bool {
+        matches!(
+            self,
+            CudaError::NoDriver(_) | CudaError::NoDevice(_) | CudaError::NoNvrtc(_)
+        )
+    }
+}
+
+/// Wraps a driver error with what was being done.
+pub(crate) fn driver(
+    during: &'static str,
+) -> impl FnOnce(cudarc::driver::DriverError) -> CudaError {
+    move |e| CudaError::Driver {
+        during,
+        message: e.to_string(),
+    }
+}

@@ -1,0 +1,618 @@
+//! A GAS on the device, and batches of rays and results on the device.
+
+use crate::context::CudaContext;
+use crate::error::{driver, CudaError};
+use crate::layout::{DeviceLayout, NodeLayout, SlotInfo};
+use bytemuck::{Pod, Zeroable};
+use cudarc::driver::{CudaSlice, LaunchConfig, PushKernelArg};
+use oxray::{Gas, Hit, HitKind, Ray};
+use rayon::prelude::*;
+use std::sync::Mutex;
+
+/// Threads per block of the trace kernels (their `__launch_bounds__`).
+const BLOCK: u32 = 128;
+
+/// One closest-hit result as the kernel writes it: `t`, the leaf slot with the back-face flag in
+/// bit 31, and the barycentrics. A miss has `t = +inf` and slot `0xFFFF_FFFF`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Pod, Zeroable)]
+pub struct HitRecord {
+    /// Distance along the ray; `+inf` for a miss.
+    pub t: f32,
+    /// Leaf slot, with bit 31 set for a back-face hit; `0xFFFF_FFFF` for a miss.
+    pub slot: u32,
+    /// First barycentric (weight of the second vertex).
+    pub u: f32,
+    /// Second barycentric (weight of the third vertex).
+    pub v: f32,
+}
+
+impl HitRecord {
+    /// The slot value of a miss.
+    pub const MISS: u32 = u32::MAX;
+
+    /// Whether the ray hit something.
+    pub fn is_hit(&self) -> bool {
+        self.slot != Self::MISS
+    }
+
+    /// The leaf slot hit (meaningless for a miss).
+    pub fn slot_index(&self) -> u32 {
+        self.slot & 0x7FFF_FFFF
+    }
+
+    /// Whether the hit is on a triangle's front face.
+    pub fn is_front_face(&self) -> bool {
+        self.slot & 0x8000_0000 == 0
+    }
+}
+
+/// A batch of rays in device memory.
+#[derive(Debug)]
+pub struct DeviceRays {
+    words: CudaSlice<u32>,
+    len: usize,
+}
+
+impl DeviceRays {
+    /// Copies rays to the device.
+    pub fn upload(ctx: &CudaContext, rays: &[Ray]) -> Result<DeviceRays, CudaError> {
+        check_batch(rays.len())?;
+        let words: &[u32] = bytemuck::cast_slice(rays);
+        let words = if words.is_empty() {
+            ctx.stream.alloc_zeros::<u32>(8)
+        } else {
+            ctx.stream.clone_htod(words)
+        }
+        .map_err(driver("copying rays to the device"))?;
+        Ok(DeviceRays {
+            words,
+            len: rays.len(),
+        })
+    }
+
+    /// Replaces the rays with as many new ones.
+    pub fn write(&mut self, ctx: &CudaContext, rays: &[Ray]) -> Result<(), CudaError> {
+        if rays.len() != self.len {
+            return Err(CudaError::LengthMismatch {
+                rays: rays.len(),
+                outputs: self.len,
+            });
+        }
+        if rays.is_empty() {
+            return Ok(());
+        }
+        ctx.stream
+            .memcpy_htod(bytemuck::cast_slice::<Ray, u32>(rays), &mut self.words)
+            .map_err(driver("copying rays to the device"))
+    }
+
+    /// Rays in the batch.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the batch is empty.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+/// Closest-hit results in device memory, one [`HitRecord`] per ray.
+#[derive(Debug)]
+pub struct DeviceHits {
+    words: CudaSlice<u32>,
+    len: usize,
+}
+
+impl DeviceHits {
+    /// Room for `len` results.
+    pub fn new(ctx: &CudaContext, len: usize) -> Result<DeviceHits, CudaError> {
+        check_batch(len)?;
+        let words = ctx
+            .stream
+            .alloc_zeros::<u32>(4 * len.max(1))
+            .map_err(driver("allocating hit records"))?;
+        Ok(DeviceHits { words, len })
+    }
+
+    /// Copies the results to the host.
+    pub fn download(&self, ctx: &CudaContext) -> Result<Vec<HitRecord>, CudaError> {
+        let mut out = vec![HitRecord::zeroed(); self.len];
+        self.download_into(ctx, &mut out)?;
+        Ok(out)
+    }
+
+    /// Copies the results into `out`, which must hold exactly [`len`](Self::len) records.
+    pub fn download_into(&self, ctx: &CudaContext, out: &mut [HitRecord]) -> Result<(), CudaError> {
+        if out.len() != self.len {
+            return Err(CudaError::LengthMismatch {
+                rays: self.len,
+                outputs: out.len(),
+            });
+        }
+        if out.is_empty() {
+            return Ok(());
+        }
+        let view = self.words.slice(..4 * self.len);
+        ctx.stream
+            .memcpy_dtoh(&view, bytemuck::cast_slice_mut::<HitRecord, u32>(out))
+            .map_err(driver("copying hit records to the host"))?;
+        ctx.synchronize()
+    }
+
+    /// Results held.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether it holds no results.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+/// Occlusion results in device memory, one byte per ray (1: occluded).
+#[derive(Debug)]
+pub struct DeviceOcclusion {
+    bytes: CudaSlice<u8>,
+    len: usize,
+}
+
+impl DeviceOcclusion {
+    /// Room for `len` results.
+    pub fn new(ctx: &CudaContext, len: usize) -> Result<DeviceOcclusion, CudaError> {
+        check_batch(len)?;
+        let bytes = ctx
+            .stream
+            .alloc_zeros::<u8>(len.max(1))
+            .map_err(driver("allocating occlusion results"))?;
+        Ok(DeviceOcclusion { bytes, len })
+    }
+
+    /// Copies the results to the host.
+    pub fn download(&self, ctx: &CudaContext) -> Result<Vec<bool>, CudaError> {
+        if self.len == 0 {
+            return Ok(Vec::new());
+        }
+        let mut raw = vec![0u8; self.len];
+        let view = self.bytes.slice(..self.len);
+        ctx.stream
+            .memcpy_dtoh(&view, &mut raw[..])
+            .map_err(driver("copying occlusion results to the host"))?;
+        ctx.synchronize()?;
+        Ok(raw.into_iter().map(|b| b != 0).collect())
+    }
+
+    /// Results held.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether it holds no results.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+fn check_batch(len: usize) -> Result<(), CudaError> {
+    if len > u32::MAX as usize {
+        return Err(CudaError::TooLarge(format!(
+            "a batch of {len} rays; at most {} per launch",
+            u32::MAX
+        )));
+    }
+    Ok(())
+}
+
+/// A triangle GAS uploaded to the device: its BVH in a chosen [`NodeLayout`] and its triangles
+/// in leaf-slot order. Queries return the hits of the CPU backend's [`Gas::intersect_batch`] and
+/// [`Gas::occluded_batch`]: distances, barycentrics and facing bit for bit; with
+/// [`NodeLayout::Bvh4`] the primitive too where two hits tie at the same distance.
+///
+/// ```no_run
+/// use oxray::{BuildOptions, Gas, Ray, TriangleInput, VertexBuffer};
+/// use oxray_cuda::{CudaContext, CudaGas};
+/// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+/// let gas = Gas::build(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+/// let ctx = CudaContext::new()?;
+/// let gpu = CudaGas::upload(&ctx, &gas)?;
+/// let rays = vec![Ray::new([0.0, 0.0, 1.0].into(), [0.0, 0.0, -1.0].into()); 1000];
+/// let hits = gpu.intersect_batch(&rays)?;
+/// assert_eq!(hits[0].unwrap().t, 1.0);
+/// assert!(gpu.occluded_batch(&rays)?.iter().all(|&o| o));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Debug)]
+pub struct CudaGas {
+    ctx: CudaContext,
+    layout: NodeLayout,
+    nodes: CudaSlice<u32>,
+    triangles: CudaSlice<u32>,
+    slots: Vec<SlotInfo>,
+    num_nodes: usize,
+    device_bytes: usize,
+    /// Buffers of the one-call queries, kept between calls (grown as batches grow) so that a
+    /// call allocates and page-faults nothing once warm.
+    scratch: Mutex<Scratch>,
+}
+
+/// Device and host buffers reused by the one-call queries.
+#[derive(Debug, Default)]
+struct Scratch {
+    /// Rays the device buffers hold room for.
+    capacity: usize,
+    rays: Option<CudaSlice<u32>>,
+    hits: Option<CudaSlice<u32>>,
+    occluded: Option<CudaSlice<u8>>,
+    records: Vec<HitRecord>,
+    flags: Vec<u8>,
+}
+
+impl Scratch {
+    /// Makes room for `n` rays and copies them to the device.
+    fn load(&mut self, ctx: &CudaContext, rays: &[Ray]) -> Result<(), CudaError> {
+        let n = rays.len();
+        check_batch(n)?;
+        if n > self.capacity || self.rays.is_none() {
+            let cap = n.max(1).next_power_of_two();
+            // Free the old buffers first.
+            (self.rays, self.hits, self.occluded) = (None, None, None);
+            let s = &ctx.stream;
+            self.rays = Some(
+                s.alloc_zeros::<u32>(8 * cap)
+                    .map_err(driver("allocating rays"))?,
+            );
+            self.hits = Some(
+                s.alloc_zeros::<u32>(4 * cap)
+                    .map_err(driver("allocating hits"))?,
+            );
+            self.occluded = Some(
+                s.alloc_zeros::<u8>(cap)
+                    .map_err(driver("allocating occlusion results"))?,
+            );
+            self.capacity = cap;
+        }
+        if let Some(d) = self.rays.as_mut() {
+            let mut view = d.slice_mut(..8 * n);
+            ctx.stream
+                .memcpy_htod(bytemuck::cast_slice::<Ray, u32>(rays), &mut view)
+                .map_err(driver("copying rays to the device"))?;
+        }
+        Ok(())
+    }
+}
+
+impl CudaGas {
+    /// Uploads a triangle GAS in the default layout ([`NodeLayout::Bvh2`]).
+    pub fn upload(ctx: &CudaContext, gas: &Gas) -> Result<CudaGas, CudaError> {
+        CudaGas::upload_with_layout(ctx, gas, NodeLayout::default())
+    }
+
+    /// Uploads a triangle GAS in the given node layout. A GAS of custom primitives is refused
+    /// ([`CudaError::CustomPrimitives`]).
+    pub fn upload_with_layout(
+        ctx: &CudaContext,
+        gas: &Gas,
+        layout: NodeLayout,
+    ) -> Result<CudaGas, CudaError> {
+        let export = gas.export_triangles().ok_or(CudaError::CustomPrimitives)?;
+        let host = DeviceLayout::new(&export, layout).map_err(CudaError::TooLarge)?;
+        let nodes = ctx
+            .stream
+            .clone_htod(&host.nodes[..])
+            .map_err(driver("copying BVH nodes to the device"))?;
+        let tri_words: Vec<u32> = if host.triangles.is_empty() {
+            vec![0; 12]
+        } else {
+            host.triangles.iter().map(|f| f.to_bits()).collect()
+        };
+        let triangles = ctx
+            .stream
+            .clone_htod(&tri_words[..])
+            .map_err(driver("copying triangles to the device"))?;
+        ctx.synchronize()?;
+        Ok(CudaGas {
+            ctx: ctx.clone(),
+            layout: host.layout,
+            num_nodes: host.nodes.len() / (layout.node_bytes() / 4),
+            device_bytes: host.device_bytes(),
+            nodes,
+            triangles,
+            slots: host.slots,
+            scratch: Mutex::new(Scratch::default()),
+        })
+    }
+
+    /// The node layout.
+    pub fn layout(&self) -> NodeLayout {
+        self.layout
+    }
+
+    /// Nodes of the device BVH.
+    pub fn num_nodes(&self) -> usize {
+        self.num_nodes
+    }
+
+    /// Bytes of nodes and triangles in device memory.
+    pub fn device_bytes(&self) -> usize {
+        self.device_bytes
+    }
+
+    /// The context it lives in.
+    pub fn context(&self) -> &CudaContext {
+        &self.ctx
+    }
+
+    /// Closest hits of a batch: uploads the rays, traces them, downloads and resolves the hits.
+    /// An invalid ray (see [`Ray::validate`]) hits nothing, as on the CPU.
+    pub fn intersect_batch(&self, rays: &[Ray]) -> Result<Vec<Option<Hit>>, CudaError> {
+        let mut hits = vec![None; rays.len()];
+        self.intersect_batch_into(rays, &mut hits)?;
+        Ok(hits)
+    }
+
+    /// [`intersect_batch`](Self::intersect_batch) into a slice, as the CPU backend's
+    /// [`Gas::intersect_batch`] does.
+    pub fn intersect_batch_into(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) -> Result<(), CudaError> {
+        if rays.len() != hits.len() {
+            return Err(CudaError::LengthMismatch {
+                rays: rays.len(),
+                outputs: hits.len(),
+            });
+        }
+        self.with_records(rays, |records| self.resolve_into(records, hits))
+    }
+
+    /// Closest hits of a batch as raw [`HitRecord`]s (resolve them with
+    /// [`resolve`](Self::resolve) or [`primitive_index`](Self::primitive_index)).
+    pub fn intersect_records(&self, rays: &[Ray]) -> Result<Vec<HitRecord>, CudaError> {
+        let mut out = Vec::new();
+        self.with_records(rays, |records| out.extend_from_slice(records))?;
+        Ok(out)
+    }
+
+    /// Traces a batch with the reused buffers and hands the records to `f`.
+    fn with_records(&self, rays: &[Ray], f: impl FnOnce(&[HitRecord])) -> Result<(), CudaError> {
+        let n = rays.len();
+        if n == 0 {
+            f(&[]);
+            return Ok(());
+        }
+        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let s = &mut *guard;
+        s.load(&self.ctx, rays)?;
+        let (Some(d_rays), Some(d_hits)) = (s.rays.as_ref(), s.hits.as_mut()) else {
+            return Err(CudaError::Driver {
+                during: "tracing",
+                message: "scratch buffers missing".into(),
+            });
+        };
+        self.launch_closest(d_rays, d_hits, n as u32)?;
+        s.records.resize(n, HitRecord::zeroed());
+        let view = d_hits.slice(..4 * n);
+        self.ctx
+            .stream
+            .memcpy_dtoh(
+                &view,
+                bytemuck::cast_slice_mut::<HitRecord, u32>(&mut s.records[..n]),
+            )
+            .map_err(driver("copying hit records to the host"))?;
+        self.ctx.synchronize()?;
+        f(&s.records[..n]);
+        Ok(())
+    }
+
+    /// Occlusion of a batch: whether anything lies in each ray's `[tmin, tmax]`.
+    pub fn occluded_batch(&self, rays: &[Ray]) -> Result<Vec<bool>, CudaError> {
+        let mut out = vec![false; rays.len()];
+        self.occluded_batch_into(rays, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`occluded_batch`](Self::occluded_batch) into a slice, as the CPU backend's
+    /// [`Gas::occluded_batch`] does.
+    pub fn occluded_batch_into(
+        &self,
+        rays: &[Ray],
+        occluded: &mut [bool],
+    ) -> Result<(), CudaError> {
+        if rays.len() != occluded.len() {
+            return Err(CudaError::LengthMismatch {
+                rays: rays.len(),
+                outputs: occluded.len(),
+            });
+        }
+        let n = rays.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let s = &mut *guard;
+        s.load(&self.ctx, rays)?;
+        let (Some(d_rays), Some(d_occ)) = (s.rays.as_ref(), s.occluded.as_mut()) else {
+            return Err(CudaError::Driver {
+                during: "tracing",
+                message: "scratch buffers missing".into(),
+            });
+        };
+        self.launch_occluded(d_rays, d_occ, n as u32)?;
+        s.flags.resize(n, 0);
+        let view = d_occ.slice(..n);
+        self.ctx
+            .stream
+            .memcpy_dtoh(&view, &mut s.flags[..n])
+            .map_err(driver("copying occlusion results to the host"))?;
+        self.ctx.synchronize()?;
+        const CHUNK: usize = 1 << 16;
+        occluded
+            .par_chunks_mut(CHUNK)
+            .zip(s.flags[..n].par_chunks(CHUNK))
+            .for_each(|(o, f)| {
+                for (o, &f) in o.iter_mut().zip(f) {
+                    *o = f != 0;
+                }
+            });
+        Ok(())
+    }
+
+    /// Traces rays already on the device into `hits`; returns when the kernel is done.
+    pub fn intersect_device(
+        &self,
+        rays: &DeviceRays,
+        hits: &mut DeviceHits,
+    ) -> Result<(), CudaError> {
+        if rays.len() != hits.len() {
+            return Err(CudaError::LengthMismatch {
+                rays: rays.len(),
+                outputs: hits.len(),
+            });
+        }
+        if rays.is_empty() {
+            return Ok(());
+        }
+        self.launch_closest(&rays.words, &mut hits.words, rays.len() as u32)?;
+        self.ctx.synchronize()
+    }
+
+    /// Traces occlusion of rays already on the device into `out`; returns when the kernel is
+    /// done.
+    pub fn occluded_device(
+        &self,
+        rays: &DeviceRays,
+        out: &mut DeviceOcclusion,
+    ) -> Result<(), CudaError> {
+        if rays.len() != out.len() {
+            return Err(CudaError::LengthMismatch {
+                rays: rays.len(),
+                outputs: out.len(),
+            });
+        }
+        if rays.is_empty() {
+            return Ok(());
+        }
+        self.launch_occluded(&rays.words, &mut out.bytes, rays.len() as u32)?;
+        self.ctx.synchronize()
+    }
+
+    /// Queues the closest-hit kernel over the first `n` rays of `rays` (8 words each), writing
+    /// 4 words per ray to `hits`.
+    fn launch_closest(
+        &self,
+        rays: &CudaSlice<u32>,
+        hits: &mut CudaSlice<u32>,
+        n: u32,
+    ) -> Result<(), CudaError> {
+        debug_assert!(rays.len() >= 8 * n as usize && hits.len() >= 4 * n as usize);
+        let f = match self.layout {
+            NodeLayout::Bvh4 => &self.ctx.kernels.closest_bvh4,
+            NodeLayout::Bvh2 => &self.ctx.kernels.closest_bvh2,
+        };
+        let mut launch = self.ctx.stream.launch_builder(f);
+        launch
+            .arg(&self.nodes)
+            .arg(&self.triangles)
+            .arg(rays)
+            .arg(hits)
+            .arg(&n);
+        // SAFETY: the kernel's parameters are (const float4* nodes, const float4* triangles,
+        // const float4* rays, uint4* hits, u32 n), matching the arguments pushed: device
+        // buffers of 32-bit words, 256-byte aligned by the allocator, holding the nodes and
+        // triangles of `DeviceLayout` (every child index and slot range in bounds), and at
+        // least 8 words per ray and 4 words per hit for `n` rays (checked by every caller).
+        // Threads past `n` return at once.
+        unsafe { launch.launch(grid(n)) }.map_err(driver("launching the closest-hit kernel"))?;
+        Ok(())
+    }
+
+    /// Queues the occlusion kernel over the first `n` rays, writing a byte per ray to `out`.
+    fn launch_occluded(
+        &self,
+        rays: &CudaSlice<u32>,
+        out: &mut CudaSlice<u8>,
+        n: u32,
+    ) -> Result<(), CudaError> {
+        debug_assert!(rays.len() >= 8 * n as usize && out.len() >= n as usize);
+        let f = match self.layout {
+            NodeLayout::Bvh4 => &self.ctx.kernels.occluded_bvh4,
+            NodeLayout::Bvh2 => &self.ctx.kernels.occluded_bvh2,
+        };
+        let mut launch = self.ctx.stream.launch_builder(f);
+        launch
+            .arg(&self.nodes)
+            .arg(&self.triangles)
+            .arg(rays)
+            .arg(out)
+            .arg(&n);
+        // SAFETY: as in `launch_closest`, with the output at least a byte per ray for `n`
+        // rays.
+        unsafe { launch.launch(grid(n)) }.map_err(driver("launching the occlusion kernel"))?;
+        Ok(())
+    }
+
+    /// The primitive index (with its input's offset) that a hit record reports, `None` for a
+    /// miss.
+    pub fn primitive_index(&self, record: &HitRecord) -> Option<u32> {
+        if !record.is_hit() {
+            return None;
+        }
+        self.slots
+            .get(record.slot_index() as usize)
+            .map(|s| s.primitive_index)
+    }
+
+    /// Turns hit records into the CPU backend's [`Hit`]s.
+    pub fn resolve(&self, records: &[HitRecord]) -> Vec<Option<Hit>> {
+        let mut out = vec![None; records.len()];
+        self.resolve_into(records, &mut out);
+        out
+    }
+
+    /// Turns hit records into [`Hit`]s in place; `out` must be as long as `records` (extra
+    /// entries on either side are left alone).
+    pub fn resolve_into(&self, records: &[HitRecord], out: &mut [Option<Hit>]) {
+        const CHUNK: usize = 1 << 14;
+        records
+            .par_chunks(CHUNK)
+            .zip(out.par_chunks_mut(CHUNK))
+            .for_each(|(r, o)| {
+                for (r, o) in r.iter().zip(o) {
+                    *o = self.resolve_one(r);
+                }
+            });
+    }
+
+    fn resolve_one(&self, r: &HitRecord) -> Option<Hit> {
+        if !r.is_hit() {
+            return None;
+        }
+        let s = self.slots.get(r.slot_index() as usize)?;
+        Some(Hit {
+            t: r.t,
+            u: r.u,
+            v: r.v,
+            primitive_index: s.primitive_index,
+            sbt_gas_index: s.sbt_gas_index,
+            build_input: s.build_input,
+            hit_kind: if r.is_front_face() {
+                HitKind::TRIANGLE_FRONT_FACE
+            } else {
+                HitKind::TRIANGLE_BACK_FACE
+            },
+            instance_id: !0,
+            instance_index: 0,
+        })
+    }
+}
+
+fn grid(n: u32) -> LaunchConfig {
+    LaunchConfig {
+        grid_dim: (n.div_ceil(BLOCK), 1, 1),
+        block_dim: (BLOCK, 1, 1),
+        shared_mem_bytes: 0,
+    }
+}

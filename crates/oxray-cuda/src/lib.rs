@@ -1,0 +1,228 @@
+//! # oxray-cuda
+//!
+//! The CUDA backend of oxray: a triangle [`Gas`](oxray::Gas) built by the CPU backend is uploaded
+//! to an NVIDIA GPU and batches of rays are traced there by a CUDA C++ kernel, with the results
+//! of the CPU backend's batched queries ([`Gas::intersect_batch`](oxray::Gas::intersect_batch),
+//! [`Gas::occluded_batch`](oxray::Gas::occluded_batch)).
+//!
+//! The CUDA driver and NVRTC are loaded at run time, so this crate builds, and its tests pass,
+//! on machines without CUDA: there [`CudaContext::new`] returns an error for which
+//! [`CudaError::is_unavailable`] holds. The kernels are CUDA C++ ([`KERNEL_SOURCE`]) compiled by
+//! NVRTC for the device's architecture when the context is created.
+//!
+//! ```no_run
+//! use oxray::{BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+//! use oxray_cuda::{CudaContext, CudaGas};
+//!
+//! let vertices = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+//! let triangles = [[0u32, 1, 2], [0, 2, 3]];
+//! let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
+//!     .indices(IndexBuffer::u32x3(&triangles));
+//! let gas = Gas::build(&BuildOptions::default(), &[input.into()])?;
+//!
+//! let ctx = CudaContext::new()?; // fails cleanly where there is no GPU
+//! let gpu = CudaGas::upload(&ctx, &gas)?;
+//! let rays = vec![Ray::new([0.25, 0.75, 1.0].into(), [0.0, 0.0, -1.0].into()); 4096];
+//! let hits = gpu.intersect_batch(&rays)?;
+//! assert_eq!(hits[0].unwrap().primitive_index, 1);
+//! let mut cpu = vec![None; rays.len()];
+//! gas.intersect_batch(&rays, &mut cpu)?;
+//! assert_eq!(hits, cpu);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+//!
+//! For timing, or to keep rays on the device between launches, use [`DeviceRays`],
+//! [`DeviceHits`] and [`DeviceOcclusion`] with [`CudaGas::intersect_device`] and
+//! [`CudaGas::occluded_device`].
+
+#![warn(missing_docs)]
+
+mod context;
+mod error;
+mod gas;
+mod layout;
+#[cfg(test)]
+mod reference;
+
+pub use context::{CudaContext, DeviceInfo, KernelInfo, KERNEL_SOURCE};
+pub use error::CudaError;
+pub use gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, HitRecord};
+pub use layout::NodeLayout;
+
+#[cfg(test)]
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+#[cfg(test)]
+mod tests {
+    use super::common::{bench_rays, find_mesh, tricky_rays, Mesh};
+    use super::layout::DeviceLayout;
+    use super::reference::trace;
+    use super::*;
+    use oxray::{BuildFlags, Gas, Ray};
+
+    /// Traces `rays` through the device layout on the CPU and compares with the CPU backend.
+    /// With `exact`, hits must be bit-identical (primitive included); otherwise distances must be
+    /// bit-identical and the primitive may differ only where another primitive is hit at the
+    /// same distance.
+    fn check(gas: &Gas, layout: NodeLayout, rays: &[Ray], exact: bool) {
+        let export = gas.export_triangles().unwrap();
+        let dl = DeviceLayout::new(&export, layout).unwrap();
+        let mut cpu = vec![None; rays.len()];
+        gas.intersect_batch(rays, &mut cpu).unwrap();
+        let mut occ = vec![false; rays.len()];
+        gas.occluded_batch(rays, &mut occ).unwrap();
+        let mut ties = 0;
+        for (i, r) in rays.iter().enumerate() {
+            let rec = trace(&dl, r, false);
+            let got = rec.is_hit().then(|| dl.slots[rec.slot_index() as usize]);
+            match (&cpu[i], got) {
+                (None, None) => assert_eq!(rec.t, f32::INFINITY),
+                (Some(h), Some(s)) => {
+                    assert_eq!(h.t.to_bits(), rec.t.to_bits(), "ray {i}: {r:?}");
+                    if exact || h.primitive_index == s.primitive_index {
+                        assert_eq!(h.primitive_index, s.primitive_index, "ray {i}: {r:?}");
+                        assert_eq!(
+                            (h.u.to_bits(), h.v.to_bits()),
+                            (rec.u.to_bits(), rec.v.to_bits())
+                        );
+                        assert_eq!(h.hit_kind.is_triangle_front_face(), rec.is_front_face());
+                        assert_eq!(
+                            (h.sbt_gas_index, h.build_input),
+                            (s.sbt_gas_index, s.build_input)
+                        );
+                    } else {
+                        ties += 1;
+                    }
+                }
+                (c, g) => panic!("ray {i} {r:?}: cpu {c:?}, layout {g:?}"),
+            }
+            let any = trace(&dl, r, true);
+            assert_eq!(any.is_hit(), occ[i], "ray {i} occlusion: {r:?}");
+        }
+        // Ties come from the rays aimed exactly at shared vertices and edges.
+        assert!(
+            ties * 100 <= rays.len(),
+            "{ties} ties in {} rays",
+            rays.len()
+        );
+    }
+
+    fn all_rays(mesh: &Mesh, gas: &Gas, side: u32) -> Vec<Ray> {
+        let (mut rays, inc) = bench_rays(mesh, side);
+        rays.extend(inc);
+        rays.extend(tricky_rays(mesh, gas, (side * side) as usize, 11));
+        rays
+    }
+
+    #[test]
+    fn bvh4_layout_traversal_matches_the_cpu_backend_bit_for_bit() {
+        for flags in [
+            BuildFlags::empty(),
+            BuildFlags::PREFER_FAST_TRACE,
+            BuildFlags::PREFER_FAST_BUILD,
+        ] {
+            let mesh = Mesh::icosphere(4);
+            let gas = mesh.build(flags).unwrap();
+            check(&gas, NodeLayout::Bvh4, &all_rays(&mesh, &gas, 64), true);
+        }
+    }
+
+    #[test]
+    fn bvh2_layout_traversal_matches_the_cpu_backend() {
+        let mesh = Mesh::icosphere(4);
+        let gas = mesh.build(BuildFlags::PREFER_FAST_TRACE).unwrap();
+        check(&gas, NodeLayout::Bvh2, &all_rays(&mesh, &gas, 64), false);
+    }
+
+    #[test]
+    fn layouts_match_on_the_bunny() {
+        let Some(path) = find_mesh("stanford-bunny.obj") else {
+            println!("skipping: stanford-bunny.obj not found (set OXRAY_MESH_DIR)");
+            return;
+        };
+        let mesh = Mesh::load_obj(&path).unwrap();
+        let gas = mesh.build(BuildFlags::PREFER_FAST_TRACE).unwrap();
+        let rays = all_rays(&mesh, &gas, 96);
+        check(&gas, NodeLayout::Bvh4, &rays, true);
+        check(&gas, NodeLayout::Bvh2, &rays, false);
+    }
+
+    #[test]
+    fn tiny_and_empty_gases_lay_out() {
+        // One triangle: the root is a leaf lane.
+        let mesh = Mesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        let gas = mesh.build(BuildFlags::empty()).unwrap();
+        let rays: Vec<Ray> = (0..64)
+            .map(|i| {
+                let x = (i % 8) as f32 / 7.0;
+                let y = (i / 8) as f32 / 7.0;
+                Ray::new([x, y, 1.0].into(), [0.0, 0.0, -1.0].into())
+            })
+            .collect();
+        check(&gas, NodeLayout::Bvh4, &rays, true);
+        check(&gas, NodeLayout::Bvh2, &rays, true);
+
+        // Only degenerate triangles: nothing to hit.
+        let flat = Mesh {
+            positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        let gas = flat.build(BuildFlags::empty()).unwrap();
+        for layout in [NodeLayout::Bvh4, NodeLayout::Bvh2] {
+            let dl = DeviceLayout::new(&gas.export_triangles().unwrap(), layout).unwrap();
+            assert!(!trace(&dl, &rays[0], false).is_hit());
+            assert!(dl.slots.is_empty());
+        }
+    }
+
+    #[test]
+    fn bvh2_nodes_are_half_the_size_and_cover_every_slot() {
+        let mesh = Mesh::icosphere(3);
+        let gas = mesh.build(BuildFlags::empty()).unwrap();
+        let export = gas.export_triangles().unwrap();
+        let b4 = DeviceLayout::new(&export, NodeLayout::Bvh4).unwrap();
+        let b2 = DeviceLayout::new(&export, NodeLayout::Bvh2).unwrap();
+        assert_eq!(b4.nodes.len(), 32 * export.nodes.len());
+        assert_eq!(b2.nodes.len() % 16, 0);
+        // Every active slot is reached exactly once from the binary root.
+        let mut seen = vec![0u32; b2.slots.len()];
+        let mut stack = vec![0usize];
+        while let Some(n) = stack.pop() {
+            let w = &b2.nodes[16 * n..][..16];
+            for c in 0..2 {
+                let lo_x = f32::from_bits(w[4 * c]);
+                let hi_x = f32::from_bits(w[4 * c + 1]);
+                if lo_x > hi_x {
+                    continue; // unused child
+                }
+                let (child, count) = (w[12 + c] as usize, w[14 + c] as usize);
+                if count == 0 {
+                    stack.push(child);
+                } else {
+                    for n in &mut seen[child..child + count] {
+                        *n += 1;
+                    }
+                }
+            }
+        }
+        for (s, info) in b2.slots.iter().enumerate() {
+            let active = info.primitive_index != u32::MAX;
+            assert_eq!(seen[s], active as u32, "slot {s}");
+        }
+        assert_eq!(b2.triangles.len(), 12 * b2.slots.len());
+    }
+
+    #[test]
+    fn custom_primitive_gas_is_refused_before_any_device_call() {
+        // Without a device a context cannot be made; the refusal is checked on the export.
+        let boxes = [oxray::Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE)];
+        let input = oxray::CustomPrimitiveInput::new(oxray::AabbBuffer::new(&boxes));
+        let gas = Gas::build(&oxray::BuildOptions::default(), &[input.into()]).unwrap();
+        assert!(gas.export_triangles().is_none());
+        assert!(CudaError::CustomPrimitives.to_string().contains("triangle"));
+    }
+}
