@@ -4,6 +4,7 @@
 
 pub mod bench;
 pub mod gpu;
+pub mod info;
 pub mod mesh;
 pub mod raycast;
 pub mod render;

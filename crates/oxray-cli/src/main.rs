@@ -28,9 +28,10 @@ enum Command {
     Render {
         /// The scene file; omit for the built-in Cornell box.
         scene: Option<PathBuf>,
-        /// Output image: .png (tone-mapped sRGB) or .exr (linear).
-        #[arg(short, long, default_value = "render.png")]
-        output: PathBuf,
+        /// Output image: .png (tone-mapped sRGB) or .exr (linear). Default: the scene file's
+        /// name with .png in the current directory, or cornell.png.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
         /// Image size, WxH.
         #[arg(long, default_value = "512x512")]
         size: String,
@@ -81,9 +82,10 @@ enum Command {
         #[arg(long, value_enum, default_value_t)]
         backend: oxray_cli::gpu::Backend,
     },
-    /// Triangle and instance counts and BVH statistics of a mesh.
+    /// Triangle and instance counts and BVH statistics of a mesh or scene: for glTF, one GAS
+    /// per mesh and an IAS over the node placements, as the renderer builds them.
     Info {
-        /// The mesh (.obj, .ply).
+        /// The mesh or scene (.obj, .ply, .gltf, .glb).
         mesh: PathBuf,
     },
     /// Build time and Mrays/s (closest and any hit; coherent and incoherent rays) on meshes.
@@ -156,6 +158,13 @@ fn run(cli: Cli) -> Result<()> {
             if !(env_intensity.is_finite() && env_intensity >= 0.0) {
                 bail!("--env-intensity must be a finite number >= 0, got {env_intensity}");
             }
+            let output = output.unwrap_or_else(|| {
+                let stem = scene
+                    .as_deref()
+                    .and_then(|p| p.file_stem())
+                    .map_or("cornell".into(), |s| s.to_string_lossy().into_owned());
+                PathBuf::from(format!("{stem}.png"))
+            });
             let ext = output
                 .extension()
                 .and_then(|e| e.to_str())
@@ -264,7 +273,16 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Info { mesh } => {
-            println!("{}", oxray_cli::raycast::info(&mesh)?);
+            let ext = mesh
+                .extension()
+                .and_then(|e| e.to_str())
+                .map(|e| e.to_ascii_lowercase());
+            if matches!(ext.as_deref(), Some("gltf") | Some("glb")) {
+                let report = oxray_cli::info::scene_info(&mesh).map_err(|e| anyhow::anyhow!("{e}"))?;
+                println!("{report}");
+            } else {
+                println!("{}", oxray_cli::raycast::info(&mesh)?);
+            }
             Ok(())
         }
         Command::Bench {

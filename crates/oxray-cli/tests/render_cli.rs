@@ -234,3 +234,26 @@ fn gltf_scene_renders_with_warnings_for_missing_textures() {
         "{err}"
     );
 }
+
+#[test]
+fn info_on_a_gltf_scene_counts_instances_and_builds_an_ias() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/hierarchy.gltf");
+    let out = oxray(&["info", s(&path)]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    // Four nodes place meshes; one mesh is placed twice (5 unique triangles, 6 instanced).
+    for line in [
+        "meshes: 3",
+        "triangles: 5 unique, 6 instanced",
+        "instances: 4",
+        "cameras: 1",
+        "IAS BVH: 1 nodes, 4 leaves",
+    ] {
+        assert!(text.contains(line), "{line:?} missing from:\n{text}");
+    }
+    assert!(text.contains("warning:") && text.contains("missing.png"));
+}
