@@ -2,8 +2,8 @@
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
-use oxray_cli::bench::{self, BenchRays};
 use glam::Vec3;
+use oxray_cli::bench::{self, BenchRays};
 use oxray_cli::mesh::Mesh;
 use oxray_cli::render::lights::Environment;
 use oxray_cli::render::RenderOptions;
@@ -248,8 +248,8 @@ fn run(cli: Cli) -> Result<()> {
                 .context("cannot start the worker threads")?;
             if backend == oxray_cli::gpu::Backend::Cuda {
                 let ctx = oxray_cli::gpu::open()?;
-                let r = pool
-                    .install(|| oxray_cli::gpu::raycast(&ctx, &mesh, &rays, &out, occlusion))?;
+                let r =
+                    pool.install(|| oxray_cli::gpu::raycast(&ctx, &mesh, &rays, &out, occlusion))?;
                 println!(
                     "{} rays, {} {} ({:.2} Mrays/s kernel, {:.2} Mrays/s with transfers on {})",
                     r.rays,
@@ -278,7 +278,8 @@ fn run(cli: Cli) -> Result<()> {
                 .and_then(|e| e.to_str())
                 .map(|e| e.to_ascii_lowercase());
             if matches!(ext.as_deref(), Some("gltf") | Some("glb")) {
-                let report = oxray_cli::info::scene_info(&mesh).map_err(|e| anyhow::anyhow!("{e}"))?;
+                let report =
+                    oxray_cli::info::scene_info(&mesh).map_err(|e| anyhow::anyhow!("{e}"))?;
                 println!("{report}");
             } else {
                 println!("{}", oxray_cli::raycast::info(&mesh)?);
@@ -355,8 +356,8 @@ fn run(cli: Cli) -> Result<()> {
                         .with_context(|| format!("cannot write to {}", dir.display()))?;
                 }
                 if let Some(ctx) = &cuda {
-                    let rows = pool
-                        .install(|| oxray_cli::gpu::bench_mesh(ctx, name, mesh, &rays, runs))?;
+                    let rows =
+                        pool.install(|| oxray_cli::gpu::bench_mesh(ctx, name, mesh, &rays, runs))?;
                     for row in rows {
                         println!("{row}");
                     }

@@ -60,7 +60,7 @@ fn read(path: &Path) -> Result<Vec<u8>, RaycastError> {
 
 /// Decodes a ray file.
 pub fn parse_rays(bytes: &[u8], path: &str) -> Result<Vec<Ray>, RaycastError> {
-    if bytes.len() % RAY_BYTES != 0 {
+    if !bytes.len().is_multiple_of(RAY_BYTES) {
         return Err(RaycastError::RayFileSize {
             path: path.to_string(),
             len: bytes.len(),

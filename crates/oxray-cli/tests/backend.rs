@@ -83,7 +83,7 @@ fn rays_file(test: &str) -> PathBuf {
             2.0,
         ];
         let d = [0.11, -0.07, -1.0];
-        let tmax = if k % 7 == 0 { 1.9 } else { f32::INFINITY };
+        let tmax = if k % 7 == 3 { 1.9 } else { f32::INFINITY };
         for x in [o[0], o[1], o[2], 0.0, d[0], d[1], d[2], tmax] {
             bytes.extend_from_slice(&x.to_le_bytes());
         }

@@ -279,7 +279,7 @@ fn glb_json(b: &[u8]) -> Option<(&[u8], &[u8])> {
 /// reaches the JSON checks instead of stopping at the container.
 fn glb_with_json(json: &[u8], rest: &[u8]) -> Vec<u8> {
     let mut json = json.to_vec();
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
     let total = 12 + 8 + json.len() + rest.len();

@@ -26,7 +26,7 @@ pub struct OutputBuffer<T> {
 impl<T: Pod> OutputBuffer<T> {
     const WORDS: usize = {
         assert!(
-            std::mem::size_of::<T>() % 4 == 0,
+            std::mem::size_of::<T>().is_multiple_of(4),
             "OutputBuffer elements must be whole 32-bit words"
         );
         std::mem::size_of::<T>() / 4

@@ -87,7 +87,7 @@ impl SbtRegion {
     /// `*RecordCount`). The stride must be a multiple of 16 holding at least the header, and
     /// the bytes must hold `count` records.
     pub fn from_bytes(bytes: Vec<u8>, stride: usize, count: usize) -> Result<Self, PipelineError> {
-        if stride % SBT_RECORD_ALIGNMENT != 0 || stride < SBT_RECORD_HEADER_SIZE {
+        if !stride.is_multiple_of(SBT_RECORD_ALIGNMENT) || stride < SBT_RECORD_HEADER_SIZE {
             return Err(PipelineError::InvalidSbtStride { stride });
         }
         let needed = stride

@@ -213,7 +213,7 @@ fn check_stride(
     }
     let reason = if (stride as usize) < elem {
         "smaller than one element"
-    } else if stride as usize % align != 0 {
+    } else if !(stride as usize).is_multiple_of(align) {
         "not a multiple of the element's alignment"
     } else {
         return Ok(());
