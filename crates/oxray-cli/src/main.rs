@@ -88,7 +88,8 @@ enum Command {
         /// The mesh or scene (.obj, .ply, .gltf, .glb).
         mesh: PathBuf,
     },
-    /// Build time and Mrays/s (closest and any hit; coherent and incoherent rays) on meshes.
+    /// Build time and Mrays/s on meshes: primary (camera) and diffuse (hemisphere) rays with
+    /// closest and any hit, and shadow rays to a point light.
     /// Without MESH, the bunny and igea from ../shared/data when present, else a generated
     /// icosphere.
     Bench {
@@ -343,9 +344,9 @@ fn run(cli: Cli) -> Result<()> {
                 println!("{}", oxray_cli::gpu::BENCH_HEADER);
             } else {
                 println!(
-                    "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | coherent closest | coherent any | incoherent closest | incoherent any | incoherent closest by build (default / fast-build / fast-trace) | pipeline coherent closest vs the same rays as queries, alternated |"
+                    "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace) | pipeline primary closest vs the same rays as queries, alternated |"
                 );
-                println!("|---|---:|---|---|---:|---:|---:|---:|---|---:|");
+                println!("|---|---:|---|---|---:|---:|---:|---:|---:|---|---:|");
             }
             for (name, mesh) in &sets {
                 let rays = BenchRays::new(mesh, side);
@@ -367,21 +368,22 @@ fn run(cli: Cli) -> Result<()> {
                     .install(|| bench::run(name, mesh, runs, &rays).map_err(|e| e.to_string()))
                     .map_err(anyhow::Error::msg)?;
                 println!(
-                    "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) |",
+                    "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) |",
                     r.name, r.triangles, r.build_ms[0], r.build_ms[1], r.build_ms[2],
                     r.sah[0], r.sah[1], r.sah[2],
-                    r.mrays[0], r.mrays[1], r.mrays[2], r.mrays[3],
+                    r.mrays[0], r.mrays[1], r.mrays[2], r.mrays[3], r.mrays[4],
                     r.mrays_by_flags[0], r.mrays_by_flags[1], r.mrays_by_flags[2],
                     r.pipeline_mrays.0,
                     r.pipeline_mrays.1,
                     100.0 * r.pipeline_mrays.0 / r.pipeline_mrays.1,
                 );
                 eprintln!(
-                    "  {}: {:.1} Mtris/s build, hit rate coherent {:.1}%, incoherent {:.1}%",
+                    "  {}: {:.1} Mtris/s build, hit rate primary {:.1}%, diffuse {:.1}%, shadow rays blocked {:.1}%",
                     r.name,
                     r.triangles as f64 / r.build_ms[0] / 1e3,
                     100.0 * r.hit_rate[0],
-                    100.0 * r.hit_rate[1]
+                    100.0 * r.hit_rate[1],
+                    100.0 * r.hit_rate[2]
                 );
             }
             if let (Some(n), Some((name, mesh))) = (instances, sets.first()) {
