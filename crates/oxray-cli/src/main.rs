@@ -153,6 +153,10 @@ fn run(cli: Cli) -> Result<()> {
                 .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
                 .filter(|&(w, h)| w > 0 && h > 0 && w <= 16384 && h <= 16384)
                 .with_context(|| format!("--size must be WxH within 1..=16384, got {size:?}"))?;
+            // The accumulation buffer takes 16 bytes a pixel: keep it within 1 GiB.
+            if w as u64 * h as u64 > 1 << 26 {
+                bail!("--size {w}x{h} has more than 2^26 pixels (about 8192x8192); render tiles of it instead");
+            }
             if spp == 0 || spp > 1 << 16 {
                 bail!("--spp must be in 1..=65536, got {spp}");
             }

@@ -162,6 +162,10 @@ fn bad_input_gives_one_error_line() {
         &oxray(&["render", "-o", s(&png), "--size", "100000x100000"]),
         "--size",
     );
+    assert_one_error(
+        &oxray(&["render", "-o", s(&png), "--size", "16384x16384"]),
+        "2^26 pixels",
+    );
     assert_one_error(&oxray(&["render", "-o", s(&png), "--spp", "0"]), "--spp");
     assert_one_error(
         &oxray(&["render", "-o", s(&tmp("out.bmp"))]),
