@@ -261,3 +261,98 @@ fn info_on_a_gltf_scene_counts_instances_and_builds_an_ias() {
     }
     assert!(text.contains("warning:") && text.contains("missing.png"));
 }
+
+#[test]
+fn raycast_on_a_gltf_scene_follows_the_flattened_file_order() {
+    // Every ray aimed at a triangle's centroid (from outside, along its normal) must report that
+    // triangle's index in the flattened order that `Mesh::load` documents.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/hierarchy.gltf");
+    let mesh = oxray_cli::mesh::Mesh::load(&path).unwrap();
+    let mut rays = Vec::new();
+    for t in &mesh.triangles {
+        let [a, b, c] = t.map(|i| glam::Vec3::from(mesh.positions[i as usize]));
+        let n = (b - a).cross(c - a).normalize();
+        let centroid = (a + b + c) / 3.0;
+        let o = centroid + n * 0.5;
+        rays.push([o.x, o.y, o.z, 0.0, -n.x, -n.y, -n.z, 1.0]);
+    }
+    let rays_path = tmp("gltf.rays");
+    let bytes: Vec<u8> = rays
+        .iter()
+        .flatten()
+        .flat_map(|x| x.to_le_bytes())
+        .collect();
+    std::fs::write(&rays_path, bytes).unwrap();
+    let hits = tmp("gltf.hits");
+    let out = oxray(&[
+        "raycast",
+        s(&path),
+        "--rays",
+        s(&rays_path),
+        "--out",
+        s(&hits),
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let words: Vec<u32> = std::fs::read(&hits)
+        .unwrap()
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes(c.try_into().unwrap()))
+        .collect();
+    assert_eq!(words.len(), 4 * mesh.triangles.len());
+    // The fixture's fan has overlapping triangles, so a ray may report another triangle that
+    // also covers its target: the hit must then lie on that triangle too, and agree with the
+    // library query on the flattened mesh.
+    let gas = oxray_cli::bench::build_gas(&mesh, oxray::BuildFlags::PREFER_FAST_TRACE).unwrap();
+    let mut own = 0;
+    for (k, r) in rays.iter().enumerate() {
+        assert!((f32::from_bits(words[4 * k]) - 0.5).abs() < 1e-4, "ray {k}");
+        let prim = words[4 * k + 1];
+        own += (prim == k as u32) as usize;
+        let ray = oxray::Ray::new(
+            glam::Vec3::new(r[0], r[1], r[2]),
+            glam::Vec3::new(r[4], r[5], r[6]),
+        );
+        assert_eq!(gas.intersect(&ray).map(|h| h.primitive_index), Some(prim));
+    }
+    assert!(
+        own + 1 >= mesh.triangles.len(),
+        "{own} of {}",
+        mesh.triangles.len()
+    );
+}
+
+#[test]
+fn bench_prints_one_row_per_mesh_with_the_three_ray_kinds() {
+    let mesh = tmp("bench.obj");
+    std::fs::write(
+        &mesh,
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nv 0 0 1\nf 1 2 5\nf 2 3 5\nf 3 4 5\nf 4 1 5\nf 1 3 2\nf 1 4 3\n",
+    )
+    .unwrap();
+    let out = oxray(&["bench", s(&mesh), "--side", "16", "--runs", "1"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let header = text.lines().find(|l| l.starts_with("| mesh")).unwrap();
+    for kind in ["primary closest", "diffuse closest", "shadow"] {
+        assert!(header.contains(kind), "{header}");
+    }
+    let row = text.lines().find(|l| l.starts_with("| bench |")).unwrap();
+    assert_eq!(
+        row.matches('|').count(),
+        header.matches('|').count(),
+        "{row}"
+    );
+    // Every throughput cell is a positive number.
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    for c in &cells[5..10] {
+        assert!(c.parse::<f64>().unwrap() > 0.0, "{row}");
+    }
+}
