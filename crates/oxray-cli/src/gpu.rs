@@ -150,7 +150,7 @@ pub struct GpuBenchRow {
     pub name: String,
     /// Triangles.
     pub triangles: usize,
-    /// `coherent` or `incoherent`.
+    /// `coherent`, `incoherent` or `shadow`.
     pub set: &'static str,
     /// `closest` or `any`.
     pub query: &'static str,
@@ -188,8 +188,8 @@ impl fmt::Display for GpuBenchRow {
 
 /// `oxray bench --backend cuda` on one mesh: the GAS of the CPU benchmark (default build
 /// flags), uploaded, and the benchmark's ray sets traced on the CPU (current rayon pool) and the
-/// GPU, closest and any hit, each timed as the median of `runs` after a warm-up. Returns four
-/// rows: coherent closest, coherent any, incoherent closest, incoherent any.
+/// GPU, closest and any hit, each timed as the median of `runs` after a warm-up. Returns six
+/// rows: closest and any hit for the coherent (primary), incoherent (diffuse) and shadow rays.
 pub fn bench_mesh(
     ctx: &CudaContext,
     name: &str,
@@ -199,10 +199,11 @@ pub fn bench_mesh(
 ) -> Result<Vec<GpuBenchRow>, GpuError> {
     let gas = build_gas(mesh, BuildFlags::empty())?;
     let gpu = CudaGas::upload(ctx, &gas)?;
-    let mut rows = Vec::with_capacity(4);
+    let mut rows = Vec::with_capacity(6);
     for (set, rays) in [
         ("coherent", &rays.coherent),
         ("incoherent", &rays.incoherent),
+        ("shadow", &rays.shadow),
     ] {
         let [closest, any] = bench_set(ctx, &gas, &gpu, rays, runs)?;
         for (query, r) in [("closest", closest), ("any", any)] {

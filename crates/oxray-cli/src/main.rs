@@ -54,6 +54,9 @@ enum Command {
         /// Multiplies the environment's radiance.
         #[arg(long, default_value_t = 1.0)]
         env_intensity: f32,
+        /// Exposure in stops applied before tone mapping (PNG only; EXR stays linear).
+        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+        exposure: f32,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -146,6 +149,7 @@ fn run(cli: Cli) -> Result<()> {
             camera,
             env,
             env_intensity,
+            exposure,
             quiet,
         } => {
             let (w, h) = size
@@ -159,6 +163,9 @@ fn run(cli: Cli) -> Result<()> {
             }
             if spp == 0 || spp > 1 << 16 {
                 bail!("--spp must be in 1..=65536, got {spp}");
+            }
+            if !(exposure.is_finite() && exposure.abs() <= 32.0) {
+                bail!("--exposure must be within -32..=32 stops, got {exposure}");
             }
             if !(env_intensity.is_finite() && env_intensity >= 0.0) {
                 bail!("--env-intensity must be a finite number >= 0, got {env_intensity}");
@@ -229,6 +236,15 @@ fn run(cli: Cli) -> Result<()> {
                 })
             })?;
             bar.finish_and_clear();
+            let mut image = image;
+            if ext.as_deref() == Some("png") && exposure != 0.0 {
+                let k = exposure.exp2();
+                for p in &mut image.pixels {
+                    for c in &mut p[..3] {
+                        *c *= k;
+                    }
+                }
+            }
             image.save(&output).map_err(anyhow::Error::msg)?;
             println!(
                 "wrote {} ({w}x{h}, {spp} spp, {} triangles, {} instances): loaded in {loaded:.1} s, total {:.1} s",

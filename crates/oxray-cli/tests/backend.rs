@@ -200,12 +200,14 @@ fn bench_cuda_compares_with_the_cpu_or_fails_with_one_error_line() {
             .lines()
             .filter(|l| l.starts_with("| heightfield |"))
             .collect();
-        assert_eq!(rows.len(), 4, "{text}");
+        assert_eq!(rows.len(), 6, "{text}");
         for (row, (set, query)) in rows.iter().zip([
             ("coherent", "closest"),
             ("coherent", "any"),
             ("incoherent", "closest"),
             ("incoherent", "any"),
+            ("shadow", "closest"),
+            ("shadow", "any"),
         ]) {
             assert!(row.contains(&format!("| {set} | {query} |")), "{row}");
             assert!(row.ends_with("| 100.0000% |"), "{row}");

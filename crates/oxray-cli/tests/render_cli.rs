@@ -356,3 +356,40 @@ fn bench_prints_one_row_per_mesh_with_the_three_ray_kinds() {
         assert!(c.parse::<f64>().unwrap() > 0.0, "{row}");
     }
 }
+
+#[test]
+fn exposure_darkens_or_brightens_the_png() {
+    let mean_byte = |ev: &str| {
+        let png = tmp(&format!("exposure{ev}.png"));
+        let out = oxray(&[
+            "render",
+            "-o",
+            s(&png),
+            "--size",
+            "16x16",
+            "--spp",
+            "2",
+            "--quiet",
+            "--exposure",
+            ev,
+        ]);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mut reader = png::Decoder::new(std::fs::File::open(&png).unwrap())
+            .read_info()
+            .unwrap();
+        let mut buf = vec![0; reader.output_buffer_size()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        let bytes = &buf[..info.buffer_size()];
+        bytes.iter().map(|&b| b as f64).sum::<f64>() / bytes.len() as f64
+    };
+    let (dark, normal, bright) = (mean_byte("-2"), mean_byte("0"), mean_byte("2"));
+    assert!(dark < normal && normal < bright, "{dark} {normal} {bright}");
+    assert_one_error(
+        &oxray(&["render", "-o", s(&tmp("e.png")), "--exposure", "1000"]),
+        "--exposure",
+    );
+}
