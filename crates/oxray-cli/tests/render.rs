@@ -239,7 +239,7 @@ fn alpha_mask_cuts_holes_in_both_ray_types() {
         }],
         materials: vec![MaterialDesc {
             base_color: [1.0; 4],
-            base_color_texture: Some(TextureRef { texture: 0 }),
+            base_color_texture: Some(TextureRef::new(0)),
             alpha_mode: AlphaMode::Mask { cutoff: 0.5 },
             emissive: [1.0, 1.0, 1.0],
             roughness: 1.0,

@@ -104,8 +104,14 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
 }
 
 fn tex(p: &Params, r: Option<TextureRef>, uv: Vec2, srgb: bool) -> Vec4 {
-    match r.and_then(|r| p.scene.textures.get(r.texture as usize)) {
-        Some(t) => sample(t, uv, srgb),
+    let Some(r) = r else {
+        return Vec4::ONE;
+    };
+    match p.scene.textures.get(r.texture as usize) {
+        Some(t) => {
+            let (u, v) = r.map(uv.x, uv.y);
+            sample(t, Vec2::new(u, v), srgb)
+        }
         None => Vec4::ONE,
     }
 }

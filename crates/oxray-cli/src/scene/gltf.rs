@@ -534,19 +534,35 @@ impl Loader<'_> {
         let mut wanted: Vec<usize> = Vec::new();
         for m in self.doc.materials() {
             let pbr = m.pbr_metallic_roughness();
+            // KHR_texture_transform as (offset, rotation, scale); its texCoord override
+            // replaces the slot's set.
+            let khr = |info: &::gltf::texture::Info| {
+                info.texture_transform().map(|t| {
+                    (
+                        (t.offset(), t.rotation(), t.scale()),
+                        t.tex_coord().unwrap_or(info.tex_coord()),
+                    )
+                })
+            };
+            let info = |i: Option<::gltf::texture::Info>| {
+                i.map(|t| match khr(&t) {
+                    Some((tr, set)) => (t.texture().index(), set, Some(tr)),
+                    None => (t.texture().index(), t.tex_coord(), None),
+                })
+            };
             let refs = [
-                pbr.base_color_texture()
-                    .map(|t| (t.texture().index(), t.tex_coord())),
-                pbr.metallic_roughness_texture()
-                    .map(|t| (t.texture().index(), t.tex_coord())),
-                m.emissive_texture()
-                    .map(|t| (t.texture().index(), t.tex_coord())),
+                info(pbr.base_color_texture()),
+                info(pbr.metallic_roughness_texture()),
+                info(m.emissive_texture()),
+                // The gltf crate exposes no transform on normal textures.
                 m.normal_texture()
-                    .map(|t| (t.texture().index(), t.tex_coord())),
+                    .map(|t| (t.texture().index(), t.tex_coord(), None)),
             ];
             let mut slots = [None; 4];
             for (slot, r) in refs.into_iter().enumerate() {
-                let Some((texture, set)) = r else { continue };
+                let Some((texture, set, transform)) = r else {
+                    continue;
+                };
                 if set != 0 {
                     self.warn(format!(
                         "material {} uses texture coordinate set {set}; only set 0 is supported, so the texture is ignored",
@@ -554,8 +570,16 @@ impl Loader<'_> {
                     ));
                     continue;
                 }
+                if transform.is_some_and(|(o, r, sc): ([f32; 2], f32, [f32; 2])| {
+                    !(o.iter().chain(&sc).all(|x| x.is_finite()) && r.is_finite())
+                }) {
+                    return Err(format!(
+                        "material {}: non-finite KHR_texture_transform",
+                        m.index().unwrap_or(0)
+                    ));
+                }
                 if textures {
-                    slots[slot] = Some(texture);
+                    slots[slot] = Some((texture, transform));
                     wanted.push(texture);
                 }
             }
@@ -652,11 +676,21 @@ impl Loader<'_> {
                 });
                 scene.textures.len() as u32 - 1
             });
-            Some(TextureRef { texture: index })
+            Some(TextureRef::new(index))
         };
         let mut scene = std::mem::take(&mut self.scene);
         for (mut desc, slots) in materials {
-            let mut r = slots.map(|s| s.and_then(|t| texture_ref(t, &mut scene)));
+            let mut r = slots.map(|s| {
+                s.and_then(|(t, transform)| {
+                    let r = texture_ref(t, &mut scene)?;
+                    Some(match transform {
+                        Some((offset, rotation, scale)) => {
+                            r.with_khr_transform(offset, rotation, scale)
+                        }
+                        None => r,
+                    })
+                })
+            });
             desc.base_color_texture = r[0].take();
             desc.metallic_roughness_texture = r[1].take();
             desc.emissive_texture = r[2].take();

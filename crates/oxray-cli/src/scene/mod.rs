@@ -71,11 +71,48 @@ pub enum AlphaMode {
     Blend,
 }
 
-/// A texture reference (texture coordinate set 0).
+/// A texture reference: texture coordinate set 0 mapped through a 2x3 affine transform
+/// (glTF `KHR_texture_transform`) before sampling.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TextureRef {
     /// Index into [`SceneDesc::textures`].
     pub texture: u32,
+    /// Rows of the UV transform: `u' = m[0] u + m[1] v + m[2]`, `v' = m[3] u + m[4] v + m[5]`.
+    pub uv_transform: [f32; 6],
+}
+
+impl TextureRef {
+    /// The identity UV transform.
+    pub const IDENTITY: [f32; 6] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+
+    /// A reference to `texture` with untransformed coordinates.
+    pub fn new(texture: u32) -> TextureRef {
+        TextureRef {
+            texture,
+            uv_transform: Self::IDENTITY,
+        }
+    }
+
+    /// The transform of `KHR_texture_transform`: scale, then rotate by `rotation` radians
+    /// (counter-clockwise in UV space, which is clockwise in the image), then offset.
+    pub fn with_khr_transform(mut self, offset: [f32; 2], rotation: f32, scale: [f32; 2]) -> Self {
+        let (s, c) = rotation.sin_cos();
+        self.uv_transform = [
+            c * scale[0],
+            s * scale[1],
+            offset[0],
+            -s * scale[0],
+            c * scale[1],
+            offset[1],
+        ];
+        self
+    }
+
+    /// Applies the UV transform.
+    pub fn map(&self, u: f32, v: f32) -> (f32, f32) {
+        let m = &self.uv_transform;
+        (m[0] * u + m[1] * v + m[2], m[3] * u + m[4] * v + m[5])
+    }
 }
 
 /// A metallic-roughness PBR material (the glTF 2.0 model) with transmission for dielectrics.

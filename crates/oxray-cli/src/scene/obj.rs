@@ -138,7 +138,7 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
             .diffuse_texture
             .as_deref()
             .and_then(|map| by_file.get(&texture_path(mi, map)).copied().flatten())
-            .map(|texture| TextureRef { texture });
+            .map(TextureRef::new);
         scene.materials.push(convert(m, texture));
     }
 
