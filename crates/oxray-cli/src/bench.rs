@@ -63,28 +63,44 @@ pub fn camera_rays(mesh: &Mesh, width: u32, height: u32) -> Vec<Ray> {
     rays
 }
 
+/// A uniform point on a random triangle with its unit normal; `None` when the triangle drawn is
+/// degenerate (the caller draws again).
+fn surface_point(mesh: &Mesh, rng: &mut Rng) -> Option<(Vec3, Vec3)> {
+    let t = mesh.triangles[(rng.next_u64() % mesh.triangles.len() as u64) as usize];
+    let [a, b, c] = t.map(|i| Vec3::from(mesh.positions[i as usize]));
+    let nrm = (b - a).cross(c - a);
+    if nrm.length_squared() == 0.0 || !nrm.is_finite() {
+        return None;
+    }
+    let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
+    if u + v > 1.0 {
+        (u, v) = (1.0 - u, 1.0 - v);
+    }
+    Some((a + (b - a) * u + (c - a) * v, nrm.normalize()))
+}
+
+/// Whether some triangle has an area: without one, [`surface_point`] would never succeed.
+fn has_surface(mesh: &Mesh) -> bool {
+    mesh.triangles.iter().any(|t| {
+        let [a, b, c] = t.map(|i| Vec3::from(mesh.positions[i as usize]));
+        let n = (b - a).cross(c - a);
+        n.length_squared() > 0.0 && n.is_finite()
+    })
+}
+
 /// `n` rays leaving random points of random (non-degenerate) triangles in cosine-distributed
 /// directions about the triangle's normal: the secondary rays of a path tracer.
 pub fn hemisphere_rays(mesh: &Mesh, n: usize, seed: u64) -> Vec<Ray> {
     let (_, r) = center_radius(mesh);
     let mut rng = Rng::new(seed);
     let mut rays = Vec::with_capacity(n);
-    if mesh.triangles.is_empty() {
+    if !has_surface(mesh) {
         return rays;
     }
     while rays.len() < n {
-        let t = mesh.triangles[(rng.next_u64() % mesh.triangles.len() as u64) as usize];
-        let [a, b, c] = t.map(|i| Vec3::from(mesh.positions[i as usize]));
-        let nrm = (b - a).cross(c - a);
-        if nrm.length_squared() == 0.0 || !nrm.is_finite() {
+        let Some((p, nrm)) = surface_point(mesh, &mut rng) else {
             continue;
-        }
-        let nrm = nrm.normalize();
-        let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
-        if u + v > 1.0 {
-            (u, v) = (1.0 - u, 1.0 - v);
-        }
-        let p = a + (b - a) * u + (c - a) * v;
+        };
         let (r1, r2) = (rng.next_f32(), rng.next_f32());
         let phi = std::f32::consts::TAU * r1;
         let s = r2.sqrt();
@@ -95,30 +111,21 @@ pub fn hemisphere_rays(mesh: &Mesh, n: usize, seed: u64) -> Vec<Ray> {
     rays
 }
 
-/// `n` shadow rays: from random surface points (offset along the normal towards the light)
-/// to a point light above and in front of the mesh, with `tmax` stopping at the light. Points
-/// facing away from the light still cast their ray, as a renderer that tests visibility before
-/// shading would.
+/// `n` shadow rays: from random surface points to a point light above and in front of the
+/// mesh, with `tmax` stopping at the light. Points facing away from the light still cast their
+/// ray, as a renderer that tests visibility before shading would.
 pub fn shadow_rays(mesh: &Mesh, n: usize, seed: u64) -> Vec<Ray> {
     let (c, r) = center_radius(mesh);
     let light = c + Vec3::new(0.4, 1.2, 0.8) * (2.0 * r);
     let mut rng = Rng::new(seed);
     let mut rays = Vec::with_capacity(n);
-    if mesh.triangles.is_empty() {
+    if !has_surface(mesh) {
         return rays;
     }
     while rays.len() < n {
-        let t = mesh.triangles[(rng.next_u64() % mesh.triangles.len() as u64) as usize];
-        let [a, b, cc] = t.map(|i| Vec3::from(mesh.positions[i as usize]));
-        let nrm = (b - a).cross(cc - a);
-        if nrm.length_squared() == 0.0 || !nrm.is_finite() {
+        let Some((p, _)) = surface_point(mesh, &mut rng) else {
             continue;
-        }
-        let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
-        if u + v > 1.0 {
-            (u, v) = (1.0 - u, 1.0 - v);
-        }
-        let p = a + (b - a) * u + (cc - a) * v;
+        };
         let to = light - p;
         let dist = to.length();
         rays.push(Ray::with_interval(p, to / dist, 1e-5 * r, dist));
@@ -564,5 +571,30 @@ mod tests {
         assert_eq!(mismatches, 0);
         let frac = blocked.iter().filter(|&&b| b).count() as f32 / rays.len() as f32;
         assert!(frac > 0.3 && frac < 0.7, "{frac}");
+    }
+
+    #[test]
+    fn meshes_without_area_give_no_rays_instead_of_looping() {
+        let flat = Mesh {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        assert!(hemisphere_rays(&flat, 10, 1).is_empty());
+        assert!(shadow_rays(&flat, 10, 1).is_empty());
+    }
+
+    #[test]
+    fn hemisphere_rays_are_deterministic_per_seed() {
+        // The exported benchmark rays (and the Embree and GPU comparisons) rely on one seed
+        // giving one sequence.
+        let r = hemisphere_rays(&Mesh::icosphere(2), 3, 7);
+        let again = hemisphere_rays(&Mesh::icosphere(2), 3, 7);
+        assert_eq!(r.len(), 3);
+        for (a, b) in r.iter().zip(&again) {
+            assert_eq!(a.origin, b.origin);
+            assert_eq!(a.direction, b.direction);
+        }
+        assert!((r[0].origin.length() - 1.0).abs() < 0.1);
+        assert!((r[0].direction.length() - 1.0).abs() < 1e-5);
     }
 }

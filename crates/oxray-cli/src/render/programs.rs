@@ -148,14 +148,20 @@ fn alpha_at(
     m.base_color[3] * tex(p, m.base_color_texture, uv, true).w
 }
 
+/// The material and primitive a hit-group record names (both `None`-safe: a record the scene
+/// did not make yields nothing).
+fn record<'p>(p: &'p Params, data: HitGroupData) -> Option<(&'p MaterialDesc, &'p Primitive)> {
+    Some((
+        p.scene.materials.get(data.material as usize)?,
+        *p.prims.get(data.geometry as usize)?,
+    ))
+}
+
 /// `__anyhit__alpha`: cutouts for MASK materials, stochastic transparency for BLEND ones.
 fn any_hit_alpha(ctx: &mut AnyHitCtx<Params>) -> ProgramResult {
     let p = ctx.params();
     let data = ctx.sbt_data::<HitGroupData>().unwrap_or_default();
-    let (Some(m), Some(prim)) = (
-        p.scene.materials.get(data.material as usize),
-        p.prims.get(data.geometry as usize),
-    ) else {
+    let Some((m, prim)) = record(p, data) else {
         return Ok(());
     };
     let alpha = alpha_at(
@@ -285,10 +291,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
     let mut s = load(ctx.payload_words());
     let p = ctx.params();
     let data = ctx.sbt_data::<HitGroupData>().unwrap_or_default();
-    let (Some(m), Some(prim)) = (
-        p.scene.materials.get(data.material as usize),
-        p.prims.get(data.geometry as usize),
-    ) else {
+    let Some((m, prim)) = record(p, data) else {
         s.done = 1;
         store(&s, |i, w| ctx.set_payload(i, w));
         return Ok(());
