@@ -57,6 +57,9 @@ enum Command {
         /// Exposure in stops applied before tone mapping (PNG only; EXR stays linear).
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         exposure: f32,
+        /// Put the scene on a large grey ground plane.
+        #[arg(long)]
+        ground: bool,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -150,6 +153,7 @@ fn run(cli: Cli) -> Result<()> {
             env,
             env_intensity,
             exposure,
+            ground,
             quiet,
         } => {
             let (w, h) = size
@@ -192,10 +196,13 @@ fn run(cli: Cli) -> Result<()> {
                 .build()
                 .context("cannot start the worker threads")?;
             let start = std::time::Instant::now();
-            let (desc, default_env) = match &scene {
+            let (mut desc, default_env) = match &scene {
                 Some(path) => (pool.install(|| SceneDesc::load(path))?, "sky"),
                 None => (oxray_cli::scene::cornell_box(), "none"),
             };
+            if ground {
+                desc.add_ground();
+            }
             for w in &desc.warnings {
                 eprintln!("warning: {w}");
             }

@@ -388,3 +388,29 @@ fn mirrored_instances_keep_their_front_faces_and_emission_side() {
     assert_eq!(seen_from(-3.0, &mut scene), 2.0);
     assert_eq!(seen_from(3.0, &mut scene), 0.0);
 }
+
+#[test]
+fn ground_plane_is_under_the_scene_and_outside_the_framing() {
+    // A white environment: without ground, the bottom row sees the sky (exactly 1); with the
+    // ground, it sees a grey diffuse plane (at most its albedo, 0.45, under a white sky).
+    let mut scene = SceneDesc::from_mesh("ball", oxray_cli::mesh::Mesh::icosphere(2));
+    let env = Environment::uniform(Vec3::ONE);
+    let o = opts(16, 16, 4, 3);
+    let bottom = |s: &SceneDesc| {
+        let img = render(s, &env, &o, |_| {}).unwrap();
+        img.pixels[15 * 16 + 1][0]
+    };
+    let camera_before = oxray_cli::render::camera_frame(&scene, &o).unwrap();
+    assert_eq!(bottom(&scene), 1.0);
+    scene.add_ground();
+    assert_eq!(scene.triangle_count(), 320 + 2);
+    let (lo, _) = scene.bounds().unwrap();
+    assert!(
+        lo.y >= -1.0 - 1e-6,
+        "the ground is at the ball's lowest point"
+    );
+    let camera_after = oxray_cli::render::camera_frame(&scene, &o).unwrap();
+    assert_eq!(camera_before.origin, camera_after.origin);
+    let g = bottom(&scene);
+    assert!(g > 0.0 && g <= 0.46, "{g}");
+}

@@ -101,7 +101,7 @@ pub fn camera_frame(scene: &SceneDesc, opts: &RenderOptions) -> Result<CameraFra
 
 fn framing_camera(scene: &SceneDesc) -> Result<Camera, RenderError> {
     let (lo, hi) = scene
-        .bounds()
+        .content_bounds()
         .ok_or_else(|| RenderError::Scene("the scene has no finite geometry".into()))?;
     let centre = (lo + hi) * 0.5;
     let radius = ((hi - lo) * 0.5).length().max(1e-6);
@@ -237,7 +237,7 @@ pub fn render(
         (false, false) => 0.5,
     };
     let eps = scene
-        .bounds()
+        .content_bounds()
         .map_or(1e-4, |(lo, hi)| (hi - lo).max_element() * 1e-5)
         .max(1e-7);
     let pipeline = ScenePipeline::new(

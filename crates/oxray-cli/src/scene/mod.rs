@@ -30,6 +30,8 @@ pub struct SceneDesc {
     /// Problems that did not stop loading (a missing texture, an unsupported feature), one line
     /// each, for the caller to print.
     pub warnings: Vec<String>,
+    /// The instance [`SceneDesc::add_ground`] added, if any.
+    pub ground: Option<usize>,
 }
 
 /// A mesh: one or more primitives, each with its own material.
@@ -326,6 +328,58 @@ impl SceneDesc {
                 transform: Mat4::IDENTITY,
             }],
             ..Default::default()
+        }
+    }
+
+    /// Adds a large grey ground square under the scene (at its lowest point, ten times its
+    /// size), so that objects stand on something and cast visible shadows. Nothing happens for
+    /// an empty scene. The framing camera still frames the original bounds.
+    pub fn add_ground(&mut self) {
+        let Some((lo, hi)) = self.bounds() else {
+            return;
+        };
+        let c = (lo + hi) * 0.5;
+        let r = ((hi - lo).length() * 5.0).max(1e-3);
+        let y = lo.y;
+        let material = self.materials.len() as u32;
+        self.materials.push(MaterialDesc {
+            name: "ground".into(),
+            base_color: [0.45, 0.45, 0.45, 1.0],
+            roughness: 1.0,
+            ..Default::default()
+        });
+        self.meshes.push(MeshDesc {
+            name: "ground".into(),
+            primitives: vec![Primitive {
+                positions: vec![
+                    [c.x - r, y, c.z - r],
+                    [c.x - r, y, c.z + r],
+                    [c.x + r, y, c.z + r],
+                    [c.x + r, y, c.z - r],
+                ],
+                normals: vec![[0.0, 1.0, 0.0]; 4],
+                triangles: vec![[0, 1, 2], [0, 2, 3]],
+                material,
+                ..Default::default()
+            }],
+        });
+        self.ground = Some(self.instances.len());
+        self.instances.push(InstanceDesc {
+            mesh: self.meshes.len() as u32 - 1,
+            transform: Mat4::IDENTITY,
+        });
+    }
+
+    /// World-space bounds of the scene's own content: every instance but the added ground.
+    pub fn content_bounds(&self) -> Option<(Vec3, Vec3)> {
+        match self.ground {
+            None => self.bounds(),
+            Some(g) => {
+                let mut own = self.clone();
+                own.instances.remove(g);
+                own.ground = None;
+                own.bounds()
+            }
         }
     }
 
