@@ -105,6 +105,7 @@ pub fn scene_info(path: &Path) -> Result<String, Box<dyn std::error::Error>> {
     )?;
     writeln!(out, "textures: {}", scene.textures.len())?;
     writeln!(out, "cameras: {}", scene.cameras.len())?;
+    writeln!(out, "punctual lights: {}", scene.lights.len())?;
     if let Some((lo, hi)) = scene.bounds() {
         writeln!(
             out,

@@ -6,7 +6,7 @@
 use super::bsdf::{hash, Rng, Surface};
 use super::lights::{Environment, TriangleLights};
 use super::texture::sample;
-use crate::scene::{AlphaMode, MaterialDesc, Primitive, SceneDesc, TextureRef};
+use crate::scene::{AlphaMode, LightKind, MaterialDesc, Primitive, SceneDesc, TextureRef};
 use glam::{Vec2, Vec3, Vec4};
 use oxray::{
     AnyHitCtx, ClosestHitCtx, Module, OutputBuffer, ProgramResult, RayFlags, TraceRay,
@@ -339,6 +339,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
 
         if !surf.dielectric {
             rad += thr * next_event(ctx, &mut rng, &surf, &sh, wo)?;
+            rad += thr * punctual_light(ctx, &mut rng, &surf, &sh, wo)?;
         }
         match surf.sample(
             sh.ns,
@@ -432,6 +433,75 @@ fn next_event(
         return Ok(Vec3::ZERO);
     }
     Ok(f * le * (power_heuristic(pdf, bsdf_pdf) / pdf))
+}
+
+/// glTF gives punctual lights in photometric units (candela, lux); the renderer works in
+/// radiometric ones, at 683 lm/W.
+const LUMENS_PER_WATT: f32 = 683.0;
+
+/// One punctual light, chosen uniformly, sampled exactly (it is a delta light: BSDF sampling can
+/// never find it, so there is nothing to weigh it against).
+fn punctual_light(
+    ctx: &ClosestHitCtx<Params>,
+    rng: &mut Rng,
+    surf: &Surface,
+    sh: &Shading,
+    wo: Vec3,
+) -> Result<Vec3, oxray::Interrupt> {
+    let p = ctx.params();
+    let lights = &p.scene.lights;
+    if lights.is_empty() {
+        return Ok(Vec3::ZERO);
+    }
+    let i = ((rng.uniform() * lights.len() as f32) as usize).min(lights.len() - 1);
+    let l = &lights[i];
+    let (wi, dist, mut e) = match l.kind {
+        LightKind::Directional => (-l.direction, f32::INFINITY, l.intensity),
+        LightKind::Point | LightKind::Spot { .. } => {
+            let to = l.position - sh.point;
+            let d2 = to.length_squared();
+            if d2.is_nan() || d2 <= 0.0 {
+                return Ok(Vec3::ZERO);
+            }
+            let d = d2.sqrt();
+            let wi = to / d;
+            let mut e = l.intensity / d2;
+            if let Some(range) = l.range {
+                // The extension's recommended window: smooth to zero at the range.
+                let w = (1.0 - (d / range).powi(4)).clamp(0.0, 1.0);
+                e *= w * w;
+            }
+            if let LightKind::Spot {
+                inner_cone,
+                outer_cone,
+            } = l.kind
+            {
+                let (cos_in, cos_out) = (inner_cone.cos(), outer_cone.cos());
+                let scale = 1.0 / (cos_in - cos_out).max(1e-3);
+                let t = ((l.direction.dot(-wi) - cos_out) * scale).clamp(0.0, 1.0);
+                e *= t * t;
+            }
+            (wi, d, e)
+        }
+    };
+    e /= LUMENS_PER_WATT;
+    if e == Vec3::ZERO || wi.dot(sh.ng) <= 0.0 {
+        return Ok(Vec3::ZERO);
+    }
+    let (f, _) = surf.eval(sh.ns, wo, wi);
+    if f == Vec3::ZERO {
+        return Ok(Vec3::ZERO);
+    }
+    let from = offset(p, sh, wi);
+    let tmax = if dist.is_finite() {
+        (l.position - from).length() * (1.0 - 1e-4)
+    } else {
+        f32::INFINITY
+    };
+    if !visible(ctx, rng.0, from, wi, tmax)? {
+        return Ok(Vec3::ZERO);
+    }
+    Ok(f * e * lights.len() as f32)
 }
 
 /// The module with every program of the path tracer.

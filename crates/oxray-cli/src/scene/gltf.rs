@@ -9,13 +9,13 @@
 //! reader, and reads images and cameras from the JSON directly.
 
 use super::{
-    image, AlphaMode, Camera, InstanceDesc, MaterialDesc, MeshDesc, Primitive, SceneDesc,
-    SceneError, Texture, TextureRef, Wrap,
+    image, AlphaMode, Camera, InstanceDesc, LightKind, MaterialDesc, MeshDesc, Primitive,
+    PunctualLight, SceneDesc, SceneError, Texture, TextureRef, Wrap,
 };
 use ::gltf::json;
 use ::gltf::mesh::{Mode, Semantic};
 use ::gltf::{accessor::DataType, accessor::Dimensions, Accessor, Document};
-use glam::Mat4;
+use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::Path;
@@ -846,6 +846,7 @@ impl Loader<'_> {
             roots.iter().rev().map(|&r| (r, Mat4::IDENTITY)).collect();
         let mut instances = Vec::new();
         let mut cameras = Vec::new();
+        let mut lights = Vec::new();
         while let Some((ni, parent)) = stack.pop() {
             if std::mem::replace(&mut visited[ni], true) {
                 return Err(format!(
@@ -868,15 +869,88 @@ impl Loader<'_> {
                     cameras.push((ni, cam));
                 }
             }
+            let light = root.nodes[ni]
+                .extensions
+                .as_ref()
+                .and_then(|e| e.khr_lights_punctual.as_ref())
+                .map(|l| l.light.value());
+            if let Some(li) = light {
+                if let Some(l) = self.light(li, global) {
+                    lights.push((ni, l));
+                }
+            }
             for child in node.children().collect::<Vec<_>>().into_iter().rev() {
                 stack.push((child.index(), global));
             }
         }
+        lights.sort_by_key(|(ni, _)| *ni);
+        self.scene.lights = lights.into_iter().map(|(_, l)| l).collect();
         instances.sort_by_key(|(ni, _)| *ni);
         cameras.sort_by_key(|(ni, _)| *ni);
         self.scene.instances = instances.into_iter().map(|(_, i)| i).collect();
         self.scene.cameras = cameras.into_iter().map(|(_, c)| c).collect();
         Ok(())
+    }
+
+    /// The `KHR_lights_punctual` light `li` placed by `to_world` (it shines down its local -Z),
+    /// or `None` with a warning when it is missing or its values are not usable. Read from the
+    /// JSON, as the crate's accessors unwrap.
+    fn light(&mut self, li: usize, to_world: Mat4) -> Option<PunctualLight> {
+        use json::extensions::scene::khr_lights_punctual::Type;
+        let root = self.doc.as_json();
+        let Some(light) = root
+            .extensions
+            .as_ref()
+            .and_then(|e| e.khr_lights_punctual.as_ref())
+            .and_then(|l| l.lights.get(li))
+        else {
+            self.warn(format!("light {li} does not exist; skipping it"));
+            return None;
+        };
+        let intensity = Vec3::from(light.color) * light.intensity;
+        let position = to_world.transform_point3(Vec3::ZERO);
+        let direction = to_world.transform_vector3(-Vec3::Z).normalize_or_zero();
+        let range = light.range.filter(|r| r.is_finite() && *r > 0.0);
+        let kind = match (&light.type_, &light.spot) {
+            (json::validation::Checked::Valid(Type::Directional), _) => LightKind::Directional,
+            (json::validation::Checked::Valid(Type::Point), _) => LightKind::Point,
+            (json::validation::Checked::Valid(Type::Spot), Some(spot)) => LightKind::Spot {
+                inner_cone: spot.inner_cone_angle,
+                outer_cone: spot.outer_cone_angle,
+            },
+            _ => {
+                self.warn(format!("light {li}: unknown type; skipping it"));
+                return None;
+            }
+        };
+        let cones_ok = match kind {
+            LightKind::Spot {
+                inner_cone,
+                outer_cone,
+            } => {
+                (0.0..=std::f32::consts::FRAC_PI_2).contains(&outer_cone)
+                    && (0.0..=outer_cone).contains(&inner_cone)
+            }
+            _ => true,
+        };
+        if !(intensity.is_finite()
+            && intensity.min_element() >= 0.0
+            && position.is_finite()
+            && cones_ok
+            && (direction != Vec3::ZERO || kind == LightKind::Point))
+        {
+            self.warn(format!(
+                "light {li}: invalid intensity, placement or cone angles; skipping it"
+            ));
+            return None;
+        }
+        Some(PunctualLight {
+            kind,
+            position,
+            direction,
+            intensity,
+            range,
+        })
     }
 
     /// A perspective camera placed by `to_world`, or `None` (with a warning) for an

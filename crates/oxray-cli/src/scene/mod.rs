@@ -27,6 +27,8 @@ pub struct SceneDesc {
     pub instances: Vec<InstanceDesc>,
     /// The scene's own cameras, first one used by default.
     pub cameras: Vec<Camera>,
+    /// Point, spot and directional lights (glTF `KHR_lights_punctual`), in world space.
+    pub lights: Vec<PunctualLight>,
     /// Problems that did not stop loading (a missing texture, an unsupported feature), one line
     /// each, for the caller to print.
     pub warnings: Vec<String>,
@@ -223,6 +225,38 @@ pub struct InstanceDesc {
     pub mesh: u32,
     /// Object to world (glTF: the node's global transform).
     pub transform: Mat4,
+}
+
+/// The kind of a punctual light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    /// Light from one direction, like the sun: `intensity` is irradiance on a surface facing it.
+    Directional,
+    /// Light from a point in all directions: `intensity` is radiant intensity (per steradian).
+    Point,
+    /// A point light limited to a cone, with a smooth falloff between the inner and outer
+    /// angles (radians).
+    Spot {
+        /// Full intensity inside this angle from the axis.
+        inner_cone: f32,
+        /// No light beyond this angle.
+        outer_cone: f32,
+    },
+}
+
+/// A light with no extent (glTF `KHR_lights_punctual`): it cannot be hit by rays, only sampled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PunctualLight {
+    /// Kind and cone.
+    pub kind: LightKind,
+    /// World position (unused for directional lights).
+    pub position: Vec3,
+    /// Unit world direction the light shines in (unused for point lights).
+    pub direction: Vec3,
+    /// Linear colour times intensity.
+    pub intensity: Vec3,
+    /// Distance beyond which a point or spot light has no effect (`None`: unlimited).
+    pub range: Option<f32>,
 }
 
 /// A pinhole camera.
