@@ -392,6 +392,13 @@ fn mutated_fixtures_never_panic_hang_or_over_allocate() {
             cases: 2000,
         },
         Target {
+            file: "extensions.gltf",
+            fixture: "extensions.gltf",
+            text: true,
+            glb: false,
+            cases: 1200,
+        },
+        Target {
             file: "triangle.glb",
             fixture: "triangle.glb",
             text: false,
