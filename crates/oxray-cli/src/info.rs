@@ -2,10 +2,8 @@
 //! the placements) and its statistics.
 
 use crate::scene::{AlphaMode, SceneDesc};
-use glam::Affine3A;
 use oxray::{
-    BuildFlags, BuildOptions, Gas, Ias, IndexBuffer, Instance, Transform, TriangleInput,
-    VertexBuffer,
+    BuildFlags, BuildOptions, Gas, Ias, IndexBuffer, Instance, TriangleInput, VertexBuffer,
 };
 use std::fmt::Write;
 use std::path::Path;
@@ -41,9 +39,7 @@ pub fn scene_info(path: &Path) -> Result<String, Box<dyn std::error::Error>> {
         .iter()
         .filter_map(|i| {
             let gas = gases.get(i.mesh as usize)?.as_ref()?;
-            let a = Affine3A::from_mat4(i.transform);
-            (i.transform.is_finite() && i.transform.determinant() != 0.0)
-                .then(|| Instance::new(gas.clone().into()).transform(Transform::from_affine(&a)))
+            Some(Instance::new(gas.clone().into()).transform(i.placement()?))
         })
         .collect();
     let ias = if instances.is_empty() {

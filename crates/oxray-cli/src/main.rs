@@ -181,10 +181,7 @@ fn run(cli: Cli) -> Result<()> {
                     .map_or("cornell".into(), |s| s.to_string_lossy().into_owned());
                 PathBuf::from(format!("{stem}.png"))
             });
-            let ext = output
-                .extension()
-                .and_then(|e| e.to_str())
-                .map(|e| e.to_ascii_lowercase());
+            let ext = oxray_cli::file_extension(&output);
             if !matches!(ext.as_deref(), Some("png") | Some("exr")) {
                 bail!(
                     "cannot write {}: unknown image format (expected .png or .exr)",
@@ -301,10 +298,7 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Info { mesh } => {
-            let ext = mesh
-                .extension()
-                .and_then(|e| e.to_str())
-                .map(|e| e.to_ascii_lowercase());
+            let ext = oxray_cli::file_extension(&mesh);
             if matches!(ext.as_deref(), Some("gltf") | Some("glb")) {
                 let report =
                     oxray_cli::info::scene_info(&mesh).map_err(|e| anyhow::anyhow!("{e}"))?;

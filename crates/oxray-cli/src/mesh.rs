@@ -84,10 +84,7 @@ impl Mesh {
     /// cameras are not loaded, and the scene loader's warnings are dropped.
     pub fn load(path: &Path) -> Result<Mesh, MeshError> {
         let name = path.display().to_string();
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(|e| e.to_ascii_lowercase());
+        let ext = crate::file_extension(path);
         let mesh = match ext.as_deref() {
             Some("obj") => load_obj(path, &name)?,
             Some("ply") => {

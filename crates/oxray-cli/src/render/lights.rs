@@ -261,10 +261,7 @@ impl Environment {
     /// Loads an equirectangular map from a Radiance `.hdr` or OpenEXR `.exr` file.
     pub fn load(path: &Path, scale: f32) -> Result<Self, String> {
         let name = path.display();
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(|e| e.to_ascii_lowercase());
+        let ext = crate::file_extension(path);
         match ext.as_deref() {
             Some("exr") => {
                 use exr::prelude::*;

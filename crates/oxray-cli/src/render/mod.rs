@@ -17,7 +17,7 @@ pub mod programs;
 pub mod texture;
 
 use crate::scene::{AlphaMode, Camera, Primitive, SceneDesc};
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use lights::{Environment, TriangleLights};
 use oxray::{
     BuildFlags, DeviceContext, GeometryFlags, HitGroupDesc, OutputBuffer, PipelineCompileOptions,
@@ -114,13 +114,6 @@ fn framing_camera(scene: &SceneDesc) -> Result<Camera, RenderError> {
     ))
 }
 
-fn transform_of(m: &Mat4) -> Option<Transform> {
-    let c = m.to_cols_array_2d();
-    let rows: [f32; 12] = std::array::from_fn(|i| c[i % 4][i / 4]);
-    let t = Transform(rows);
-    (rows.iter().all(|x| x.is_finite()) && m.determinant().abs() > 1e-30).then_some(t)
-}
-
 /// Renders `scene` with the environment `env`; `progress` is called after each pass with the
 /// number of samples done. Returns the mean radiance per pixel, linear RGB.
 pub fn render(
@@ -203,9 +196,7 @@ pub fn render(
         let Some(gas) = gas_of_mesh[inst.mesh as usize] else {
             continue;
         };
-        let Some(transform) = transform_of(&inst.transform) else {
-            // A singular or non-finite placement cannot be traced; such an instance has no
-            // visible surface anyway.
+        let Some(transform) = inst.placement() else {
             continue;
         };
         let mut u = UtilInstance::new(gas, 0);

@@ -44,13 +44,10 @@ impl Image {
             .collect()
     }
 
-    /// Writes the image; the extension picks the format: `.exr` is linear half-float-free
-    /// 32-bit RGBA, anything else a tone-mapped sRGB PNG.
+    /// Writes the image; the extension picks the format: `.exr` is linear 32-bit float RGBA,
+    /// `.png` tone-mapped 8-bit sRGB, anything else an error.
     pub fn save(&self, path: &Path) -> Result<(), String> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(|e| e.to_ascii_lowercase());
+        let ext = crate::file_extension(path);
         let name = path.display();
         match ext.as_deref() {
             Some("exr") => self

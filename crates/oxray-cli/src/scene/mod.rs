@@ -259,6 +259,16 @@ pub struct PunctualLight {
     pub range: Option<f32>,
 }
 
+impl InstanceDesc {
+    /// The placement as an engine transform, or `None` when it cannot be traced (a non-finite
+    /// or singular matrix: such an instance has no visible surface).
+    pub fn placement(&self) -> Option<oxray::Transform> {
+        let m = self.transform;
+        (m.is_finite() && m.determinant().abs() > 1e-30)
+            .then(|| oxray::Transform::from_affine(&glam::Affine3A::from_mat4(m)))
+    }
+}
+
 /// A pinhole camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
@@ -323,10 +333,7 @@ impl SceneDesc {
     /// Loads a `.gltf`, `.glb`, `.obj` (with its `.mtl`) or `.ply` file.
     pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
         let name = path.display().to_string();
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(|e| e.to_ascii_lowercase());
+        let ext = crate::file_extension(path);
         let scene = match ext.as_deref() {
             Some("gltf") | Some("glb") => gltf::load(path)?,
             Some("obj") => obj::load(path)?,
@@ -520,4 +527,32 @@ fn strip_path(message: &str, path: &str) -> String {
         .and_then(|m| m.strip_prefix(": "))
         .unwrap_or(message)
         .to_string()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn placements_convert_exactly_and_refuse_singular_matrices() {
+        let at = |transform| InstanceDesc { mesh: 0, transform };
+        // The renderer traces an untransformed single instance as its GAS: that needs the
+        // identity to convert to exactly the engine's identity.
+        assert_eq!(
+            at(Mat4::IDENTITY).placement(),
+            Some(oxray::Transform::IDENTITY)
+        );
+        let t = at(Mat4::from_translation(Vec3::new(1.0, 2.0, 3.0)))
+            .placement()
+            .unwrap();
+        assert_eq!(t.transform_point(Vec3::ZERO), Vec3::new(1.0, 2.0, 3.0));
+        assert_eq!(
+            at(Mat4::from_scale(Vec3::new(1.0, 0.0, 1.0))).placement(),
+            None
+        );
+        assert_eq!(
+            at(Mat4::from_scale(Vec3::splat(f32::NAN))).placement(),
+            None
+        );
+    }
 }
