@@ -3,7 +3,8 @@
 
 use crate::mesh::Mesh;
 use glam::Vec3;
-use oxray::{BuildFlags, BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use oxray::cpu::{Gas, Ias};
+use oxray::{BuildFlags, BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
 use std::time::Instant;
 
 /// A small, fast, deterministic generator (SplitMix64), so benchmark rays are reproducible.
@@ -443,7 +444,7 @@ pub fn instances(
     runs: usize,
 ) -> Result<InstanceBenchResult, Box<dyn std::error::Error>> {
     use glam::{Affine3A, Quat};
-    use oxray::{Ias, Instance, Transform};
+    use oxray::{Instance, Transform};
     let gas = std::sync::Arc::new(build_gas(mesh, BuildFlags::empty())?);
     let (c, r) = center_radius(mesh);
     let per_side = (n as f64).cbrt().ceil() as usize;

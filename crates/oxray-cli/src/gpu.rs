@@ -8,6 +8,7 @@
 use crate::bench::{build_gas, median, BenchRays};
 use crate::mesh::Mesh;
 use crate::raycast::{encode_hits, encode_occlusion, load_inputs, write_results, RaycastError};
+use oxray::cpu::Gas;
 use oxray::{BuildFlags, Hit, Ray};
 use oxray_cuda::{CudaContext, CudaError, CudaGas, DeviceHits, DeviceOcclusion, DeviceRays};
 use std::fmt;
@@ -222,7 +223,7 @@ pub fn bench_mesh(
 /// Times one ray set, closest and any hit; the rows' names are filled in by the caller.
 fn bench_set(
     ctx: &CudaContext,
-    gas: &oxray::Gas,
+    gas: &Gas,
     gpu: &CudaGas,
     rays: &[Ray],
     runs: usize,

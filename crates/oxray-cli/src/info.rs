@@ -2,9 +2,8 @@
 //! the placements) and its statistics.
 
 use crate::scene::{AlphaMode, SceneDesc};
-use oxray::{
-    BuildFlags, BuildOptions, Gas, Ias, IndexBuffer, Instance, TriangleInput, VertexBuffer,
-};
+use oxray::cpu::{Gas, Ias};
+use oxray::{BuildFlags, BuildOptions, IndexBuffer, Instance, TriangleInput, VertexBuffer};
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;

@@ -3,7 +3,8 @@
 
 use crate::bench::build_gas;
 use crate::mesh::Mesh;
-use oxray::{BuildFlags, Gas, Hit, Ray};
+use oxray::cpu::Gas;
+use oxray::{BuildFlags, Hit, Ray};
 use std::path::Path;
 use std::time::Instant;
 use thiserror::Error;

@@ -16,7 +16,8 @@
 mod common;
 
 use common::{bench_rays, find_mesh, Mesh};
-use oxray::{BuildFlags, Gas, Ray};
+use oxray_core::{BuildFlags, Ray};
+use oxray_cpu::Gas;
 use oxray_cuda::{
     CudaContext, CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, HitRecord, NodeLayout,
 };

@@ -10,13 +10,10 @@ use std::sync::Arc;
 /// The CUDA C++ source of the trace kernels, compiled at run time by NVRTC.
 pub const KERNEL_SOURCE: &str = include_str!("kernels/trace.cu");
 
-/// `1 + 2 * gamma(3)`: the CPU backend's factor on far slab distances (conservative box test).
-pub(crate) const ROBUST_FAR: f32 =
-    1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
-/// The CPU backend's slack on `tmax` in box tests, so a hit at exactly `tmax` is found.
-pub(crate) const TMAX_SLACK: f32 = 1.0 + 1.0 / 16384.0;
-/// Below this magnitude the CPU backend's triangle test redoes the edge functions in `f64`.
-pub(crate) const F32_TINY: f32 = 1.0 / (1u128 << 96) as f32;
+// The numeric contract of every backend's box and triangle tests, passed to the kernels as
+// defines so that it is written down once.
+pub(crate) use oxray_bvh::triangle::F32_TINY;
+pub(crate) use oxray_core::ray::{ROBUST_FAR, TMAX_SLACK};
 
 /// What the device is.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -240,10 +237,7 @@ pub(crate) fn compile_options(cc: (i32, i32)) -> Vec<String> {
         format!("-DOXRAY_ROBUST_FAR_BITS={:#010x}", ROBUST_FAR.to_bits()),
         format!("-DOXRAY_TMAX_SLACK_BITS={:#010x}", TMAX_SLACK.to_bits()),
         format!("-DOXRAY_F32_TINY_BITS={:#010x}", F32_TINY.to_bits()),
-        format!(
-            "-DOXRAY_STACK_SIZE={}",
-            oxray::accel::bvh::TRAVERSAL_STACK_SIZE
-        ),
+        format!("-DOXRAY_STACK_SIZE={}", oxray_bvh::TRAVERSAL_STACK_SIZE),
     ]
 }
 
@@ -274,7 +268,7 @@ mod tests {
 
     #[test]
     fn constants_match_the_cpu_backend() {
-        // The values the CPU backend's traversal uses (oxray::traversal::ray, triangle).
+        // The constants the kernels are compiled with are the numeric contract every backend keeps.
         assert_eq!(TMAX_SLACK.to_bits(), 0x3f80_0200);
         assert_eq!(F32_TINY, 2f32.powi(-96));
         const { assert!(ROBUST_FAR > 1.0 && ROBUST_FAR < 1.0 + 4.0 * f32::EPSILON) };

@@ -5,7 +5,8 @@ use crate::error::{driver, CudaError};
 use crate::layout::{DeviceLayout, NodeLayout, SlotInfo};
 use bytemuck::{Pod, Zeroable};
 use cudarc::driver::{CudaSlice, LaunchConfig, PushKernelArg};
-use oxray::{Gas, Hit, HitKind, Ray};
+use oxray_bvh::{GasData, GasInfo};
+use oxray_core::{Aabb, BackendKind, Hit, HitKind, Ray, RayRecord, Traversable, TraversableKind};
 use rayon::prelude::*;
 use std::sync::Mutex;
 
@@ -58,7 +59,8 @@ impl DeviceRays {
     /// Copies rays to the device.
     pub fn upload(ctx: &CudaContext, rays: &[Ray]) -> Result<DeviceRays, CudaError> {
         check_batch(rays.len())?;
-        let words: &[u32] = bytemuck::cast_slice(rays);
+        let records = records(rays);
+        let words: &[u32] = bytemuck::cast_slice(&records);
         let words = if words.is_empty() {
             ctx.stream.alloc_zeros::<u32>(8)
         } else {
@@ -83,7 +85,10 @@ impl DeviceRays {
             return Ok(());
         }
         ctx.stream
-            .memcpy_htod(bytemuck::cast_slice::<Ray, u32>(rays), &mut self.words)
+            .memcpy_htod(
+                bytemuck::cast_slice::<RayRecord, u32>(&records(rays)),
+                &mut self.words,
+            )
             .map_err(driver("copying rays to the device"))
     }
 
@@ -195,6 +200,12 @@ impl DeviceOcclusion {
     }
 }
 
+/// The kernels' ray records (8 words a ray; motion comes with the motion-blur work, so the
+/// time is not sent).
+fn records(rays: &[Ray]) -> Vec<RayRecord> {
+    rays.par_iter().map(|&r| RayRecord::from(r)).collect()
+}
+
 fn check_batch(len: usize) -> Result<(), CudaError> {
     if len > u32::MAX as usize {
         return Err(CudaError::TooLarge(format!(
@@ -206,15 +217,16 @@ fn check_batch(len: usize) -> Result<(), CudaError> {
 }
 
 /// A triangle GAS uploaded to the device: its BVH in a chosen [`NodeLayout`] and its triangles
-/// in leaf-slot order. Queries return the hits of the CPU backend's [`Gas::intersect_batch`] and
-/// [`Gas::occluded_batch`]: distances, barycentrics and facing bit for bit; with
-/// [`NodeLayout::Bvh4`] the primitive too where two hits tie at the same distance.
+/// in leaf-slot order. Queries return the hits of the CPU backend's batched queries: distances,
+/// barycentrics and facing bit for bit; with [`NodeLayout::Bvh4`] the primitive too where two
+/// hits tie at the same distance.
 ///
 /// ```no_run
-/// use oxray::{BuildOptions, Gas, Ray, TriangleInput, VertexBuffer};
+/// use oxray_bvh::GasData;
+/// use oxray_core::{BuildOptions, Ray, TriangleInput, VertexBuffer};
 /// use oxray_cuda::{CudaContext, CudaGas};
 /// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
-/// let gas = Gas::build(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+/// let gas = GasData::build(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
 /// let ctx = CudaContext::new()?;
 /// let gpu = CudaGas::upload(&ctx, &gas)?;
 /// let rays = vec![Ray::new([0.0, 0.0, 1.0].into(), [0.0, 0.0, -1.0].into()); 1000];
@@ -230,6 +242,7 @@ pub struct CudaGas {
     nodes: CudaSlice<u32>,
     triangles: CudaSlice<u32>,
     slots: Vec<SlotInfo>,
+    info: GasInfo,
     num_nodes: usize,
     device_bytes: usize,
     /// Buffers of the one-call queries, kept between calls (grown as batches grow) so that a
@@ -247,6 +260,8 @@ struct Scratch {
     occluded: Option<CudaSlice<u8>>,
     records: Vec<HitRecord>,
     flags: Vec<u8>,
+    /// Host staging of the rays' kernel records.
+    staged: Vec<RayRecord>,
 }
 
 impl Scratch {
@@ -273,10 +288,15 @@ impl Scratch {
             );
             self.capacity = cap;
         }
+        self.staged.clear();
+        self.staged.extend(rays.iter().map(|&r| RayRecord::from(r)));
         if let Some(d) = self.rays.as_mut() {
             let mut view = d.slice_mut(..8 * n);
             ctx.stream
-                .memcpy_htod(bytemuck::cast_slice::<Ray, u32>(rays), &mut view)
+                .memcpy_htod(
+                    bytemuck::cast_slice::<RayRecord, u32>(&self.staged),
+                    &mut view,
+                )
                 .map_err(driver("copying rays to the device"))?;
         }
         Ok(())
@@ -285,7 +305,7 @@ impl Scratch {
 
 impl CudaGas {
     /// Uploads a triangle GAS in the default layout ([`NodeLayout::Bvh2`]).
-    pub fn upload(ctx: &CudaContext, gas: &Gas) -> Result<CudaGas, CudaError> {
+    pub fn upload(ctx: &CudaContext, gas: &GasData) -> Result<CudaGas, CudaError> {
         CudaGas::upload_with_layout(ctx, gas, NodeLayout::default())
     }
 
@@ -293,7 +313,7 @@ impl CudaGas {
     /// ([`CudaError::CustomPrimitives`]).
     pub fn upload_with_layout(
         ctx: &CudaContext,
-        gas: &Gas,
+        gas: &GasData,
         layout: NodeLayout,
     ) -> Result<CudaGas, CudaError> {
         let export = gas.export_triangles().ok_or(CudaError::CustomPrimitives)?;
@@ -320,6 +340,7 @@ impl CudaGas {
             nodes,
             triangles,
             slots: host.slots,
+            info: gas.info(),
             scratch: Mutex::new(Scratch::default()),
         })
     }
@@ -339,6 +360,11 @@ impl CudaGas {
         self.device_bytes
     }
 
+    /// What the structure was built from: counts, flags, bounds, BVH statistics.
+    pub fn info(&self) -> &GasInfo {
+        &self.info
+    }
+
     /// The context it lives in.
     pub fn context(&self) -> &CudaContext {
         &self.ctx
@@ -352,8 +378,7 @@ impl CudaGas {
         Ok(hits)
     }
 
-    /// [`intersect_batch`](Self::intersect_batch) into a slice, as the CPU backend's
-    /// [`Gas::intersect_batch`] does.
+    /// [`intersect_batch`](Self::intersect_batch) into a slice.
     pub fn intersect_batch_into(
         &self,
         rays: &[Ray],
@@ -414,8 +439,7 @@ impl CudaGas {
         Ok(out)
     }
 
-    /// [`occluded_batch`](Self::occluded_batch) into a slice, as the CPU backend's
-    /// [`Gas::occluded_batch`] does.
+    /// [`occluded_batch`](Self::occluded_batch) into a slice.
     pub fn occluded_batch_into(
         &self,
         rays: &[Ray],
@@ -606,6 +630,31 @@ impl CudaGas {
             instance_id: !0,
             instance_index: 0,
         })
+    }
+}
+
+impl Traversable for CudaGas {
+    fn traversable_kind(&self) -> TraversableKind {
+        TraversableKind::Gas
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.info.bounds
+    }
+
+    fn graph_depth(&self) -> u32 {
+        1
+    }
+
+    fn backend(&self) -> BackendKind {
+        BackendKind::Cuda
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "CUDA GAS of {} primitives ({:?} layout)",
+            self.info.num_primitives, self.layout
+        )
     }
 }
 

@@ -14,8 +14,8 @@
 //! Triangles are stored per leaf slot as three `float4` (48 bytes; `w` unused), so that a thread
 //! reads one triangle with three 16-byte loads.
 
-use oxray::accel::bvh::Bvh4Node;
-use oxray::{Aabb, GasExport};
+use oxray_bvh::{Bvh4Node, GasExport};
+use oxray_core::Aabb;
 
 /// The node layout a [`CudaGas`](crate::CudaGas) is uploaded in.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]

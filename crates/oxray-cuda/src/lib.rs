@@ -1,42 +1,40 @@
 //! # oxray-cuda
 //!
-//! The CUDA backend of oxray: a triangle [`Gas`](oxray::Gas) built by the CPU backend is uploaded
-//! to an NVIDIA GPU and batches of rays are traced there by a CUDA C++ kernel, with the results
-//! of the CPU backend's batched queries ([`Gas::intersect_batch`](oxray::Gas::intersect_batch),
-//! [`Gas::occluded_batch`](oxray::Gas::occluded_batch)).
+//! The CUDA backend of oxray. [`Cuda`] implements the [`AccelBackend`](oxray_core::AccelBackend)
+//! boundary for the `oxray` facade's `Device`: a triangle GAS is built on the host by the
+//! builders every backend shares (`oxray-bvh`), uploaded in one of the kernels' node layouts
+//! ([`CudaGas`]), and batches of rays are traced there by a CUDA C++ kernel with the results of
+//! the CPU backend's batched queries, bit for bit.
 //!
 //! The CUDA driver and NVRTC are loaded at run time, so this crate builds, and its tests pass,
-//! on machines without CUDA: there [`CudaContext::new`] returns an error for which
-//! [`CudaError::is_unavailable`] holds. The kernels are CUDA C++ ([`KERNEL_SOURCE`]) compiled by
-//! NVRTC for the device's architecture when the context is created.
+//! on machines without CUDA: there [`Cuda::new`] and [`CudaContext::new`] return an error for
+//! which [`CudaError::is_unavailable`] holds. The kernels are CUDA C++ ([`KERNEL_SOURCE`])
+//! compiled by NVRTC for the device's architecture when the context is created.
 //!
 //! ```no_run
-//! use oxray::{BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
-//! use oxray_cuda::{CudaContext, CudaGas};
+//! use oxray_core::{AccelBackend, BuildOptions, IndexBuffer, Ray, TraversableHandle, TriangleInput, VertexBuffer};
+//! use oxray_cuda::Cuda;
 //!
 //! let vertices = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
 //! let triangles = [[0u32, 1, 2], [0, 2, 3]];
 //! let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
 //!     .indices(IndexBuffer::u32x3(&triangles));
-//! let gas = Gas::build(&BuildOptions::default(), &[input.into()])?;
-//!
-//! let ctx = CudaContext::new()?; // fails cleanly where there is no GPU
-//! let gpu = CudaGas::upload(&ctx, &gas)?;
+//! let cuda = Cuda::new(0)?; // fails cleanly where there is no GPU
+//! let gas = TraversableHandle::from(cuda.build_gas(&BuildOptions::default(), &[input.into()])?);
 //! let rays = vec![Ray::new([0.25, 0.75, 1.0].into(), [0.0, 0.0, -1.0].into()); 4096];
-//! let hits = gpu.intersect_batch(&rays)?;
+//! let mut hits = vec![None; rays.len()];
+//! cuda.intersect_closest(&gas, &rays, &mut hits)?;
 //! assert_eq!(hits[0].unwrap().primitive_index, 1);
-//! let mut cpu = vec![None; rays.len()];
-//! gas.intersect_batch(&rays, &mut cpu)?;
-//! assert_eq!(hits, cpu);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
 //! For timing, or to keep rays on the device between launches, use [`DeviceRays`],
 //! [`DeviceHits`] and [`DeviceOcclusion`] with [`CudaGas::intersect_device`] and
-//! [`CudaGas::occluded_device`].
+//! [`CudaGas::occluded_device`] (the facade exposes them as resident batches).
 
 #![warn(missing_docs)]
 
+mod backend;
 mod context;
 mod error;
 mod gas;
@@ -44,6 +42,7 @@ mod layout;
 #[cfg(test)]
 mod reference;
 
+pub use backend::{Cuda, CudaBatch, CudaIas};
 pub use context::{CudaContext, DeviceInfo, KernelInfo, KERNEL_SOURCE};
 pub use error::CudaError;
 pub use gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, HitRecord};
@@ -59,7 +58,8 @@ mod tests {
     use super::layout::DeviceLayout;
     use super::reference::trace;
     use super::*;
-    use oxray::{BuildFlags, Gas, Ray};
+    use oxray_core::{BuildFlags, Ray};
+    use oxray_cpu::Gas;
 
     /// Traces `rays` through the device layout on the CPU and compares with the CPU backend.
     /// With `exact`, hits must be bit-identical (primitive included); otherwise distances must be
@@ -219,9 +219,9 @@ mod tests {
     #[test]
     fn custom_primitive_gas_is_refused_before_any_device_call() {
         // Without a device a context cannot be made; the refusal is checked on the export.
-        let boxes = [oxray::Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE)];
-        let input = oxray::CustomPrimitiveInput::new(oxray::AabbBuffer::new(&boxes));
-        let gas = Gas::build(&oxray::BuildOptions::default(), &[input.into()]).unwrap();
+        let boxes = [oxray_core::Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE)];
+        let input = oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(&boxes));
+        let gas = Gas::build(&oxray_core::BuildOptions::default(), &[input.into()]).unwrap();
         assert!(gas.export_triangles().is_none());
         assert!(CudaError::CustomPrimitives.to_string().contains("triangle"));
     }

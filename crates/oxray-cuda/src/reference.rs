@@ -6,8 +6,8 @@
 use crate::context::{ROBUST_FAR, TMAX_SLACK};
 use crate::gas::HitRecord;
 use crate::layout::{DeviceLayout, NodeLayout};
-use oxray::geometry::triangle::WatertightRay;
-use oxray::Ray;
+use oxray_bvh::triangle::WatertightRay;
+use oxray_core::Ray;
 
 #[derive(Clone, Copy)]
 struct Entry {

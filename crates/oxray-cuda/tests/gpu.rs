@@ -4,7 +4,8 @@
 mod common;
 
 use common::{bench_rays, find_mesh, tricky_rays, Mesh};
-use oxray::{BuildFlags, Gas, Hit, Ray};
+use oxray_core::{BuildFlags, Hit, Ray};
+use oxray_cpu::Gas;
 use oxray_cuda::{
     CudaContext, CudaError, CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, NodeLayout,
 };
@@ -212,9 +213,9 @@ fn device_buffers_and_errors() {
     ));
 
     // A custom-primitive GAS is refused.
-    let boxes = [oxray::Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE)];
-    let input = oxray::CustomPrimitiveInput::new(oxray::AabbBuffer::new(&boxes));
-    let custom = Gas::build(&oxray::BuildOptions::default(), &[input.into()]).unwrap();
+    let boxes = [oxray_core::Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE)];
+    let input = oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(&boxes));
+    let custom = Gas::build(&oxray_core::BuildOptions::default(), &[input.into()]).unwrap();
     assert_eq!(
         CudaGas::upload(&ctx, &custom).unwrap_err(),
         CudaError::CustomPrimitives

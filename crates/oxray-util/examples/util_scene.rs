@@ -186,7 +186,10 @@ pub fn render(width: u32, height: u32) -> Result<Vec<[u8; 4]>, Box<dyn std::erro
             [0.2, 0.8, 0.3],
         ],
     };
-    pipeline.launch(&mut scene, &params, width, height, 1)?;
+    let report = pipeline.launch(&mut scene, &params, width, height, 1)?;
+    if report.exceptions > 0 {
+        return Err(format!("the launch raised {:?}", report.first_exceptions).into());
+    }
     Ok(image.to_vec())
 }
 

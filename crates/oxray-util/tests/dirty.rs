@@ -264,7 +264,7 @@ fn util_and_low_level_paths_render_identically() {
         rg.clone(),
         vec![ms.clone()],
     );
-    pipeline
+    let report = pipeline
         .launch(
             &mut scene,
             &Params {
@@ -276,6 +276,7 @@ fn util_and_low_level_paths_render_identically() {
             1,
         )
         .unwrap();
+    assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
 
     // Low-level path: the same structures and SBT written by hand.
     let Geometry::Triangles { vertices, indices } = quad() else {
@@ -328,17 +329,19 @@ fn util_and_low_level_paths_render_identically() {
         &[rg, ms, hg],
     )
     .unwrap();
-    low.launch(
-        &Params {
-            handle,
-            out: &outs[1],
-        },
-        &sbt,
-        64,
-        1,
-        1,
-    )
-    .unwrap();
+    let report = low
+        .launch(
+            &Params {
+                handle,
+                out: &outs[1],
+            },
+            &sbt,
+            64,
+            1,
+            1,
+        )
+        .unwrap();
+    assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
 
     let (u, l) = (outs[0].to_vec(), outs[1].to_vec());
     assert_eq!(u, l);

@@ -282,7 +282,7 @@ fn one_gas_serves_two_pipelines_and_instances_pick_their_material_set() {
             hitgroup: hitgroup.clone(),
             ..Default::default()
         };
-        pipeline
+        let report = pipeline
             .launch(
                 &Params {
                     handle: handle.clone(),
@@ -294,6 +294,7 @@ fn one_gas_serves_two_pipelines_and_instances_pick_their_material_set() {
                 1,
             )
             .unwrap();
+        assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
         results.push(out.to_vec());
     }
     assert_eq!(results[0], vec![11, 22]);

@@ -7,8 +7,9 @@
 mod common;
 
 use glam::Vec3;
+use oxray::cpu::Gas;
 use oxray::{
-    Aabb, AabbBuffer, BuildOptions, CustomPrimitiveInput, DeviceContext, Gas, HitGroupDesc, Module,
+    Aabb, AabbBuffer, BuildOptions, CustomPrimitiveInput, DeviceContext, HitGroupDesc, Module,
     OutputBuffer, Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, SbtRegion,
     ShaderBindingTable, TraceRay, TraversableHandle,
 };
@@ -125,7 +126,10 @@ pub fn render(width: u32, height: u32) -> Result<Vec<[u8; 4]>, Box<dyn std::erro
         handle: gas.into(),
         eye: Vec3::new(0.0, 0.0, -5.0),
     };
-    pipeline.launch(&params, &sbt, width, height, 1)?;
+    let report = pipeline.launch(&params, &sbt, width, height, 1)?;
+    if report.exceptions > 0 {
+        return Err(format!("the launch raised {:?}", report.first_exceptions).into());
+    }
     Ok(image.to_vec())
 }
 

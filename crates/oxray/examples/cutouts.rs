@@ -8,9 +8,10 @@
 mod common;
 
 use glam::Vec3;
+use oxray::cpu::Gas;
 use oxray::{
-    BuildOptions, DeviceContext, Gas, GeometryFlags, HitGroupDesc, IndexBuffer, Module,
-    OutputBuffer, Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, SbtRegion,
+    BuildOptions, DeviceContext, GeometryFlags, HitGroupDesc, IndexBuffer, Module, OutputBuffer,
+    Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, SbtRegion,
     ShaderBindingTable, TraceRay, TraversableHandle, TriangleInput, VertexBuffer,
 };
 
@@ -122,7 +123,10 @@ pub fn render(width: u32, height: u32) -> Result<Vec<[u8; 4]>, Box<dyn std::erro
         handle: gas.into(),
         eye: Vec3::new(0.0, 0.0, -4.0),
     };
-    pipeline.launch(&params, &sbt, width, height, 1)?;
+    let report = pipeline.launch(&params, &sbt, width, height, 1)?;
+    if report.exceptions > 0 {
+        return Err(format!("the launch raised {:?}", report.first_exceptions).into());
+    }
     Ok(image.to_vec())
 }
 

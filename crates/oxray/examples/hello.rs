@@ -44,7 +44,10 @@ pub fn render(
         raygen: SbtRegion::from_records(&[(raygen.pack_header(), color)]),
         ..Default::default()
     };
-    pipeline.launch(&Params { image: &image }, &sbt, width, height, 1)?;
+    let report = pipeline.launch(&Params { image: &image }, &sbt, width, height, 1)?;
+    if report.exceptions > 0 {
+        return Err(format!("the launch raised {:?}", report.first_exceptions).into());
+    }
     Ok(image.to_vec())
 }
 

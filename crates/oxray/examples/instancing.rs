@@ -7,9 +7,10 @@
 mod common;
 
 use glam::{Affine3A, Quat, Vec3};
+use oxray::cpu::{Gas, Ias};
 use oxray::{
-    BuildOptions, DeviceContext, Gas, HitGroupDesc, Ias, IndexBuffer, Instance, Module,
-    OutputBuffer, Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, SbtRegion,
+    BuildOptions, DeviceContext, HitGroupDesc, IndexBuffer, Instance, Module, OutputBuffer,
+    Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, SbtRegion,
     ShaderBindingTable, TraceRay, Transform, TraversableHandle, TriangleInput, VertexBuffer,
 };
 use std::sync::Arc;
@@ -203,7 +204,10 @@ pub fn render(width: u32, height: u32) -> Result<Vec<[u8; 4]>, Box<dyn std::erro
         v: Vec3::Y * 0.5,
         w: Vec3::Z,
     };
-    pipeline.launch(&params, &sbt, width, height, 1)?;
+    let report = pipeline.launch(&params, &sbt, width, height, 1)?;
+    if report.exceptions > 0 {
+        return Err(format!("the launch raised {:?}", report.first_exceptions).into());
+    }
     Ok(image.to_vec())
 }
 

@@ -7,8 +7,9 @@
 mod common;
 
 use glam::Vec3;
+use oxray::cpu::Gas;
 use oxray::{
-    BuildOptions, DeviceContext, Gas, HitGroupDesc, IndexBuffer, Module, OutputBuffer, Pipeline,
+    BuildOptions, DeviceContext, HitGroupDesc, IndexBuffer, Module, OutputBuffer, Pipeline,
     PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, SbtRegion, ShaderBindingTable,
     TraceRay, TraversableHandle, TriangleInput, VertexBuffer,
 };
@@ -99,7 +100,10 @@ pub fn render(width: u32, height: u32) -> Result<Vec<[u8; 4]>, Box<dyn std::erro
         v: Vec3::Y * 0.5,
         w: Vec3::Z,
     };
-    pipeline.launch(&params, &sbt, width, height, 1)?;
+    let report = pipeline.launch(&params, &sbt, width, height, 1)?;
+    if report.exceptions > 0 {
+        return Err(format!("the launch raised {:?}", report.first_exceptions).into());
+    }
     Ok(image.to_vec())
 }
 

@@ -1,32 +1,34 @@
 //! # oxray
 //!
 //! A programmable ray-tracing engine that implements the programming model of NVIDIA OptiX 9,
-//! with an embedded CPU backend (pure Rust, all cores).
+//! with one host API over several backends: the CPU (pure Rust, all cores; the default,
+//! everywhere) and CUDA GPUs.
 //!
-//! This release provides geometry acceleration structures (GAS) over triangles and custom
-//! primitives, built from OptiX-style build inputs, and ray queries on them:
+//! A [`Device`] is chosen at run time and every build and query goes through it:
 //!
 //! ```
-//! use oxray::{BuildFlags, BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+//! use oxray::{BuildFlags, BuildOptions, Device, IndexBuffer, Ray, TriangleInput, VertexBuffer};
 //! use glam::Vec3;
+//!
+//! // "cpu" here; "cuda" or "auto" run the same code on a GPU where there is one.
+//! let device = Device::from_name("cpu")?;
 //!
 //! // A unit quad in the z = 0 plane, as two triangles.
 //! let vertices = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
 //! let triangles = [[0u32, 1, 2], [0, 2, 3]];
 //! let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
 //!     .indices(IndexBuffer::u32x3(&triangles));
-//! let gas = Gas::build(&BuildOptions::new(BuildFlags::PREFER_FAST_TRACE), &[input.into()])?;
+//! let gas = device.build_gas(&BuildOptions::new(BuildFlags::PREFER_FAST_TRACE), &[input.into()])?;
 //!
-//! // Closest hit of one ray...
-//! let ray = Ray::new(Vec3::new(0.25, 0.75, 1.0), -Vec3::Z);
-//! let hit = gas.intersect(&ray).expect("the ray hits the quad");
+//! // Closest hits and occlusion of a batch, in parallel.
+//! let rays = vec![Ray::new(Vec3::new(0.25, 0.75, 1.0), -Vec3::Z); 1000];
+//! let mut hits = vec![None; rays.len()];
+//! device.intersect_closest(&gas.handle(), &rays, &mut hits)?;
+//! let hit = hits[0].expect("the ray hits the quad");
 //! assert_eq!(hit.primitive_index, 1);
 //! assert!(hit.hit_kind.is_triangle_front_face());
-//!
-//! // ... and occlusion of a batch, in parallel.
-//! let rays = vec![ray; 1000];
 //! let mut occluded = vec![false; rays.len()];
-//! gas.occluded_batch(&rays, &mut occluded)?;
+//! device.intersect_any(&gas.handle(), &rays, &mut occluded)?;
 //! assert!(occluded.iter().all(|&o| o));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -34,65 +36,74 @@
 //! The semantics are the guide's: the primitive index carries the input's offset, the SBT-GAS
 //! index sums the records of earlier inputs (§7.3.2), hits lie in the closed interval
 //! `[tmin, tmax]`, triangles report hit kind `0xFE`/`0xFF` for front/back faces, and
-//! triangle intersection is watertight.
+//! triangle intersection is watertight, with bit-identical results on every device.
 //!
 //! On top sits the programmable pipeline of OptiX (guide chapters 6, 7, 10, 13, 15): a
-//! [`Module`] registers Rust programs under entry names (`__raygen__*`, `__closesthit__*`,
+//! [`Module`] registers programs under entry names (`__raygen__*`, `__closesthit__*`,
 //! `__anyhit__*`, `__miss__*`, `__intersection__*`, `__exception__*`, `__direct_callable__*`,
 //! `__continuation_callable__*`); [`ProgramGroup`]s made from them are linked into a
 //! [`Pipeline`] and named by the records of a [`ShaderBindingTable`]; [`Pipeline::launch`] runs
 //! the ray-generation program over a 1-, 2- or 3-D grid on all cores. Each program kind receives
 //! its own context ([`RayGenCtx`], [`ClosestHitCtx`], [`AnyHitCtx`], [`MissCtx`],
 //! [`IntersectionCtx`], [`ExceptionCtx`], [`DirectCallableCtx`], [`ContinuationCallableCtx`])
-//! with exactly the device functions the guide's §13 table allows it. Device functions that
-//! never return in OptiX (a trace that raises, `optixThrowException`,
-//! `optixIgnoreIntersection`, `optixTerminateRay`) give an [`Interrupt`] that the program passes
-//! on with `?` or `return`. See `examples/` (`hello`, `triangle`, `custom_sphere`, `cutouts`).
+//! with exactly the device functions the guide's §13 table allows it. Programs are Rust
+//! closures today, run by the CPU backend; programs in CUDA C++ for the CUDA backend use the
+//! same groups, SBT and launches.
+//!
+//! The crates behind the facade, each reachable here: [`core`](oxray_core) (neutral types and
+//! the backend traits), [`bvh`] (the canonical BVH and its layouts), [`cpu`] (the CPU backend,
+//! with per-ray queries and closures), and `cuda` (the CUDA backend, with the `cuda` feature).
 
 #![warn(missing_docs)]
-// Lane and axis loops index several arrays in step; iterator chains would hide that.
-#![allow(clippy::needless_range_loop)]
 
-pub mod accel;
-pub mod error;
-pub mod exception;
-pub mod geometry;
-mod output;
-pub mod pipeline;
-pub mod program;
-mod query;
-pub mod sbt;
-pub mod traversal;
+mod accel;
+mod device;
 
-pub use accel::input::{
-    AabbBuffer, BuildInput, BuildInputKind, CustomPrimitiveInput, IndexBuffer, SbtIndexOffsets,
-    SbtIndexSize, TriangleInput, VertexBuffer,
+pub use accel::{Gas, Ias};
+pub use device::{Device, DeviceError, RayBatch};
+
+/// The CPU backend: per-ray queries, any-hit filters and custom-primitive closures on CPU
+/// structures, and the program model's types.
+pub mod cpu {
+    pub use oxray_cpu::*;
+}
+
+/// The CUDA backend: its GAS, node layouts, device buffers and kernels.
+#[cfg(feature = "cuda")]
+pub mod cuda {
+    pub use oxray_cuda::*;
+}
+
+pub use oxray_bvh as bvh;
+pub use oxray_core::{error, exception, sbt, validate};
+
+pub use oxray_core::Aabb;
+pub use oxray_core::{
+    AabbBuffer, BackendKind, BatchKind, BufferKind, BuildError, BuildFlags, BuildInput,
+    BuildInputKind, BuildOperation, BuildOptions, CandidateAction, CustomHit, CustomPrimitive,
+    CustomPrimitiveInput, DeviceContext, ErrorCode, Exception, ExceptionCode, ExceptionFlags,
+    GeometryFlags, Hit, HitKind, IndexBuffer, IndexFormat, InputLocation, Instance, InstanceFlags,
+    LaunchError, LaunchReport, LogLevel, PipelineCompileOptions, PipelineError,
+    PipelineLinkOptions, PrimitiveTypeFlags, QueryError, Ray, RayError, RayFlags, RayRecord,
+    SbtHeader, SbtIndexOffsets, SbtIndexSize, SbtRegion, ShaderBindingTable, StaticTransform,
+    Transform, Traversable, TraversableGraphFlags, TraversableHandle, TraversableKind,
+    TriangleInput, VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
+    MAX_PRIMITIVES_PER_GAS, MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
-pub use accel::options::{BuildFlags, BuildOperation, BuildOptions, GeometryFlags};
-pub use accel::{
-    compute_memory_usage, AccelBufferSizes, ExportedTriangle, Gas, GasExport, GasMemory, Ias,
-    Instance, InstanceFlags, StaticTransform, Transform, TraversableHandle, TraversableKind,
+
+pub use oxray_bvh::{
+    compute_memory_usage, AccelBufferSizes, BvhStats, ExportedTriangle, GasExport, GasMemory,
 };
-pub use error::{BuildError, ErrorCode, LaunchError, PipelineError, QueryError};
-pub use exception::{Exception, ExceptionCode, ExceptionFlags, Interrupt, ProgramResult};
-pub use geometry::vertex::{IndexFormat, VertexFormat};
-pub use geometry::Aabb;
-pub use output::OutputBuffer;
-pub use pipeline::{
-    DeviceContext, LaunchReport, LogLevel, Pipeline, PipelineCompileOptions, PipelineLinkOptions,
-    PrimitiveTypeFlags, TraversableGraphFlags,
+pub use oxray_cpu::{
+    AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, CustomIntersector, DirectCallableCtx,
+    ExceptionCtx, HitGroupDesc, Interrupt, IntersectionCtx, MissCtx, Module, NoCustomPrimitives,
+    OutputBuffer, Pipeline, ProgramGroup, ProgramGroupKind, ProgramKind, ProgramResult, RayGenCtx,
+    TraceRay, TransformListEntry, TransformListKind,
 };
-pub use program::{
-    AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx,
-    HitGroupDesc, IntersectionCtx, MissCtx, Module, ProgramGroup, ProgramGroupKind, ProgramKind,
-    RayFlags, RayGenCtx, TraceRay, TransformListEntry, TransformListKind,
-};
-pub use query::{
-    CandidateAction, CustomHit, CustomIntersector, CustomPrimitive, Hit, HitKind,
-    NoCustomPrimitives,
-};
-pub use sbt::{SbtHeader, SbtRegion, ShaderBindingTable};
-pub use traversal::{Ray, RayError};
+
+/// The math and plain-data crates the public API uses, at the versions it uses.
+pub use bytemuck;
+pub use glam;
 
 /// The README's example, compiled and run as a doctest.
 #[cfg(doctest)]

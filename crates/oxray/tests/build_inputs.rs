@@ -9,14 +9,15 @@ mod common;
 
 use common::Rng;
 use glam::Vec3;
-use oxray::accel::{MAX_PRIMITIVES_PER_GAS, MAX_SBT_RECORDS_PER_GAS};
+use oxray::cpu::Gas;
 use oxray::error::{BufferKind, InputLocation};
 use oxray::{
     Aabb, AabbBuffer, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOperation,
     BuildOptions, CandidateAction, CustomHit, CustomPrimitive, CustomPrimitiveInput, ErrorCode,
-    Gas, GeometryFlags, Hit, HitKind, IndexBuffer, IndexFormat, NoCustomPrimitives, QueryError,
-    Ray, RayError, SbtIndexOffsets, SbtIndexSize, TriangleInput, VertexBuffer, VertexFormat,
+    GeometryFlags, Hit, HitKind, IndexBuffer, IndexFormat, NoCustomPrimitives, QueryError, Ray,
+    RayError, SbtIndexOffsets, SbtIndexSize, TriangleInput, VertexBuffer, VertexFormat,
 };
+use oxray::{MAX_PRIMITIVES_PER_GAS, MAX_SBT_RECORDS_PER_GAS};
 
 // ---------------------------------------------------------------------------------------------
 // Helpers
@@ -1758,6 +1759,7 @@ const UP: Ray = Ray {
     tmin: 0.0,
     direction: Vec3::Z,
     tmax: f32::INFINITY,
+    time: 0.0,
 };
 
 /// Every candidate the filter sees lies within the interval as shrunk by the accepted ones.

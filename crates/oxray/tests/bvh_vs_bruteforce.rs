@@ -8,9 +8,10 @@ mod common;
 
 use common::{check_closest, reference_closest, reference_hits, Tri};
 use glam::Vec3;
+use oxray::cpu::Gas;
 use oxray::{
     Aabb, AabbBuffer, BuildFlags, BuildOptions, CustomHit, CustomPrimitive, CustomPrimitiveInput,
-    Gas, HitKind, Ray, TriangleInput, VertexBuffer,
+    HitKind, Ray, TriangleInput, VertexBuffer,
 };
 use proptest::prelude::*;
 

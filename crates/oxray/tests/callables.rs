@@ -1,8 +1,9 @@
 //! Direct and continuation callables (guide §15, inventory Z4) and their exceptions.
 
 use glam::Vec3;
+use oxray::cpu::Gas;
 use oxray::{
-    BuildOptions, DeviceContext, ExceptionCode, Gas, HitGroupDesc, Module, OutputBuffer, Pipeline,
+    BuildOptions, DeviceContext, ExceptionCode, HitGroupDesc, Module, OutputBuffer, Pipeline,
     PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, SbtRegion, ShaderBindingTable,
     TraceRay, TraversableHandle, TriangleInput, VertexBuffer,
 };

@@ -9,10 +9,11 @@ mod common;
 
 use common::{hit_bits, random_soup, Rng, Tri};
 use glam::Vec3;
+use oxray::cpu::Gas;
 use oxray::{
     Aabb, AabbBuffer, BuildFlags, BuildInput, BuildOptions, CustomHit, CustomPrimitive,
-    CustomPrimitiveInput, Gas, GeometryFlags, Hit, IndexBuffer, Ray, SbtIndexOffsets,
-    TriangleInput, VertexBuffer,
+    CustomPrimitiveInput, GeometryFlags, Hit, IndexBuffer, Ray, SbtIndexOffsets, TriangleInput,
+    VertexBuffer,
 };
 use rayon::ThreadPool;
 

@@ -5,13 +5,14 @@
 mod instancing_common;
 
 use instancing_common::*;
-use oxray::accel::{MAX_INSTANCE_ID, MAX_SBT_OFFSET, MAX_TRAVERSABLE_GRAPH_DEPTH};
+use oxray::cpu::{Gas, Ias};
 use oxray::{
     Aabb, AabbBuffer, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOperation,
-    BuildOptions, CustomPrimitiveInput, ErrorCode, Gas, Ias, Instance, InstanceFlags, Ray,
-    StaticTransform, Transform, TraversableGraphFlags, TraversableHandle, TraversableKind,
-    TriangleInput, VertexBuffer,
+    BuildOptions, CustomPrimitiveInput, ErrorCode, Instance, InstanceFlags, Ray, StaticTransform,
+    Transform, TraversableGraphFlags, TraversableHandle, TraversableKind, TriangleInput,
+    VertexBuffer,
 };
+use oxray::{MAX_INSTANCE_ID, MAX_SBT_OFFSET, MAX_TRAVERSABLE_GRAPH_DEPTH};
 use std::sync::Arc;
 
 fn build(instances: &[Instance]) -> Result<Ias, BuildError> {
@@ -223,7 +224,7 @@ fn z0_graph_deeper_than_31_levels_is_refused() {
     assert_eq!(h.graph_depth(), 31);
     let deepest = h.clone();
     // The whole chain is traversed: 30 translations of 0.01 in x.
-    let top = deepest.as_ias().unwrap();
+    let top = deepest.downcast_ref::<oxray::cpu::Ias>().unwrap();
     let hit = top
         .intersect(&Ray::new(Vec3::new(0.3 + 0.2, 0.0, 5.0), -Vec3::Z))
         .expect("a hit through 30 levels");
@@ -393,7 +394,7 @@ fn o_null_and_empty_children_are_never_hit() {
     all.push(Instance::new(unit_tri().into()).instance_id(77));
     let s: TraversableHandle = build(&all).unwrap().into();
     let hit = s
-        .as_ias()
+        .downcast_ref::<oxray::cpu::Ias>()
         .unwrap()
         .intersect(&down())
         .expect("the real instance");

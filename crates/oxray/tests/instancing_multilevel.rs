@@ -10,8 +10,9 @@
 mod instancing_common;
 
 use instancing_common::*;
+use oxray::cpu::{Gas, Ias};
 use oxray::{
-    BuildOptions, Gas, GeometryFlags, HitKind, Ias, Instance, InstanceFlags, Module, RayFlags,
+    BuildOptions, GeometryFlags, HitKind, Instance, InstanceFlags, Module, RayFlags,
     StaticTransform, Transform, TraversableGraphFlags, TraversableHandle,
 };
 use proptest::prelude::any;
@@ -702,7 +703,7 @@ fn z2_exception_in_any_hit_below_instances_ends_the_trace() {
 #[test]
 fn g18_instance_offset_past_the_records_raises_invalid_hit_sbt() {
     let gas = tri_gas(&[tri_at(0.0, 0.0, 0.0, 0.5)]);
-    let max = oxray::accel::MAX_SBT_OFFSET;
+    let max = oxray::MAX_SBT_OFFSET;
     let h = recording_harness(3);
     for (parent, child, record) in [
         (0, 3, 3u64),
@@ -738,7 +739,7 @@ fn g18_instance_offset_past_the_records_raises_invalid_hit_sbt() {
 #[test]
 fn u6_query_filter_sees_instance_fields() {
     let root = stack_scene();
-    let top = root.as_ias().unwrap();
+    let top = root.downcast_ref::<oxray::cpu::Ias>().unwrap();
     let ray = oxray::Ray::new(Vec3::new(0.0, 0.0, 10.0), -Vec3::Z);
     let hit = top.intersect(&ray).unwrap();
     assert_eq!((hit.t, hit.instance_id, hit.instance_index), (6.0, 10, 0));

@@ -8,9 +8,10 @@
 mod instancing_common;
 
 use instancing_common::*;
+use oxray::cpu::{Gas, Ias};
 use oxray::{
-    Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, ExceptionCode, Gas, Ias,
-    Instance, Module, PipelineCompileOptions, PrimitiveTypeFlags, StaticTransform, Transform,
+    Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, ExceptionCode, Instance,
+    Module, PipelineCompileOptions, PrimitiveTypeFlags, StaticTransform, Transform,
     TraversableGraphFlags, TraversableHandle,
 };
 use std::sync::Arc;

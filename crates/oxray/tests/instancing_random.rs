@@ -9,7 +9,8 @@
 mod instancing_common;
 
 use instancing_common::*;
-use oxray::{BuildOptions, Gas, Hit, Ias, Instance, Ray, Transform};
+use oxray::cpu::{Gas, Ias};
+use oxray::{BuildOptions, Hit, Instance, Ray, Transform};
 use proptest::prelude::any;
 use proptest::test_runner::{TestCaseError, TestRunner};
 use std::sync::Arc;

@@ -7,11 +7,12 @@ mod common;
 
 use common::{random_soup, Rng};
 use glam::Vec3;
+use oxray::cpu::Gas;
 use oxray::error::BufferKind;
 use oxray::{
     compute_memory_usage, Aabb, AabbBuffer, AccelBufferSizes, BuildError, BuildFlags, BuildInput,
-    BuildOperation, BuildOptions, CustomPrimitiveInput, Gas, GeometryFlags, IndexBuffer,
-    IndexFormat, SbtIndexOffsets, TriangleInput, VertexBuffer, VertexFormat,
+    BuildOperation, BuildOptions, CustomPrimitiveInput, GeometryFlags, IndexBuffer, IndexFormat,
+    SbtIndexOffsets, TriangleInput, VertexBuffer, VertexFormat,
 };
 use proptest::prelude::*;
 use std::alloc::{GlobalAlloc, Layout, System};

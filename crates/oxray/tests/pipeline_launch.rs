@@ -4,9 +4,10 @@
 
 mod pipeline_common;
 
+use oxray::cpu::Gas;
 use oxray::{
     Aabb, AabbBuffer, BuildInput, BuildOptions, CustomHit, CustomPrimitive, CustomPrimitiveInput,
-    DeviceContext, ErrorCode, Gas, LaunchError, Module, OutputBuffer, Pipeline, PipelineError,
+    DeviceContext, ErrorCode, LaunchError, Module, OutputBuffer, Pipeline, PipelineError,
     ProgramGroup, ProgramKind, Ray, RayFlags, SbtRegion, ShaderBindingTable, TraceRay,
     TraversableHandle, TriangleInput, VertexBuffer,
 };
@@ -173,7 +174,8 @@ fn launch_params_copied_once_per_launch_10_g40() {
     };
     for launch in 1..=3 {
         p.address.store(0, Ordering::SeqCst);
-        pipeline.launch(&p, &sbt, 32, 8, 2).unwrap();
+        let report = pipeline.launch(&p, &sbt, 32, 8, 2).unwrap();
+        assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
         assert_eq!(
             p.clones.load(Ordering::SeqCst),
             launch,

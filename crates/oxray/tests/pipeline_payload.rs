@@ -4,6 +4,7 @@
 
 mod pipeline_common;
 
+use oxray::cpu::Gas;
 use oxray::{ExceptionCode, Module, RayFlags, TraversableHandle};
 use pipeline_common::*;
 
@@ -634,8 +635,7 @@ fn triangle_hit_kinds_and_facing_13_7_u5() -> TestResult {
 #[test]
 fn intersection_program_sees_its_primitive_13_7() -> TestResult {
     use oxray::{
-        AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, Gas, GeometryFlags,
-        SbtIndexOffsets,
+        AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, GeometryFlags, SbtIndexOffsets,
     };
     let m = with_single_raygen(Module::new()).intersection("__intersection__who", |ctx| {
         let b = ctx.primitive_aabb();

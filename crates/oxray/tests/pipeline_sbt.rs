@@ -5,10 +5,11 @@
 
 mod pipeline_common;
 
+use oxray::cpu::Gas;
 use oxray::{
-    BuildOptions, DeviceContext, Gas, GeometryFlags, IndexBuffer, LaunchError, Module,
-    OutputBuffer, Pipeline, PipelineError, ProgramGroup, SbtIndexOffsets, SbtRegion,
-    ShaderBindingTable, TraceRay, TraversableHandle, TriangleInput, VertexBuffer,
+    BuildOptions, DeviceContext, GeometryFlags, IndexBuffer, LaunchError, Module, OutputBuffer,
+    Pipeline, PipelineError, ProgramGroup, SbtIndexOffsets, SbtRegion, ShaderBindingTable,
+    TraceRay, TraversableHandle, TriangleInput, VertexBuffer,
 };
 use pipeline_common::*;
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -208,9 +209,10 @@ fn sbt_gas_index_prefix_sum_7_3_2_g19() {
     let (gas, targets, expected) = three_input_scene();
     let (pipeline, sbt) = sbt_pipeline(&m, 6, 1);
     let params = sp(TraversableHandle::from(gas), targets.clone(), 0, 1, 0);
-    pipeline
+    let report = pipeline
         .launch(&params, &sbt, targets.len() as u32, 1, 1)
         .unwrap();
+    assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
     let out = params.out.to_vec();
     for (k, &(gas_index, _)) in expected.iter().enumerate() {
         assert_eq!(out[k][1], gas_index, "triangle {k}");
@@ -230,9 +232,10 @@ fn primitive_index_with_offset_13_7_g20() {
     let (gas, targets, expected) = three_input_scene();
     let (pipeline, sbt) = sbt_pipeline(&m, 6, 1);
     let params = sp(TraversableHandle::from(gas), targets.clone(), 0, 1, 0);
-    pipeline
+    let report = pipeline
         .launch(&params, &sbt, targets.len() as u32, 1, 1)
         .unwrap();
+    assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
     let out = params.out.to_vec();
     for (k, &(_, prim)) in expected.iter().enumerate() {
         assert_eq!(out[k][2], prim, "triangle {k}");
@@ -252,7 +255,8 @@ fn miss_record_by_miss_index_7_2_g22() {
             TraversableHandle::from(tri_gas(&[tri_at(0.0, 0.0, 0.0, 1.0)])),
         ] {
             let params = sp(handle, targets.clone(), 0, 1, miss);
-            pipeline.launch(&params, &sbt, 3, 1, 1).unwrap();
+            let report = pipeline.launch(&params, &sbt, 3, 1, 1).unwrap();
+            assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
             for o in params.out.to_vec() {
                 assert_eq!(o, [500 + miss, !0, !0, 2], "miss index {miss}");
             }
@@ -297,9 +301,10 @@ fn record_address_base_plus_index_times_stride_7_2_g22() {
     let (gas, targets, expected) = three_input_scene();
     let handle = TraversableHandle::from(gas);
     let params = sp(handle.clone(), targets.clone(), 1, 1, 2);
-    pipeline
+    let report = pipeline
         .launch(&params, &sbt, targets.len() as u32, 1, 1)
         .unwrap();
+    assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
     let out = params.out.to_vec();
     for (k, &(gas_index, _)) in expected.iter().enumerate() {
         assert_eq!(out[k][0], 2000 + gas_index + 1, "triangle {k}");
@@ -602,7 +607,8 @@ fn program_group_reused_across_pipelines_6_6() {
             1,
             0,
         );
-        p.launch(&params, &sbt, 2, 1, 1).unwrap();
+        let report = p.launch(&params, &sbt, 2, 1, 1).unwrap();
+        assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
         assert_eq!(params.out.to_vec(), vec![[1001, 0, 0, 1], [500, !0, !0, 2]]);
     }
 }
@@ -637,6 +643,7 @@ fn indexed_input_with_u32_offsets_selects_records_7_3_2() {
         2,
         0,
     );
-    pipeline.launch(&params, &sbt, 2, 1, 1).unwrap();
+    let report = pipeline.launch(&params, &sbt, 2, 1, 1).unwrap();
+    assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
     assert_eq!(params.out.to_vec(), vec![[1006, 3, 5, 1], [1002, 1, 6, 1]]);
 }

@@ -4,10 +4,11 @@
 
 mod pipeline_common;
 
+use oxray::cpu::Gas;
 use oxray::{
-    Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, DeviceContext, Gas,
-    GeometryFlags, Module, Pipeline, ProgramGroup, Ray, RayFlags, SbtRegion, ShaderBindingTable,
-    TraceRay, TraversableHandle, TriangleInput, VertexBuffer,
+    Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, DeviceContext, GeometryFlags,
+    Module, Pipeline, ProgramGroup, Ray, RayFlags, SbtRegion, ShaderBindingTable, TraceRay,
+    TraversableHandle, TriangleInput, VertexBuffer,
 };
 use pipeline_common::*;
 use std::collections::BTreeSet;

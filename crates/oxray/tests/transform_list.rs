@@ -2,8 +2,9 @@
 //! to the geometry, with their kind, ids and matrices, in any-hit and closest-hit programs.
 
 use glam::Vec3;
+use oxray::cpu::{Gas, Ias};
 use oxray::{
-    BuildOptions, DeviceContext, Gas, HitGroupDesc, Ias, Instance, Module, OutputBuffer, Pipeline,
+    BuildOptions, DeviceContext, HitGroupDesc, Instance, Module, OutputBuffer, Pipeline,
     PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, SbtRegion, ShaderBindingTable,
     StaticTransform, TraceRay, Transform, TransformListEntry, TransformListKind, TraversableHandle,
     TriangleInput, VertexBuffer,
@@ -76,7 +77,7 @@ fn trace(handle: TraversableHandle) -> Vec<(&'static str, Vec<TransformListEntry
         hitgroup: SbtRegion::from_headers(&[hg.pack_header()]),
         ..Default::default()
     };
-    pipeline
+    let report = pipeline
         .launch(
             &Params {
                 handle,
@@ -89,6 +90,7 @@ fn trace(handle: TraversableHandle) -> Vec<(&'static str, Vec<TransformListEntry
             1,
         )
         .unwrap();
+    assert_eq!(report.exceptions, 0, "{:?}", report.first_exceptions);
     assert_eq!(out.read(0), Some(1), "the ray must hit");
     let result = seen.lock().unwrap().clone();
     result

@@ -9,7 +9,8 @@ mod common;
 
 use common::{grid_cube, icosphere, load_bunny, parse_obj, Mesh, Rng};
 use glam::{DVec3, Vec3};
-use oxray::{BuildFlags, BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use oxray::cpu::Gas;
+use oxray::{BuildFlags, BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
 use std::collections::{HashMap, HashSet};
 
 const TOLERANCE: f32 = 1e-4;

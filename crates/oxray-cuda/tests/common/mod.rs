@@ -4,7 +4,8 @@
 #![allow(dead_code)]
 
 use glam::Vec3;
-use oxray::{BuildFlags, BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use oxray_core::{BuildFlags, BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use oxray_cpu::Gas;
 use std::path::{Path, PathBuf};
 
 /// An indexed triangle mesh.
@@ -124,7 +125,7 @@ impl Mesh {
     }
 
     /// Builds a GAS over the mesh.
-    pub fn build(&self, flags: BuildFlags) -> Result<Gas, oxray::BuildError> {
+    pub fn build(&self, flags: BuildFlags) -> Result<Gas, oxray_core::BuildError> {
         let input = TriangleInput::new(VertexBuffer::f32x3(&self.positions))
             .indices(IndexBuffer::u32x3(&self.triangles));
         Gas::build(&BuildOptions::new(flags), &[input.into()])

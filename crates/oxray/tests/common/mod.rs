@@ -6,7 +6,7 @@
 #![allow(dead_code)]
 
 use glam::Vec3;
-use oxray::geometry::triangle::{is_degenerate, TriangleHit, WatertightRay};
+use oxray::bvh::triangle::{is_degenerate, TriangleHit, WatertightRay};
 use oxray::{Hit, HitKind, Ray};
 use std::collections::HashMap;
 use std::path::PathBuf;

@@ -7,9 +7,10 @@
 #![allow(dead_code)]
 
 pub use glam::{Affine3A, Mat3, Quat, Vec3};
+use oxray::cpu::Gas;
 use oxray::{
     AnyHitCtx, BuildInput, BuildOptions, ClosestHitCtx, DeviceContext, ExceptionCode,
-    ExceptionFlags, Gas, GeometryFlags, Hit, IntersectionCtx, LaunchReport, Module, OutputBuffer,
+    ExceptionFlags, GeometryFlags, Hit, IntersectionCtx, LaunchReport, Module, OutputBuffer,
     Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, RayFlags, SbtRegion,
     ShaderBindingTable, TraceRay, Transform, TraversableHandle, TriangleInput, VertexBuffer,
 };
@@ -780,7 +781,7 @@ fn grazing(tri: &Tri, ray: &oxray::Ray, t: f32) -> bool {
 /// must be near-ties; where only one scene hits, or one finds a nearer hit, the ray must graze
 /// that triangle. `occluded()` agrees with `intersect()` on each scene exactly.
 pub fn compare_ray(
-    ias: &oxray::Ias,
+    ias: &oxray::cpu::Ias,
     flat: &Gas,
     leaves: &[Leaf],
     ray: &oxray::Ray,

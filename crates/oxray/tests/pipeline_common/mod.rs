@@ -6,12 +6,12 @@
 #![allow(dead_code)]
 
 pub use glam::Vec3;
+use oxray::cpu::Gas;
 use oxray::{
     Aabb, AabbBuffer, AnyHitCtx, BuildInput, BuildOptions, ClosestHitCtx, CustomPrimitiveInput,
-    DeviceContext, ExceptionFlags, Gas, GeometryFlags, IntersectionCtx, LaunchReport, MissCtx,
-    Module, Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, ProgramResult,
-    RayFlags, SbtRegion, ShaderBindingTable, TraceRay, TraversableHandle, TriangleInput,
-    VertexBuffer,
+    DeviceContext, ExceptionFlags, GeometryFlags, IntersectionCtx, LaunchReport, MissCtx, Module,
+    Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, ProgramResult, RayFlags,
+    SbtRegion, ShaderBindingTable, TraceRay, TraversableHandle, TriangleInput, VertexBuffer,
 };
 use std::sync::{Arc, Mutex};
 

@@ -1,0 +1,721 @@
+//! Binned SAH builder (Wald 2007), parallel over subtrees and, at the top, over primitives.
+//!
+//! Every reduction is a min, a max or an integer sum, and work is split at fixed sizes, so the
+//! tree is bit-identical whatever the number of threads.
+
+use crate::bvh2::{Bvh2, Bvh2Node};
+use crate::FORCE_MEDIAN_DEPTH;
+use oxray_core::Aabb;
+use rayon::prelude::*;
+
+/// Tuning of the SAH builder; the build flags choose one of the presets.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BuildConfig {
+    /// Bins per axis: 8, 16 or 32 (other values round up to one of these, at most 32).
+    pub bins: usize,
+    /// Largest leaf the SAH may choose; more primitives than this are always split.
+    pub max_leaf_size: usize,
+    /// Cost of visiting a node relative to intersecting one block of primitives.
+    pub traversal_cost: f32,
+    /// Nodes with at most this many primitives (at most 256) are split by a full SAH sweep
+    /// (exact SAH over sorted centroids) instead of bins; 0 disables the sweep.
+    pub sweep_threshold: usize,
+    /// Primitives the traversal tests at once (4 for triangles, which leaves store in blocks of
+    /// four): the SAH counts a leaf's cost in blocks, and a node with at most one block of
+    /// primitives becomes a leaf.
+    pub block_size: usize,
+    /// Nodes with fewer primitives than this search splits along the widest axis of their
+    /// centroids only (a third of the binning work); larger nodes search all three axes.
+    pub widest_axis_below: usize,
+}
+
+impl BuildConfig {
+    /// `PREFER_FAST_BUILD`: few bins.
+    pub const FAST_BUILD: BuildConfig = BuildConfig {
+        bins: 8,
+        max_leaf_size: 8,
+        traversal_cost: 1.0,
+        sweep_threshold: 0,
+        block_size: 4,
+        widest_axis_below: usize::MAX,
+    };
+    /// The default trade-off.
+    pub const BALANCED: BuildConfig = BuildConfig {
+        bins: 16,
+        max_leaf_size: 8,
+        traversal_cost: 1.0,
+        sweep_threshold: 0,
+        block_size: 4,
+        widest_axis_below: 1024,
+    };
+    /// `PREFER_FAST_TRACE`: more bins, and an exact SAH sweep near the leaves.
+    pub const FAST_TRACE: BuildConfig = BuildConfig {
+        bins: 32,
+        max_leaf_size: 8,
+        traversal_cost: 1.0,
+        sweep_threshold: 32,
+        block_size: 4,
+        widest_axis_below: 0,
+    };
+}
+
+/// Nodes with fewer primitives than this use 8 bins whatever the configuration.
+const SMALL_NODE: usize = 64;
+/// Largest node the exact sweep handles (its scratch lives on the stack).
+const MAX_SWEEP: usize = 256;
+/// Subtrees smaller than this are built on the current thread.
+const PARALLEL_SUBTREE: usize = 1024;
+/// Nodes larger than this bin their primitives in parallel chunks of this size.
+const PARALLEL_BINNING: usize = 1 << 13;
+
+/// A box with a fourth, unused lane, so that unions compile to `minps`/`maxps`.
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Debug)]
+struct Box4 {
+    lo: [f32; 4],
+    hi: [f32; 4],
+}
+
+impl Box4 {
+    const EMPTY: Box4 = Box4 {
+        lo: [f32::INFINITY; 4],
+        hi: [f32::NEG_INFINITY; 4],
+    };
+
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn grow(&mut self, o: &Box4) {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE is part of the x86_64 baseline; `Box4` is `align(16)` and its rows are
+        // `[f32; 4]`, so the loads and stores are aligned and in bounds. `minps(a, b)` returns `b`
+        // when either is NaN, so NaN in `o` keeps `self`, as the portable form does.
+        unsafe {
+            let lo = _mm_min_ps(_mm_load_ps(o.lo.as_ptr()), _mm_load_ps(self.lo.as_ptr()));
+            let hi = _mm_max_ps(_mm_load_ps(o.hi.as_ptr()), _mm_load_ps(self.hi.as_ptr()));
+            _mm_store_ps(self.lo.as_mut_ptr(), lo);
+            _mm_store_ps(self.hi.as_mut_ptr(), hi);
+        }
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    #[inline(always)]
+    fn grow(&mut self, o: &Box4) {
+        for i in 0..4 {
+            self.lo[i] = if o.lo[i] < self.lo[i] {
+                o.lo[i]
+            } else {
+                self.lo[i]
+            };
+            self.hi[i] = if o.hi[i] > self.hi[i] {
+                o.hi[i]
+            } else {
+                self.hi[i]
+            };
+        }
+    }
+
+    #[inline(always)]
+    fn grow_point(&mut self, p: &[f32; 4]) {
+        for i in 0..4 {
+            self.lo[i] = if p[i] < self.lo[i] { p[i] } else { self.lo[i] };
+            self.hi[i] = if p[i] > self.hi[i] { p[i] } else { self.hi[i] };
+        }
+    }
+
+    fn aabb(&self) -> Aabb {
+        Aabb::new(
+            [self.lo[0], self.lo[1], self.lo[2]].into(),
+            [self.hi[0], self.hi[1], self.hi[2]].into(),
+        )
+    }
+
+    fn half_area(&self) -> f32 {
+        self.aabb().half_area()
+    }
+}
+
+/// The builder's view of one primitive: its box, with the primitive's id in the bits of the
+/// unused fourth lane of `hi` (ids are below 2^29, so those bits are a small finite float).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PrimRef(Box4);
+
+impl PrimRef {
+    fn new(b: &Aabb, id: u32) -> Self {
+        PrimRef(Box4 {
+            lo: [b.min.x, b.min.y, b.min.z, 0.0],
+            hi: [b.max.x, b.max.y, b.max.z, f32::from_bits(id)],
+        })
+    }
+
+    #[inline(always)]
+    fn id(&self) -> u32 {
+        self.0.hi[3].to_bits()
+    }
+
+    /// The centroid; binning and partitioning both use this, so they agree bit for bit.
+    #[inline(always)]
+    fn centroid(&self) -> [f32; 4] {
+        let b = &self.0;
+        std::array::from_fn(|i| b.lo[i] * 0.5 + b.hi[i] * 0.5)
+    }
+}
+
+/// Bytes of working memory [`build_bvh2`] allocates for `n` primitives, at most.
+pub fn temp_bytes(n: usize) -> usize {
+    n * std::mem::size_of::<PrimRef>()
+        + 2 * n.max(1) * std::mem::size_of::<Bvh2Node>()
+        + n * std::mem::size_of::<u32>()
+}
+
+/// Builds a binary BVH over `bounds` (every box must be finite and valid).
+pub fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
+    let config = BuildConfig {
+        bins: config.bins.clamp(8, 32).next_power_of_two(),
+        max_leaf_size: config.max_leaf_size.max(1),
+        sweep_threshold: config.sweep_threshold.min(MAX_SWEEP),
+        ..*config
+    };
+    let mut refs: Vec<PrimRef> = bounds
+        .par_iter()
+        .enumerate()
+        .map(|(i, b)| PrimRef::new(b, i as u32))
+        .collect();
+    if refs.is_empty() {
+        return Bvh2::default();
+    }
+    let (root_bounds, root_centroids) = reduce(&refs);
+    // Node slots: the root, then the interior of its subtree (see `build_node`).
+    // Zeroed memory from the allocator: pages under leaves are never even touched.
+    let mut nodes: Vec<Bvh2Node> = bytemuck::allocation::zeroed_vec(2 * refs.len() - 1);
+    let (root, interior) = nodes.split_at_mut(1);
+    root[0] = build_node(
+        &mut refs,
+        0,
+        interior,
+        1,
+        root_bounds,
+        root_centroids,
+        0,
+        &config,
+    );
+    Bvh2 {
+        nodes,
+        prim_order: refs.iter().map(PrimRef::id).collect(),
+    }
+}
+
+/// The box of the primitives and the box of their centroids.
+fn reduce(refs: &[PrimRef]) -> (Box4, Box4) {
+    let fold = |(mut b, mut c): (Box4, Box4), r: &PrimRef| {
+        b.grow(&r.0);
+        c.grow_point(&r.centroid());
+        (b, c)
+    };
+    let empty = (Box4::EMPTY, Box4::EMPTY);
+    if refs.len() > PARALLEL_BINNING {
+        refs.par_chunks(PARALLEL_BINNING)
+            .map(|c| c.iter().fold(empty, fold))
+            .reduce(
+                || empty,
+                |(mut a, mut b), (c, d)| {
+                    a.grow(&c);
+                    b.grow(&d);
+                    (a, b)
+                },
+            )
+    } else {
+        refs.iter().fold(empty, fold)
+    }
+}
+
+/// A chosen split.
+#[derive(Clone, Copy)]
+enum Split {
+    /// Left iff the bin of the centroid along `axis` is below `bin`.
+    Binned {
+        axis: usize,
+        bin: usize,
+        cmin: f32,
+        scale: f32,
+    },
+    /// Sorted by centroid along `axis`, the first `count` go left.
+    Sorted { axis: usize, count: usize },
+    /// Object median along `axis` (or, with `axis == 3`, by position in the array).
+    Median { axis: usize },
+}
+
+#[inline(always)]
+fn bin_of<const B: usize>(c: f32, cmin: f32, scale: f32) -> usize {
+    // `as usize` saturates (and maps NaN to 0), so every centroid lands in a valid bin.
+    (((c - cmin) * scale) as usize).min(B - 1)
+}
+
+/// The bins of a primitive's centroid on the three axes; equal, axis by axis, to [`bin_of`]
+/// applied to [`PrimRef::centroid`] (same operations, and clamping before or after the
+/// truncation gives the same integer).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -> [usize; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: SSE2 is part of the x86_64 baseline; all pointers come from `[f32; 4]`/`[i32; 4]`
+    // arrays (the `Box4` rows are 16-byte aligned; the others are loaded unaligned).
+    unsafe {
+        let half = _mm_set1_ps(0.5);
+        let c = _mm_add_ps(
+            _mm_mul_ps(_mm_load_ps(r.0.lo.as_ptr()), half),
+            _mm_mul_ps(_mm_load_ps(r.0.hi.as_ptr()), half),
+        );
+        let f = _mm_mul_ps(
+            _mm_sub_ps(c, _mm_loadu_ps(cmin.as_ptr())),
+            _mm_loadu_ps(scale.as_ptr()),
+        );
+        // maxps returns the second operand (0) for NaN, as `as usize` maps NaN to 0.
+        let f = _mm_min_ps(_mm_max_ps(f, _mm_setzero_ps()), _mm_set1_ps((B - 1) as f32));
+        let mut out = [0i32; 4];
+        _mm_storeu_si128(out.as_mut_ptr().cast(), _mm_cvttps_epi32(f));
+        [out[0] as usize, out[1] as usize, out[2] as usize, 0]
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -> [usize; 4] {
+    let c = r.centroid();
+    std::array::from_fn(|a| {
+        if a < 3 {
+            bin_of::<B>(c[a], cmin[a], scale[a])
+        } else {
+            0
+        }
+    })
+}
+
+/// Per axis and bin: the primitives' box and their count.
+#[derive(Clone, Copy)]
+struct Bins<const B: usize> {
+    boxes: [[Box4; B]; 3],
+    counts: [[u32; B]; 3],
+}
+
+impl<const B: usize> Bins<B> {
+    fn new() -> Self {
+        Bins {
+            boxes: [[Box4::EMPTY; B]; 3],
+            counts: [[0; B]; 3],
+        }
+    }
+
+    fn merge(mut self, o: &Self) -> Self {
+        for a in 0..3 {
+            for b in 0..B {
+                self.boxes[a][b].grow(&o.boxes[a][b]);
+                self.counts[a][b] += o.counts[a][b];
+            }
+        }
+        self
+    }
+
+    /// Bins every primitive on the three axes at once. Even and odd primitives go to separate
+    /// bin sets, merged at the end, so that consecutive primitives falling in the same bin do
+    /// not wait on each other's stores.
+    fn fill(refs: &[PrimRef], cmin: &[f32; 4], scale: &[f32; 4]) -> Self {
+        let mut even = Self::new();
+        let mut odd = Self::new();
+        let active: [bool; 3] = std::array::from_fn(|a| scale[a] != 0.0);
+        let add = |bins: &mut Self, r: &PrimRef| {
+            let idx = bin_indices::<B>(r, cmin, scale);
+            for axis in 0..3 {
+                // Axes without extent (or not searched) take no part.
+                if active[axis] {
+                    let i = idx[axis];
+                    bins.boxes[axis][i].grow(&r.0);
+                    bins.counts[axis][i] += 1;
+                }
+            }
+        };
+        let mut pairs = refs.chunks_exact(2);
+        for pair in &mut pairs {
+            add(&mut even, &pair[0]);
+            add(&mut odd, &pair[1]);
+        }
+        if let [last] = pairs.remainder() {
+            add(&mut even, last);
+        }
+        even.merge(&odd)
+    }
+}
+
+/// The boxes of the two sides of a split.
+#[derive(Clone, Copy)]
+struct Sides {
+    bounds: [Box4; 2],
+    centroids: [Box4; 2],
+}
+
+/// Returns the best binned split, its SAH cost (area-weighted primitive count, not yet divided
+/// by the parent's area) and the boxes of its sides (the centroid boxes are filled in by the
+/// partition).
+fn best_binned_split<const B: usize>(
+    refs: &[PrimRef],
+    cb: &Box4,
+    block: usize,
+    widest_axis_only: bool,
+) -> Option<(Split, f32, [Box4; 2])> {
+    let mut scale = [0.0f32; 4];
+    let widest = widest_axis(cb);
+    for axis in 0..3 {
+        let e = cb.hi[axis] - cb.lo[axis];
+        let s = B as f32 * (1.0 - 1e-6) / e;
+        let searched = !widest_axis_only || axis == widest;
+        scale[axis] = if searched && e > 0.0 && s.is_finite() {
+            s
+        } else {
+            0.0
+        };
+    }
+    if scale == [0.0; 4] {
+        return None;
+    }
+    let bins = if refs.len() > PARALLEL_BINNING {
+        refs.par_chunks(PARALLEL_BINNING)
+            .map(|c| Bins::<B>::fill(c, &cb.lo, &scale))
+            .reduce(Bins::new, |a, b| a.merge(&b))
+    } else {
+        Bins::<B>::fill(refs, &cb.lo, &scale)
+    };
+    let mut best: Option<(usize, usize, f32)> = None;
+    for axis in 0..3 {
+        if scale[axis] == 0.0 {
+            continue;
+        }
+        // Sweep from the right for right-side areas and counts, then from the left.
+        let mut right_area = [0.0f32; B];
+        let mut right_count = [0u32; B];
+        let mut acc = Box4::EMPTY;
+        let mut n = 0u32;
+        for i in (1..B).rev() {
+            acc.grow(&bins.boxes[axis][i]);
+            n += bins.counts[axis][i];
+            right_area[i] = acc.half_area();
+            right_count[i] = n;
+        }
+        let mut acc = Box4::EMPTY;
+        let mut n = 0u32;
+        for i in 1..B {
+            acc.grow(&bins.boxes[axis][i - 1]);
+            n += bins.counts[axis][i - 1];
+            if n == 0 || right_count[i] == 0 {
+                continue;
+            }
+            let cost = acc.half_area() * n.div_ceil(block as u32) as f32
+                + right_area[i] * right_count[i].div_ceil(block as u32) as f32;
+            if cost.is_finite() && best.is_none_or(|(_, _, c)| cost < c) {
+                best = Some((axis, i, cost));
+            }
+        }
+    }
+    let (axis, bin, cost) = best?;
+    let side = |r: std::ops::Range<usize>| {
+        bins.boxes[axis][r].iter().fold(Box4::EMPTY, |mut a, b| {
+            a.grow(b);
+            a
+        })
+    };
+    let split = Split::Binned {
+        axis,
+        bin,
+        cmin: cb.lo[axis],
+        scale: scale[axis],
+    };
+    Some((split, cost, [side(0..bin), side(bin..B)]))
+}
+
+/// The axis along which a box is widest.
+fn widest_axis(b: &Box4) -> usize {
+    let e = [b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]];
+    if e[0] >= e[1] && e[0] >= e[2] {
+        0
+    } else if e[1] >= e[2] {
+        1
+    } else {
+        2
+    }
+}
+
+/// The split of a node of at most two blocks: sorted along the widest centroid axis, one full
+/// block on the left.
+fn small_split(refs: &mut [PrimRef], cb: &Box4, block: usize) -> Option<(Split, f32)> {
+    let e = [
+        cb.hi[0] - cb.lo[0],
+        cb.hi[1] - cb.lo[1],
+        cb.hi[2] - cb.lo[2],
+    ];
+    let axis = if e[0] >= e[1] && e[0] >= e[2] {
+        0
+    } else if e[1] >= e[2] {
+        1
+    } else {
+        2
+    };
+    sort_by_centroid(refs, axis);
+    let side = |r: &[PrimRef]| {
+        r.iter().fold(Box4::EMPTY, |mut a, p| {
+            a.grow(&p.0);
+            a
+        })
+    };
+    let n = refs.len();
+    let cost = side(&refs[..block]).half_area()
+        + side(&refs[block..]).half_area() * (n - block).div_ceil(block) as f32;
+    cost.is_finite()
+        .then_some((Split::Sorted { axis, count: block }, cost))
+}
+
+/// Exact SAH: sorts along each axis and evaluates every split position.
+fn best_sweep_split(refs: &mut [PrimRef], block: usize) -> Option<(Split, f32)> {
+    let n = refs.len();
+    let mut right_area = [0.0f32; MAX_SWEEP];
+    let mut best: Option<(Split, f32)> = None;
+    for axis in 0..3 {
+        sort_by_centroid(refs, axis);
+        let mut acc = Box4::EMPTY;
+        for i in (1..n).rev() {
+            acc.grow(&refs[i].0);
+            right_area[i] = acc.half_area();
+        }
+        let mut acc = Box4::EMPTY;
+        for i in 1..n {
+            acc.grow(&refs[i - 1].0);
+            let cost = acc.half_area() * i.div_ceil(block) as f32
+                + right_area[i] * (n - i).div_ceil(block) as f32;
+            if cost.is_finite() && best.is_none_or(|(_, c)| cost < c) {
+                best = Some((Split::Sorted { axis, count: i }, cost));
+            }
+        }
+    }
+    best
+}
+
+fn sort_by_centroid(refs: &mut [PrimRef], axis: usize) {
+    // Ties are broken by id so that the order (and the tree) is fully determined.
+    refs.sort_unstable_by(|a, b| {
+        a.centroid()[axis]
+            .total_cmp(&b.centroid()[axis])
+            .then(a.id().cmp(&b.id()))
+    });
+}
+
+/// Applies a split; returns how many primitives went left and, for a binned split, the boxes of
+/// the sides' centroids.
+fn partition<const B: usize>(refs: &mut [PrimRef], split: Split) -> (usize, Option<[Box4; 2]>) {
+    match split {
+        Split::Binned {
+            axis,
+            bin,
+            cmin,
+            scale,
+        } => {
+            let mut cl = Box4::EMPTY;
+            let mut cr = Box4::EMPTY;
+            let mut i = 0;
+            let mut j = refs.len();
+            while i < j {
+                let c = refs[i].centroid();
+                if bin_of::<B>(c[axis], cmin, scale) < bin {
+                    cl.grow_point(&c);
+                    i += 1;
+                } else {
+                    cr.grow_point(&c);
+                    j -= 1;
+                    refs.swap(i, j);
+                }
+            }
+            (i, Some([cl, cr]))
+        }
+        Split::Sorted { axis, count } => {
+            sort_by_centroid(refs, axis);
+            (count, None)
+        }
+        Split::Median { axis } => {
+            let mid = refs.len() / 2;
+            if axis < 3 {
+                refs.select_nth_unstable_by(mid, |a, b| {
+                    a.centroid()[axis]
+                        .total_cmp(&b.centroid()[axis])
+                        .then(a.id().cmp(&b.id()))
+                });
+            }
+            (mid, None)
+        }
+    }
+}
+
+/// Builds the subtree over `refs` (primitive slots `offset..offset + refs.len()`) and returns its
+/// root node.
+///
+/// Node slots are assigned without coordination, so subtrees can be built in parallel and the
+/// layout does not depend on scheduling: the subtree over `n` primitives owns the `2n - 2` slots of
+/// `interior` (global index `base`); a split after `m` primitives puts the left subtree's interior
+/// first (`2m - 2` slots), then the pair of children, then the right subtree's interior. Slots
+/// under leaves stay unused.
+#[allow(clippy::too_many_arguments)]
+fn build_node(
+    refs: &mut [PrimRef],
+    offset: usize,
+    interior: &mut [Bvh2Node],
+    base: usize,
+    bounds: Box4,
+    cb: Box4,
+    depth: usize,
+    config: &BuildConfig,
+) -> Bvh2Node {
+    // Small nodes bin coarsely: their few primitives cannot use many bins, and each bin costs.
+    let bins = if refs.len() < SMALL_NODE {
+        8
+    } else {
+        config.bins
+    };
+    match bins {
+        8 => build_node_b::<8>(refs, offset, interior, base, bounds, cb, depth, config),
+        16 => build_node_b::<16>(refs, offset, interior, base, bounds, cb, depth, config),
+        _ => build_node_b::<32>(refs, offset, interior, base, bounds, cb, depth, config),
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn build_node_b<const B: usize>(
+    refs: &mut [PrimRef],
+    offset: usize,
+    interior: &mut [Bvh2Node],
+    base: usize,
+    bounds: Box4,
+    cb: Box4,
+    depth: usize,
+    config: &BuildConfig,
+) -> Bvh2Node {
+    let n = refs.len();
+    let aabb = bounds.aabb();
+    let leaf = Bvh2Node {
+        min: aabb.min.to_array(),
+        left_first: offset as u32,
+        max: aabb.max.to_array(),
+        count: n as u32,
+    };
+    if n <= config.block_size.max(1) && depth < FORCE_MEDIAN_DEPTH {
+        return leaf;
+    }
+    if n <= 1 {
+        return leaf;
+    }
+    let blocks = |k: usize| k.div_ceil(config.block_size.max(1)) as f32;
+    let mut side_bounds = None;
+    let block = config.block_size.max(1);
+    let split = if depth >= FORCE_MEDIAN_DEPTH {
+        None
+    } else if n <= 2 * block && n <= config.max_leaf_size && n > config.sweep_threshold {
+        // At most two blocks: the only split worth a node puts one full block on one side.
+        small_split(refs, &cb, block)
+    } else if n <= config.sweep_threshold {
+        best_sweep_split(refs, config.block_size.max(1))
+    } else {
+        best_binned_split::<B>(refs, &cb, block, n < config.widest_axis_below).map(
+            |(split, cost, sides)| {
+                side_bounds = Some(sides);
+                (split, cost)
+            },
+        )
+    };
+    let split = match split {
+        Some((split, cost)) => {
+            // SAH in units of one block test, relative to this node's area.
+            let split_cost = config.traversal_cost + cost / bounds.half_area();
+            let leaf_cost = blocks(n);
+            if n <= config.max_leaf_size && (leaf_cost <= split_cost || !split_cost.is_finite()) {
+                return leaf;
+            }
+            split
+        }
+        None => {
+            if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH {
+                return leaf;
+            }
+            let axis = widest_axis(&cb);
+            Split::Median {
+                axis: if cb.hi[axis] - cb.lo[axis] > 0.0 {
+                    axis
+                } else {
+                    3
+                },
+            }
+        }
+    };
+    let (mut mid, side_centroids) = partition::<B>(refs, split);
+    let mut sides = match (side_bounds, side_centroids) {
+        (Some(bounds), Some(centroids)) => Some(Sides { bounds, centroids }),
+        _ => None,
+    };
+    if mid == 0 || mid == n {
+        // Only reachable with non-finite arithmetic; any split keeps the tree correct.
+        mid = n / 2;
+        sides = None;
+    }
+    let (l, r) = refs.split_at_mut(mid);
+    let parallel = n > PARALLEL_SUBTREE;
+    let sides = sides.unwrap_or_else(|| {
+        let ((lb, lc), (rb, rc)) = if parallel {
+            rayon::join(|| reduce(l), || reduce(r))
+        } else {
+            (reduce(l), reduce(r))
+        };
+        Sides {
+            bounds: [lb, rb],
+            centroids: [lc, rc],
+        }
+    });
+    let Sides {
+        bounds: [lb, rb],
+        centroids: [lc, rc],
+    } = sides;
+    let (left_interior, rest) = interior.split_at_mut(2 * mid - 2);
+    let (pair, right_interior) = rest.split_at_mut(2);
+    let pair_index = base + 2 * mid - 2;
+    let right_base = pair_index + 2;
+    let (left, right) = if parallel {
+        rayon::join(
+            || build_node(l, offset, left_interior, base, lb, lc, depth + 1, config),
+            || {
+                build_node(
+                    r,
+                    offset + mid,
+                    right_interior,
+                    right_base,
+                    rb,
+                    rc,
+                    depth + 1,
+                    config,
+                )
+            },
+        )
+    } else {
+        (
+            build_node(l, offset, left_interior, base, lb, lc, depth + 1, config),
+            build_node(
+                r,
+                offset + mid,
+                right_interior,
+                right_base,
+                rb,
+                rc,
+                depth + 1,
+                config,
+            ),
+        )
+    };
+    pair[0] = left;
+    pair[1] = right;
+    Bvh2Node {
+        count: 0,
+        left_first: pair_index as u32,
+        ..leaf
+    }
+}

@@ -1,0 +1,476 @@
+//! The geometry acceleration structure: primitives of one kind from one or more build inputs,
+//! under a 4-wide BVH.
+
+use crate::build::{build_bvh2, BuildConfig};
+use crate::bvh4::Bvh4;
+use crate::stats::BvhStats;
+use crate::triangle::is_degenerate;
+use crate::triangle4::Triangle4;
+use bytemuck::Zeroable;
+use glam::Vec3;
+use oxray_core::validate::{validate_sbt_offsets, validate_structure};
+use oxray_core::{
+    Aabb, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOptions, GeometryFlags,
+    InputLocation, TriangleInput,
+};
+use rayon::prelude::*;
+
+/// The primitives of a GAS.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum GasKind {
+    /// Triangles, in blocks of four.
+    Triangles,
+    /// Custom primitives (boxes; their shape is decided by an intersection program).
+    CustomPrimitives,
+}
+
+/// What the structure keeps of each build input.
+#[derive(Clone, Debug)]
+pub struct InputRecord {
+    /// Global id of the input's first primitive (ids count over all inputs, in order).
+    pub first: u32,
+    /// Added to reported primitive indices.
+    pub primitive_index_offset: u32,
+    /// SBT-GAS index of the input's first record: the records of the inputs before it.
+    pub sbt_base: u32,
+}
+
+/// The facts of a built GAS that every backend reports, whatever memory holds its data.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GasInfo {
+    /// The kind of primitives.
+    pub kind: BuildInputKind,
+    /// The flags it was built with.
+    pub build_flags: BuildFlags,
+    /// Primitives declared over all build inputs, inactive ones included.
+    pub num_primitives: u32,
+    /// Primitives that can be hit.
+    pub num_active_primitives: u32,
+    /// Number of build inputs.
+    pub num_build_inputs: usize,
+    /// Geometry flags of every SBT record, by SBT-GAS index.
+    pub record_flags: Vec<GeometryFlags>,
+    /// The box around every active primitive.
+    pub bounds: Aabb,
+    /// Statistics of the BVH it was built with.
+    pub stats: BvhStats,
+}
+
+/// Bytes a built GAS occupies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct GasMemory {
+    /// Bytes of the structure: nodes, primitives and the tables that hits are resolved with.
+    /// At most the `output_size_in_bytes` of the memory query.
+    pub output_bytes: usize,
+    /// Of which BVH nodes.
+    pub node_bytes: usize,
+    /// Of which primitive data (vertices or boxes).
+    pub primitive_bytes: usize,
+}
+
+/// The data of a built geometry acceleration structure (GAS), whatever backend traverses it:
+/// the 4-wide BVH derived from the builder's binary BVH, the primitives in leaf-slot order and
+/// the tables a hit is resolved with (primitive index, SBT-GAS index, build input).
+///
+/// It copies what it needs from the build inputs, which may be dropped once it is built.
+/// Backends wrap it (the CPU backend traverses it in place; the CUDA backend uploads a layout
+/// derived from it).
+///
+/// ```
+/// use oxray_bvh::GasData;
+/// use oxray_core::{BuildOptions, IndexBuffer, TriangleInput, VertexBuffer};
+/// let vertices = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+/// let triangles = [[0u32, 1, 2]];
+/// let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
+///     .indices(IndexBuffer::u32x3(&triangles));
+/// let gas = GasData::build(&BuildOptions::default(), &[input.into()])?;
+/// assert_eq!((gas.num_primitives(), gas.num_active_primitives()), (1, 1));
+/// let root = &gas.bvh.nodes[0];
+/// assert_eq!(root.count[0], 1);
+/// // Leaf slot of that lane: primitive 0 of build input 0, SBT-GAS index 0.
+/// assert_eq!(gas.resolve(root.child[0]), (0, 0, 0));
+/// # Ok::<(), oxray_core::BuildError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct GasData {
+    /// The kind of primitives.
+    pub kind: GasKind,
+    /// The flags it was built with.
+    pub build_flags: BuildFlags,
+    /// The 4-wide BVH; leaves point at slots (triangle GAS: at the first slot of a block).
+    pub bvh: Bvh4,
+    /// Triangles in blocks of four, in leaf-slot order (triangle GAS): slot `s` is lane `s % 4`
+    /// of block `s / 4`. Each leaf starts a new block; unused lanes have no primitive.
+    pub triangles: Vec<Triangle4>,
+    /// Boxes in leaf-slot order (custom-primitive GAS).
+    pub aabbs: Vec<Aabb>,
+    /// Leaf slot to global primitive id ([`NO_PRIMITIVE`] for an unused lane).
+    pub slot_prim: Vec<u32>,
+    /// Per global primitive id, its SBT record within its input; empty when every input has one.
+    pub sbt_offsets: Vec<u32>,
+    /// What is kept of each build input.
+    pub inputs: Vec<InputRecord>,
+    /// Flags of every SBT record, indexed by SBT-GAS index.
+    pub record_flags: Vec<GeometryFlags>,
+    /// The box around every active primitive.
+    pub bounds: Aabb,
+    /// Primitives declared over all inputs, inactive ones included.
+    pub num_primitives: u32,
+}
+
+impl GasData {
+    /// Builds a GAS (`optixAccelBuild`). Inputs must all be of one kind; see [`BuildError`] for
+    /// every rule checked. Primitives that can never be hit (a NaN or infinite coordinate, a
+    /// zero-area triangle, an inverted box) are left out: they are inactive.
+    pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<GasData, BuildError> {
+        let summary = validate_structure(options, inputs)?;
+
+        let mut records = Vec::with_capacity(inputs.len());
+        let mut record_flags = Vec::with_capacity(summary.num_sbt_records as usize);
+        let mut first = 0u32;
+        for (i, input) in inputs.iter().enumerate() {
+            let count = input.num_primitives();
+            let num_records = input.flags().len() as u32;
+            if let Some(o) = input.sbt_index_offsets() {
+                validate_sbt_offsets(InputLocation { input: i }, o, count, num_records)?;
+            }
+            if let BuildInput::Triangles(t) = input {
+                check_indices(InputLocation { input: i }, t)?;
+            }
+            records.push(InputRecord {
+                first,
+                primitive_index_offset: input.primitive_index_offset(),
+                sbt_base: record_flags.len() as u32,
+            });
+            record_flags.extend_from_slice(input.flags());
+            first += count;
+        }
+
+        let sbt_offsets: Vec<u32> = if inputs.iter().any(|i| i.flags().len() > 1) {
+            inputs
+                .iter()
+                .flat_map(|input| {
+                    let n = input.num_primitives() as usize;
+                    let offsets = input.sbt_index_offsets();
+                    (0..n).map(move |p| offsets.map_or(0, |o| o.get(p)))
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+
+        let config = if options.flags.contains(BuildFlags::PREFER_FAST_TRACE) {
+            BuildConfig::FAST_TRACE
+        } else if options.flags.contains(BuildFlags::PREFER_FAST_BUILD) {
+            BuildConfig::FAST_BUILD
+        } else {
+            BuildConfig::BALANCED
+        };
+
+        let mut gas = GasData {
+            kind: match summary.kind {
+                BuildInputKind::Triangles => GasKind::Triangles,
+                _ => GasKind::CustomPrimitives,
+            },
+            build_flags: options.flags,
+            bvh: Bvh4 { nodes: Vec::new() },
+            triangles: Vec::new(),
+            aabbs: Vec::new(),
+            slot_prim: Vec::new(),
+            sbt_offsets,
+            inputs: records,
+            record_flags,
+            bounds: Aabb::EMPTY,
+            num_primitives: summary.num_primitives,
+        };
+
+        match gas.kind {
+            GasKind::Triangles => {
+                let mut per_input: Vec<Vec<[Vec3; 3]>> = inputs
+                    .iter()
+                    .map(|input| match input {
+                        BuildInput::Triangles(t) => decode_triangles(t),
+                        _ => unreachable!("inputs are homogeneous"),
+                    })
+                    .collect();
+                let tris: Vec<[Vec3; 3]> = if per_input.len() == 1 {
+                    per_input.pop().unwrap_or_default()
+                } else {
+                    per_input.concat()
+                };
+                // An indexed parallel map, then a sequential filter: rayon's filtered collect
+                // would allocate per item.
+                let boxes: Vec<Option<Aabb>> = tris
+                    .par_iter()
+                    .map(|t| (!is_degenerate(t[0], t[1], t[2])).then(|| Aabb::from_points(t)))
+                    .collect();
+                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
+                    .unzip();
+                let bvh2 = build_bvh2(&bounds, &config);
+                gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
+                gas.bvh = Bvh4::from(&bvh2);
+                let global: Vec<u32> = bvh2
+                    .prim_order
+                    .par_iter()
+                    .map(|&k| ids[k as usize])
+                    .collect();
+                (gas.triangles, gas.slot_prim) = pack_triangles(&mut gas.bvh, &global, &tris);
+            }
+            GasKind::CustomPrimitives => {
+                let boxes: Vec<Aabb> = inputs
+                    .iter()
+                    .flat_map(|input| match input {
+                        BuildInput::CustomPrimitives(c) => {
+                            let a = c.aabbs;
+                            let stride = a.effective_stride();
+                            (0..a.count as usize).map(move |i| {
+                                let f: [f32; 6] = std::array::from_fn(|k| {
+                                    let at = i * stride + 4 * k;
+                                    f32::from_le_bytes(
+                                        a.data[at..at + 4].try_into().unwrap_or([0; 4]),
+                                    )
+                                });
+                                Aabb::new(Vec3::new(f[0], f[1], f[2]), Vec3::new(f[3], f[4], f[5]))
+                            })
+                        }
+                        _ => unreachable!("inputs are homogeneous"),
+                    })
+                    .collect();
+                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, b)| b.is_finite_valid())
+                    .map(|(i, b)| (i as u32, *b))
+                    .unzip();
+                let bvh2 = build_bvh2(&bounds, &config);
+                gas.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+                gas.aabbs = gas.slot_prim.iter().map(|&g| boxes[g as usize]).collect();
+                gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
+                gas.bvh = Bvh4::from(&bvh2);
+            }
+        }
+        // What the structure keeps is exactly what it reports (and what the query bounds).
+        gas.bvh.nodes.shrink_to_fit();
+        gas.triangles.shrink_to_fit();
+        gas.aabbs.shrink_to_fit();
+        gas.slot_prim.shrink_to_fit();
+        gas.sbt_offsets.shrink_to_fit();
+        gas.inputs.shrink_to_fit();
+        gas.record_flags.shrink_to_fit();
+        Ok(gas)
+    }
+
+    /// The kind of primitives.
+    pub fn kind(&self) -> BuildInputKind {
+        match self.kind {
+            GasKind::Triangles => BuildInputKind::Triangles,
+            GasKind::CustomPrimitives => BuildInputKind::CustomPrimitives,
+        }
+    }
+
+    /// The flags it was built with.
+    pub fn build_flags(&self) -> BuildFlags {
+        self.build_flags
+    }
+
+    /// Primitives declared over all build inputs, inactive ones included.
+    pub fn num_primitives(&self) -> u32 {
+        self.num_primitives
+    }
+
+    /// Primitives that can be hit.
+    pub fn num_active_primitives(&self) -> u32 {
+        self.slot_prim
+            .iter()
+            .filter(|&&g| g != NO_PRIMITIVE)
+            .count() as u32
+    }
+
+    /// Number of build inputs.
+    pub fn num_build_inputs(&self) -> usize {
+        self.inputs.len()
+    }
+
+    /// SBT records over all build inputs (the span of SBT-GAS indices).
+    pub fn num_sbt_records(&self) -> u32 {
+        self.record_flags.len() as u32
+    }
+
+    /// The geometry flags of an SBT record, by SBT-GAS index.
+    pub fn geometry_flags(&self, sbt_gas_index: u32) -> Option<GeometryFlags> {
+        self.record_flags.get(sbt_gas_index as usize).copied()
+    }
+
+    /// The box around every active primitive (empty when there is none).
+    pub fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// The BVH.
+    pub fn bvh(&self) -> &Bvh4 {
+        &self.bvh
+    }
+
+    /// BVH statistics: nodes, depth, SAH cost, bytes.
+    pub fn stats(&self) -> BvhStats {
+        self.bvh.stats()
+    }
+
+    /// Bytes the structure occupies.
+    pub fn memory(&self) -> GasMemory {
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        let node_bytes = bytes(&self.bvh.nodes);
+        let primitive_bytes = bytes(&self.triangles) + bytes(&self.aabbs);
+        GasMemory {
+            output_bytes: node_bytes
+                + primitive_bytes
+                + bytes(&self.slot_prim)
+                + bytes(&self.sbt_offsets)
+                + bytes(&self.inputs)
+                + bytes(&self.record_flags),
+            node_bytes,
+            primitive_bytes,
+        }
+    }
+
+    /// What a backend that keeps the structure elsewhere (in GPU memory, say) reports of it.
+    pub fn info(&self) -> GasInfo {
+        GasInfo {
+            kind: self.kind(),
+            build_flags: self.build_flags,
+            num_primitives: self.num_primitives,
+            num_active_primitives: self.num_active_primitives(),
+            num_build_inputs: self.inputs.len(),
+            record_flags: self.record_flags.clone(),
+            bounds: self.bounds,
+            stats: self.stats(),
+        }
+    }
+
+    /// The build input and the index within it of a global primitive id.
+    #[inline]
+    pub fn locate(&self, global: u32) -> (usize, u32) {
+        let i = if self.inputs.len() == 1 {
+            0
+        } else {
+            self.inputs.partition_point(|r| r.first <= global) - 1
+        };
+        (i, global - self.inputs[i].first)
+    }
+
+    /// Primitive index (with the input's offset), SBT-GAS index and build input of a leaf slot.
+    #[inline]
+    pub fn resolve(&self, slot: u32) -> (u32, u32, u32) {
+        let global = self.slot_prim[slot as usize];
+        let (input, local) = self.locate(global);
+        let rec = &self.inputs[input];
+        let sbt = rec.sbt_base + self.sbt_offsets.get(global as usize).copied().unwrap_or(0);
+        (local + rec.primitive_index_offset, sbt, input as u32)
+    }
+}
+
+/// Marks an unused lane of a [`Triangle4`] block in [`GasData::slot_prim`].
+pub const NO_PRIMITIVE: u32 = u32::MAX;
+
+/// Lays the triangles of every leaf out in blocks of four, leaves in node order, and points the
+/// leaves at their blocks. `global[slot]` is the primitive at binary-BVH slot `slot`.
+fn pack_triangles(
+    bvh: &mut Bvh4,
+    global: &[u32],
+    tris: &[[Vec3; 3]],
+) -> (Vec<Triangle4>, Vec<u32>) {
+    // Serially: give every leaf its blocks, and note each block's primitives.
+    let mut sources: Vec<(u32, u32)> = Vec::new();
+    for node in &mut bvh.nodes {
+        for lane in 0..4 {
+            let n = node.count[lane];
+            if n == 0 {
+                continue;
+            }
+            let start = node.child[lane];
+            node.child[lane] = (sources.len() * 4) as u32;
+            for k in (0..n).step_by(4) {
+                sources.push((start + k, (n - k).min(4)));
+            }
+        }
+    }
+    // In parallel: fill the blocks and the slot map.
+    let blocks: Vec<Triangle4> = sources
+        .par_iter()
+        .map(|&(start, n)| {
+            let mut block = Triangle4::zeroed();
+            for l in 0..n as usize {
+                let g = global[start as usize + l];
+                block.set(l, &tris[g as usize].map(|v| v.to_array()));
+            }
+            block
+        })
+        .collect();
+    let slot_prim: Vec<u32> = (0..sources.len() * 4)
+        .into_par_iter()
+        .map(|slot| {
+            let (start, n) = sources[slot / 4];
+            let l = (slot % 4) as u32;
+            if l < n {
+                global[(start + l) as usize]
+            } else {
+                NO_PRIMITIVE
+            }
+        })
+        .collect();
+    (blocks, slot_prim)
+}
+
+/// Checks that every index of an indexed triangle input is in range.
+fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<(), BuildError> {
+    let Some(ix) = &t.indices else { return Ok(()) };
+    let stride = ix.effective_stride();
+    let nv = t.vertices.count;
+    // A plain scan: one compare per index is cheaper than splitting the work.
+    for i in 0..ix.count as usize {
+        let tri = ix.format.decode(&ix.data[i * stride..]);
+        if let Some(&index) = tri.iter().find(|&&v| v >= nv) {
+            return Err(BuildError::IndexOutOfRange {
+                at,
+                triangle: i as u32,
+                index,
+                num_vertices: nv,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Decodes (and pre-transforms) every triangle of a validated input.
+fn decode_triangles(t: &TriangleInput<'_>) -> Vec<[Vec3; 3]> {
+    let v = &t.vertices;
+    let vstride = v.effective_stride();
+    let m = t.pre_transform;
+    let vertex = |i: u32| {
+        let p = v.format.decode(&v.data[i as usize * vstride..]);
+        match &m {
+            None => p,
+            Some(m) => Vec3::new(
+                m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],
+                m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+                m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11],
+            ),
+        }
+    };
+    let n = t.num_primitives() as usize;
+    (0..n)
+        .into_par_iter()
+        .map(|k| {
+            let idx = match &t.indices {
+                Some(ix) => ix.format.decode(&ix.data[k * ix.effective_stride()..]),
+                None => [3 * k as u32, 3 * k as u32 + 1, 3 * k as u32 + 2],
+            };
+            idx.map(vertex)
+        })
+        .collect()
+}

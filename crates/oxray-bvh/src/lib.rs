@@ -1,0 +1,56 @@
+//! # oxray-bvh
+//!
+//! Bounding volume hierarchies for every oxray backend. Builders produce one canonical binary
+//! BVH ([`Bvh2`]); traversal layouts are derived from it ([`Bvh4`], the 4-wide layout of the
+//! CPU backend, from which the CUDA backend's node layouts are derived in turn). Leaf blocks
+//! ([`Triangle4`]) and the watertight triangle test live here too, so that every backend
+//! intersects primitives with the same arithmetic and finds bit-identical hits.
+//!
+//! [`GasData`] is a built geometry acceleration structure as data: the layout, the primitives
+//! in leaf-slot order and the tables that resolve a hit.
+//!
+//! ```
+//! use oxray_bvh::{build_bvh2, BuildConfig, Bvh4};
+//! use oxray_core::Aabb;
+//! use glam::Vec3;
+//! let boxes: Vec<Aabb> = (0..100)
+//!     .map(|i| Aabb::new(Vec3::splat(i as f32), Vec3::splat(i as f32 + 0.5)))
+//!     .collect();
+//! let bvh2 = build_bvh2(&boxes, &BuildConfig::BALANCED);
+//! assert_eq!(bvh2.prim_order.len(), 100);
+//! let bvh4 = Bvh4::from(&bvh2);
+//! assert!(bvh4.stats().leaves > 0);
+//! ```
+
+#![warn(missing_docs)]
+// Lane and axis loops index several arrays in step; iterator chains would hide that.
+#![allow(clippy::needless_range_loop)]
+
+mod build;
+mod bvh2;
+mod bvh4;
+pub mod export;
+pub mod gas;
+pub mod memory;
+mod stats;
+pub mod triangle;
+pub mod triangle4;
+
+pub use build::{build_bvh2, temp_bytes, BuildConfig};
+pub use bvh2::{Bvh2, Bvh2Node};
+pub use bvh4::{Bvh4, Bvh4Node};
+pub use export::{ExportedTriangle, GasExport};
+pub use gas::{GasData, GasInfo, GasKind, GasMemory, InputRecord, NO_PRIMITIVE};
+pub use memory::{compute_memory_usage, AccelBufferSizes};
+pub use stats::BvhStats;
+pub use triangle4::Triangle4;
+
+/// A traversal stack of this many entries is always enough: the builder bounds the depth of
+/// [`Bvh2`] by [`MAX_BVH2_DEPTH`], and a 4-wide node pushes at most 3 entries per level.
+pub const TRAVERSAL_STACK_SIZE: usize = 3 * MAX_BVH2_DEPTH + 4;
+
+/// Past this depth the builder splits at the object median, so that the depth stays within
+/// `FORCE_MEDIAN_DEPTH + log2(2^29)`.
+pub(crate) const FORCE_MEDIAN_DEPTH: usize = 34;
+/// The greatest depth a [`Bvh2`] built by oxray can have (root at depth 0).
+pub const MAX_BVH2_DEPTH: usize = FORCE_MEDIAN_DEPTH + 30;

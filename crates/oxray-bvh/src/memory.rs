@@ -1,0 +1,81 @@
+//! The memory query that precedes a build (`optixAccelComputeMemoryUsage`, guide §5).
+
+use crate::bvh4::Bvh4Node;
+use crate::gas::InputRecord;
+use crate::triangle4::Triangle4;
+use oxray_core::validate::{validate_structure, InputSummary};
+use oxray_core::{Aabb, BuildError, BuildInput, BuildOptions};
+
+/// Buffer sizes for a build (`OptixAccelBufferSizes`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct AccelBufferSizes {
+    /// Upper bound of the bytes the built structure occupies ([`GasData::memory`](crate::GasData::memory)).
+    pub output_size_in_bytes: usize,
+    /// Upper bound of the working memory the build allocates and frees.
+    pub temp_size_in_bytes: usize,
+    /// Working memory of an update; 0 unless `ALLOW_UPDATE` is set.
+    pub temp_update_size_in_bytes: usize,
+}
+
+/// Computes the buffer sizes of a build without building, from the inputs' declared counts
+/// (the buffers' contents are not read). Validates the inputs as the build would, short of
+/// the checks that need the data (index and SBT offset ranges).
+///
+/// ```
+/// use oxray_bvh::{compute_memory_usage, GasData};
+/// use oxray_core::{BuildInput, BuildOptions, TriangleInput, VertexBuffer};
+/// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+/// let inputs = [BuildInput::from(TriangleInput::new(VertexBuffer::f32x3(&v)))];
+/// let sizes = compute_memory_usage(&BuildOptions::default(), &inputs)?;
+/// let gas = GasData::build(&BuildOptions::default(), &inputs)?;
+/// assert!(gas.memory().output_bytes <= sizes.output_size_in_bytes);
+/// # Ok::<(), oxray_core::BuildError>(())
+/// ```
+pub fn compute_memory_usage(
+    options: &BuildOptions,
+    inputs: &[BuildInput<'_>],
+) -> Result<AccelBufferSizes, BuildError> {
+    let summary = validate_structure(options, inputs)?;
+    Ok(sizes_for(&summary, inputs.len()))
+}
+
+/// The sizes for validated inputs of `num_inputs` build inputs.
+pub fn sizes_for(s: &InputSummary, num_inputs: usize) -> AccelBufferSizes {
+    let n = s.num_primitives as usize;
+    let output = output_bound(s, num_inputs);
+    // Decoded primitives (bounds and vertices) + the binary tree and its working set + the map
+    // from active primitives to global ids.
+    let temp = n * (std::mem::size_of::<Aabb>() + std::mem::size_of::<[[f32; 3]; 3]>() + 4)
+        + n * std::mem::size_of::<Option<Aabb>>()
+        + crate::build::temp_bytes(n)
+        + FIXED_TEMP;
+    AccelBufferSizes {
+        output_size_in_bytes: output,
+        temp_size_in_bytes: temp,
+        temp_update_size_in_bytes: 0,
+    }
+}
+
+fn output_bound(s: &InputSummary, num_inputs: usize) -> usize {
+    let n = s.num_primitives as usize;
+    // A 4-wide node absorbs at least one binary inner node, and a binary tree over n leaves has
+    // n - 1 inner nodes, so n - 1 nodes (and the root) always suffice.
+    let nodes = n.saturating_sub(1).max(1) * std::mem::size_of::<Bvh4Node>();
+    // Triangles go in blocks of four, a leaf starting a new block: a leaf of c triangles takes
+    // ceil(c / 4) <= c blocks, so at most one block (and four slots) per triangle.
+    let (per_prim, slots) = match s.kind {
+        oxray_core::BuildInputKind::Triangles => (std::mem::size_of::<Triangle4>(), 4),
+        _ => (std::mem::size_of::<Aabb>(), 1),
+    };
+    // Slot-to-primitive map, and per-primitive SBT offsets (kept only when some input has more
+    // than one record, but bounded here by counts alone).
+    let ids = n * 4 * (slots + 1);
+    let inputs = num_inputs * std::mem::size_of::<InputRecord>() + s.num_sbt_records as usize * 4;
+    nodes + n * per_prim + ids + inputs + FIXED_OUTPUT
+}
+
+/// Bytes every structure may take beyond its per-primitive data (the root node, small tables).
+const FIXED_OUTPUT: usize = 1024;
+/// Working memory every build may take beyond its per-primitive data (thread-pool jobs, small
+/// scratch arrays).
+const FIXED_TEMP: usize = 16 * 1024;

@@ -1,0 +1,431 @@
+//! Typed errors. Each carries its context and maps to the guide's `OptixResult` code.
+
+use crate::input::BuildInputKind;
+use thiserror::Error;
+
+/// The `OptixResult` codes that oxray's errors map to (guide §3.1; values from the OptiX headers).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(u32)]
+pub enum ErrorCode {
+    /// `OPTIX_ERROR_INVALID_VALUE`.
+    InvalidValue = 7001,
+    /// `OPTIX_ERROR_INVALID_INPUT`.
+    InvalidInput = 7200,
+    /// `OPTIX_ERROR_VALIDATION_FAILURE`.
+    ValidationFailure = 7053,
+    /// `OPTIX_ERROR_INVALID_LAUNCH_PARAMETER`.
+    InvalidLaunchParameter = 7201,
+    /// `OPTIX_ERROR_NOT_SUPPORTED`.
+    NotSupported = 7800,
+}
+
+/// Where in a build an offending value lies: which build input and, where known, which primitive.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InputLocation {
+    /// Index of the build input.
+    pub input: usize,
+}
+
+impl std::fmt::Display for InputLocation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "build input {}", self.input)
+    }
+}
+
+/// Which buffer of a build input an error is about.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BufferKind {
+    /// The vertex buffer.
+    Vertices,
+    /// The index buffer.
+    Indices,
+    /// The AABB buffer.
+    Aabbs,
+    /// The SBT index offset buffer.
+    SbtIndexOffsets,
+}
+
+impl std::fmt::Display for BufferKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            BufferKind::Vertices => "vertex buffer",
+            BufferKind::Indices => "index buffer",
+            BufferKind::Aabbs => "AABB buffer",
+            BufferKind::SbtIndexOffsets => "SBT index offset buffer",
+        })
+    }
+}
+
+/// Why an acceleration-structure build (or its memory query) was refused.
+#[derive(Debug, Error, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum BuildError {
+    /// A GAS build needs at least one build input (guide §5).
+    #[error("a geometry acceleration structure needs at least one build input")]
+    NoBuildInputs,
+    /// All build inputs of one GAS must have the same type (guide §5).
+    #[error("build input {index} is {found} but build input 0 is {expected}: all inputs of one GAS must have the same type")]
+    MixedInputTypes {
+        /// Index of the first input of another kind.
+        index: usize,
+        /// Kind of input 0.
+        expected: BuildInputKind,
+        /// Kind of the offending input.
+        found: BuildInputKind,
+    },
+    /// `PREFER_FAST_TRACE` and `PREFER_FAST_BUILD` exclude each other (guide §5.5).
+    #[error("build flags PREFER_FAST_TRACE and PREFER_FAST_BUILD are mutually exclusive")]
+    ConflictingBuildFlags,
+    /// A child of an instance or transform lives on another backend than the build's device.
+    #[error("instance {instance}: its child lives on the {found} backend, not on the {device} device building the IAS")]
+    ForeignTraversable {
+        /// The instance.
+        instance: u32,
+        /// The backend of the building device.
+        device: crate::handle::BackendKind,
+        /// The backend the child lives on.
+        found: crate::handle::BackendKind,
+    },
+    /// The device failed (out of memory, a driver error).
+    #[error("device error: {0}")]
+    Device(String),
+    /// The operation is not available (yet) for this structure.
+    #[error("{0} is not supported by this build")]
+    Unsupported(&'static str),
+    /// A GAS may hold at most 2^29 primitives (guide §12).
+    #[error("{count} primitives exceed the limit of {limit} per geometry acceleration structure")]
+    TooManyPrimitives {
+        /// Primitives over all inputs.
+        count: u64,
+        /// The limit, 2^29.
+        limit: u64,
+    },
+    /// A GAS may reference at most 2^24 SBT records (guide §12).
+    #[error("{count} SBT records exceed the limit of {limit} per geometry acceleration structure")]
+    TooManySbtRecords {
+        /// SBT records over all inputs.
+        count: u64,
+        /// The limit, 2^24.
+        limit: u64,
+    },
+    /// Every build input uses at least one SBT record (guide §5.1).
+    #[error("{at}: numSbtRecords is 0 (the flags slice is empty); every input needs at least one SBT record")]
+    NoSbtRecords {
+        /// The input.
+        at: InputLocation,
+    },
+    /// An input with more than one SBT record needs per-primitive SBT index offsets (guide §5.1).
+    #[error("{at}: {num_sbt_records} SBT records but no SBT index offset buffer")]
+    MissingSbtIndexOffsets {
+        /// The input.
+        at: InputLocation,
+        /// Its number of SBT records.
+        num_sbt_records: u32,
+    },
+    /// A per-primitive SBT index offset must lie in `[0, numSbtRecords)` (guide §5.1).
+    #[error("{at}, primitive {primitive}: SBT index offset {offset} is out of range (numSbtRecords = {num_sbt_records})")]
+    SbtIndexOffsetOutOfRange {
+        /// The input.
+        at: InputLocation,
+        /// Primitive within the input.
+        primitive: u32,
+        /// The offending offset.
+        offset: u32,
+        /// The input's number of SBT records.
+        num_sbt_records: u32,
+    },
+    /// A stride is smaller than one element or breaks the element's alignment.
+    #[error("{at}: {buffer} stride {stride} is invalid ({reason})")]
+    InvalidStride {
+        /// The input.
+        at: InputLocation,
+        /// Which buffer.
+        buffer: BufferKind,
+        /// The stride given.
+        stride: u32,
+        /// What rule it breaks.
+        reason: &'static str,
+    },
+    /// A buffer is shorter than its declared count and stride require.
+    #[error("{at}: {buffer} holds {len} bytes but {count} elements need {needed}")]
+    BufferTooSmall {
+        /// The input.
+        at: InputLocation,
+        /// Which buffer.
+        buffer: BufferKind,
+        /// Elements declared.
+        count: u64,
+        /// Bytes needed.
+        needed: u64,
+        /// Bytes given.
+        len: u64,
+    },
+    /// A triangle soup (no index buffer) needs a multiple of three vertices.
+    #[error("{at}: {count} vertices without an index buffer is not a multiple of 3")]
+    VertexCountNotMultipleOfThree {
+        /// The input.
+        at: InputLocation,
+        /// The vertex count.
+        count: u32,
+    },
+    /// An index refers past the end of the vertex buffer.
+    #[error(
+        "{at}, triangle {triangle}: vertex index {index} is out of range ({num_vertices} vertices)"
+    )]
+    IndexOutOfRange {
+        /// The input.
+        at: InputLocation,
+        /// Triangle within the input.
+        triangle: u32,
+        /// The offending index.
+        index: u32,
+        /// Vertices in the input.
+        num_vertices: u32,
+    },
+    /// Instance build inputs belong in an IAS, not a GAS (guide §5).
+    #[error("build input {index} holds instances: instances are built into an IAS, not a GAS")]
+    InstancesInGas {
+        /// The input.
+        index: usize,
+    },
+    /// An IAS takes exactly one build input (guide §5.4).
+    #[error("an instance acceleration structure takes exactly one build input, not {count}")]
+    IasInputCount {
+        /// Inputs given.
+        count: usize,
+    },
+    /// An IAS's input must hold instances.
+    #[error("an instance acceleration structure needs an instance input, not {found}")]
+    NotInstances {
+        /// Kind given.
+        found: BuildInputKind,
+    },
+    /// An IAS holds at most 2^28 instances (guide §12).
+    #[error("{count} instances exceed the limit of {limit} per instance acceleration structure")]
+    TooManyInstances {
+        /// Instances given.
+        count: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// An instance field has bits set above its limit (guide §5.4, §12: they must be zero).
+    #[error("instance {instance}: {field} {value:#x} has bits above its {bits}-bit limit")]
+    InstanceFieldOutOfRange {
+        /// The instance.
+        instance: u32,
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: u32,
+        /// Bits allowed.
+        bits: u32,
+    },
+    /// `DISABLE_ANYHIT` and `ENFORCE_ANYHIT` exclude each other.
+    #[error("instance {instance}: flags DISABLE_ANYHIT and ENFORCE_ANYHIT are mutually exclusive")]
+    ConflictingInstanceFlags {
+        /// The instance.
+        instance: u32,
+    },
+    /// A transform is singular or not finite.
+    #[error("{}transform is singular or not finite", match instance { Some(i) => format!("instance {i}: "), None => String::new() })]
+    InvalidTransform {
+        /// The instance, or `None` for a static transform.
+        instance: Option<u32>,
+    },
+    /// The traversable graph may be at most 31 levels deep (guide §12).
+    #[error("traversable graph depth {depth} exceeds {limit}")]
+    GraphTooDeep {
+        /// The depth.
+        depth: u32,
+        /// The limit.
+        limit: u32,
+    },
+    /// `primitiveIndexOffset + numPrimitives` must fit in 32 bits.
+    #[error("{at}: primitive index offset {offset} + {count} primitives overflows 32 bits")]
+    PrimitiveIndexOffsetOverflow {
+        /// The input.
+        at: InputLocation,
+        /// The offset.
+        offset: u32,
+        /// Primitives in the input.
+        count: u32,
+    },
+}
+
+impl BuildError {
+    /// Shorthand for an instance field with bits above its limit.
+    pub fn field(instance: u32, field: &'static str, value: u32, bits: u32) -> Self {
+        BuildError::InstanceFieldOutOfRange {
+            instance,
+            field,
+            value,
+            bits,
+        }
+    }
+
+    /// The `OptixResult` code the guide gives for this error.
+    pub fn code(&self) -> ErrorCode {
+        match self {
+            BuildError::Unsupported(_) => ErrorCode::NotSupported,
+            BuildError::NoBuildInputs | BuildError::ConflictingBuildFlags => {
+                ErrorCode::InvalidValue
+            }
+            _ => ErrorCode::InvalidInput,
+        }
+    }
+}
+
+/// Why a batched query was refused.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum QueryError {
+    /// The traversable lives on another backend than the device asked to trace it.
+    #[error("the traversable lives on the {found} backend, not on the {device} device that was asked to trace it")]
+    ForeignTraversable {
+        /// The backend of the device asked.
+        device: crate::handle::BackendKind,
+        /// The backend the structure lives on.
+        found: crate::handle::BackendKind,
+    },
+    /// The backend cannot run this query (yet).
+    #[error("{0} is not supported by this backend")]
+    Unsupported(&'static str),
+    /// The result buffer holds results of the other query kind.
+    #[error("the batch holds {0} results")]
+    WrongBatchKind(&'static str),
+    /// A batch larger than the backend can take at once.
+    #[error("a batch of {rays} rays exceeds the limit of {limit}")]
+    BatchTooLarge {
+        /// Rays given.
+        rays: usize,
+        /// Most rays in one batch.
+        limit: usize,
+    },
+    /// The device failed (out of memory, a driver error).
+    #[error("device error: {0}")]
+    Device(String),
+    /// The output slice must have one element per ray.
+    #[error("{rays} rays but the output holds {outputs} results")]
+    LengthMismatch {
+        /// Rays given.
+        rays: usize,
+        /// Output elements given.
+        outputs: usize,
+    },
+}
+
+/// Why a module, program group or pipeline could not be created (guide §6), or an SBT region
+/// was refused (§7).
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PipelineError {
+    /// An entry name lacks the prefix of its program kind (guide §6.2).
+    #[error("entry {name:?} registered as a {kind} program must start with {prefix:?}")]
+    BadEntryName {
+        /// The name.
+        name: String,
+        /// The program kind.
+        kind: &'static str,
+        /// The prefix it needs.
+        prefix: &'static str,
+    },
+    /// Two programs of one module share an entry name.
+    #[error("entry {0:?} is defined twice in one module")]
+    DuplicateEntry(String),
+    /// A program group names an entry its module lacks, or one of another kind.
+    #[error("module has no {kind} program named {name:?}")]
+    UnknownEntry {
+        /// The name.
+        name: String,
+        /// The kind wanted.
+        kind: &'static str,
+    },
+    /// `num_payload_values` must be at most 32 (guide §13.3).
+    #[error("num_payload_values {0} exceeds 32")]
+    TooManyPayloadValues(u32),
+    /// `num_attribute_values` must be at most 8 (guide §13.4).
+    #[error("num_attribute_values {0} exceeds 8")]
+    TooManyAttributeValues(u32),
+    /// `max_trace_depth` must be at most 31 (guide §12).
+    #[error("max_trace_depth {0} exceeds 31")]
+    TraceDepthTooLarge(u32),
+    /// A callables group needs a direct or a continuation callable (or both).
+    #[error("a callables program group needs a direct or a continuation callable")]
+    EmptyCallables,
+    /// `max_traversable_graph_depth` must be in `1..=31` (guide §12).
+    #[error("max_traversable_graph_depth {0} is not in 1..=31")]
+    InvalidGraphDepth(u32),
+    /// A pipeline needs at least one program group.
+    #[error("a pipeline needs at least one program group")]
+    NoProgramGroups,
+    /// SBT strides are multiples of 16 that hold at least the 32-byte header (guide §7.2).
+    #[error("SBT stride {stride} is not a multiple of 16 of at least 32 bytes")]
+    InvalidSbtStride {
+        /// The stride.
+        stride: usize,
+    },
+    /// An SBT region's bytes are fewer than its records need.
+    #[error("SBT region holds {len} bytes but its records need {needed}")]
+    SbtRegionTooSmall {
+        /// Bytes needed.
+        needed: usize,
+        /// Bytes given.
+        len: usize,
+    },
+}
+
+impl PipelineError {
+    /// The `OptixResult` code the guide gives for this error.
+    pub fn code(&self) -> ErrorCode {
+        ErrorCode::InvalidValue
+    }
+}
+
+/// Why a launch was refused (guide §7, §10, §12). Nothing ran.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum LaunchError {
+    /// `width * height * depth` must be at most 2^30 (guide §12).
+    #[error("launch of {width} x {height} x {depth} exceeds 2^30 launch indices")]
+    TooLarge {
+        /// Width.
+        width: u32,
+        /// Height.
+        height: u32,
+        /// Depth.
+        depth: u32,
+    },
+    /// The SBT has no ray-generation record.
+    #[error("the SBT has no ray-generation record")]
+    NoRaygenRecord,
+    /// Validation mode (guide §4.3): a launch index raised a built-in exception. The launch ran
+    /// to the end; this is the first such exception by launch index.
+    #[error("validation failure at launch index {index:?}: {exception}")]
+    ValidationFailure {
+        /// The launch index.
+        index: [u32; 3],
+        /// The exception.
+        exception: crate::exception::Exception,
+    },
+    /// A record's header does not name a program group of this pipeline, or names one of the
+    /// wrong kind for its region.
+    #[error("SBT {region} record {index}: {reason}")]
+    InvalidSbtRecord {
+        /// The region (raygen, exception, miss, hitgroup, callables).
+        region: &'static str,
+        /// The record.
+        index: usize,
+        /// What is wrong.
+        reason: &'static str,
+    },
+}
+
+impl LaunchError {
+    /// The `OptixResult` code the guide gives for this error.
+    pub fn code(&self) -> ErrorCode {
+        match self {
+            LaunchError::ValidationFailure { .. } => ErrorCode::ValidationFailure,
+            _ => ErrorCode::InvalidLaunchParameter,
+        }
+    }
+}

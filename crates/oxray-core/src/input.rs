@@ -1,0 +1,484 @@
+//! Build inputs of geometry acceleration structures (guide §5.1): triangle arrays and custom
+//! primitive (AABB) arrays, described by borrowed byte buffers and formats so that nothing here
+//! assumes where the data lives or how the backend lays it out.
+
+use crate::options::GeometryFlags;
+use crate::vertex::{IndexFormat, VertexFormat};
+use glam::Vec3;
+
+/// The one-record default for [`TriangleInput::flags`] and [`CustomPrimitiveInput::flags`].
+const ONE_RECORD: &[GeometryFlags] = &[GeometryFlags::empty()];
+
+/// A vertex buffer: `count` vertices of `format`, `stride` bytes apart (0 = tightly packed).
+#[derive(Clone, Copy, Debug)]
+pub struct VertexBuffer<'a> {
+    /// Raw little-endian bytes.
+    pub data: &'a [u8],
+    /// Format of each vertex.
+    pub format: VertexFormat,
+    /// Bytes from one vertex to the next; 0 means `format.size()`.
+    pub stride: u32,
+    /// Number of vertices.
+    pub count: u32,
+}
+
+impl<'a> VertexBuffer<'a> {
+    /// A buffer of `count` vertices of `format` with the given stride.
+    pub fn new(data: &'a [u8], format: VertexFormat, stride: u32, count: u32) -> Self {
+        VertexBuffer {
+            data,
+            format,
+            stride,
+            count,
+        }
+    }
+
+    /// Tightly packed `f32` positions.
+    pub fn f32x3(vertices: &'a [[f32; 3]]) -> Self {
+        Self::new(
+            bytemuck::cast_slice(vertices),
+            VertexFormat::F32x3,
+            0,
+            count_u32(vertices.len()),
+        )
+    }
+
+    /// Tightly packed `glam::Vec3` positions.
+    pub fn vec3(vertices: &'a [Vec3]) -> Self {
+        Self::new(
+            bytemuck::cast_slice(vertices),
+            VertexFormat::F32x3,
+            0,
+            count_u32(vertices.len()),
+        )
+    }
+
+    /// The stride in bytes, resolving 0.
+    pub fn effective_stride(&self) -> usize {
+        if self.stride == 0 {
+            self.format.size()
+        } else {
+            self.stride as usize
+        }
+    }
+}
+
+/// An index buffer: `count` triplets of `format`, `stride` bytes apart (0 = tightly packed).
+#[derive(Clone, Copy, Debug)]
+pub struct IndexBuffer<'a> {
+    /// Raw little-endian bytes.
+    pub data: &'a [u8],
+    /// Format of each triplet.
+    pub format: IndexFormat,
+    /// Bytes from one triplet to the next; 0 means `format.size()`.
+    pub stride: u32,
+    /// Number of triplets (triangles).
+    pub count: u32,
+}
+
+impl<'a> IndexBuffer<'a> {
+    /// A buffer of `count` triplets of `format` with the given stride.
+    pub fn new(data: &'a [u8], format: IndexFormat, stride: u32, count: u32) -> Self {
+        IndexBuffer {
+            data,
+            format,
+            stride,
+            count,
+        }
+    }
+
+    /// Tightly packed `u32` triplets.
+    pub fn u32x3(triangles: &'a [[u32; 3]]) -> Self {
+        Self::new(
+            bytemuck::cast_slice(triangles),
+            IndexFormat::U32x3,
+            0,
+            count_u32(triangles.len()),
+        )
+    }
+
+    /// Tightly packed `u16` triplets.
+    pub fn u16x3(triangles: &'a [[u16; 3]]) -> Self {
+        Self::new(
+            bytemuck::cast_slice(triangles),
+            IndexFormat::U16x3,
+            0,
+            count_u32(triangles.len()),
+        )
+    }
+
+    /// The stride in bytes, resolving 0.
+    pub fn effective_stride(&self) -> usize {
+        if self.stride == 0 {
+            self.format.size()
+        } else {
+            self.stride as usize
+        }
+    }
+}
+
+/// The integer size of one per-primitive SBT index offset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SbtIndexSize {
+    /// `u8` offsets.
+    U8,
+    /// `u16` offsets.
+    U16,
+    /// `u32` offsets.
+    U32,
+}
+
+impl SbtIndexSize {
+    /// Bytes of one offset.
+    pub const fn size(self) -> usize {
+        match self {
+            SbtIndexSize::U8 => 1,
+            SbtIndexSize::U16 => 2,
+            SbtIndexSize::U32 => 4,
+        }
+    }
+}
+
+/// Per-primitive SBT index offsets (`sbtIndexOffsetBuffer`, guide §5.1): one unsigned integer per
+/// primitive, each in `[0, num_sbt_records)`.
+#[derive(Clone, Copy, Debug)]
+pub struct SbtIndexOffsets<'a> {
+    /// Raw little-endian bytes.
+    pub data: &'a [u8],
+    /// Size of each offset.
+    pub size: SbtIndexSize,
+    /// Bytes from one offset to the next; 0 means `size.size()`.
+    pub stride: u32,
+}
+
+impl<'a> SbtIndexOffsets<'a> {
+    /// Tightly packed `u8` offsets.
+    pub fn u8(offsets: &'a [u8]) -> Self {
+        SbtIndexOffsets {
+            data: offsets,
+            size: SbtIndexSize::U8,
+            stride: 0,
+        }
+    }
+
+    /// Tightly packed `u16` offsets.
+    pub fn u16(offsets: &'a [u16]) -> Self {
+        SbtIndexOffsets {
+            data: bytemuck::cast_slice(offsets),
+            size: SbtIndexSize::U16,
+            stride: 0,
+        }
+    }
+
+    /// Tightly packed `u32` offsets.
+    pub fn u32(offsets: &'a [u32]) -> Self {
+        SbtIndexOffsets {
+            data: bytemuck::cast_slice(offsets),
+            size: SbtIndexSize::U32,
+            stride: 0,
+        }
+    }
+
+    /// The stride in bytes, resolving 0.
+    pub fn effective_stride(&self) -> usize {
+        if self.stride == 0 {
+            self.size.size()
+        } else {
+            self.stride as usize
+        }
+    }
+
+    /// The offset of primitive `i`; the buffer must have been validated.
+    #[inline]
+    pub fn get(&self, i: usize) -> u32 {
+        let at = i * self.effective_stride();
+        let b = &self.data[at..at + self.size.size()];
+        match self.size {
+            SbtIndexSize::U8 => b[0] as u32,
+            SbtIndexSize::U16 => u16::from_le_bytes([b[0], b[1]]) as u32,
+            SbtIndexSize::U32 => u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+        }
+    }
+}
+
+/// A triangle build input (`OptixBuildInputTriangleArray`, guide §5.1).
+///
+/// ```
+/// use oxray::{GeometryFlags, IndexBuffer, TriangleInput, VertexBuffer};
+/// let vertices = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+/// let triangles = [[0u32, 1, 2]];
+/// let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
+///     .indices(IndexBuffer::u32x3(&triangles))
+///     .flags(&[GeometryFlags::DISABLE_ANYHIT]);
+/// assert_eq!(input.num_primitives(), 1);
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct TriangleInput<'a> {
+    /// Vertex positions.
+    pub vertices: VertexBuffer<'a>,
+    /// Index triplets; without them every three consecutive vertices form a triangle.
+    pub indices: Option<IndexBuffer<'a>>,
+    /// A 3x4 row-major object transform applied to every vertex at build time.
+    pub pre_transform: Option<[f32; 12]>,
+    /// Geometry flags, one per SBT record: its length is `numSbtRecords` (at least 1).
+    pub flags: &'a [GeometryFlags],
+    /// Which of this input's SBT records each primitive uses; required when there is more than
+    /// one record.
+    pub sbt_index_offsets: Option<SbtIndexOffsets<'a>>,
+    /// Added to the primitive index that hits report.
+    pub primitive_index_offset: u32,
+}
+
+impl<'a> TriangleInput<'a> {
+    /// A triangle soup over `vertices` with one SBT record and no flags.
+    pub fn new(vertices: VertexBuffer<'a>) -> Self {
+        TriangleInput {
+            vertices,
+            indices: None,
+            pre_transform: None,
+            flags: ONE_RECORD,
+            sbt_index_offsets: None,
+            primitive_index_offset: 0,
+        }
+    }
+
+    /// Sets the index buffer.
+    pub fn indices(mut self, indices: IndexBuffer<'a>) -> Self {
+        self.indices = Some(indices);
+        self
+    }
+
+    /// Sets the 3x4 row-major pre-transform.
+    pub fn pre_transform(mut self, m: [f32; 12]) -> Self {
+        self.pre_transform = Some(m);
+        self
+    }
+
+    /// Sets the per-record geometry flags (and so the number of SBT records).
+    pub fn flags(mut self, flags: &'a [GeometryFlags]) -> Self {
+        self.flags = flags;
+        self
+    }
+
+    /// Sets the per-primitive SBT index offsets.
+    pub fn sbt_index_offsets(mut self, offsets: SbtIndexOffsets<'a>) -> Self {
+        self.sbt_index_offsets = Some(offsets);
+        self
+    }
+
+    /// Sets the primitive index offset.
+    pub fn primitive_index_offset(mut self, offset: u32) -> Self {
+        self.primitive_index_offset = offset;
+        self
+    }
+
+    /// Number of triangles this input declares.
+    pub fn num_primitives(&self) -> u32 {
+        match &self.indices {
+            Some(ix) => ix.count,
+            None => self.vertices.count / 3,
+        }
+    }
+}
+
+/// An AABB buffer for custom primitives: `count` boxes of six `f32`
+/// (`minX, minY, minZ, maxX, maxY, maxZ`), `stride` bytes apart (0 = 24, else a multiple of 8).
+#[derive(Clone, Copy, Debug)]
+pub struct AabbBuffer<'a> {
+    /// Raw little-endian bytes.
+    pub data: &'a [u8],
+    /// Bytes from one box to the next; 0 means 24.
+    pub stride: u32,
+    /// Number of boxes (primitives).
+    pub count: u32,
+}
+
+impl<'a> AabbBuffer<'a> {
+    /// Tightly packed boxes.
+    pub fn new(aabbs: &'a [crate::Aabb]) -> Self {
+        AabbBuffer {
+            data: bytemuck::cast_slice(aabbs),
+            stride: 0,
+            count: count_u32(aabbs.len()),
+        }
+    }
+
+    /// The stride in bytes, resolving 0.
+    pub fn effective_stride(&self) -> usize {
+        if self.stride == 0 {
+            24
+        } else {
+            self.stride as usize
+        }
+    }
+}
+
+/// A custom-primitive build input (`OptixBuildInputCustomPrimitiveArray`, guide §5.1): the shape
+/// inside each box is decided by an intersection program (or closure) at trace time.
+#[derive(Clone, Copy, Debug)]
+pub struct CustomPrimitiveInput<'a> {
+    /// One box per primitive; each must enclose its primitive.
+    pub aabbs: AabbBuffer<'a>,
+    /// Geometry flags, one per SBT record.
+    pub flags: &'a [GeometryFlags],
+    /// Which of this input's SBT records each primitive uses.
+    pub sbt_index_offsets: Option<SbtIndexOffsets<'a>>,
+    /// Added to the primitive index that hits report.
+    pub primitive_index_offset: u32,
+}
+
+impl<'a> CustomPrimitiveInput<'a> {
+    /// Custom primitives bounded by `aabbs`, with one SBT record and no flags.
+    pub fn new(aabbs: AabbBuffer<'a>) -> Self {
+        CustomPrimitiveInput {
+            aabbs,
+            flags: ONE_RECORD,
+            sbt_index_offsets: None,
+            primitive_index_offset: 0,
+        }
+    }
+
+    /// Sets the per-record geometry flags.
+    pub fn flags(mut self, flags: &'a [GeometryFlags]) -> Self {
+        self.flags = flags;
+        self
+    }
+
+    /// Sets the per-primitive SBT index offsets.
+    pub fn sbt_index_offsets(mut self, offsets: SbtIndexOffsets<'a>) -> Self {
+        self.sbt_index_offsets = Some(offsets);
+        self
+    }
+
+    /// Sets the primitive index offset.
+    pub fn primitive_index_offset(mut self, offset: u32) -> Self {
+        self.primitive_index_offset = offset;
+        self
+    }
+}
+
+/// One build input of an acceleration structure (`OptixBuildInput`). All inputs of one GAS
+/// build must be of the same kind.
+#[derive(Clone, Copy, Debug)]
+pub enum BuildInput<'a> {
+    /// Triangles.
+    Triangles(TriangleInput<'a>),
+    /// Custom primitives bounded by AABBs.
+    CustomPrimitives(CustomPrimitiveInput<'a>),
+    /// Instances, for an IAS (`OPTIX_BUILD_INPUT_TYPE_INSTANCES`).
+    Instances(&'a [crate::Instance]),
+    /// Instances by reference, for an IAS (`OPTIX_BUILD_INPUT_TYPE_INSTANCE_POINTERS`).
+    InstancePointers(&'a [&'a crate::Instance]),
+}
+
+impl<'a> From<TriangleInput<'a>> for BuildInput<'a> {
+    fn from(t: TriangleInput<'a>) -> Self {
+        BuildInput::Triangles(t)
+    }
+}
+
+impl<'a> From<CustomPrimitiveInput<'a>> for BuildInput<'a> {
+    fn from(c: CustomPrimitiveInput<'a>) -> Self {
+        BuildInput::CustomPrimitives(c)
+    }
+}
+
+/// The kind of a build input (`OptixBuildInputType`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BuildInputKind {
+    /// Triangles.
+    Triangles,
+    /// Custom primitives.
+    CustomPrimitives,
+    /// Instances.
+    Instances,
+    /// Instance pointers.
+    InstancePointers,
+}
+
+impl std::fmt::Display for BuildInputKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            BuildInputKind::Triangles => "triangles",
+            BuildInputKind::CustomPrimitives => "custom primitives",
+            BuildInputKind::Instances => "instances",
+            BuildInputKind::InstancePointers => "instance pointers",
+        })
+    }
+}
+
+impl BuildInput<'_> {
+    /// The kind of this input.
+    pub fn kind(&self) -> BuildInputKind {
+        match self {
+            BuildInput::Triangles(_) => BuildInputKind::Triangles,
+            BuildInput::CustomPrimitives(_) => BuildInputKind::CustomPrimitives,
+            BuildInput::Instances(_) => BuildInputKind::Instances,
+            BuildInput::InstancePointers(_) => BuildInputKind::InstancePointers,
+        }
+    }
+
+    /// Number of primitives this input declares.
+    pub fn num_primitives(&self) -> u32 {
+        match self {
+            BuildInput::Triangles(t) => t.num_primitives(),
+            BuildInput::CustomPrimitives(c) => c.aabbs.count,
+            BuildInput::Instances(i) => i.len().min(u32::MAX as usize) as u32,
+            BuildInput::InstancePointers(i) => i.len().min(u32::MAX as usize) as u32,
+        }
+    }
+
+    /// The per-record geometry flags (none for instances).
+    pub fn flags(&self) -> &[GeometryFlags] {
+        match self {
+            BuildInput::Triangles(t) => t.flags,
+            BuildInput::CustomPrimitives(c) => c.flags,
+            BuildInput::Instances(_) | BuildInput::InstancePointers(_) => &[],
+        }
+    }
+
+    /// The per-primitive SBT index offsets.
+    pub fn sbt_index_offsets(&self) -> Option<&SbtIndexOffsets<'_>> {
+        match self {
+            BuildInput::Triangles(t) => t.sbt_index_offsets.as_ref(),
+            BuildInput::CustomPrimitives(c) => c.sbt_index_offsets.as_ref(),
+            BuildInput::Instances(_) | BuildInput::InstancePointers(_) => None,
+        }
+    }
+
+    /// The primitive index offset.
+    pub fn primitive_index_offset(&self) -> u32 {
+        match self {
+            BuildInput::Triangles(t) => t.primitive_index_offset,
+            BuildInput::CustomPrimitives(c) => c.primitive_index_offset,
+            BuildInput::Instances(_) | BuildInput::InstancePointers(_) => 0,
+        }
+    }
+}
+
+/// Slice lengths beyond `u32` saturate, so that validation reports them as over the limits.
+fn count_u32(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
+
+impl<'a> From<&'a [crate::Instance]> for BuildInput<'a> {
+    fn from(i: &'a [crate::Instance]) -> Self {
+        BuildInput::Instances(i)
+    }
+}
+
+impl<'a> From<&'a [&'a crate::Instance]> for BuildInput<'a> {
+    fn from(i: &'a [&'a crate::Instance]) -> Self {
+        BuildInput::InstancePointers(i)
+    }
+}
+
+impl BuildInputKind {
+    /// Whether inputs of this kind build an IAS.
+    pub fn is_instances(self) -> bool {
+        matches!(
+            self,
+            BuildInputKind::Instances | BuildInputKind::InstancePointers
+        )
+    }
+}

@@ -1,0 +1,182 @@
+//! Device-context and pipeline options (guide §4, §6.3, §6.7), ray flags (§13.2) and what a
+//! launch reports (§10).
+
+use crate::exception::{Exception, ExceptionFlags};
+use bitflags::bitflags;
+use std::sync::Arc;
+
+/// Log levels of the context's log callback (guide §4.1; numeric values as OptiX's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum LogLevel {
+    /// No messages.
+    Disable = 0,
+    /// Unrecoverable errors.
+    Fatal = 1,
+    /// Recoverable errors.
+    Error = 2,
+    /// Warnings.
+    Warning = 3,
+    /// Status and progress.
+    Print = 4,
+}
+
+type LogFn = Arc<dyn Fn(LogLevel, &str, &str) + Send + Sync>;
+
+/// The device context (`OptixDeviceContext`): validation mode and logging.
+///
+/// ```
+/// use oxray::{DeviceContext, LogLevel};
+/// let ctx = DeviceContext::new()
+///     .validation_mode(true)
+///     .log_callback(LogLevel::Warning, |level, tag, message| eprintln!("[{level:?}][{tag}] {message}"));
+/// assert!(ctx.is_validation_mode());
+/// ```
+#[derive(Clone, Default)]
+pub struct DeviceContext {
+    validation_mode: bool,
+    log_level: Option<LogLevel>,
+    log: Option<LogFn>,
+}
+
+impl DeviceContext {
+    /// A context without validation or logging.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Validation mode (guide §4.3): launches also check rays (NaN or infinite components,
+    /// negative tmin, tmin > tmax raise `INVALID_RAY`), report every exception to the log, and
+    /// fail with [`LaunchError::ValidationFailure`](crate::LaunchError::ValidationFailure) when a
+    /// launch index raised a built-in (non-user) exception.
+    pub fn validation_mode(mut self, on: bool) -> Self {
+        self.validation_mode = on;
+        self
+    }
+
+    /// Whether validation mode is on.
+    pub fn is_validation_mode(&self) -> bool {
+        self.validation_mode
+    }
+
+    /// Sets the log callback: it receives messages at `level` and below (more severe).
+    pub fn log_callback(
+        mut self,
+        level: LogLevel,
+        f: impl Fn(LogLevel, &str, &str) + Send + Sync + 'static,
+    ) -> Self {
+        self.log_level = Some(level);
+        self.log = Some(Arc::new(f));
+        self
+    }
+
+    /// Sends a message to the log callback, if one is set for its level.
+    pub fn log(&self, level: LogLevel, tag: &str, message: &str) {
+        if let (Some(max), Some(f)) = (self.log_level, &self.log) {
+            if level != LogLevel::Disable && level <= max {
+                f(level, tag, message);
+            }
+        }
+    }
+}
+
+bitflags! {
+    /// Which traversable graphs a pipeline may trace (`OptixTraversableGraphFlags`); empty means
+    /// any.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct TraversableGraphFlags: u32 {
+        /// A GAS traced directly.
+        const ALLOW_SINGLE_GAS = 1 << 0;
+        /// One level of instances over GASes, without transforms.
+        const ALLOW_SINGLE_LEVEL_INSTANCING = 1 << 1;
+    }
+}
+
+bitflags! {
+    /// Which primitive types a pipeline may intersect (`OptixPrimitiveTypeFlags`); empty means
+    /// triangles and custom primitives.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct PrimitiveTypeFlags: u32 {
+        /// Custom primitives.
+        const CUSTOM = 1 << 0;
+        /// Triangles.
+        const TRIANGLE = 1 << 31;
+    }
+}
+
+/// Compile options shared by every program of a pipeline (`OptixPipelineCompileOptions`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PipelineCompileOptions {
+    /// Whether rays carry a time (otherwise `ray_time()` is 0).
+    pub uses_motion_blur: bool,
+    /// Allowed traversable graphs.
+    pub traversable_graph_flags: TraversableGraphFlags,
+    /// Payload words a trace may pass (at most 32).
+    pub num_payload_values: u32,
+    /// Attribute words an intersection may report (at most 8).
+    pub num_attribute_values: u32,
+    /// Exceptions checked for.
+    pub exception_flags: ExceptionFlags,
+    /// Allowed primitive types.
+    pub uses_primitive_type_flags: PrimitiveTypeFlags,
+}
+
+impl Default for PipelineCompileOptions {
+    fn default() -> Self {
+        PipelineCompileOptions {
+            uses_motion_blur: false,
+            traversable_graph_flags: TraversableGraphFlags::empty(),
+            num_payload_values: 8,
+            num_attribute_values: 2,
+            exception_flags: ExceptionFlags::empty(),
+            uses_primitive_type_flags: PrimitiveTypeFlags::empty(),
+        }
+    }
+}
+
+/// Link options (`OptixPipelineLinkOptions`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PipelineLinkOptions {
+    /// Deepest trace nesting (ray generation traces at depth 1); at most 31.
+    pub max_trace_depth: u32,
+}
+
+impl Default for PipelineLinkOptions {
+    fn default() -> Self {
+        PipelineLinkOptions { max_trace_depth: 1 }
+    }
+}
+
+bitflags! {
+    /// Ray flags of a trace (`OptixRayFlags`, guide §13.2). Values match OptiX's.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    pub struct RayFlags: u32 {
+        /// No any-hit program runs; overrides instance and geometry flags.
+        const DISABLE_ANYHIT = 1 << 0;
+        /// The any-hit program runs even where geometry or instance flags disable it.
+        const ENFORCE_ANYHIT = 1 << 1;
+        /// The first accepted hit ends traversal and becomes the closest hit.
+        const TERMINATE_ON_FIRST_HIT = 1 << 2;
+        /// No closest-hit program runs (the miss program still does on a miss).
+        const DISABLE_CLOSESTHIT = 1 << 3;
+        /// Back faces of triangles are not hit.
+        const CULL_BACK_FACING_TRIANGLES = 1 << 4;
+        /// Front faces of triangles are not hit.
+        const CULL_FRONT_FACING_TRIANGLES = 1 << 5;
+        /// Primitives whose any-hit is disabled are not hit.
+        const CULL_DISABLED_ANYHIT = 1 << 6;
+        /// Primitives whose any-hit is enabled are not hit.
+        const CULL_ENFORCED_ANYHIT = 1 << 7;
+        /// Accepted for compatibility; oxray has no opacity micromaps yet.
+        const FORCE_OPACITY_MICROMAP_2_STATE = 1 << 10;
+    }
+}
+
+/// What a launch reports.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[must_use = "a launch reports the exceptions its launch indices raised"]
+pub struct LaunchReport {
+    /// Launch indices that ended in an exception.
+    pub exceptions: u64,
+    /// The first (up to five, by launch index) exceptions, with their launch indices.
+    pub first_exceptions: Vec<([u32; 3], Exception)>,
+}

@@ -1,0 +1,256 @@
+//! Validation of build inputs: every rule of guide §5, §5.1, §5.5 and §12 that can be checked
+//! before reading the data, and the data checks (index and SBT offset ranges) the build makes.
+
+use crate::error::{BufferKind, BuildError, InputLocation};
+use crate::input::{BuildInput, BuildInputKind, SbtIndexOffsets};
+use crate::options::{BuildFlags, BuildOperation, BuildOptions};
+
+/// Maximum primitives per GAS, motion keys included (guide §12).
+pub const MAX_PRIMITIVES_PER_GAS: u64 = 1 << 29;
+/// Maximum SBT records referenced by one GAS (guide §12).
+pub const MAX_SBT_RECORDS_PER_GAS: u64 = 1 << 24;
+
+/// What validation learnt about a set of build inputs.
+#[derive(Clone, Copy, Debug)]
+pub struct InputSummary {
+    /// The kind of every input.
+    pub kind: BuildInputKind,
+    /// Primitives declared over all inputs.
+    pub num_primitives: u32,
+    /// SBT records over all inputs.
+    pub num_sbt_records: u32,
+}
+
+/// Checks everything that does not need the buffers' contents.
+pub fn validate_structure(
+    options: &BuildOptions,
+    inputs: &[BuildInput<'_>],
+) -> Result<InputSummary, BuildError> {
+    let Some(first) = inputs.first() else {
+        return Err(BuildError::NoBuildInputs);
+    };
+    if options
+        .flags
+        .contains(BuildFlags::PREFER_FAST_TRACE | BuildFlags::PREFER_FAST_BUILD)
+    {
+        return Err(BuildError::ConflictingBuildFlags);
+    }
+    if options.operation == BuildOperation::Update {
+        return Err(BuildError::Unsupported("BuildOperation::Update"));
+    }
+    if let Some(index) = inputs.iter().position(|i| {
+        matches!(
+            i.kind(),
+            BuildInputKind::Instances | BuildInputKind::InstancePointers
+        )
+    }) {
+        return Err(BuildError::InstancesInGas { index });
+    }
+    let kind = first.kind();
+    if let Some((index, other)) = inputs.iter().enumerate().find(|(_, i)| i.kind() != kind) {
+        return Err(BuildError::MixedInputTypes {
+            index,
+            expected: kind,
+            found: other.kind(),
+        });
+    }
+
+    // Limits first, on declared counts, so that they are reported before any buffer problem.
+    let mut prims = 0u64;
+    let mut records = 0u64;
+    for (i, input) in inputs.iter().enumerate() {
+        if input.flags().is_empty() {
+            return Err(BuildError::NoSbtRecords {
+                at: InputLocation { input: i },
+            });
+        }
+        prims += input.num_primitives() as u64;
+        records += input.flags().len() as u64;
+    }
+    if prims > MAX_PRIMITIVES_PER_GAS {
+        return Err(BuildError::TooManyPrimitives {
+            count: prims,
+            limit: MAX_PRIMITIVES_PER_GAS,
+        });
+    }
+    if records > MAX_SBT_RECORDS_PER_GAS {
+        return Err(BuildError::TooManySbtRecords {
+            count: records,
+            limit: MAX_SBT_RECORDS_PER_GAS,
+        });
+    }
+
+    for (i, input) in inputs.iter().enumerate() {
+        let at = InputLocation { input: i };
+        match input {
+            BuildInput::Triangles(t) => {
+                let v = &t.vertices;
+                check_stride(
+                    at,
+                    BufferKind::Vertices,
+                    v.stride,
+                    v.format.size(),
+                    v.format.alignment(),
+                )?;
+                check_len(
+                    at,
+                    BufferKind::Vertices,
+                    v.data.len(),
+                    v.count,
+                    v.effective_stride(),
+                    v.format.size(),
+                )?;
+                match &t.indices {
+                    Some(ix) => {
+                        check_stride(
+                            at,
+                            BufferKind::Indices,
+                            ix.stride,
+                            ix.format.size(),
+                            ix.format.alignment(),
+                        )?;
+                        check_len(
+                            at,
+                            BufferKind::Indices,
+                            ix.data.len(),
+                            ix.count,
+                            ix.effective_stride(),
+                            ix.format.size(),
+                        )?;
+                    }
+                    None => {
+                        if v.count % 3 != 0 {
+                            return Err(BuildError::VertexCountNotMultipleOfThree {
+                                at,
+                                count: v.count,
+                            });
+                        }
+                    }
+                }
+            }
+            BuildInput::Instances(_) | BuildInput::InstancePointers(_) => {
+                unreachable!("instance inputs were refused above")
+            }
+            BuildInput::CustomPrimitives(c) => {
+                let a = &c.aabbs;
+                check_stride(at, BufferKind::Aabbs, a.stride, 24, 8)?;
+                check_len(
+                    at,
+                    BufferKind::Aabbs,
+                    a.data.len(),
+                    a.count,
+                    a.effective_stride(),
+                    24,
+                )?;
+            }
+        }
+        let n = input.num_primitives();
+        let offset = input.primitive_index_offset();
+        if offset.checked_add(n).is_none() {
+            return Err(BuildError::PrimitiveIndexOffsetOverflow {
+                at,
+                offset,
+                count: n,
+            });
+        }
+        let num_sbt_records = input.flags().len() as u32;
+        match input.sbt_index_offsets() {
+            None if num_sbt_records > 1 => {
+                return Err(BuildError::MissingSbtIndexOffsets {
+                    at,
+                    num_sbt_records,
+                });
+            }
+            None => {}
+            Some(o) => {
+                let size = o.size.size();
+                check_stride(at, BufferKind::SbtIndexOffsets, o.stride, size, size)?;
+                check_len(
+                    at,
+                    BufferKind::SbtIndexOffsets,
+                    o.data.len(),
+                    n,
+                    o.effective_stride(),
+                    size,
+                )?;
+            }
+        }
+    }
+    Ok(InputSummary {
+        kind,
+        num_primitives: prims as u32,
+        num_sbt_records: records as u32,
+    })
+}
+
+/// Checks that every per-primitive SBT index offset of an input is in range.
+pub fn validate_sbt_offsets(
+    at: InputLocation,
+    offsets: &SbtIndexOffsets<'_>,
+    count: u32,
+    num_sbt_records: u32,
+) -> Result<(), BuildError> {
+    for primitive in 0..count {
+        let offset = offsets.get(primitive as usize);
+        if offset >= num_sbt_records {
+            return Err(BuildError::SbtIndexOffsetOutOfRange {
+                at,
+                primitive,
+                offset,
+                num_sbt_records,
+            });
+        }
+    }
+    Ok(())
+}
+
+fn check_stride(
+    at: InputLocation,
+    buffer: BufferKind,
+    stride: u32,
+    elem: usize,
+    align: usize,
+) -> Result<(), BuildError> {
+    if stride == 0 {
+        return Ok(());
+    }
+    let reason = if (stride as usize) < elem {
+        "smaller than one element"
+    } else if !(stride as usize).is_multiple_of(align) {
+        "not a multiple of the element's alignment"
+    } else {
+        return Ok(());
+    };
+    Err(BuildError::InvalidStride {
+        at,
+        buffer,
+        stride,
+        reason,
+    })
+}
+
+fn check_len(
+    at: InputLocation,
+    buffer: BufferKind,
+    len: usize,
+    count: u32,
+    stride: usize,
+    elem: usize,
+) -> Result<(), BuildError> {
+    // The last element needs only its own size, not a whole stride.
+    let needed = if count == 0 {
+        0
+    } else {
+        (count as u64 - 1) * stride as u64 + elem as u64
+    };
+    if (len as u64) < needed {
+        return Err(BuildError::BufferTooSmall {
+            at,
+            buffer,
+            count: count as u64,
+            needed,
+            len: len as u64,
+        });
+    }
+    Ok(())
+}

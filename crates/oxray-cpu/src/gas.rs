@@ -1,0 +1,128 @@
+//! The CPU backend's geometry acceleration structure: the backend-neutral [`GasData`] in host
+//! memory, traversed in place.
+
+use oxray_bvh::GasData;
+use oxray_core::{
+    Aabb, BackendKind, BuildError, BuildInput, BuildOptions, Traversable, TraversableKind,
+};
+use std::sync::Arc;
+
+/// A geometry acceleration structure (GAS) in host memory, over triangles or custom primitives.
+///
+/// It copies what it needs from the build inputs, which may be dropped once it is built. The
+/// built data ([`GasData`]: BVH, primitives, hit tables) is reachable through `Deref`.
+///
+/// ```
+/// use oxray_cpu::Gas;
+/// use oxray_core::{BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+/// use glam::Vec3;
+/// let vertices = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+/// let triangles = [[0u32, 1, 2]];
+/// let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
+///     .indices(IndexBuffer::u32x3(&triangles));
+/// let gas = Gas::build(&BuildOptions::default(), &[input.into()])?;
+///
+/// let hit = gas.intersect(&Ray::new(Vec3::new(0.0, 0.0, 1.0), -Vec3::Z)).unwrap();
+/// assert_eq!((hit.t, hit.primitive_index), (1.0, 0));
+/// assert!(gas.occluded(&Ray::new(Vec3::new(0.0, 0.0, -1.0), Vec3::Z)));
+/// # Ok::<(), oxray_core::BuildError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct Gas {
+    data: GasData,
+}
+
+impl Gas {
+    /// Builds a GAS (`optixAccelBuild`). Inputs must all be of one kind; see [`BuildError`] for
+    /// every rule checked. Primitives that can never be hit (a NaN or infinite coordinate, a
+    /// zero-area triangle, an inverted box) are left out: they are inactive.
+    pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Gas, BuildError> {
+        Ok(Gas {
+            data: GasData::build(options, inputs)?,
+        })
+    }
+
+    /// The built data.
+    pub fn data(&self) -> &GasData {
+        &self.data
+    }
+}
+
+impl From<GasData> for Gas {
+    fn from(data: GasData) -> Self {
+        Gas { data }
+    }
+}
+
+impl std::ops::Deref for Gas {
+    type Target = GasData;
+
+    fn deref(&self) -> &GasData {
+        &self.data
+    }
+}
+
+impl Traversable for Gas {
+    fn traversable_kind(&self) -> TraversableKind {
+        TraversableKind::Gas
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.data.bounds
+    }
+
+    fn graph_depth(&self) -> u32 {
+        1
+    }
+
+    fn backend(&self) -> BackendKind {
+        BackendKind::Cpu
+    }
+
+    fn describe(&self) -> String {
+        format!("CPU GAS of {} primitives", self.data.num_primitives)
+    }
+}
+
+/// A traversable of the CPU backend, resolved from a handle once (at an IAS build, or when a
+/// trace starts) so that traversal dispatches on a closed enum, never on a trait object.
+#[derive(Clone)]
+pub(crate) enum CpuNode {
+    Gas(Arc<Gas>),
+    Ias(Arc<crate::Ias>),
+    Static(Arc<oxray_core::StaticTransform>),
+}
+
+impl std::fmt::Debug for CpuNode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&match self {
+            CpuNode::Gas(g) => g.describe(),
+            CpuNode::Ias(i) => i.describe(),
+            CpuNode::Static(s) => s.describe(),
+        })
+    }
+}
+
+impl CpuNode {
+    /// The CPU object behind a handle: `Ok(None)` for the null handle, `Err(backend)` for an
+    /// object of another backend.
+    pub(crate) fn resolve(
+        handle: &oxray_core::TraversableHandle,
+    ) -> Result<Option<CpuNode>, BackendKind> {
+        let Some(backend) = handle.backend() else {
+            return Ok(None);
+        };
+        if let Some(g) = handle.downcast_arc::<Gas>() {
+            return Ok(Some(CpuNode::Gas(g)));
+        }
+        if let Some(i) = handle.downcast_arc::<crate::Ias>() {
+            return Ok(Some(CpuNode::Ias(i)));
+        }
+        if let Some(s) = handle.downcast_arc::<oxray_core::StaticTransform>() {
+            if matches!(s.backend(), BackendKind::Cpu | BackendKind::Any) {
+                return Ok(Some(CpuNode::Static(s)));
+            }
+        }
+        Err(backend)
+    }
+}

@@ -1,0 +1,39 @@
+//! The value that unwinds a Rust program: an exception, or an any-hit's ignore or terminate.
+
+use oxray_core::{Exception, ExceptionCode};
+
+/// Why a program stopped early. Device functions that, in OptiX, never return
+/// (`optixTrace` raising an exception, `optixThrowException`, `optixIgnoreIntersection`,
+/// `optixTerminateRay`, an intersection whose any-hit terminated the ray) give an `Interrupt`
+/// instead, which the program passes on with `?` or `return`. It can only be made by those
+/// functions, so a program cannot invent one it is not allowed to raise.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Interrupt(pub(crate) InterruptKind);
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum InterruptKind {
+    /// An exception: the launch index ends and the exception program runs.
+    Exception(Exception),
+    /// `optixIgnoreIntersection` from an any-hit program.
+    IgnoreIntersection,
+    /// `optixTerminateRay` from an any-hit program (or an intersection program whose report
+    /// was terminated).
+    TerminateRay,
+}
+
+impl Interrupt {
+    pub(crate) fn exception(code: ExceptionCode, details: &[u32]) -> Self {
+        Interrupt(InterruptKind::Exception(Exception::new(code, details)))
+    }
+
+    /// The exception, if this interrupt is one.
+    pub fn as_exception(&self) -> Option<&Exception> {
+        match &self.0 {
+            InterruptKind::Exception(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+/// What every program returns: `Ok(())`, or an [`Interrupt`] passed on from a device function.
+pub type ProgramResult = Result<(), Interrupt>;

@@ -1,0 +1,629 @@
+//! The device context of each program kind (guide §13): launch index and dimensions, launch
+//! parameters, SBT data, payload, ray and hit queries, and tracing where the kind may trace.
+
+use crate::interrupt::{Interrupt, InterruptKind, ProgramResult};
+use crate::pipeline::PipelineShared;
+use crate::program::trace::{self, HitState, Placement, RayState, TraceRay};
+use crate::traversal::{Level, Path};
+use bytemuck::Pod;
+use glam::Vec3;
+use oxray_core::sbt::{ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
+use oxray_core::{Exception, ExceptionCode, HitKind};
+
+/// What a transform-list entry is (`OptixTransformType`, with the instance's ids).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TransformListKind {
+    /// An instance of an IAS.
+    Instance {
+        /// Its user id.
+        instance_id: u32,
+        /// Its position in the IAS's build input.
+        instance_index: u32,
+    },
+    /// A static transform.
+    StaticTransform,
+}
+
+/// One entry of the transform list of the current hit (guide §13.11).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransformListEntry {
+    /// What the entry is.
+    pub kind: TransformListKind,
+    /// Its object-to-world transform.
+    pub object_to_world: crate::Transform,
+    /// Its world-to-object transform.
+    pub world_to_object: crate::Transform,
+}
+
+/// What every program of one launch shares.
+pub(crate) struct LaunchShared<'a, P> {
+    pub pipeline: &'a PipelineShared<P>,
+    pub params: &'a P,
+    pub sbt: &'a ShaderBindingTable,
+    /// Pipeline group index of every miss and hit-group record.
+    pub miss_groups: &'a [usize],
+    pub hit_groups: &'a [usize],
+    /// Pipeline group index of the exception record, if any.
+    pub exception_group: Option<usize>,
+    /// Pipeline group index of every callables record.
+    pub callable_groups: &'a [usize],
+    pub dims: [u32; 3],
+}
+
+/// Where a program runs: its launch, launch index and SBT record.
+pub(crate) struct Frame<'a, P> {
+    pub launch: &'a LaunchShared<'a, P>,
+    pub index: [u32; 3],
+    /// Bytes of the current program's SBT record.
+    pub record: &'a [u8],
+    /// Trace nesting depth of the program (0 for ray generation).
+    pub depth: u32,
+    /// Callable nesting depth.
+    pub calls: u32,
+}
+
+impl<P> Clone for Frame<'_, P> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<P> Copy for Frame<'_, P> {}
+
+impl<'a, P> Frame<'a, P> {
+    fn sbt_data<T: Pod>(&self) -> Option<T> {
+        let d = self
+            .record
+            .get(SBT_RECORD_HEADER_SIZE..SBT_RECORD_HEADER_SIZE + std::mem::size_of::<T>())?;
+        Some(bytemuck::pod_read_unaligned(d))
+    }
+
+    fn throw(&self, code: i32, details: &[u32]) -> ProgramResult {
+        // Only user codes may be thrown; anything else is clamped into the user range's
+        // complement so it cannot impersonate a built-in exception.
+        let code = if (0..=ExceptionCode::MAX_USER).contains(&code) {
+            code
+        } else {
+            ExceptionCode::MAX_USER
+        };
+        Err(Interrupt::exception(ExceptionCode(code), details))
+    }
+}
+
+macro_rules! common_queries {
+    () => {
+        /// `optixGetLaunchIndex`.
+        pub fn launch_index(&self) -> [u32; 3] {
+            self.frame.index
+        }
+
+        /// `optixGetLaunchDimensions`.
+        pub fn launch_dimensions(&self) -> [u32; 3] {
+            self.frame.launch.dims
+        }
+
+        /// The launch parameters (copied at launch, guide §10).
+        pub fn params(&self) -> &P {
+            self.frame.launch.params
+        }
+
+        /// The data of this program's SBT record (`optixGetSbtDataPointer`), read as `T`;
+        /// `None` if the record is shorter than the header plus `T`.
+        pub fn sbt_data<T: Pod>(&self) -> Option<T> {
+            self.frame.sbt_data()
+        }
+
+        /// The raw bytes of this program's SBT record after the 32-byte header.
+        pub fn sbt_data_bytes(&self) -> &[u8] {
+            &self.frame.record[SBT_RECORD_HEADER_SIZE..]
+        }
+    };
+}
+
+macro_rules! throw_fn {
+    () => {
+        /// `optixThrowException`: raises user exception `code` (in `0..2^30`; other values are
+        /// clamped to `2^30 - 1`) with up to eight detail words. The launch index ends and the
+        /// exception program runs; pass the result on with `?` or `return`.
+        pub fn throw_exception(&self, code: i32, details: &[u32]) -> ProgramResult {
+            self.frame.throw(code, details)
+        }
+    };
+}
+
+macro_rules! direct_call_fn {
+    () => {
+        /// `optixDirectCall`: runs the direct callable of callables record `sbt_index` with
+        /// `args`, returning its result. `A` and `R` must be the types it was registered with
+        /// (otherwise `CALLABLE_PARAMETER_MISMATCH`); a bad index raises `CALLABLE_INVALID_SBT`.
+        pub fn direct_call<A: 'static, R: 'static>(
+            &self,
+            sbt_index: u32,
+            args: A,
+        ) -> Result<R, Interrupt> {
+            trace::direct_call(self.frame, sbt_index, args)
+        }
+    };
+}
+
+macro_rules! continuation_call_fn {
+    () => {
+        /// `optixContinuationCall`: runs the continuation callable of callables record
+        /// `sbt_index` with `args`; it may trace.
+        pub fn continuation_call<A: 'static, R: 'static>(
+            &self,
+            sbt_index: u32,
+            args: A,
+        ) -> Result<R, Interrupt> {
+            trace::continuation_call(self.frame, sbt_index, args)
+        }
+    };
+}
+
+macro_rules! ray_queries {
+    ($ray:ident) => {
+        /// `optixGetWorldRayOrigin`.
+        pub fn world_ray_origin(&self) -> Vec3 {
+            self.$ray.origin
+        }
+        /// `optixGetWorldRayDirection`.
+        pub fn world_ray_direction(&self) -> Vec3 {
+            self.$ray.direction
+        }
+        /// `optixGetRayTmin`: the trace's tmin.
+        pub fn ray_tmin(&self) -> f32 {
+            self.$ray.tmin
+        }
+        /// `optixGetRayTime` (0 in a pipeline without motion blur).
+        pub fn ray_time(&self) -> f32 {
+            self.$ray.time
+        }
+        /// `optixGetRayFlags`.
+        pub fn ray_flags(&self) -> crate::RayFlags {
+            self.$ray.flags
+        }
+        /// `optixGetRayVisibilityMask`.
+        pub fn ray_visibility_mask(&self) -> u8 {
+            self.$ray.mask
+        }
+    };
+}
+
+macro_rules! payload_fns {
+    () => {
+        /// `optixGetPayload_i`. Words past the trace's payload read as 0.
+        pub fn payload(&self, i: usize) -> u32 {
+            self.payload.get(i).copied().unwrap_or(0)
+        }
+        /// `optixSetPayload_i`. Words past the trace's payload are ignored.
+        pub fn set_payload(&mut self, i: usize, v: u32) {
+            if let Some(p) = self.payload.get_mut(i) {
+                *p = v;
+            }
+        }
+        /// Payload word `i` as an `f32`.
+        pub fn payload_f32(&self, i: usize) -> f32 {
+            f32::from_bits(self.payload(i))
+        }
+        /// Sets payload word `i` to an `f32`.
+        pub fn set_payload_f32(&mut self, i: usize, v: f32) {
+            self.set_payload(i, v.to_bits())
+        }
+        /// Payload words `i..i + 3` as a vector of three `f32`.
+        pub fn payload_vec3(&self, i: usize) -> Vec3 {
+            Vec3::new(
+                self.payload_f32(i),
+                self.payload_f32(i + 1),
+                self.payload_f32(i + 2),
+            )
+        }
+        /// Sets payload words `i..i + 3` to a vector of three `f32`.
+        pub fn set_payload_vec3(&mut self, i: usize, v: Vec3) {
+            for (k, c) in v.to_array().into_iter().enumerate() {
+                self.set_payload_f32(i + k, c);
+            }
+        }
+        /// The payload words of the current trace.
+        pub fn payload_words(&self) -> &[u32] {
+            self.payload
+        }
+    };
+}
+
+macro_rules! transform_queries {
+    ($hit:ident) => {
+        /// Entry `i` of the transform list (`optixGetTransformListHandle` and the queries on
+        /// its handle): index 0 is the level nearest the root. `None` past the list.
+        pub fn transform_list_entry(&self, i: u32) -> Option<TransformListEntry> {
+            let level = self.path?.levels().nth(i as usize)?;
+            Some(match level {
+                Level::Instance(inst) => TransformListEntry {
+                    kind: TransformListKind::Instance {
+                        instance_id: inst.instance_id,
+                        instance_index: inst.index,
+                    },
+                    object_to_world: inst.object_to_world,
+                    world_to_object: inst.world_to_object,
+                },
+                Level::Static(st) => TransformListEntry {
+                    kind: TransformListKind::StaticTransform,
+                    object_to_world: *st.transform(),
+                    world_to_object: *st.inverse(),
+                },
+            })
+        }
+
+        /// `optixGetTransformListSize`: transforms (instances and static transforms) between
+        /// world and object space.
+        pub fn transform_list_size(&self) -> u32 {
+            self.place.levels
+        }
+        /// `optixGetObjectToWorldTransformMatrix`: the composed object-to-world transform.
+        pub fn object_to_world_transform(&self) -> crate::Transform {
+            self.place.object_to_world()
+        }
+        /// `optixGetWorldToObjectTransformMatrix`: the composed world-to-object transform.
+        pub fn world_to_object_transform(&self) -> crate::Transform {
+            self.place.world_to_object()
+        }
+        /// `optixTransformPointFromObjectToWorldSpace`.
+        pub fn transform_point_to_world(&self, p: Vec3) -> Vec3 {
+            self.place.object_to_world().transform_point(p)
+        }
+        /// `optixTransformVectorFromObjectToWorldSpace`.
+        pub fn transform_vector_to_world(&self, v: Vec3) -> Vec3 {
+            self.place.object_to_world().transform_vector(v)
+        }
+        /// `optixTransformNormalFromObjectToWorldSpace` (inverse transpose).
+        pub fn transform_normal_to_world(&self, n: Vec3) -> Vec3 {
+            crate::Transform::transform_normal_with_inverse(&self.place.world_to_object(), n)
+        }
+        /// `optixTransformPointFromWorldToObjectSpace`.
+        pub fn transform_point_to_object(&self, p: Vec3) -> Vec3 {
+            self.place.world_to_object().transform_point(p)
+        }
+        /// `optixTransformVectorFromWorldToObjectSpace`.
+        pub fn transform_vector_to_object(&self, v: Vec3) -> Vec3 {
+            self.place.world_to_object().transform_vector(v)
+        }
+        /// `optixTransformNormalFromWorldToObjectSpace` (inverse transpose).
+        pub fn transform_normal_to_object(&self, n: Vec3) -> Vec3 {
+            crate::Transform::transform_normal_with_inverse(&self.place.object_to_world(), n)
+        }
+    };
+}
+
+macro_rules! hit_queries {
+    ($hit:ident) => {
+        /// `optixGetPrimitiveIndex`: index within the build input plus its offset.
+        pub fn primitive_index(&self) -> u32 {
+            self.$hit.primitive_index
+        }
+        /// `optixGetSbtGASIndex`.
+        pub fn sbt_gas_index(&self) -> u32 {
+            self.$hit.sbt_gas_index
+        }
+        /// `optixGetInstanceId`: the user id of the instance nearest to the geometry; `!0` when
+        /// there is no instance (a GAS traced directly: guide §13.7; the OptiX 9.0 header says
+        /// 0, oxray follows the guide).
+        pub fn instance_id(&self) -> u32 {
+            self.place.instance_id
+        }
+        /// `optixGetInstanceIndex`: that instance's position in its IAS's build input; 0 when
+        /// there is no instance.
+        pub fn instance_index(&self) -> u32 {
+            self.place.instance_index
+        }
+        transform_queries!($hit);
+        /// `optixGetHitKind`.
+        pub fn hit_kind(&self) -> HitKind {
+            self.$hit.hit_kind
+        }
+        /// `optixIsFrontFaceHit`: a triangle's front face.
+        pub fn is_front_face_hit(&self) -> bool {
+            self.$hit.hit_kind.is_triangle_front_face()
+        }
+        /// `optixIsBackFaceHit`: a triangle's back face.
+        pub fn is_back_face_hit(&self) -> bool {
+            self.$hit.hit_kind.is_triangle_back_face()
+        }
+        /// `optixIsTriangleHit`.
+        pub fn is_triangle_hit(&self) -> bool {
+            self.$hit.hit_kind.0 >= 0xFE
+        }
+        /// `optixGetAttribute_i` (0 past the reported attributes).
+        pub fn attribute(&self, i: usize) -> u32 {
+            self.$hit.attributes.get(i).copied().unwrap_or(0)
+        }
+        /// `optixGetTriangleVertexData`: the object-space vertices of the hit triangle (zeros
+        /// for a custom primitive).
+        pub fn triangle_vertex_data(&self) -> [Vec3; 3] {
+            let slot = self.$hit.slot as usize;
+            match self.gas.and_then(|g| g.triangles.get(slot / 4)) {
+                Some(block) => block.get(slot % 4).map(Vec3::from),
+                None => [Vec3::ZERO; 3],
+            }
+        }
+        /// `optixGetTriangleBarycentrics`: attributes 0 and 1 as floats.
+        pub fn triangle_barycentrics(&self) -> [f32; 2] {
+            [
+                f32::from_bits(self.attribute(0)),
+                f32::from_bits(self.attribute(1)),
+            ]
+        }
+    };
+}
+
+/// The context of a ray-generation program.
+pub struct RayGenCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+}
+
+impl<P> RayGenCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+    continuation_call_fn!();
+
+    /// `optixTrace`: traces a ray with `payload` as the payload words (copied in, and out when
+    /// the trace returns). An exception raised by the trace comes back as an [`Interrupt`] to
+    /// pass on with `?`.
+    pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
+        trace::trace(self.frame, ray, payload)
+    }
+}
+
+/// The context of a closest-hit program.
+pub struct ClosestHitCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) ray: RayState,
+    pub(crate) hit: HitState,
+    pub(crate) payload: &'a mut [u32],
+    pub(crate) path: Option<&'a Path<'a>>,
+    pub(crate) gas: Option<&'a crate::Gas>,
+    pub(crate) place: &'a Placement,
+}
+
+impl<P> ClosestHitCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+    continuation_call_fn!();
+    ray_queries!(ray);
+    payload_fns!();
+    hit_queries!(hit);
+
+    /// `optixGetRayTmax`: the distance of the closest hit.
+    pub fn ray_tmax(&self) -> f32 {
+        self.hit.t
+    }
+
+    /// `optixTrace` from a closest-hit program (recursion, up to the pipeline's depth).
+    pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
+        trace::trace(self.frame, ray, payload)
+    }
+}
+
+/// The context of an any-hit program.
+pub struct AnyHitCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) ray: RayState,
+    pub(crate) hit: HitState,
+    pub(crate) payload: &'a mut [u32],
+    pub(crate) path: Option<&'a Path<'a>>,
+    pub(crate) gas: Option<&'a crate::Gas>,
+    pub(crate) place: &'a Placement,
+}
+
+impl<P> AnyHitCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+    ray_queries!(ray);
+    payload_fns!();
+    hit_queries!(hit);
+
+    /// `optixGetRayTmax`: the candidate's distance.
+    pub fn ray_tmax(&self) -> f32 {
+        self.hit.t
+    }
+    /// `optixGetObjectRayOrigin`: the ray in the object space of the hit geometry.
+    pub fn object_ray_origin(&self) -> Vec3 {
+        self.place.object_origin
+    }
+    /// `optixGetObjectRayDirection` (not normalised: t is the same in both spaces).
+    pub fn object_ray_direction(&self) -> Vec3 {
+        self.place.object_direction
+    }
+
+    /// `optixIgnoreIntersection`: the candidate is not a hit and the interval stays. Return it
+    /// from the program (`return ctx.ignore_intersection();`); write the payload before.
+    pub fn ignore_intersection(&self) -> ProgramResult {
+        Err(Interrupt(InterruptKind::IgnoreIntersection))
+    }
+
+    /// `optixTerminateRay`: the candidate is accepted and traversal ends; the closest-hit
+    /// program then runs. Return it from the program.
+    pub fn terminate_ray(&self) -> ProgramResult {
+        Err(Interrupt(InterruptKind::TerminateRay))
+    }
+}
+
+/// The context of a miss program.
+pub struct MissCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) ray: RayState,
+    pub(crate) payload: &'a mut [u32],
+}
+
+impl<P> MissCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+    continuation_call_fn!();
+    ray_queries!(ray);
+    payload_fns!();
+
+    /// `optixGetRayTmax`: the trace's tmax.
+    pub fn ray_tmax(&self) -> f32 {
+        self.ray.tmax
+    }
+
+    /// `optixTrace` from a miss program.
+    pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
+        trace::trace(self.frame, ray, payload)
+    }
+}
+
+/// The context of an intersection program: the candidate custom primitive and the current
+/// interval.
+pub struct IntersectionCtx<'a, 'v, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) ray: RayState,
+    pub(crate) tmax: f32,
+    pub(crate) prim: HitState,
+    pub(crate) aabb: crate::Aabb,
+    pub(crate) reporter: &'v mut dyn trace::Reporter<P>,
+    pub(crate) path: Option<&'v Path<'v>>,
+    pub(crate) place: &'v Placement,
+}
+
+impl<P> IntersectionCtx<'_, '_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+    ray_queries!(ray);
+
+    /// `optixGetRayTmax`: the closest accepted hit so far, or the trace's tmax.
+    pub fn ray_tmax(&self) -> f32 {
+        self.tmax
+    }
+    /// `optixGetObjectRayOrigin`: the ray in the object space of the primitive.
+    pub fn object_ray_origin(&self) -> Vec3 {
+        self.place.object_origin
+    }
+    /// `optixGetObjectRayDirection` (not normalised: t is the same in both spaces).
+    pub fn object_ray_direction(&self) -> Vec3 {
+        self.place.object_direction
+    }
+    transform_queries!(prim);
+
+    /// `optixGetInstanceId` (`!0` without instances).
+    pub fn instance_id(&self) -> u32 {
+        self.place.instance_id
+    }
+    /// `optixGetInstanceIndex` (0 without instances).
+    pub fn instance_index(&self) -> u32 {
+        self.place.instance_index
+    }
+    /// `optixGetPrimitiveIndex`.
+    pub fn primitive_index(&self) -> u32 {
+        self.prim.primitive_index
+    }
+    /// `optixGetSbtGASIndex`.
+    pub fn sbt_gas_index(&self) -> u32 {
+        self.prim.sbt_gas_index
+    }
+    /// The primitive's bounding box from the build input.
+    pub fn primitive_aabb(&self) -> crate::Aabb {
+        self.aabb
+    }
+    /// `optixGetPayload_i`.
+    pub fn payload(&self, i: usize) -> u32 {
+        self.reporter.payload_ref().get(i).copied().unwrap_or(0)
+    }
+    /// `optixSetPayload_i`.
+    pub fn set_payload(&mut self, i: usize, v: u32) {
+        if let Some(p) = self.reporter.payload().get_mut(i) {
+            *p = v;
+        }
+    }
+
+    /// `optixReportIntersection`: reports a hit at `t` with hit kind `hit_kind` (low 7 bits)
+    /// and up to `num_attribute_values` attribute words. Outside `[tmin, tmax]` it is ignored and `Ok(false)` comes
+    /// back; otherwise the any-hit program runs: `Ok(false)` if it ignored the hit, `Ok(true)`
+    /// if the hit was accepted (the interval then ends at `t`). If the any-hit program
+    /// terminated the ray, an [`Interrupt`] comes back: pass it on with `?`.
+    pub fn report_intersection(
+        &mut self,
+        t: f32,
+        hit_kind: u8,
+        attributes: &[u32],
+    ) -> Result<bool, Interrupt> {
+        if !(t >= self.ray.tmin && t <= self.tmax) {
+            return Ok(false);
+        }
+        let mut hit = self.prim;
+        hit.t = t;
+        hit.hit_kind = HitKind::custom(hit_kind);
+        // Attributes past the pipeline's `num_attribute_values` (at least 2, at most 8) are
+        // dropped, as they would not fit the registers OptiX reserves.
+        let limit = self
+            .frame
+            .launch
+            .pipeline
+            .compile
+            .num_attribute_values
+            .clamp(2, 8) as usize;
+        let n = attributes.len().min(limit);
+        hit.attributes = [0; 8];
+        hit.attributes[..n].copy_from_slice(&attributes[..n]);
+        let accepted = self.reporter.report(self.frame, &self.ray, &hit)?;
+        if accepted {
+            self.tmax = t;
+        }
+        Ok(accepted)
+    }
+}
+
+/// The context of an exception program.
+pub struct ExceptionCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+    pub(crate) exception: Exception,
+}
+
+impl<P> ExceptionCtx<'_, P> {
+    common_queries!();
+
+    /// `optixGetExceptionCode`.
+    pub fn exception_code(&self) -> ExceptionCode {
+        self.exception.code
+    }
+
+    /// `optixGetExceptionDetail_i`: 0 past the details given.
+    pub fn exception_detail(&self, i: usize) -> u32 {
+        self.exception.details().get(i).copied().unwrap_or(0)
+    }
+
+    /// The whole exception.
+    pub fn exception(&self) -> &Exception {
+        &self.exception
+    }
+}
+
+/// The context of a direct callable: no payload, no tracing (guide §15).
+pub struct DirectCallableCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+}
+
+impl<P> DirectCallableCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+}
+
+/// The context of a continuation callable: it may trace and call other callables (guide §15).
+pub struct ContinuationCallableCtx<'a, P> {
+    pub(crate) frame: Frame<'a, P>,
+}
+
+impl<P> ContinuationCallableCtx<'_, P> {
+    common_queries!();
+    throw_fn!();
+    direct_call_fn!();
+    continuation_call_fn!();
+
+    /// `optixTrace` from a continuation callable.
+    pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
+        trace::trace(self.frame, ray, payload)
+    }
+}

@@ -1,0 +1,350 @@
+//! Ray queries on a GAS: closest hit, any hit (occlusion) and filtered queries, one ray at a time
+//! or in parallel batches. This is the Embree-like path for simulation users and the kernel the
+//! program pipeline is built on.
+
+use crate::ias::InstanceRecord;
+use crate::traversal::{
+    traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef, Path, SceneVisitor,
+};
+use crate::Gas;
+use oxray_bvh::triangle::TriangleHit;
+use oxray_core::{CandidateAction, CustomHit, CustomPrimitive, Hit, HitKind, QueryError, Ray};
+use rayon::prelude::*;
+
+/// Intersects custom primitives: given the primitive and the ray with its current interval,
+/// returns the closest intersection in that interval, if any.
+pub trait CustomIntersector {
+    /// Intersects one primitive.
+    fn intersect(&mut self, primitive: &CustomPrimitive, ray: &Ray) -> Option<CustomHit>;
+}
+
+impl<F: FnMut(&CustomPrimitive, &Ray) -> Option<CustomHit>> CustomIntersector for F {
+    fn intersect(&mut self, primitive: &CustomPrimitive, ray: &Ray) -> Option<CustomHit> {
+        self(primitive, ray)
+    }
+}
+
+/// The intersector of [`Gas::intersect`]: custom primitives are never hit.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoCustomPrimitives;
+
+impl CustomIntersector for NoCustomPrimitives {
+    fn intersect(&mut self, _: &CustomPrimitive, _: &Ray) -> Option<CustomHit> {
+        None
+    }
+}
+
+struct QueryVisitor<'s, 'a, C, F> {
+    /// The GAS being traversed, and where it sits.
+    gas: Option<&'s Gas>,
+    /// The instance nearest to the current GAS (a reference, not a copy of the whole path:
+    /// entering a GAS happens once per ray and instance).
+    instance: Option<&'s InstanceRecord>,
+    object_ray: Ray,
+    custom: &'a mut C,
+    filter: F,
+    first_hit_ends: bool,
+    best: Option<Hit>,
+}
+
+impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'s, '_, C, F> {
+    #[inline(always)]
+    fn offer(&mut self, hit: Hit) -> Decision {
+        match (self.filter)(&hit) {
+            CandidateAction::Ignore => Decision::Ignore,
+            action => {
+                self.best = Some(hit);
+                if self.first_hit_ends || action == CandidateAction::Terminate {
+                    Decision::AcceptAndTerminate
+                } else {
+                    Decision::Accept
+                }
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn instance(&self) -> (u32, u32) {
+        self.instance.map_or((!0, 0), |i| (i.instance_id, i.index))
+    }
+}
+
+impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> SceneVisitor<'s>
+    for QueryVisitor<'s, '_, C, F>
+{
+    fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
+        self.gas = Some(gas);
+        self.instance = path.instance;
+        self.object_ray = *object_ray;
+    }
+
+    fn ray_mask(&self) -> u8 {
+        0xFF
+    }
+}
+
+impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
+    for QueryVisitor<'_, '_, C, F>
+{
+    #[inline(always)]
+    fn triangle(&mut self, slot: u32, h: &TriangleHit) -> Decision {
+        let Some(gas) = self.gas else {
+            return Decision::Ignore;
+        };
+        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
+        let (instance_id, instance_index) = self.instance();
+        // FLIP_TRIANGLE_FACING of the nearest instance swaps the faces (guide §5.4).
+        let flip = self
+            .instance
+            .is_some_and(|i| i.flags.contains(crate::InstanceFlags::FLIP_TRIANGLE_FACING));
+        self.offer(Hit {
+            t: h.t,
+            u: h.u,
+            v: h.v,
+            primitive_index,
+            sbt_gas_index,
+            build_input,
+            hit_kind: if h.front_face != flip {
+                HitKind::TRIANGLE_FRONT_FACE
+            } else {
+                HitKind::TRIANGLE_BACK_FACE
+            },
+            instance_id,
+            instance_index,
+        })
+    }
+
+    fn custom(&mut self, slot: u32, tmin: f32, tmax: f32, _: &mut [Entry]) -> (Option<f32>, bool) {
+        let Some(gas) = self.gas else {
+            return (None, false);
+        };
+        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
+        let prim = CustomPrimitive {
+            primitive_index,
+            sbt_gas_index,
+            build_input,
+            aabb: gas.aabbs[slot as usize],
+        };
+        let ray = Ray {
+            tmin,
+            tmax,
+            ..self.object_ray
+        };
+        let Some(c) = self.custom.intersect(&prim, &ray) else {
+            return (None, false);
+        };
+        if !(c.t >= tmin && c.t <= tmax) {
+            return (None, false);
+        }
+        let (instance_id, instance_index) = self.instance();
+        let hit = Hit {
+            t: c.t,
+            u: c.u,
+            v: c.v,
+            primitive_index,
+            sbt_gas_index,
+            build_input,
+            hit_kind: HitKind::custom(c.hit_kind),
+            instance_id,
+            instance_index,
+        };
+        match self.offer(hit) {
+            Decision::Ignore | Decision::Abort => (None, false),
+            Decision::Accept => (Some(c.t), false),
+            Decision::AcceptAndTerminate => (Some(c.t), true),
+        }
+    }
+}
+
+fn accept_all(_: &Hit) -> CandidateAction {
+    CandidateAction::Accept
+}
+
+/// Runs one query from `root` with this thread's stack.
+fn query<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction>(
+    root: NodeRef<'s>,
+    ray: &Ray,
+    custom: &mut C,
+    filter: F,
+    first_hit_ends: bool,
+) -> Option<Hit> {
+    ray.validate().ok()?;
+    let mut v = QueryVisitor {
+        gas: None,
+        instance: None,
+        object_ray: *ray,
+        custom,
+        filter,
+        first_hit_ends,
+        best: None,
+    };
+    with_stack(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
+    v.best
+}
+
+/// Closest hits of a batch under `root` (`None`: the null handle, every ray misses), in
+/// parallel; the same results as one ray at a time, whatever the number of threads.
+pub(crate) fn closest_batch(
+    root: Option<NodeRef<'_>>,
+    rays: &[Ray],
+    hits: &mut [Option<Hit>],
+) -> Result<(), QueryError> {
+    par_batch(rays, hits, |ray| {
+        root.and_then(|r| query(r, ray, &mut NoCustomPrimitives, accept_all, false))
+    })
+}
+
+/// Occlusion of a batch under `root`, in parallel.
+pub(crate) fn any_batch(
+    root: Option<NodeRef<'_>>,
+    rays: &[Ray],
+    occluded: &mut [bool],
+) -> Result<(), QueryError> {
+    par_batch(rays, occluded, |ray| {
+        root.is_some_and(|r| query(r, ray, &mut NoCustomPrimitives, accept_all, true).is_some())
+    })
+}
+
+/// Runs `f` on every ray in parallel chunks, writing `out` in ray order.
+fn par_batch<T: Send>(
+    rays: &[Ray],
+    out: &mut [T],
+    f: impl Fn(&Ray) -> T + Sync,
+) -> Result<(), QueryError> {
+    if rays.len() != out.len() {
+        return Err(QueryError::LengthMismatch {
+            rays: rays.len(),
+            outputs: out.len(),
+        });
+    }
+    const CHUNK: usize = 256;
+    rays.par_chunks(CHUNK)
+        .zip(out.par_chunks_mut(CHUNK))
+        .for_each(|(rays, out)| {
+            for (r, o) in rays.iter().zip(out) {
+                *o = f(r);
+            }
+        });
+    Ok(())
+}
+
+/// The queries every traversable offers: closest hit, occlusion, filtered, and batches.
+macro_rules! query_api {
+    ($t:ty, $root:expr) => {
+        impl $t {
+            /// The closest hit in `[ray.tmin, ray.tmax]`, or `None`. Custom primitives are not hit (use
+            /// [`intersect_with`](Self::intersect_with)); an invalid ray (see [`Ray::validate`]) hits
+            /// nothing. Where two hits are at the same distance, which one is returned is fixed by the
+            /// structure, identical from run to run.
+            pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+                query($root(self), ray, &mut NoCustomPrimitives, accept_all, false)
+            }
+
+            /// The closest hit, with custom primitives intersected by `custom`.
+            pub fn intersect_with<C: CustomIntersector>(
+                &self,
+                ray: &Ray,
+                custom: &mut C,
+            ) -> Option<Hit> {
+                query($root(self), ray, custom, accept_all, false)
+            }
+
+            /// The closest hit that `filter` accepts: an any-hit program in closure form. The filter sees
+            /// each candidate within the current interval (in no particular order, possibly more than
+            /// once per primitive) and may accept, ignore, or accept and terminate.
+            ///
+            /// ```
+            /// # use oxray_cpu::{Gas, NoCustomPrimitives};
+            /// # use oxray_core::{BuildOptions, CandidateAction, Ray, TriangleInput, VertexBuffer};
+            /// # use glam::Vec3;
+            /// // Two parallel triangles; ignore the first primitive to see the one behind it.
+            /// let v = [[-1.0f32, -1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 1.0, 1.0],
+            ///          [-1.0, -1.0, 2.0], [1.0, -1.0, 2.0], [0.0, 1.0, 2.0]];
+            /// let gas = Gas::build(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+            /// let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+            /// let hit = gas.intersect_filtered(&ray, &mut NoCustomPrimitives, |h| {
+            ///     if h.primitive_index == 0 { CandidateAction::Ignore } else { CandidateAction::Accept }
+            /// });
+            /// assert_eq!(hit.unwrap().t, 2.0);
+            /// # Ok::<(), oxray_core::BuildError>(())
+            /// ```
+            pub fn intersect_filtered<C: CustomIntersector>(
+                &self,
+                ray: &Ray,
+                custom: &mut C,
+                filter: impl FnMut(&Hit) -> CandidateAction,
+            ) -> Option<Hit> {
+                query($root(self), ray, custom, filter, false)
+            }
+
+            /// Whether anything lies in `[ray.tmin, ray.tmax]` (a shadow or visibility ray): traversal
+            /// stops at the first hit found, which need not be the closest.
+            pub fn occluded(&self, ray: &Ray) -> bool {
+                query($root(self), ray, &mut NoCustomPrimitives, accept_all, true).is_some()
+            }
+
+            /// Whether anything lies in the ray's interval, with custom primitives intersected by
+            /// `custom`.
+            pub fn occluded_with<C: CustomIntersector>(&self, ray: &Ray, custom: &mut C) -> bool {
+                query($root(self), ray, custom, accept_all, true).is_some()
+            }
+
+            /// Closest hits of a batch of rays, in parallel on the current rayon pool. The results are
+            /// the same as [`intersect`](Self::intersect) ray by ray, whatever the number of threads.
+            pub fn intersect_batch(
+                &self,
+                rays: &[Ray],
+                hits: &mut [Option<Hit>],
+            ) -> Result<(), QueryError> {
+                self.batch(rays, hits, |root, ray| {
+                    query(root, ray, &mut NoCustomPrimitives, accept_all, false)
+                })
+            }
+
+            /// Occlusion of a batch of rays, in parallel.
+            pub fn occluded_batch(
+                &self,
+                rays: &[Ray],
+                occluded: &mut [bool],
+            ) -> Result<(), QueryError> {
+                self.batch(rays, occluded, |root, ray| {
+                    query(root, ray, &mut NoCustomPrimitives, accept_all, true).is_some()
+                })
+            }
+
+            /// Closest hits of a batch, with custom primitives intersected by `custom` (called from
+            /// several threads at once).
+            pub fn intersect_batch_with<C>(
+                &self,
+                rays: &[Ray],
+                hits: &mut [Option<Hit>],
+                custom: &C,
+            ) -> Result<(), QueryError>
+            where
+                C: Fn(&CustomPrimitive, &Ray) -> Option<CustomHit> + Sync,
+            {
+                self.batch(rays, hits, |root, ray| {
+                    query(
+                        root,
+                        ray,
+                        &mut |p: &CustomPrimitive, r: &Ray| custom(p, r),
+                        accept_all,
+                        false,
+                    )
+                })
+            }
+
+            fn batch<T: Send>(
+                &self,
+                rays: &[Ray],
+                out: &mut [T],
+                f: impl Fn(NodeRef<'_>, &Ray) -> T + Sync,
+            ) -> Result<(), QueryError> {
+                par_batch(rays, out, |r| f($root(self), r))
+            }
+        }
+    };
+}
+
+query_api!(Gas, NodeRef::Gas);
+query_api!(crate::Ias, NodeRef::Ias);

@@ -1,0 +1,233 @@
+//! Traversal of a traversable graph (guide §2.5, §5.4, §5.9): instance ASes and static
+//! transforms above GASes, any number of levels deep. The ray is carried into each object space;
+//! its direction is transformed without normalising, so distances t agree across levels and the
+//! interval shrinks across instances.
+
+use super::gas::{traverse_gas, Decision, Entry, GasVisitor, Primitives};
+use super::ray::PreparedRay;
+use crate::gas::CpuNode;
+use crate::ias::InstanceRecord;
+use crate::{Gas, Ias};
+use oxray_bvh::triangle::TriangleHit;
+use oxray_bvh::GasKind;
+use oxray_core::{Ray, StaticTransform, Transform, MAX_TRAVERSABLE_GRAPH_DEPTH};
+
+/// One transform on the way from the root to a GAS.
+#[derive(Clone, Copy)]
+pub(crate) enum Level<'s> {
+    Instance(&'s InstanceRecord),
+    Static(&'s StaticTransform),
+}
+
+impl Level<'_> {
+    /// Object-to-world transform of this level.
+    pub fn object_to_world(&self) -> &Transform {
+        match self {
+            Level::Instance(i) => &i.object_to_world,
+            Level::Static(s) => s.transform(),
+        }
+    }
+    /// World-to-object transform of this level.
+    pub fn world_to_object(&self) -> &Transform {
+        match self {
+            Level::Instance(i) => &i.world_to_object,
+            Level::Static(s) => s.inverse(),
+        }
+    }
+}
+
+/// The path from the root to the current GAS: the transform list of guide §13.11 and what the
+/// instances along it add up to.
+#[derive(Clone, Copy)]
+pub(crate) struct Path<'s> {
+    pub levels: [Option<Level<'s>>; MAX_TRAVERSABLE_GRAPH_DEPTH as usize],
+    pub len: usize,
+    /// Sum of the SBT offsets of the instances on the path (§7.3.1).
+    pub sbt_offset: u32,
+    /// The instance nearest to the GAS, whose flags override its ancestors' (§5.4).
+    pub instance: Option<&'s InstanceRecord>,
+}
+
+impl<'s> Path<'s> {
+    pub const ROOT: Path<'static> = Path {
+        levels: [None; MAX_TRAVERSABLE_GRAPH_DEPTH as usize],
+        len: 0,
+        sbt_offset: 0,
+        instance: None,
+    };
+
+    fn push(&self, level: Level<'s>) -> Option<Path<'s>> {
+        if self.len >= self.levels.len() {
+            return None;
+        }
+        let mut p = *self;
+        p.levels[p.len] = Some(level);
+        p.len += 1;
+        if let Level::Instance(i) = level {
+            p.sbt_offset = p.sbt_offset.wrapping_add(i.sbt_offset);
+            p.instance = Some(i);
+        }
+        Some(p)
+    }
+
+    /// The transforms from the root (index 0) to the GAS.
+    pub fn levels(&self) -> impl DoubleEndedIterator<Item = &Level<'s>> {
+        self.levels[..self.len].iter().flatten()
+    }
+}
+
+/// A visitor of a whole graph: a [`GasVisitor`] told which GAS it is in and where.
+pub(crate) trait SceneVisitor<'s>: GasVisitor {
+    /// Called before the candidates of `gas`, reached along `path` with `object_ray`.
+    fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray);
+    /// The ray's visibility mask: instances whose mask shares no bit with it are skipped.
+    fn ray_mask(&self) -> u8;
+    /// A path deeper than 31 levels was met; traversal of that branch stops.
+    fn graph_too_deep(&mut self) {}
+}
+
+/// A borrowed traversable.
+#[derive(Clone, Copy)]
+pub(crate) enum NodeRef<'s> {
+    Gas(&'s Gas),
+    Ias(&'s Ias),
+    Static(&'s StaticTransform),
+}
+
+impl<'s> From<&'s CpuNode> for NodeRef<'s> {
+    fn from(t: &'s CpuNode) -> Self {
+        match t {
+            CpuNode::Gas(g) => NodeRef::Gas(g),
+            CpuNode::Ias(i) => NodeRef::Ias(i),
+            CpuNode::Static(s) => NodeRef::Static(s),
+        }
+    }
+}
+
+impl<'s> NodeRef<'s> {
+    /// The CPU structure behind a handle, borrowed; `None` for the null handle or a structure
+    /// of another backend (which a CPU traversal cannot enter).
+    pub fn of(handle: &'s oxray_core::TraversableHandle) -> Option<NodeRef<'s>> {
+        if let Some(g) = handle.downcast_ref::<Gas>() {
+            return Some(NodeRef::Gas(g));
+        }
+        if let Some(i) = handle.downcast_ref::<Ias>() {
+            return Some(NodeRef::Ias(i));
+        }
+        handle
+            .downcast_ref::<StaticTransform>()
+            .map(NodeRef::Static)
+    }
+}
+
+/// Traverses the graph under `node` with `ray` in `node`'s space. Returns the final tmax and
+/// whether the visitor ended traversal.
+pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
+    node: NodeRef<'s>,
+    path: &Path<'s>,
+    ray: &Ray,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    match node {
+        NodeRef::Gas(gas) => {
+            visitor.enter_gas(gas, path, ray);
+            let Some(prepared) = PreparedRay::new(ray) else {
+                return (ray.tmax, false);
+            };
+            let prims = match gas.kind {
+                GasKind::Triangles => Primitives::Triangles(&gas.triangles),
+                GasKind::CustomPrimitives => Primitives::Aabbs(&gas.aabbs),
+            };
+            traverse_gas(
+                &gas.bvh.nodes,
+                prims,
+                &prepared,
+                ray.tmin,
+                ray.tmax,
+                visitor,
+                stack,
+            )
+        }
+        NodeRef::Ias(ias) => {
+            let Some(prepared) = PreparedRay::new(ray) else {
+                return (ray.tmax, false);
+            };
+            let mut iv = InstanceVisitor {
+                ias,
+                path,
+                ray,
+                inner: visitor,
+            };
+            traverse_gas(
+                &ias.bvh.nodes,
+                Primitives::Aabbs(&ias.boxes),
+                &prepared,
+                ray.tmin,
+                ray.tmax,
+                &mut iv,
+                stack,
+            )
+        }
+        NodeRef::Static(st) => {
+            let Some(child) = NodeRef::of(st.child()) else {
+                return (ray.tmax, false);
+            };
+            let Some(p) = path.push(Level::Static(st)) else {
+                visitor.graph_too_deep();
+                return (ray.tmax, true);
+            };
+            let r = transform_ray(st.inverse(), ray);
+            traverse_node(child, &p, &r, visitor, stack)
+        }
+    }
+}
+
+fn transform_ray(world_to_object: &Transform, ray: &Ray) -> Ray {
+    Ray {
+        origin: world_to_object.transform_point(ray.origin),
+        direction: world_to_object.transform_vector(ray.direction),
+        ..*ray
+    }
+}
+
+struct InstanceVisitor<'s, 'v, V> {
+    ias: &'s Ias,
+    path: &'v Path<'s>,
+    ray: &'v Ray,
+    inner: &'v mut V,
+}
+
+impl<'s, V: SceneVisitor<'s>> GasVisitor for InstanceVisitor<'s, '_, V> {
+    fn triangle(&mut self, _: u32, _: &TriangleHit) -> Decision {
+        Decision::Ignore
+    }
+
+    fn custom(
+        &mut self,
+        slot: u32,
+        tmin: f32,
+        tmax: f32,
+        spare: &mut [Entry],
+    ) -> (Option<f32>, bool) {
+        let inst = &self.ias.instances[slot as usize];
+        // §5.4 / §13.2: an instance is traversed only if its mask shares a bit with the ray's.
+        if inst.mask & self.inner.ray_mask() == 0 {
+            return (None, false);
+        }
+        let Some(child) = inst.node.as_ref() else {
+            return (None, false);
+        };
+        let Some(path) = self.path.push(Level::Instance(inst)) else {
+            self.inner.graph_too_deep();
+            return (None, true);
+        };
+        let r = Ray {
+            tmin,
+            tmax,
+            ..transform_ray(&inst.world_to_object, self.ray)
+        };
+        let (t, stop) = traverse_node(child.into(), &path, &r, self.inner, spare);
+        ((t < tmax).then_some(t), stop)
+    }
+}

@@ -1,0 +1,360 @@
+//! Acceleration structures on any device: the facade's [`Gas`] and [`Ias`].
+
+use crate::device::Device;
+use oxray_bvh::{BvhStats, GasMemory};
+use oxray_core::{
+    Aabb, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOptions,
+    GeometryFlags, Hit, QueryError, Ray, Traversable, TraversableHandle, TraversableKind,
+};
+use std::sync::Arc;
+
+#[derive(Clone)]
+pub(crate) enum GasRepr {
+    Cpu(Arc<oxray_cpu::Gas>),
+    #[cfg(feature = "cuda")]
+    Cuda(Arc<oxray_cuda::CudaGas>),
+}
+
+/// A geometry acceleration structure (GAS) on some device, from [`Device::build_gas`].
+///
+/// Cheap to clone (the structure is shared). It converts into a [`TraversableHandle`] for
+/// instances and traces. Batched queries run on the device that holds it; the per-ray queries,
+/// any-hit filters and custom-primitive closures of the CPU backend are on its CPU structure
+/// ([`as_cpu`](Self::as_cpu), or build an [`oxray::cpu::Gas`](crate::cpu::Gas) directly).
+///
+/// ```
+/// use oxray::{BuildOptions, Device, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+/// use glam::Vec3;
+/// let vertices = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+/// let triangles = [[0u32, 1, 2], [0, 2, 3]];
+/// let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))
+///     .indices(IndexBuffer::u32x3(&triangles));
+/// let gas: Gas = Device::cpu().build_gas(&BuildOptions::default(), &[input.into()])?;
+/// assert_eq!(gas.num_primitives(), 2);
+///
+/// let rays = vec![Ray::new(Vec3::new(0.25, 0.75, 1.0), -Vec3::Z); 16];
+/// let mut hits = vec![None; rays.len()];
+/// gas.intersect_batch(&rays, &mut hits)?;
+/// assert_eq!(hits[0].unwrap().primitive_index, 1);
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone)]
+pub struct Gas(GasRepr);
+
+/// Calls `$body` with `$g` bound to the structure of whichever backend holds it.
+macro_rules! on_gas {
+    ($gas:expr, $g:ident => $cpu:expr, $cuda:expr) => {
+        match &$gas.0 {
+            GasRepr::Cpu($g) => $cpu,
+            #[cfg(feature = "cuda")]
+            GasRepr::Cuda($g) => $cuda,
+        }
+    };
+}
+
+impl Gas {
+    pub(crate) fn from_repr(repr: GasRepr) -> Gas {
+        Gas(repr)
+    }
+
+    /// Builds a GAS on the CPU: shorthand for `Device::cpu().build_gas(options, inputs)`.
+    pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Gas, BuildError> {
+        Device::cpu().build_gas(options, inputs)
+    }
+
+    /// A handle for instances and traces.
+    pub fn handle(&self) -> TraversableHandle {
+        on_gas!(self, g => g.clone().into(), g.clone().into())
+    }
+
+    /// The backend whose memory holds it.
+    pub fn device_kind(&self) -> BackendKind {
+        on_gas!(self, _g => BackendKind::Cpu, BackendKind::Cuda)
+    }
+
+    /// The CPU structure, if it lives on the CPU.
+    pub fn as_cpu(&self) -> Option<&oxray_cpu::Gas> {
+        on_gas!(self, g => Some(g), { let _ = g; None })
+    }
+
+    /// The CUDA structure, if it lives on a CUDA device.
+    #[cfg(feature = "cuda")]
+    pub fn as_cuda(&self) -> Option<&oxray_cuda::CudaGas> {
+        on_gas!(self, _g => None, Some(_g))
+    }
+
+    /// The kind of primitives.
+    pub fn kind(&self) -> BuildInputKind {
+        on_gas!(self, g => g.kind(), g.info().kind)
+    }
+
+    /// The flags it was built with.
+    pub fn build_flags(&self) -> BuildFlags {
+        on_gas!(self, g => g.build_flags, g.info().build_flags)
+    }
+
+    /// Primitives declared over all build inputs, inactive ones included.
+    pub fn num_primitives(&self) -> u32 {
+        on_gas!(self, g => g.num_primitives, g.info().num_primitives)
+    }
+
+    /// Primitives that can be hit.
+    pub fn num_active_primitives(&self) -> u32 {
+        on_gas!(self, g => g.num_active_primitives(), g.info().num_active_primitives)
+    }
+
+    /// Number of build inputs.
+    pub fn num_build_inputs(&self) -> usize {
+        on_gas!(self, g => g.num_build_inputs(), g.info().num_build_inputs)
+    }
+
+    /// SBT records over all build inputs (the span of SBT-GAS indices).
+    pub fn num_sbt_records(&self) -> u32 {
+        on_gas!(self, g => g.num_sbt_records(), g.info().record_flags.len() as u32)
+    }
+
+    /// The geometry flags of an SBT record, by SBT-GAS index.
+    pub fn geometry_flags(&self, sbt_gas_index: u32) -> Option<GeometryFlags> {
+        on_gas!(
+            self,
+            g => g.geometry_flags(sbt_gas_index),
+            g.info().record_flags.get(sbt_gas_index as usize).copied()
+        )
+    }
+
+    /// The box around every active primitive (empty when there is none).
+    pub fn bounds(&self) -> Aabb {
+        on_gas!(self, g => g.bounds, g.info().bounds)
+    }
+
+    /// Statistics of the BVH it was built with: nodes, depth, SAH cost.
+    pub fn stats(&self) -> BvhStats {
+        on_gas!(self, g => g.stats(), g.info().stats)
+    }
+
+    /// Bytes the structure occupies in its device's memory.
+    pub fn memory(&self) -> GasMemory {
+        on_gas!(self, g => g.memory(), GasMemory {
+            output_bytes: g.device_bytes(),
+            node_bytes: g.num_nodes() * g.layout().node_bytes(),
+            primitive_bytes: g.device_bytes() - g.num_nodes() * g.layout().node_bytes(),
+        })
+    }
+
+    /// Closest hits of a batch on the structure's device; the same hits on every device and
+    /// for every thread count.
+    pub fn intersect_batch(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) -> Result<(), QueryError> {
+        on_gas!(
+            self,
+            g => g.intersect_batch(rays, hits),
+            {
+                let handle = TraversableHandle::from(g.clone());
+                oxray_core::AccelBackend::intersect_closest(&cuda_of(g), &handle, rays, hits)
+            }
+        )
+    }
+
+    /// Occlusion of a batch on the structure's device.
+    pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) -> Result<(), QueryError> {
+        on_gas!(
+            self,
+            g => g.occluded_batch(rays, occluded),
+            {
+                let handle = TraversableHandle::from(g.clone());
+                oxray_core::AccelBackend::intersect_any(&cuda_of(g), &handle, rays, occluded)
+            }
+        )
+    }
+}
+
+/// The backend of the context a CUDA GAS lives in.
+#[cfg(feature = "cuda")]
+fn cuda_of(g: &oxray_cuda::CudaGas) -> oxray_cuda::Cuda {
+    oxray_cuda::Cuda::from_context(g.context().clone())
+}
+
+impl From<oxray_cpu::Gas> for Gas {
+    fn from(g: oxray_cpu::Gas) -> Self {
+        Gas(GasRepr::Cpu(Arc::new(g)))
+    }
+}
+
+impl std::fmt::Debug for Gas {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Gas({})", on_gas!(self, g => g.describe(), g.describe()))
+    }
+}
+
+impl Traversable for Gas {
+    fn traversable_kind(&self) -> TraversableKind {
+        TraversableKind::Gas
+    }
+    fn bounds(&self) -> Aabb {
+        Gas::bounds(self)
+    }
+    fn graph_depth(&self) -> u32 {
+        1
+    }
+    fn backend(&self) -> BackendKind {
+        self.device_kind()
+    }
+    fn describe(&self) -> String {
+        format!("{self:?}")
+    }
+    /// A handle refers to the backend's structure, not to this wrapper.
+    fn into_object(self: Arc<Self>) -> Arc<dyn Traversable> {
+        match &self.0 {
+            GasRepr::Cpu(g) => g.clone(),
+            #[cfg(feature = "cuda")]
+            GasRepr::Cuda(g) => g.clone(),
+        }
+    }
+}
+
+#[derive(Clone)]
+pub(crate) enum IasRepr {
+    Cpu(Arc<oxray_cpu::Ias>),
+}
+
+/// An instance acceleration structure (IAS) on some device, from [`Device::build_ias`]. It
+/// keeps every child it references alive. The CPU backend builds IASes today; the CUDA backend
+/// refuses them with `Unsupported` until its kernels trace instances.
+///
+/// ```
+/// use oxray::{BuildOptions, Device, Instance, Ray, Transform, TriangleInput, VertexBuffer};
+/// use glam::Vec3;
+/// let device = Device::cpu();
+/// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+/// let gas = device.build_gas(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+/// let instances: Vec<Instance> = (0..3)
+///     .map(|i| Instance::new(gas.handle())
+///         .transform(Transform::from_translation(Vec3::new(0.0, 0.0, i as f32)))
+///         .instance_id(10 + i))
+///     .collect();
+/// let ias = device.build_ias(&BuildOptions::default(), &[(&instances[..]).into()])?;
+/// let mut hits = [None];
+/// device.intersect_closest(&ias.handle(), &[Ray::new(Vec3::new(0.0, 0.0, 5.0), -Vec3::Z)], &mut hits)?;
+/// let hit = hits[0].unwrap();
+/// assert_eq!((hit.t, hit.instance_id, hit.instance_index), (3.0, 12, 2));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone)]
+pub struct Ias(IasRepr);
+
+impl Ias {
+    pub(crate) fn from_repr(repr: IasRepr) -> Ias {
+        Ias(repr)
+    }
+
+    /// Builds an IAS on the CPU: shorthand for `Device::cpu().build_ias(options, inputs)`.
+    pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Ias, BuildError> {
+        Device::cpu().build_ias(options, inputs)
+    }
+
+    /// A handle for instances and traces.
+    pub fn handle(&self) -> TraversableHandle {
+        match &self.0 {
+            IasRepr::Cpu(i) => i.clone().into(),
+        }
+    }
+
+    /// The CPU structure, if it lives on the CPU.
+    pub fn as_cpu(&self) -> Option<&oxray_cpu::Ias> {
+        match &self.0 {
+            IasRepr::Cpu(i) => Some(i),
+        }
+    }
+
+    /// The backend whose memory holds it.
+    pub fn device_kind(&self) -> BackendKind {
+        BackendKind::Cpu
+    }
+
+    /// Instances in the build input.
+    pub fn num_instances(&self) -> u32 {
+        match &self.0 {
+            IasRepr::Cpu(i) => i.num_instances(),
+        }
+    }
+
+    /// The world box of every instance that can be hit.
+    pub fn bounds(&self) -> Aabb {
+        match &self.0 {
+            IasRepr::Cpu(i) => i.bounds(),
+        }
+    }
+
+    /// Levels of the traversable graph from this IAS down (an IAS over GASes is 2).
+    pub fn graph_depth(&self) -> u32 {
+        match &self.0 {
+            IasRepr::Cpu(i) => i.graph_depth(),
+        }
+    }
+
+    /// Statistics of the BVH over the instances.
+    pub fn stats(&self) -> BvhStats {
+        match &self.0 {
+            IasRepr::Cpu(i) => i.stats(),
+        }
+    }
+
+    /// Closest hits of a batch on the structure's device.
+    pub fn intersect_batch(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) -> Result<(), QueryError> {
+        match &self.0 {
+            IasRepr::Cpu(i) => i.intersect_batch(rays, hits),
+        }
+    }
+
+    /// Occlusion of a batch on the structure's device.
+    pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) -> Result<(), QueryError> {
+        match &self.0 {
+            IasRepr::Cpu(i) => i.occluded_batch(rays, occluded),
+        }
+    }
+}
+
+impl From<oxray_cpu::Ias> for Ias {
+    fn from(i: oxray_cpu::Ias) -> Self {
+        Ias(IasRepr::Cpu(Arc::new(i)))
+    }
+}
+
+impl std::fmt::Debug for Ias {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.0 {
+            IasRepr::Cpu(i) => write!(f, "Ias({})", i.describe()),
+        }
+    }
+}
+
+impl Traversable for Ias {
+    fn traversable_kind(&self) -> TraversableKind {
+        TraversableKind::Ias
+    }
+    fn bounds(&self) -> Aabb {
+        Ias::bounds(self)
+    }
+    fn graph_depth(&self) -> u32 {
+        Ias::graph_depth(self)
+    }
+    fn backend(&self) -> BackendKind {
+        self.device_kind()
+    }
+    fn describe(&self) -> String {
+        format!("{self:?}")
+    }
+    /// A handle refers to the backend's structure, not to this wrapper.
+    fn into_object(self: Arc<Self>) -> Arc<dyn Traversable> {
+        match &self.0 {
+            IasRepr::Cpu(i) => i.clone(),
+        }
+    }
+}

@@ -1,0 +1,335 @@
+//! The device every build and query goes through, chosen at run time.
+
+use crate::accel::{Gas, GasRepr, Ias, IasRepr};
+use oxray_core::{
+    AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, DeviceContext, Hit,
+    QueryError, Ray, TraversableHandle,
+};
+use std::sync::Arc;
+use thiserror::Error;
+
+/// Why a device could not be opened.
+#[derive(Clone, Debug, Error, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum DeviceError {
+    /// The name is not one of `cpu`, `cuda`, `cuda:N` or `auto`.
+    #[error("unknown device {0:?}: expected cpu, cuda, cuda:N or auto")]
+    UnknownName(String),
+    /// This build of oxray has no CUDA backend (the `cuda` feature is off).
+    #[error("this build of oxray has no CUDA backend (the `cuda` feature is off)")]
+    CudaNotBuilt,
+    /// This machine has no usable CUDA (no driver, no device or no NVRTC).
+    #[error("CUDA is not available on this machine: {0}")]
+    CudaUnavailable(String),
+    /// CUDA is there but opening the device failed.
+    #[error("the CUDA device could not be opened: {0}")]
+    Cuda(String),
+}
+
+impl DeviceError {
+    /// Whether the error only says that this machine or build has no CUDA, so that a caller
+    /// may fall back to the CPU or skip.
+    pub fn is_unavailable(&self) -> bool {
+        matches!(
+            self,
+            DeviceError::CudaNotBuilt | DeviceError::CudaUnavailable(_)
+        )
+    }
+}
+
+#[derive(Clone)]
+pub(crate) enum DeviceRepr {
+    Cpu(oxray_cpu::Cpu),
+    #[cfg(feature = "cuda")]
+    Cuda(Arc<oxray_cuda::Cuda>),
+}
+
+/// A device: the CPU (the default, everywhere) or a CUDA GPU. Every build and query takes one,
+/// so the same host code runs on either; the choice is made once, at run time
+/// ([`Device::from_name`] for a command-line flag, [`Device::best`] for the fastest present).
+///
+/// A device also carries the options of the OptiX device context ([`DeviceContext`]:
+/// validation mode and the log callback), which pipelines created for it inherit.
+///
+/// Dispatch to the backend happens once per call (a build, a batch), never per ray.
+///
+/// ```
+/// use oxray::{BuildOptions, Device, Ray, TriangleInput, VertexBuffer};
+/// use glam::Vec3;
+/// let device = Device::from_name("cpu")?; // or "cuda", "cuda:1", "auto"
+/// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+/// let gas = device.build_gas(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+/// let rays = vec![Ray::new(Vec3::Z, -Vec3::Z); 64];
+/// let mut hits = vec![None; rays.len()];
+/// device.intersect_closest(&gas.handle(), &rays, &mut hits)?;
+/// assert!(hits.iter().all(|h| h.map(|h| h.t) == Some(1.0)));
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+#[derive(Clone)]
+pub struct Device {
+    pub(crate) repr: DeviceRepr,
+    context: DeviceContext,
+}
+
+impl Default for Device {
+    /// The CPU.
+    fn default() -> Self {
+        Device::cpu()
+    }
+}
+
+impl std::fmt::Debug for Device {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Device({})", self.describe())
+    }
+}
+
+/// Calls `$body` with `$b` bound to the device's backend.
+macro_rules! with_backend {
+    ($dev:expr, $b:ident => $body:expr) => {
+        match &$dev.repr {
+            DeviceRepr::Cpu($b) => $body,
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda($b) => {
+                let $b = &**$b;
+                $body
+            }
+        }
+    };
+}
+
+impl Device {
+    /// The CPU backend, on the current rayon pool.
+    pub fn cpu() -> Device {
+        Device {
+            repr: DeviceRepr::Cpu(oxray_cpu::Cpu::new()),
+            context: DeviceContext::default(),
+        }
+    }
+
+    /// CUDA device `ordinal`; its kernels are compiled when it is opened.
+    pub fn cuda(ordinal: usize) -> Result<Device, DeviceError> {
+        #[cfg(feature = "cuda")]
+        {
+            match oxray_cuda::Cuda::new(ordinal) {
+                Ok(c) => Ok(Device {
+                    repr: DeviceRepr::Cuda(Arc::new(c)),
+                    context: DeviceContext::default(),
+                }),
+                Err(e) if e.is_unavailable() => Err(DeviceError::CudaUnavailable(e.to_string())),
+                Err(e) => Err(DeviceError::Cuda(e.to_string())),
+            }
+        }
+        #[cfg(not(feature = "cuda"))]
+        {
+            let _ = ordinal;
+            Err(DeviceError::CudaNotBuilt)
+        }
+    }
+
+    /// CUDA device 0 where this machine has one, else the CPU.
+    pub fn best() -> Device {
+        Device::cuda(0).unwrap_or_else(|_| Device::cpu())
+    }
+
+    /// A device by name: `cpu`, `cuda` (device 0), `cuda:N`, or `auto` ([`Device::best`]).
+    /// Asking for CUDA where there is none is an error, never a silent fall-back.
+    pub fn from_name(name: &str) -> Result<Device, DeviceError> {
+        match name.trim().to_ascii_lowercase().as_str() {
+            "cpu" => Ok(Device::cpu()),
+            "auto" => Ok(Device::best()),
+            "cuda" | "gpu" => Device::cuda(0),
+            other => match other.strip_prefix("cuda:").map(str::parse::<usize>) {
+                Some(Ok(n)) => Device::cuda(n),
+                _ => Err(DeviceError::UnknownName(name.to_string())),
+            },
+        }
+    }
+
+    /// The same device with these context options (validation mode, log callback).
+    pub fn with_context(mut self, context: DeviceContext) -> Device {
+        self.context = context;
+        self
+    }
+
+    /// The context options.
+    pub fn context(&self) -> &DeviceContext {
+        &self.context
+    }
+
+    /// Which backend this is.
+    pub fn kind(&self) -> BackendKind {
+        with_backend!(self, b => b.kind())
+    }
+
+    /// One line naming the device, e.g. `CPU (16 threads)` or
+    /// `NVIDIA H200 (sm_90, 132 SMs)`.
+    pub fn describe(&self) -> String {
+        with_backend!(self, b => b.describe())
+    }
+
+    /// The CUDA backend, if this is a CUDA device (for its node-layout and timing extras).
+    #[cfg(feature = "cuda")]
+    pub fn as_cuda(&self) -> Option<&oxray_cuda::Cuda> {
+        match &self.repr {
+            DeviceRepr::Cuda(c) => Some(c),
+            DeviceRepr::Cpu(_) => None,
+        }
+    }
+
+    /// Builds a GAS on this device (`optixAccelBuild`); inputs are validated as the guide says,
+    /// with the same typed errors on every device.
+    pub fn build_gas(
+        &self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<Gas, BuildError> {
+        Ok(Gas::from_repr(match &self.repr {
+            DeviceRepr::Cpu(b) => GasRepr::Cpu(Arc::new(b.build_gas(options, inputs)?)),
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda(b) => GasRepr::Cuda(Arc::new(b.build_gas(options, inputs)?)),
+        }))
+    }
+
+    /// Builds an IAS on this device from one instance build input (guide §5.4). Every child
+    /// must live on this device.
+    pub fn build_ias(
+        &self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<Ias, BuildError> {
+        Ok(Ias::from_repr(match &self.repr {
+            DeviceRepr::Cpu(b) => IasRepr::Cpu(Arc::new(b.build_ias(options, inputs)?)),
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda(b) => match b.build_ias(options, inputs)? {},
+        }))
+    }
+
+    /// The closest hit of every ray under `root` (`None` for a miss), in parallel. The hits are
+    /// the same on every device and for every thread count.
+    pub fn intersect_closest(
+        &self,
+        root: &TraversableHandle,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) -> Result<(), QueryError> {
+        with_backend!(self, b => b.intersect_closest(root, rays, hits))
+    }
+
+    /// Whether anything lies in every ray's interval under `root` (shadow and visibility rays).
+    pub fn intersect_any(
+        &self,
+        root: &TraversableHandle,
+        rays: &[Ray],
+        occluded: &mut [bool],
+    ) -> Result<(), QueryError> {
+        with_backend!(self, b => b.intersect_any(root, rays, occluded))
+    }
+
+    /// Copies rays into the device's memory with room for the results of a `kind` query, so
+    /// that they can be traced again and again without transfers (timing, iterative work).
+    pub fn upload_rays(&self, rays: &[Ray], kind: BatchKind) -> Result<RayBatch, QueryError> {
+        Ok(RayBatch {
+            len: rays.len(),
+            kind,
+            repr: match &self.repr {
+                DeviceRepr::Cpu(b) => BatchRepr::Cpu(b.upload_batch(rays, kind)?),
+                #[cfg(feature = "cuda")]
+                DeviceRepr::Cuda(b) => BatchRepr::Cuda(b.upload_batch(rays, kind)?),
+            },
+        })
+    }
+
+    /// Traces a resident batch under `root`; the results stay on the device.
+    pub fn trace_batch(
+        &self,
+        root: &TraversableHandle,
+        batch: &mut RayBatch,
+    ) -> Result<(), QueryError> {
+        match (&self.repr, &mut batch.repr) {
+            (DeviceRepr::Cpu(b), BatchRepr::Cpu(x)) => b.run_batch(root, x),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(b), BatchRepr::Cuda(x)) => b.run_batch(root, x),
+            #[cfg(feature = "cuda")]
+            _ => Err(QueryError::ForeignTraversable {
+                device: self.kind(),
+                found: batch.device_kind(),
+            }),
+        }
+    }
+
+    /// Copies the closest hits of a traced [`BatchKind::Closest`] batch out.
+    pub fn download_hits(
+        &self,
+        batch: &RayBatch,
+        hits: &mut [Option<Hit>],
+    ) -> Result<(), QueryError> {
+        match (&self.repr, &batch.repr) {
+            (DeviceRepr::Cpu(b), BatchRepr::Cpu(x)) => b.download_hits(x, hits),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(b), BatchRepr::Cuda(x)) => b.download_hits(x, hits),
+            #[cfg(feature = "cuda")]
+            _ => Err(QueryError::ForeignTraversable {
+                device: self.kind(),
+                found: batch.device_kind(),
+            }),
+        }
+    }
+
+    /// Copies the results of a traced [`BatchKind::Any`] batch out.
+    pub fn download_occlusion(
+        &self,
+        batch: &RayBatch,
+        occluded: &mut [bool],
+    ) -> Result<(), QueryError> {
+        match (&self.repr, &batch.repr) {
+            (DeviceRepr::Cpu(b), BatchRepr::Cpu(x)) => b.download_occlusion(x, occluded),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(b), BatchRepr::Cuda(x)) => b.download_occlusion(x, occluded),
+            #[cfg(feature = "cuda")]
+            _ => Err(QueryError::ForeignTraversable {
+                device: self.kind(),
+                found: batch.device_kind(),
+            }),
+        }
+    }
+}
+
+/// Rays and room for their results, resident in one device's memory ([`Device::upload_rays`]).
+pub struct RayBatch {
+    len: usize,
+    kind: BatchKind,
+    repr: BatchRepr,
+}
+
+enum BatchRepr {
+    Cpu(oxray_cpu::CpuBatch),
+    #[cfg(feature = "cuda")]
+    Cuda(oxray_cuda::CudaBatch),
+}
+
+impl RayBatch {
+    /// Rays in the batch.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether the batch holds no rays.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// The query it runs.
+    pub fn kind(&self) -> BatchKind {
+        self.kind
+    }
+
+    /// The device whose memory holds it.
+    pub fn device_kind(&self) -> BackendKind {
+        match self.repr {
+            BatchRepr::Cpu(_) => BackendKind::Cpu,
+            #[cfg(feature = "cuda")]
+            BatchRepr::Cuda(_) => BackendKind::Cuda,
+        }
+    }
+}
