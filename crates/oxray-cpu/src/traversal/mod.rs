@@ -1,10 +1,13 @@
-//! Ray traversal: the per-ray constants, the kernel that walks one acceleration structure, and
-//! the walk of a traversable graph across instances and transforms.
+//! Ray traversal, composed from orthogonal parts: node layouts ([`node`]), leaf intersectors
+//! ([`leaf`]) and the visitors of queries and the pipeline, joined by one kernel ([`kernel`]);
+//! the walk of a traversable graph across instances and transforms ([`scene`]); and the
+//! per-ray constants ([`ray`]).
 
-mod gas;
+mod kernel;
+mod leaf;
+mod node;
 mod ray;
 mod scene;
 
-pub(crate) use gas::{with_stack, Decision, Entry, GasVisitor};
-
+pub(crate) use kernel::{with_stack, Decision, Entry, GasVisitor};
 pub(crate) use scene::{traverse_node, Level, NodeRef, Path, SceneVisitor};

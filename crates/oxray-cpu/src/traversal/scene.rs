@@ -3,13 +3,15 @@
 //! its direction is transformed without normalising, so distances t agree across levels and the
 //! interval shrinks across instances.
 
-use super::gas::{traverse_gas, Decision, Entry, GasVisitor, Primitives};
+use super::kernel::{traverse, Entry, GasVisitor};
+use super::leaf::{AabbLeaves, LeafEnd, LeafIntersector, TriangleLeaves};
+use super::node::Bvh4;
 use super::ray::PreparedRay;
 use crate::gas::CpuNode;
 use crate::ias::InstanceRecord;
 use crate::{Gas, Ias};
-use oxray_bvh::triangle::TriangleHit;
 use oxray_bvh::GasKind;
+use oxray_core::ray::min_ignore_nan;
 use oxray_core::{Ray, StaticTransform, Transform, MAX_TRAVERSABLE_GRAPH_DEPTH};
 
 /// One transform on the way from the root to a GAS.
@@ -121,7 +123,8 @@ impl<'s> NodeRef<'s> {
 }
 
 /// Traverses the graph under `node` with `ray` in `node`'s space. Returns the final tmax and
-/// whether the visitor ended traversal.
+/// whether the visitor ended traversal. The leaf intersector is chosen here, once per
+/// structure entered.
 pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
     node: NodeRef<'s>,
     path: &Path<'s>,
@@ -135,39 +138,26 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
             let Some(prepared) = PreparedRay::new(ray) else {
                 return (ray.tmax, false);
             };
-            let prims = match gas.kind {
-                GasKind::Triangles => Primitives::Triangles(&gas.triangles),
-                GasKind::CustomPrimitives => Primitives::Aabbs(&gas.aabbs),
-            };
-            traverse_gas(
-                &gas.bvh.nodes,
-                prims,
-                &prepared,
-                ray.tmin,
-                ray.tmax,
-                visitor,
-                stack,
-            )
+            let nodes = &gas.bvh.nodes;
+            let (tmin, tmax) = (ray.tmin, ray.tmax);
+            match gas.kind {
+                GasKind::Triangles => {
+                    let leaves = TriangleLeaves(&gas.triangles);
+                    traverse::<Bvh4, _, _>(nodes, &leaves, &prepared, tmin, tmax, visitor, stack)
+                }
+                GasKind::CustomPrimitives => {
+                    let leaves = AabbLeaves(&gas.aabbs);
+                    traverse::<Bvh4, _, _>(nodes, &leaves, &prepared, tmin, tmax, visitor, stack)
+                }
+            }
         }
         NodeRef::Ias(ias) => {
             let Some(prepared) = PreparedRay::new(ray) else {
                 return (ray.tmax, false);
             };
-            let mut iv = InstanceVisitor {
-                ias,
-                path,
-                ray,
-                inner: visitor,
-            };
-            traverse_gas(
-                &ias.bvh.nodes,
-                Primitives::Aabbs(&ias.boxes),
-                &prepared,
-                ray.tmin,
-                ray.tmax,
-                &mut iv,
-                stack,
-            )
+            let leaves = InstanceLeaves { ias, path, ray };
+            let (nodes, tmin, tmax) = (&ias.bvh.nodes, ray.tmin, ray.tmax);
+            traverse::<Bvh4, _, _>(nodes, &leaves, &prepared, tmin, tmax, visitor, stack)
         }
         NodeRef::Static(st) => {
             let Some(child) = NodeRef::of(st.child()) else {
@@ -191,43 +181,59 @@ fn transform_ray(world_to_object: &Transform, ray: &Ray) -> Ray {
     }
 }
 
-struct InstanceVisitor<'s, 'v, V> {
+/// The leaves of an IAS: instances, in leaf-slot order with their world boxes. Entering one
+/// carries the ray into the instance's object space and traverses its child, with the same
+/// visitor and the shrinking interval (guide §5.4).
+pub(crate) struct InstanceLeaves<'s, 'v> {
     ias: &'s Ias,
     path: &'v Path<'s>,
+    /// The ray in the IAS's space.
     ray: &'v Ray,
-    inner: &'v mut V,
 }
 
-impl<'s, V: SceneVisitor<'s>> GasVisitor for InstanceVisitor<'s, '_, V> {
-    fn triangle(&mut self, _: u32, _: &TriangleHit) -> Decision {
-        Decision::Ignore
-    }
-
-    fn custom(
-        &mut self,
-        slot: u32,
+impl<'s, V: SceneVisitor<'s>> LeafIntersector<V> for InstanceLeaves<'s, '_> {
+    #[inline(always)]
+    fn leaf(
+        &self,
+        start: u32,
+        count: u32,
+        prepared: &PreparedRay,
         tmin: f32,
-        tmax: f32,
+        tmax: &mut f32,
+        visitor: &mut V,
         spare: &mut [Entry],
-    ) -> (Option<f32>, bool) {
-        let inst = &self.ias.instances[slot as usize];
-        // §5.4 / §13.2: an instance is traversed only if its mask shares a bit with the ray's.
-        if inst.mask & self.inner.ray_mask() == 0 {
-            return (None, false);
+    ) -> LeafEnd {
+        let start = start as usize;
+        for slot in start..start + count as usize {
+            if !prepared.hits_box(&self.ias.boxes[slot], tmin, *tmax) {
+                continue;
+            }
+            let inst = &self.ias.instances[slot];
+            // §5.4 / §13.2: an instance is traversed only if its mask shares a bit with the ray's.
+            if inst.mask & visitor.ray_mask() == 0 {
+                continue;
+            }
+            let Some(child) = inst.node.as_ref() else {
+                continue;
+            };
+            let Some(path) = self.path.push(Level::Instance(inst)) else {
+                visitor.graph_too_deep();
+                return LeafEnd::Stop;
+            };
+            let r = Ray {
+                tmin,
+                tmax: *tmax,
+                ..transform_ray(&inst.world_to_object, self.ray)
+            };
+            let before = *tmax;
+            let (t, stop) = traverse_node(child.into(), &path, &r, visitor, spare);
+            if t < before {
+                *tmax = min_ignore_nan(*tmax, t);
+            }
+            if stop {
+                return LeafEnd::Stop;
+            }
         }
-        let Some(child) = inst.node.as_ref() else {
-            return (None, false);
-        };
-        let Some(path) = self.path.push(Level::Instance(inst)) else {
-            self.inner.graph_too_deep();
-            return (None, true);
-        };
-        let r = Ray {
-            tmin,
-            tmax,
-            ..transform_ray(&inst.world_to_object, self.ray)
-        };
-        let (t, stop) = traverse_node(child.into(), &path, &r, self.inner, spare);
-        ((t < tmax).then_some(t), stop)
+        LeafEnd::Continue
     }
 }

@@ -1,0 +1,179 @@
+//! The traversal kernel: a BVH walked nearest-first with a fixed-size stack, composed from three
+//! orthogonal parts, as Embree's kernels are:
+//!
+//! - a node layout ([`NodeLayout`]: how one node's children are tested),
+//! - a leaf intersector ([`LeafIntersector`]: how the primitives of one leaf are tested —
+//!   triangle blocks, custom-primitive boxes, instances),
+//! - a visitor ([`GasVisitor`]: what is done with a candidate — queries, any-hit filters, the
+//!   program pipeline).
+//!
+//! Each combination is monomorphised: there is no dynamic dispatch per node or per leaf. The
+//! choice of leaf intersector is made once per acceleration structure entered (see
+//! [`super::scene::traverse_node`]).
+
+use super::leaf::{LeafEnd, LeafIntersector};
+use super::node::NodeLayout;
+use super::ray::PreparedRay;
+use oxray_bvh::TRAVERSAL_STACK_SIZE;
+use oxray_core::ray::TMAX_SLACK;
+
+/// What a visitor decides about a candidate hit (guide §13.4, §13.13).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Decision {
+    /// Not a hit (an any-hit program ignored it, or it was culled): tmax stays.
+    Ignore,
+    /// Accepted: tmax shrinks to its t.
+    Accept,
+    /// Accepted, and traversal ends (terminate-ray, or terminate-on-first-hit).
+    AcceptAndTerminate,
+    /// Not accepted, and traversal ends (an exception was raised).
+    Abort,
+}
+
+/// Receives the candidate hits of a traversal.
+pub(crate) trait GasVisitor {
+    /// A triangle hit within the current interval, at leaf slot `slot`.
+    fn triangle(&mut self, slot: u32, hit: &oxray_bvh::triangle::TriangleHit) -> Decision;
+    /// A custom primitive whose box the ray enters within `[tmin, tmax]`. Returns the t of the
+    /// closest hit it accepted (the new tmax), and whether traversal must end. `spare` is the
+    /// unused part of the traversal stack, for a nested traversal (an instance's child).
+    fn custom(
+        &mut self,
+        slot: u32,
+        tmin: f32,
+        tmax: f32,
+        spare: &mut [Entry],
+    ) -> (Option<f32>, bool);
+}
+
+/// One entry of the traversal stack.
+#[derive(Clone, Copy, Default)]
+pub(crate) struct Entry {
+    /// Node index (inner) or first primitive slot (leaf).
+    pub child: u32,
+    /// Primitive count of a leaf; 0 for an inner node.
+    pub count: u32,
+    /// Entry distance of the node's box.
+    pub dist: f32,
+}
+
+/// Entries of the per-thread stack: enough for the deepest graph (31 levels) of the deepest BVHs
+/// oxray builds.
+pub(crate) const STACK_ENTRIES: usize = 32 * TRAVERSAL_STACK_SIZE;
+
+thread_local! {
+    static STACK: std::cell::RefCell<Vec<Entry>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Runs `f` with this thread's traversal stack (allocated once per thread, so traversal
+/// allocates nothing per ray). Should work nest on the same thread while the stack is in use
+/// (a program running its own thread pool inside a traversal), a fresh stack is used.
+pub(crate) fn with_stack<R>(f: impl FnOnce(&mut [Entry]) -> R) -> R {
+    STACK.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut stack) => {
+            if stack.len() < STACK_ENTRIES {
+                stack.resize(STACK_ENTRIES, Entry::default());
+            }
+            f(&mut stack)
+        }
+        Err(_) => f(&mut vec![Entry::default(); STACK_ENTRIES]),
+    })
+}
+
+/// Walks the BVH `nodes` (root first) nearest child first, handing the slot range of every leaf
+/// the ray enters to `leaves`, which offers candidates to `visitor`. The interval shrinks as
+/// candidates are accepted. Returns the final tmax and whether traversal was ended early.
+#[inline(always)]
+pub(crate) fn traverse<N: NodeLayout, L: LeafIntersector<V>, V>(
+    nodes: &[N::Node],
+    leaves: &L,
+    ray: &PreparedRay,
+    tmin: f32,
+    mut tmax: f32,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    let mut sp = 0usize;
+    let mut box_tmax = tmax * TMAX_SLACK;
+    let mut cur = Entry {
+        child: 0,
+        count: 0,
+        dist: tmin,
+    };
+    loop {
+        if cur.count == 0 {
+            let node = &nodes[cur.child as usize];
+            let (dist, mut mask) = N::intersect(node, ray, tmin, box_tmax);
+            if mask != 0 {
+                let entry = |l: usize| N::entry(node, l, dist[l]);
+                let a = entry(mask.trailing_zeros() as usize);
+                mask &= mask - 1;
+                if mask == 0 {
+                    // One child hit: descend without touching the stack.
+                    cur = a;
+                    continue;
+                }
+                let b = entry(mask.trailing_zeros() as usize);
+                mask &= mask - 1;
+                if mask == 0 {
+                    // Two: push the farther one.
+                    let (near, far) = if b.dist < a.dist { (b, a) } else { (a, b) };
+                    stack[sp] = far;
+                    sp += 1;
+                    cur = near;
+                    continue;
+                }
+                // Three or more: push all, sort them farthest first, continue with the nearest.
+                let base = sp;
+                stack[sp] = a;
+                stack[sp + 1] = b;
+                sp += 2;
+                while mask != 0 {
+                    stack[sp] = entry(mask.trailing_zeros() as usize);
+                    mask &= mask - 1;
+                    sp += 1;
+                }
+                for i in base + 1..sp {
+                    let e = stack[i];
+                    let mut j = i;
+                    while j > base && stack[j - 1].dist < e.dist {
+                        stack[j] = stack[j - 1];
+                        j -= 1;
+                    }
+                    stack[j] = e;
+                }
+                sp -= 1;
+                cur = stack[sp];
+                continue;
+            }
+        } else {
+            let (spare_at, leaf_tmax) = (sp, tmax);
+            let end = leaves.leaf(
+                cur.child,
+                cur.count,
+                ray,
+                tmin,
+                &mut tmax,
+                visitor,
+                &mut stack[spare_at..],
+            );
+            if end == LeafEnd::Stop {
+                return (tmax, true);
+            }
+            if tmax != leaf_tmax {
+                box_tmax = tmax * TMAX_SLACK;
+            }
+        }
+        // Pop the next entry that may still hold a hit.
+        loop {
+            if sp == 0 {
+                return (tmax, false);
+            }
+            sp -= 1;
+            cur = stack[sp];
+            if cur.dist <= box_tmax {
+                break;
+            }
+        }
+    }
+}

@@ -1,0 +1,116 @@
+//! Leaf intersectors: how the primitives of one leaf are tested against a ray and offered to
+//! the visitor. One per primitive kind (triangle blocks, custom-primitive boxes) and one for
+//! the instances of an IAS ([`super::scene::InstanceLeaves`]); a new built-in primitive kind is
+//! a new implementation of [`LeafIntersector`].
+
+use super::kernel::{Decision, Entry, GasVisitor};
+use super::ray::PreparedRay;
+use oxray_bvh::Triangle4;
+use oxray_core::ray::min_ignore_nan;
+use oxray_core::Aabb;
+
+/// Whether traversal goes on after a leaf.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum LeafEnd {
+    /// Go on with the (possibly shrunk) interval.
+    Continue,
+    /// End traversal: a terminating accept, or an abort.
+    Stop,
+}
+
+/// Tests the primitives of one leaf, slots `start .. start + count`, within `[tmin, *tmax]`,
+/// offering candidates to the visitor and shrinking `*tmax` to every accepted hit. `spare` is
+/// the unused part of the traversal stack, for a nested traversal (an instance's child).
+pub(crate) trait LeafIntersector<V> {
+    /// Tests one leaf.
+    #[allow(clippy::too_many_arguments)]
+    fn leaf(
+        &self,
+        start: u32,
+        count: u32,
+        ray: &PreparedRay,
+        tmin: f32,
+        tmax: &mut f32,
+        visitor: &mut V,
+        spare: &mut [Entry],
+    ) -> LeafEnd;
+}
+
+/// Triangles in blocks of four (leaf slot `s` is lane `s % 4` of block `s / 4`), tested with
+/// the watertight test four at a time.
+pub(crate) struct TriangleLeaves<'a>(pub &'a [Triangle4]);
+
+impl<V: GasVisitor> LeafIntersector<V> for TriangleLeaves<'_> {
+    #[inline(always)]
+    fn leaf(
+        &self,
+        start: u32,
+        count: u32,
+        ray: &PreparedRay,
+        tmin: f32,
+        tmax: &mut f32,
+        visitor: &mut V,
+        _spare: &mut [Entry],
+    ) -> LeafEnd {
+        let blocks = self.0;
+        let mut slot = start as usize;
+        let end = slot + count as usize;
+        while slot < end {
+            let valid = (end - slot).min(4);
+            let hits = ray.tri.intersect4(&blocks[slot / 4], valid, tmin, *tmax);
+            let mut m = hits.mask;
+            while m != 0 {
+                let l = m.trailing_zeros() as usize;
+                m &= m - 1;
+                // An earlier lane may have shrunk the interval.
+                if hits.t[l] > *tmax {
+                    continue;
+                }
+                let h = hits.get(l);
+                match visitor.triangle((slot + l) as u32, &h) {
+                    Decision::Ignore => {}
+                    Decision::Accept => *tmax = h.t,
+                    Decision::AcceptAndTerminate => {
+                        *tmax = h.t;
+                        return LeafEnd::Stop;
+                    }
+                    Decision::Abort => return LeafEnd::Stop,
+                }
+            }
+            slot += 4;
+        }
+        LeafEnd::Continue
+    }
+}
+
+/// Custom primitives: boxes in leaf-slot order; the visitor runs the intersection for every box
+/// the ray enters.
+pub(crate) struct AabbLeaves<'a>(pub &'a [Aabb]);
+
+impl<V: GasVisitor> LeafIntersector<V> for AabbLeaves<'_> {
+    #[inline(always)]
+    fn leaf(
+        &self,
+        start: u32,
+        count: u32,
+        ray: &PreparedRay,
+        tmin: f32,
+        tmax: &mut f32,
+        visitor: &mut V,
+        spare: &mut [Entry],
+    ) -> LeafEnd {
+        let start = start as usize;
+        for (k, b) in self.0[start..start + count as usize].iter().enumerate() {
+            if ray.hits_box(b, tmin, *tmax) {
+                let (t, stop) = visitor.custom((start + k) as u32, tmin, *tmax, spare);
+                if let Some(t) = t {
+                    *tmax = min_ignore_nan(*tmax, t);
+                }
+                if stop {
+                    return LeafEnd::Stop;
+                }
+            }
+        }
+        LeafEnd::Continue
+    }
+}
