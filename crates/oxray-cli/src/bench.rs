@@ -1,7 +1,7 @@
 //! Benchmarks: BVH build time and ray throughput for coherent (pinhole camera) and incoherent
 //! (random hemisphere from surface points) rays, closest hit and any hit.
 
-use crate::mesh::Mesh;
+use oxray_scene::mesh::Mesh;
 use glam::Vec3;
 use oxray::{BuildFlags, BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
 use std::time::Instant;

@@ -1,7 +1,7 @@
 //! `oxray info` on scene files: what the renderer would build (one GAS per mesh, one IAS over
 //! the placements) and its statistics.
 
-use crate::scene::{AlphaMode, SceneDesc};
+use oxray_scene::{AlphaMode, SceneDesc};
 use oxray::{
     BuildFlags, BuildOptions, Gas, Ias, IndexBuffer, Instance, TriangleInput, VertexBuffer,
 };

@@ -6,7 +6,7 @@
 use super::bsdf::{hash, Rng, Surface};
 use super::lights::{Environment, TriangleLights};
 use super::texture::sample;
-use crate::scene::{AlphaMode, LightKind, MaterialDesc, Primitive, SceneDesc, TextureRef};
+use oxray_scene::{AlphaMode, LightKind, MaterialDesc, Primitive, SceneDesc, TextureRef};
 use glam::{Vec2, Vec3, Vec4};
 use oxray::{
     AnyHitCtx, ClosestHitCtx, Module, OutputBuffer, ProgramResult, RayFlags, TraceRay,

@@ -1,6 +1,6 @@
 //! Texture sampling: bilinear filtering with glTF wrap modes, sRGB decoding through a table.
 
-use crate::scene::{Texture, Wrap};
+use oxray_scene::{Texture, Wrap};
 use glam::{Vec2, Vec4};
 use std::sync::OnceLock;
 

@@ -2,9 +2,12 @@
 //! format-neutral description that every loader (glTF, OBJ+MTL, PLY, the built-in Cornell box)
 //! produces and the path tracer consumes.
 
+#![warn(missing_docs)]
+
 mod cornell;
 pub mod gltf;
 mod image;
+pub mod mesh;
 pub mod obj;
 
 pub use cornell::cornell_box;
@@ -518,6 +521,14 @@ impl SceneDesc {
         }
         Ok(())
     }
+}
+
+/// A file's extension in lower case (`None` without one, or when it is not UTF-8): how every
+/// loader and writer picks a format.
+pub fn file_extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
 }
 
 /// Drops a leading "path: " from a message that will be prefixed with the path again.

@@ -10,13 +10,15 @@
 //! Emitters emit from both faces. Each launch adds one sample per pixel, so progress is reported
 //! per pass and the result does not depend on the thread count.
 
+#![warn(missing_docs)]
+
 pub mod bsdf;
 pub mod lights;
 pub mod output;
 pub mod programs;
 pub mod texture;
 
-use crate::scene::{AlphaMode, Camera, Primitive, SceneDesc};
+use oxray_scene::{AlphaMode, Camera, Primitive, SceneDesc};
 use glam::Vec3;
 use lights::{Environment, TriangleLights};
 use oxray::{
