@@ -1,9 +1,9 @@
 //! Benchmarks: BVH build time and ray throughput for coherent (pinhole camera) and incoherent
 //! (random hemisphere from surface points) rays, closest hit and any hit.
 
-use oxray_scene::mesh::Mesh;
 use glam::Vec3;
 use oxray::{BuildFlags, BuildOptions, Gas, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use oxray_scene::mesh::Mesh;
 use std::time::Instant;
 
 /// A small, fast, deterministic generator (SplitMix64), so benchmark rays are reproducible.

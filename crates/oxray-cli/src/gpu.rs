@@ -6,10 +6,10 @@
 //! error, never a silent fall-back to the CPU.
 
 use crate::bench::{build_gas, median, BenchRays};
-use oxray_scene::mesh::Mesh;
 use crate::raycast::{encode_hits, encode_occlusion, load_inputs, write_results, RaycastError};
 use oxray::{BuildFlags, Hit, Ray};
 use oxray_cuda::{CudaContext, CudaError, CudaGas, DeviceHits, DeviceOcclusion, DeviceRays};
+use oxray_scene::mesh::Mesh;
 use std::fmt;
 use std::path::Path;
 use std::time::Instant;

@@ -1,10 +1,10 @@
 //! `oxray info` on scene files: what the renderer would build (one GAS per mesh, one IAS over
 //! the placements) and its statistics.
 
-use oxray_scene::{AlphaMode, SceneDesc};
 use oxray::{
     BuildFlags, BuildOptions, Gas, Ias, IndexBuffer, Instance, TriangleInput, VertexBuffer,
 };
+use oxray_scene::{AlphaMode, SceneDesc};
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;

@@ -4,9 +4,9 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 use oxray_cli::bench::{self, BenchRays};
-use oxray_scene::mesh::Mesh;
 use oxray_render::lights::Environment;
 use oxray_render::RenderOptions;
+use oxray_scene::mesh::Mesh;
 use oxray_scene::SceneDesc;
 use std::path::{Path, PathBuf};
 

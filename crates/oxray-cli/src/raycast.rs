@@ -2,8 +2,8 @@
 //! mesh's acceleration structure.
 
 use crate::bench::build_gas;
-use oxray_scene::mesh::Mesh;
 use oxray::{BuildFlags, Gas, Hit, Ray};
+use oxray_scene::mesh::Mesh;
 use std::path::Path;
 use std::time::Instant;
 use thiserror::Error;

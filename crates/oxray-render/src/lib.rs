@@ -18,13 +18,13 @@ pub mod output;
 pub mod programs;
 pub mod texture;
 
-use oxray_scene::{AlphaMode, Camera, Primitive, SceneDesc};
 use glam::Vec3;
 use lights::{Environment, TriangleLights};
 use oxray::{
     BuildFlags, DeviceContext, GeometryFlags, HitGroupDesc, OutputBuffer, PipelineCompileOptions,
     PipelineLinkOptions, ProgramGroup, Transform,
 };
+use oxray_scene::{AlphaMode, Camera, Primitive, SceneDesc};
 use oxray_util::{
     GasDesc, Geometry, GeometryInstance, Material, Scene, ScenePipeline, UtilInstance,
 };

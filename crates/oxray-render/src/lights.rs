@@ -4,8 +4,8 @@
 
 use super::bsdf::luminance;
 use super::texture;
-use oxray_scene::SceneDesc;
 use glam::{Vec2, Vec3};
+use oxray_scene::SceneDesc;
 use std::f32::consts::{PI, TAU};
 use std::path::Path;
 
