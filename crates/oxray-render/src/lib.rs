@@ -1,6 +1,6 @@
-//! `oxray render`: a physically based path tracer written as oxray programs, over scenes built
-//! with the oxray-util layer (one GAS per mesh, one IAS instance per placement, the hit-group
-//! SBT laid out by the scene).
+//! A physically based path tracer written as oxray programs (the renderer of `oxray render`),
+//! over scenes described by `oxray-scene` and built with the oxray-util layer (one GAS per mesh,
+//! one IAS instance per placement, the hit-group SBT laid out by the scene).
 //!
 //! Materials follow glTF's metallic-roughness model (Lambert plus GGX), with smooth dielectrics
 //! for transmissive materials, emission, normal maps, and alpha cutouts (MASK) or stochastic
@@ -9,6 +9,35 @@
 //! importance), combined with BSDF sampling by multiple importance sampling; Russian roulette.
 //! Emitters emit from both faces. Each launch adds one sample per pixel, so progress is reported
 //! per pass and the result does not depend on the thread count.
+//!
+//! The result is linear radiance; [`Image::save`] writes it as OpenEXR (linear) or PNG
+//! (tone-mapped sRGB).
+//!
+//! ```
+//! use glam::Vec3;
+//! use oxray_render::lights::Environment;
+//! use oxray_render::{render, RenderOptions};
+//!
+//! let scene = oxray_scene::cornell_box();
+//! let opts = RenderOptions {
+//!     width: 8,
+//!     height: 8,
+//!     spp: 2,
+//!     max_depth: 4,
+//!     camera: None, // the scene's first camera, else one framing the scene
+//! };
+//! let dark = Environment::uniform(Vec3::ZERO); // the box is lit by its ceiling panel only
+//! let mut passes = 0;
+//! let image = render(&scene, &dark, &opts, |done| passes = done)?;
+//! assert_eq!(passes, 2);
+//! assert_eq!(image.pixels.len(), 64);
+//! assert!(image.pixels.iter().any(|p| p[0] + p[1] + p[2] > 0.0));
+//!
+//! let out = std::env::temp_dir().join(format!("oxray-doc-{}.png", std::process::id()));
+//! image.save(&out)?;
+//! # std::fs::remove_file(&out)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 
