@@ -1,10 +1,10 @@
 //! Benchmarks: BVH build time and ray throughput for coherent (pinhole camera) and incoherent
 //! (random hemisphere from surface points) rays, closest hit and any hit.
 
-use crate::mesh::Mesh;
 use glam::Vec3;
 use oxray::cpu::{Gas, Ias};
 use oxray::{BuildFlags, BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use oxray_scene::mesh::Mesh;
 use std::time::Instant;
 
 /// A small, fast, deterministic generator (SplitMix64), so benchmark rays are reproducible.

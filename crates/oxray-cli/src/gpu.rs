@@ -6,11 +6,11 @@
 //! error, never a silent fall-back to the CPU.
 
 use crate::bench::{build_gas, median, BenchRays};
-use crate::mesh::Mesh;
 use crate::raycast::{encode_hits, encode_occlusion, load_inputs, write_results, RaycastError};
 use oxray::cpu::Gas;
 use oxray::{BuildFlags, Hit, Ray};
 use oxray_cuda::{CudaContext, CudaError, CudaGas, DeviceHits, DeviceOcclusion, DeviceRays};
+use oxray_scene::mesh::Mesh;
 use std::fmt;
 use std::path::Path;
 use std::time::Instant;

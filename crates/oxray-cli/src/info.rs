@@ -1,9 +1,9 @@
 //! `oxray info` on scene files: what the renderer would build (one GAS per mesh, one IAS over
 //! the placements) and its statistics.
 
-use crate::scene::{AlphaMode, SceneDesc};
 use oxray::cpu::{Gas, Ias};
 use oxray::{BuildFlags, BuildOptions, IndexBuffer, Instance, TriangleInput, VertexBuffer};
+use oxray_scene::{AlphaMode, SceneDesc};
 use std::fmt::Write;
 use std::path::Path;
 use std::time::Instant;

@@ -4,10 +4,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 use oxray_cli::bench::{self, BenchRays};
-use oxray_cli::mesh::Mesh;
-use oxray_cli::render::lights::Environment;
-use oxray_cli::render::RenderOptions;
-use oxray_cli::scene::SceneDesc;
+use oxray_render::lights::Environment;
+use oxray_render::RenderOptions;
+use oxray_scene::mesh::Mesh;
+use oxray_scene::SceneDesc;
 use std::path::{Path, PathBuf};
 
 #[derive(Parser)]
@@ -181,7 +181,7 @@ fn run(cli: Cli) -> Result<()> {
                     .map_or("cornell".into(), |s| s.to_string_lossy().into_owned());
                 PathBuf::from(format!("{stem}.png"))
             });
-            let ext = oxray_cli::file_extension(&output);
+            let ext = oxray_scene::file_extension(&output);
             if !matches!(ext.as_deref(), Some("png") | Some("exr")) {
                 bail!(
                     "cannot write {}: unknown image format (expected .png or .exr)",
@@ -195,7 +195,7 @@ fn run(cli: Cli) -> Result<()> {
             let start = std::time::Instant::now();
             let (mut desc, default_env) = match &scene {
                 Some(path) => (pool.install(|| SceneDesc::load(path))?, "sky"),
-                None => (oxray_cli::scene::cornell_box(), "none"),
+                None => (oxray_scene::cornell_box(), "none"),
             };
             if ground {
                 desc.add_ground();
@@ -235,7 +235,7 @@ fn run(cli: Cli) -> Result<()> {
                 .progress_chars("=> "),
             );
             let image = pool.install(|| {
-                oxray_cli::render::render(&desc, &environment, &opts, |done| {
+                oxray_render::render(&desc, &environment, &opts, |done| {
                     bar.set_position(done as u64)
                 })
             })?;
@@ -298,7 +298,7 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Info { mesh } => {
-            let ext = oxray_cli::file_extension(&mesh);
+            let ext = oxray_scene::file_extension(&mesh);
             if matches!(ext.as_deref(), Some("gltf") | Some("glb")) {
                 let report =
                     oxray_cli::info::scene_info(&mesh).map_err(|e| anyhow::anyhow!("{e}"))?;

@@ -2,9 +2,9 @@
 //! mesh's acceleration structure.
 
 use crate::bench::build_gas;
-use crate::mesh::Mesh;
 use oxray::cpu::Gas;
 use oxray::{BuildFlags, Hit, Ray};
+use oxray_scene::mesh::Mesh;
 use std::path::Path;
 use std::time::Instant;
 use thiserror::Error;
@@ -19,7 +19,7 @@ pub const HIT_BYTES: usize = 16;
 pub enum RaycastError {
     /// The mesh could not be loaded.
     #[error(transparent)]
-    Mesh(#[from] crate::mesh::MeshError),
+    Mesh(#[from] oxray_scene::mesh::MeshError),
     /// A file could not be read or written.
     #[error("{path}: {source}")]
     Io {

@@ -76,7 +76,7 @@ fn raycast_writes_hits_in_file_order_and_agrees_with_the_library() {
     assert_eq!((f(8), w[9]), (inf, 0xFFFF_FFFF));
 
     // The same through the library.
-    let m = oxray_cli::mesh::Mesh::load(&mesh).unwrap();
+    let m = oxray_scene::mesh::Mesh::load(&mesh).unwrap();
     let gas = oxray_cli::bench::build_gas(&m, oxray::BuildFlags::PREFER_FAST_TRACE).unwrap();
     let parsed =
         oxray_cli::raycast::parse_rays(&std::fs::read(&rays_path).unwrap(), "rays").unwrap();

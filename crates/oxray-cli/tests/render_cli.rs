@@ -241,7 +241,8 @@ fn gltf_scene_renders_with_warnings_for_missing_textures() {
 
 #[test]
 fn info_on_a_gltf_scene_counts_instances_and_builds_an_ias() {
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/hierarchy.gltf");
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../oxray-scene/tests/data/hierarchy.gltf");
     let out = oxray(&["info", s(&path)]);
     assert!(
         out.status.success(),
@@ -266,8 +267,9 @@ fn info_on_a_gltf_scene_counts_instances_and_builds_an_ias() {
 fn raycast_on_a_gltf_scene_follows_the_flattened_file_order() {
     // Every ray aimed at a triangle's centroid (from outside, along its normal) must report that
     // triangle's index in the flattened order that `Mesh::load` documents.
-    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/hierarchy.gltf");
-    let mesh = oxray_cli::mesh::Mesh::load(&path).unwrap();
+    let path =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../oxray-scene/tests/data/hierarchy.gltf");
+    let mesh = oxray_scene::mesh::Mesh::load(&path).unwrap();
     let mut rays = Vec::new();
     for t in &mesh.triangles {
         let [a, b, c] = t.map(|i| glam::Vec3::from(mesh.positions[i as usize]));

@@ -103,4 +103,3 @@ fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 
     }
     (tn, mask)
 }
-

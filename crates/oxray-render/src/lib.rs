@@ -1,6 +1,6 @@
-//! `oxray render`: a physically based path tracer written as oxray programs, over scenes built
-//! with the oxray-util layer (one GAS per mesh, one IAS instance per placement, the hit-group
-//! SBT laid out by the scene).
+//! A physically based path tracer written as oxray programs (the renderer of `oxray render`),
+//! over scenes described by `oxray-scene` and built with the oxray-util layer (one GAS per mesh,
+//! one IAS instance per placement, the hit-group SBT laid out by the scene).
 //!
 //! Materials follow glTF's metallic-roughness model (Lambert plus GGX), with smooth dielectrics
 //! for transmissive materials, emission, normal maps, and alpha cutouts (MASK) or stochastic
@@ -9,6 +9,37 @@
 //! importance), combined with BSDF sampling by multiple importance sampling; Russian roulette.
 //! Emitters emit from both faces. Each launch adds one sample per pixel, so progress is reported
 //! per pass and the result does not depend on the thread count.
+//!
+//! The result is linear radiance; [`Image::save`] writes it as OpenEXR (linear) or PNG
+//! (tone-mapped sRGB).
+//!
+//! ```
+//! use glam::Vec3;
+//! use oxray_render::lights::Environment;
+//! use oxray_render::{render, RenderOptions};
+//!
+//! let scene = oxray_scene::cornell_box();
+//! let opts = RenderOptions {
+//!     width: 8,
+//!     height: 8,
+//!     spp: 2,
+//!     max_depth: 4,
+//!     camera: None, // the scene's first camera, else one framing the scene
+//! };
+//! let dark = Environment::uniform(Vec3::ZERO); // the box is lit by its ceiling panel only
+//! let mut passes = 0;
+//! let image = render(&scene, &dark, &opts, |done| passes = done)?;
+//! assert_eq!(passes, 2);
+//! assert_eq!(image.pixels.len(), 64);
+//! assert!(image.pixels.iter().any(|p| p[0] + p[1] + p[2] > 0.0));
+//!
+//! let out = std::env::temp_dir().join(format!("oxray-doc-{}.png", std::process::id()));
+//! image.save(&out)?;
+//! # std::fs::remove_file(&out)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+#![warn(missing_docs)]
 
 pub mod bsdf;
 pub mod lights;
@@ -16,13 +47,13 @@ pub mod output;
 pub mod programs;
 pub mod texture;
 
-use crate::scene::{AlphaMode, Camera, Primitive, SceneDesc};
 use glam::Vec3;
 use lights::{Environment, TriangleLights};
 use oxray::{
     BuildFlags, DeviceContext, GeometryFlags, HitGroupDesc, OutputBuffer, PipelineCompileOptions,
     PipelineLinkOptions, ProgramGroup, Transform,
 };
+use oxray_scene::{AlphaMode, Camera, Primitive, SceneDesc};
 use oxray_util::{
     GasDesc, Geometry, GeometryInstance, Material, Scene, ScenePipeline, UtilInstance,
 };
@@ -61,6 +92,17 @@ pub enum RenderError {
     /// A program could not be registered.
     #[error(transparent)]
     Pipeline(#[from] oxray::PipelineError),
+    /// A sample pass raised exceptions in the renderer's programs (a defect of the renderer or
+    /// a scene it cannot handle); the image would be wrong, so none is returned.
+    #[error("sample pass {pass}: {count} pixels raised exceptions, the first {first}")]
+    Exceptions {
+        /// The sample pass.
+        pass: u32,
+        /// Pixels that raised one.
+        count: u64,
+        /// The first, with its pixel.
+        first: String,
+    },
 }
 
 /// Where the camera looks from, for `opts`: the scene's camera, else one that frames the
@@ -259,7 +301,14 @@ pub fn render(
             max_depth,
             eps,
         };
-        pipeline.launch(&mut util, &params, opts.width, opts.height, 1)?;
+        let report = pipeline.launch(&mut util, &params, opts.width, opts.height, 1)?;
+        if let Some((index, e)) = report.first_exceptions.first() {
+            return Err(RenderError::Exceptions {
+                pass: sample,
+                count: report.exceptions,
+                first: format!("at pixel {:?}: {e}", &index[..2]),
+            });
+        }
         progress(sample + 1);
     }
     let pixels = accum

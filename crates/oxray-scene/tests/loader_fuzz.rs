@@ -7,8 +7,8 @@
 //! refuses any single allocation over [`ALLOC_CAP`], so a file that claims billions of elements
 //! in a tiny buffer aborts the test instead of being silently satisfied.
 
-use oxray_cli::mesh::Mesh;
-use oxray_cli::scene::SceneDesc;
+use oxray_scene::mesh::Mesh;
+use oxray_scene::SceneDesc;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::path::{Path, PathBuf};

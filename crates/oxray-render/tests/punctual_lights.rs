@@ -3,9 +3,9 @@
 //! the range window.
 
 use glam::{Mat4, Vec3};
-use oxray_cli::render::lights::Environment;
-use oxray_cli::render::{render, RenderOptions};
-use oxray_cli::scene::{
+use oxray_render::lights::Environment;
+use oxray_render::{render, RenderOptions};
+use oxray_scene::{
     Camera, InstanceDesc, LightKind, MaterialDesc, MeshDesc, Primitive, PunctualLight, SceneDesc,
 };
 
@@ -37,7 +37,7 @@ fn lights_are_read_with_their_node_placement() {
     std::fs::write(&path, GLTF).unwrap();
     // No triangles: `SceneDesc::load` would refuse the scene as empty; the loader itself
     // returns what it read.
-    let scene = oxray_cli::scene::gltf::load(&path).unwrap();
+    let scene = oxray_scene::gltf::load(&path).unwrap();
     assert_eq!(scene.lights.len(), 3, "{:?}", scene.warnings);
     let point = scene.lights[0];
     assert_eq!(point.kind, LightKind::Point);
@@ -83,7 +83,7 @@ fn lights_are_read_with_their_node_placement() {
         ),
     )
     .unwrap();
-    let err = oxray_cli::scene::gltf::load(&bad).unwrap_err().to_string();
+    let err = oxray_scene::gltf::load(&bad).unwrap_err().to_string();
     assert!(err.contains("light") && err.lines().count() == 1, "{err}");
 }
 
@@ -198,17 +198,18 @@ fn directional_lights_give_constant_irradiance_on_the_side_they_face() {
 #[test]
 fn the_extensions_fixture_renders_with_its_lights_and_transforms() {
     // The fuzzer's seed for the extension paths must itself load and render.
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/extensions.gltf");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../oxray-scene/tests/data/extensions.gltf");
     let scene = SceneDesc::load(&path).unwrap();
     assert_eq!(scene.lights.len(), 3);
     let m = &scene.materials[0];
     assert_ne!(
         m.base_color_texture.unwrap().uv_transform,
-        oxray_cli::scene::TextureRef::IDENTITY
+        oxray_scene::TextureRef::IDENTITY
     );
     assert_ne!(
         m.emissive_texture.unwrap().uv_transform,
-        oxray_cli::scene::TextureRef::IDENTITY
+        oxray_scene::TextureRef::IDENTITY
     );
     let opts = RenderOptions {
         width: 8,

@@ -3,9 +3,9 @@
 //! alpha cutouts on the pine glTF, and the `oxray render` command's outputs and errors.
 
 use glam::Vec3;
-use oxray_cli::render::lights::Environment;
-use oxray_cli::render::{render, Image, RenderOptions};
-use oxray_cli::scene::{
+use oxray_render::lights::Environment;
+use oxray_render::{render, Image, RenderOptions};
+use oxray_scene::{
     cornell_box, AlphaMode, Camera, InstanceDesc, MaterialDesc, MeshDesc, Primitive, SceneDesc,
     Texture, TextureRef,
 };
@@ -166,7 +166,7 @@ fn uniform_environment_is_seen_through_glass_and_mirrors() {
     // clear glass keeps radiance 1 (both lose nothing); a grey diffuse ball under it reflects
     // at most its albedo.
     let scene = |m: MaterialDesc| {
-        let mut s = SceneDesc::from_mesh("ball", oxray_cli::mesh::Mesh::icosphere(3));
+        let mut s = SceneDesc::from_mesh("ball", oxray_scene::mesh::Mesh::icosphere(3));
         s.materials[0] = m;
         s.cameras = vec![Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 0.5)];
         s
@@ -393,14 +393,14 @@ fn mirrored_instances_keep_their_front_faces_and_emission_side() {
 fn ground_plane_is_under_the_scene_and_outside_the_framing() {
     // A white environment: without ground, the bottom row sees the sky (exactly 1); with the
     // ground, it sees a grey diffuse plane (at most its albedo, 0.45, under a white sky).
-    let mut scene = SceneDesc::from_mesh("ball", oxray_cli::mesh::Mesh::icosphere(2));
+    let mut scene = SceneDesc::from_mesh("ball", oxray_scene::mesh::Mesh::icosphere(2));
     let env = Environment::uniform(Vec3::ONE);
     let o = opts(16, 16, 4, 3);
     let bottom = |s: &SceneDesc| {
         let img = render(s, &env, &o, |_| {}).unwrap();
         img.pixels[15 * 16 + 1][0]
     };
-    let camera_before = oxray_cli::render::camera_frame(&scene, &o).unwrap();
+    let camera_before = oxray_render::camera_frame(&scene, &o).unwrap();
     assert_eq!(bottom(&scene), 1.0);
     scene.add_ground();
     assert_eq!(scene.triangle_count(), 320 + 2);
@@ -409,7 +409,7 @@ fn ground_plane_is_under_the_scene_and_outside_the_framing() {
         lo.y >= -1.0 - 1e-6,
         "the ground is at the ball's lowest point"
     );
-    let camera_after = oxray_cli::render::camera_frame(&scene, &o).unwrap();
+    let camera_after = oxray_render::camera_frame(&scene, &o).unwrap();
     assert_eq!(camera_before.origin, camera_after.origin);
     let g = bottom(&scene);
     assert!(g > 0.0 && g <= 0.46, "{g}");

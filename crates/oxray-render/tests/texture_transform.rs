@@ -2,15 +2,15 @@
 //! the renderer before sampling.
 
 use glam::{Mat4, Vec3};
-use oxray_cli::render::lights::Environment;
-use oxray_cli::render::{render, RenderOptions};
-use oxray_cli::scene::{
+use oxray_render::lights::Environment;
+use oxray_render::{render, RenderOptions};
+use oxray_scene::{
     Camera, InstanceDesc, MaterialDesc, MeshDesc, Primitive, SceneDesc, Texture, TextureRef,
 };
 use std::path::{Path, PathBuf};
 
 fn fixture_with_transform(extension: &str) -> PathBuf {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../oxray-scene/tests/data");
     let dir = std::env::temp_dir().join(format!("oxray-khr-tt-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::copy(src.join("tex2x2.png"), dir.join("tex2x2.png")).unwrap();
@@ -52,9 +52,10 @@ fn khr_texture_transform_is_read_as_the_specified_matrix() {
         "{u} {v}"
     );
     // Without the extension: the identity.
-    let plain =
-        SceneDesc::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/hierarchy.gltf"))
-            .unwrap();
+    let plain = SceneDesc::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../oxray-scene/tests/data/hierarchy.gltf"),
+    )
+    .unwrap();
     assert_eq!(
         plain.materials[0].base_color_texture.unwrap().uv_transform,
         TextureRef::IDENTITY

@@ -1,10 +1,40 @@
 //! Renderable scenes: meshes, PBR materials, textures, instances, cameras and lights, in one
-//! format-neutral description that every loader (glTF, OBJ+MTL, PLY, the built-in Cornell box)
-//! produces and the path tracer consumes.
+//! format-neutral description ([`SceneDesc`]) that every loader (glTF, OBJ+MTL, PLY, the built-in
+//! Cornell box) produces and the path tracer (`oxray-render`) consumes. [`mesh`] loads plain
+//! triangle meshes for ray casting and benchmarks. Loaders fail with typed errors
+//! ([`SceneError`], [`mesh::MeshError`]) whose messages are one line naming the file; problems
+//! that do not stop loading become [`SceneDesc::warnings`].
+//!
+//! ```
+//! use oxray_scene::{cornell_box, SceneDesc};
+//! use std::path::Path;
+//!
+//! // The built-in Cornell box, with its own camera and an emissive ceiling panel.
+//! let cornell = cornell_box();
+//! assert_eq!(cornell.cameras.len(), 1);
+//! assert!(cornell.materials.iter().any(|m| m.emissive != [0.0; 3]));
+//!
+//! // A file, its format picked by the extension (.gltf, .glb, .obj, .ply).
+//! let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/triangle.gltf");
+//! let scene = SceneDesc::load(&path)?;
+//! assert_eq!(scene.triangle_count(), 1);
+//! assert_eq!(scene.materials[0].name, "red");
+//! for warning in &scene.warnings {
+//!     eprintln!("warning: {warning}");
+//! }
+//!
+//! // The same file flattened into one world-space triangle mesh, for ray casting.
+//! let mesh = oxray_scene::mesh::Mesh::load(&path)?;
+//! assert_eq!(mesh.triangles.len(), 1);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+#![warn(missing_docs)]
 
 mod cornell;
 pub mod gltf;
 mod image;
+pub mod mesh;
 pub mod obj;
 
 pub use cornell::cornell_box;
@@ -518,6 +548,14 @@ impl SceneDesc {
         }
         Ok(())
     }
+}
+
+/// A file's extension in lower case (`None` without one, or when it is not UTF-8): how every
+/// loader and writer picks a format.
+pub fn file_extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
 }
 
 /// Drops a leading "path: " from a message that will be prefixed with the path again.

@@ -49,7 +49,7 @@ pub enum MeshError {
     },
     /// The glTF scene loader failed (its message names the file).
     #[error(transparent)]
-    Scene(#[from] crate::scene::SceneError),
+    Scene(#[from] crate::SceneError),
     /// The flattened scene has more vertices or triangles than a mesh can index.
     #[error("{path}: the scene flattens to more than {limit} vertices or triangles")]
     TooLarge {
@@ -98,7 +98,7 @@ impl Mesh {
                 })?
             }
             Some("gltf") | Some("glb") => {
-                let scene = crate::scene::gltf::load_impl(path, false)?;
+                let scene = crate::gltf::load_impl(path, false)?;
                 flatten(&scene, &name)?
             }
             _ => return Err(MeshError::UnknownFormat { path: name }),
@@ -208,7 +208,7 @@ const MAX_FLAT: u64 = 1 << 28;
 
 /// Copies every instance's primitives into one world-space mesh, in instance order, then
 /// primitive order (see [`Mesh::load`]).
-fn flatten(scene: &crate::scene::SceneDesc, name: &str) -> Result<Mesh, MeshError> {
+fn flatten(scene: &crate::SceneDesc, name: &str) -> Result<Mesh, MeshError> {
     let prims = || {
         scene.instances.iter().flat_map(|inst| {
             let prims = scene

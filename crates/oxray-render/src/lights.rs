@@ -4,8 +4,8 @@
 
 use super::bsdf::luminance;
 use super::texture;
-use crate::scene::SceneDesc;
 use glam::{Vec2, Vec3};
+use oxray_scene::SceneDesc;
 use std::f32::consts::{PI, TAU};
 use std::path::Path;
 
@@ -261,7 +261,7 @@ impl Environment {
     /// Loads an equirectangular map from a Radiance `.hdr` or OpenEXR `.exr` file.
     pub fn load(path: &Path, scale: f32) -> Result<Self, String> {
         let name = path.display();
-        let ext = crate::file_extension(path);
+        let ext = oxray_scene::file_extension(path);
         match ext.as_deref() {
             Some("exr") => {
                 use exr::prelude::*;
@@ -381,7 +381,7 @@ fn texel_direction(x: usize, y: usize, w: usize, h: usize) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::cornell_box;
+    use oxray_scene::cornell_box;
 
     #[test]
     fn direction_mapping_round_trips() {

@@ -1,7 +1,7 @@
 //! Texture sampling: bilinear filtering with glTF wrap modes, sRGB decoding through a table.
 
-use crate::scene::{Texture, Wrap};
 use glam::{Vec2, Vec4};
+use oxray_scene::{Texture, Wrap};
 use std::sync::OnceLock;
 
 /// sRGB-encoded byte to linear value.

@@ -47,7 +47,7 @@ impl Image {
     /// Writes the image; the extension picks the format: `.exr` is linear 32-bit float RGBA,
     /// `.png` tone-mapped 8-bit sRGB, anything else an error.
     pub fn save(&self, path: &Path) -> Result<(), String> {
-        let ext = crate::file_extension(path);
+        let ext = oxray_scene::file_extension(path);
         let name = path.display();
         match ext.as_deref() {
             Some("exr") => self

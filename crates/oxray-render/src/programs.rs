@@ -6,12 +6,12 @@
 use super::bsdf::{hash, Rng, Surface};
 use super::lights::{Environment, TriangleLights};
 use super::texture::sample;
-use crate::scene::{AlphaMode, LightKind, MaterialDesc, Primitive, SceneDesc, TextureRef};
 use glam::{Vec2, Vec3, Vec4};
 use oxray::{
     AnyHitCtx, ClosestHitCtx, Module, OutputBuffer, ProgramResult, RayFlags, TraceRay,
     TraversableHandle,
 };
+use oxray_scene::{AlphaMode, LightKind, MaterialDesc, Primitive, SceneDesc, TextureRef};
 use oxray_util::HitGroupData;
 
 /// Ray type of camera and bounce rays.

@@ -2,8 +2,8 @@
 //! files giving one-line errors, and the real scenes in `../shared/data` when present.
 
 use glam::{Mat4, Vec3};
-use oxray_cli::mesh::Mesh;
-use oxray_cli::scene::{AlphaMode, MaterialDesc, SceneDesc, SceneError, Wrap};
+use oxray_scene::mesh::Mesh;
+use oxray_scene::{AlphaMode, MaterialDesc, SceneDesc, SceneError, Wrap};
 use std::path::{Path, PathBuf};
 
 fn data(name: &str) -> PathBuf {
