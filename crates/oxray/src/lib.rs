@@ -46,8 +46,12 @@
 //! [`IntersectionCtx`], [`ExceptionCtx`], [`DirectCallableCtx`], [`ContinuationCallableCtx`])
 //! with exactly the device functions the guide's §13 table allows it. Device functions that
 //! never return in OptiX (a trace that raises, `optixThrowException`,
-//! `optixIgnoreIntersection`, `optixTerminateRay`) give an [`Interrupt`] that the program passes
-//! on with `?` or `return`. See `examples/` (`hello`, `triangle`, `custom_sphere`, `cutouts`).
+//! `optixIgnoreIntersection`, `optixTerminateRay`, a report whose any-hit terminated the ray, a
+//! callable that raised) give an [`Interrupt`]. They take effect when called: the runtime
+//! honours the first such call of a program once the program returns, whatever it returns, and
+//! the program's later device calls do nothing. Passing the interrupt on with `?` (or `return`)
+//! is the idiomatic way to leave the program at once, as OptiX does. See `examples/` (`hello`,
+//! `triangle`, `custom_sphere`, `cutouts`).
 
 #![warn(missing_docs)]
 // Lane and axis loops index several arrays in step; iterator chains would hide that.
