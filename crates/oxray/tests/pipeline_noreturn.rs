@@ -174,7 +174,7 @@ fn s13_13_ignore_dropped_still_ignores() -> TestResult {
     let out = s.run(&stack(2), RayDesc::down(0.0, 0.0), &[0, 0]);
     assert_eq!(exception(&out), None);
     let mut ah = prims(&out, Prog::Ah);
-    ah.sort_by(|a, b| a.0.cmp(&b.0));
+    ah.sort_by_key(|a| a.0);
     assert_eq!(ah, vec![(0, 11.0), (1, 10.0)], "{:?}", out.log);
     assert_eq!(
         prims(&out, Prog::Ch),
