@@ -69,6 +69,11 @@ impl DeviceContext {
         self
     }
 
+    /// Whether a log callback is set (at any level).
+    pub fn has_log_callback(&self) -> bool {
+        self.log.is_some()
+    }
+
     /// Sends a message to the log callback, if one is set for its level.
     pub fn log(&self, level: LogLevel, tag: &str, message: &str) {
         if let (Some(max), Some(f)) = (self.log_level, &self.log) {

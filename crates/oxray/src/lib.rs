@@ -46,9 +46,15 @@
 //! the ray-generation program over a 1-, 2- or 3-D grid on all cores. Each program kind receives
 //! its own context ([`RayGenCtx`], [`ClosestHitCtx`], [`AnyHitCtx`], [`MissCtx`],
 //! [`IntersectionCtx`], [`ExceptionCtx`], [`DirectCallableCtx`], [`ContinuationCallableCtx`])
-//! with exactly the device functions the guide's §13 table allows it. Programs are Rust
-//! closures today, run by the CPU backend; programs in CUDA C++ for the CUDA backend use the
-//! same groups, SBT and launches.
+//! with exactly the device functions the guide's §13 table allows it. Device functions that
+//! never return in OptiX (a trace that raises, `optixThrowException`,
+//! `optixIgnoreIntersection`, `optixTerminateRay`, a report whose any-hit terminated the ray, a
+//! callable that raised) give an [`Interrupt`]. They take effect when called: the runtime
+//! honours the first such call of a program once the program returns, whatever it returns, and
+//! the program's later device calls do nothing. Passing the interrupt on with `?` (or `return`)
+//! is the idiomatic way to leave the program at once, as OptiX does.
+//! Programs are Rust closures today, run by the CPU backend; see `examples/` (`hello`,
+//! `triangle`, `custom_sphere`, `cutouts`).
 //!
 //! The crates behind the facade, each reachable here: [`core`](oxray_core) (neutral types and
 //! the backend traits), [`bvh`] (the canonical BVH and its layouts), [`cpu`] (the CPU backend,

@@ -9,6 +9,7 @@ use bytemuck::Pod;
 use glam::Vec3;
 use oxray_core::sbt::{ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
 use oxray_core::{Exception, ExceptionCode, HitKind};
+use std::cell::Cell;
 
 /// What a transform-list entry is (`OptixTransformType`, with the instance's ids).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -69,6 +70,53 @@ impl<P> Clone for Frame<'_, P> {
 }
 impl<P> Copy for Frame<'_, P> {}
 
+/// The first device call of one program invocation that, in OptiX, never returns (guide §13.13,
+/// §13.14): `optixIgnoreIntersection`, `optixTerminateRay`, `optixThrowException`, a trace or a
+/// callable that raised, a report whose any-hit terminated the ray. It is recorded at the call,
+/// so that the runtime honours it once the program returns, whatever the program returns; and
+/// later device calls of the same program give it back without doing anything (in OptiX they
+/// are never reached). A cell in the program's context: no allocation, no lock.
+#[derive(Default)]
+pub(crate) struct NoReturn(Cell<Option<Interrupt>>);
+
+impl NoReturn {
+    /// The recorded interrupt, if a device call of the program did not return.
+    #[inline]
+    pub fn get(&self) -> Option<Interrupt> {
+        self.0.get()
+    }
+
+    /// Whether a device call of the program did not return.
+    #[inline]
+    pub fn is_set(&self) -> bool {
+        self.0.get().is_some()
+    }
+
+    /// Runs a device call unless an earlier one did not return (that one is given back), and
+    /// records the interrupt the call gives, if any.
+    #[inline]
+    pub fn call<T>(&self, f: impl FnOnce() -> Result<T, Interrupt>) -> Result<T, Interrupt> {
+        if let Some(i) = self.0.get() {
+            return Err(i);
+        }
+        let r = f();
+        if let Err(i) = r {
+            self.0.set(Some(i));
+        }
+        r
+    }
+
+    /// What the program's run amounts to: the recorded interrupt, which came first, wins over
+    /// what the program returned.
+    #[inline]
+    pub fn outcome<T>(&self, returned: Result<T, Interrupt>) -> Result<T, Interrupt> {
+        match self.0.get() {
+            Some(i) => Err(i),
+            None => returned,
+        }
+    }
+}
+
 impl<'a, P> Frame<'a, P> {
     fn sbt_data<T: Pod>(&self) -> Option<T> {
         let d = self
@@ -122,10 +170,13 @@ macro_rules! common_queries {
 macro_rules! throw_fn {
     () => {
         /// `optixThrowException`: raises user exception `code` (in `0..2^30`; other values are
-        /// clamped to `2^30 - 1`) with up to eight detail words. The launch index ends and the
-        /// exception program runs; pass the result on with `?` or `return`.
+        /// clamped to `2^30 - 1`) with up to eight detail words. It takes effect when called:
+        /// the launch index ends when this program returns, whatever it returns, and the
+        /// exception program runs; later device calls of this program do nothing. Leave the
+        /// program at once with `?` or `return` (the idiomatic way: in OptiX the call never
+        /// returns).
         pub fn throw_exception(&self, code: i32, details: &[u32]) -> ProgramResult {
-            self.frame.throw(code, details)
+            self.no_return.call(|| self.frame.throw(code, details))
         }
     };
 }
@@ -135,12 +186,16 @@ macro_rules! direct_call_fn {
         /// `optixDirectCall`: runs the direct callable of callables record `sbt_index` with
         /// `args`, returning its result. `A` and `R` must be the types it was registered with
         /// (otherwise `CALLABLE_PARAMETER_MISMATCH`); a bad index raises `CALLABLE_INVALID_SBT`.
+        /// If the call raises (here or in the callable, even if the callable dropped the
+        /// interrupt), an [`Interrupt`] comes back and takes effect as
+        /// [`throw_exception`](Self::throw_exception) does: pass it on with `?`.
         pub fn direct_call<A: 'static, R: 'static>(
             &self,
             sbt_index: u32,
             args: A,
         ) -> Result<R, Interrupt> {
-            trace::direct_call(self.frame, sbt_index, args)
+            self.no_return
+                .call(|| trace::direct_call(self.frame, sbt_index, args))
         }
     };
 }
@@ -148,13 +203,16 @@ macro_rules! direct_call_fn {
 macro_rules! continuation_call_fn {
     () => {
         /// `optixContinuationCall`: runs the continuation callable of callables record
-        /// `sbt_index` with `args`; it may trace.
+        /// `sbt_index` with `args`; it may trace. If the call raises, an [`Interrupt`] comes
+        /// back and takes effect as [`throw_exception`](Self::throw_exception) does: pass it on
+        /// with `?`.
         pub fn continuation_call<A: 'static, R: 'static>(
             &self,
             sbt_index: u32,
             args: A,
         ) -> Result<R, Interrupt> {
-            trace::continuation_call(self.frame, sbt_index, args)
+            self.no_return
+                .call(|| trace::continuation_call(self.frame, sbt_index, args))
         }
     };
 }
@@ -194,8 +252,12 @@ macro_rules! payload_fns {
         pub fn payload(&self, i: usize) -> u32 {
             self.payload.get(i).copied().unwrap_or(0)
         }
-        /// `optixSetPayload_i`. Words past the trace's payload are ignored.
+        /// `optixSetPayload_i`. Words past the trace's payload are ignored, and so are writes
+        /// after a device call that does not return (in OptiX they are never reached).
         pub fn set_payload(&mut self, i: usize, v: u32) {
+            if self.no_return.is_set() {
+                return;
+            }
             if let Some(p) = self.payload.get_mut(i) {
                 *p = v;
             }
@@ -356,6 +418,7 @@ macro_rules! hit_queries {
 /// The context of a ray-generation program.
 pub struct RayGenCtx<'a, P> {
     pub(crate) frame: Frame<'a, P>,
+    pub(crate) no_return: NoReturn,
 }
 
 impl<P> RayGenCtx<'_, P> {
@@ -365,10 +428,12 @@ impl<P> RayGenCtx<'_, P> {
     continuation_call_fn!();
 
     /// `optixTrace`: traces a ray with `payload` as the payload words (copied in, and out when
-    /// the trace returns). An exception raised by the trace comes back as an [`Interrupt`] to
-    /// pass on with `?`.
+    /// the trace returns). An exception raised by the trace comes back as an [`Interrupt`]; it
+    /// takes effect as [`throw_exception`](Self::throw_exception) does (the launch index ends
+    /// even if the program drops it): pass it on with `?`.
     pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
-        trace::trace(self.frame, ray, payload)
+        self.no_return
+            .call(|| trace::trace(self.frame, ray, payload))
     }
 }
 
@@ -381,6 +446,7 @@ pub struct ClosestHitCtx<'a, P> {
     pub(crate) path: Option<&'a Path<'a>>,
     pub(crate) gas: Option<&'a crate::Gas>,
     pub(crate) place: &'a Placement,
+    pub(crate) no_return: NoReturn,
 }
 
 impl<P> ClosestHitCtx<'_, P> {
@@ -398,8 +464,10 @@ impl<P> ClosestHitCtx<'_, P> {
     }
 
     /// `optixTrace` from a closest-hit program (recursion, up to the pipeline's depth).
+    /// An exception it raises takes effect when it returns: pass it on with `?`.
     pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
-        trace::trace(self.frame, ray, payload)
+        self.no_return
+            .call(|| trace::trace(self.frame, ray, payload))
     }
 }
 
@@ -412,6 +480,7 @@ pub struct AnyHitCtx<'a, P> {
     pub(crate) path: Option<&'a Path<'a>>,
     pub(crate) gas: Option<&'a crate::Gas>,
     pub(crate) place: &'a Placement,
+    pub(crate) no_return: NoReturn,
 }
 
 impl<P> AnyHitCtx<'_, P> {
@@ -435,16 +504,23 @@ impl<P> AnyHitCtx<'_, P> {
         self.place.object_direction
     }
 
-    /// `optixIgnoreIntersection`: the candidate is not a hit and the interval stays. Return it
-    /// from the program (`return ctx.ignore_intersection();`); write the payload before.
+    /// `optixIgnoreIntersection`: the candidate is not a hit and the interval stays. It takes
+    /// effect when called: once the program returns, whatever it returns, the candidate is
+    /// ignored; later device calls of the program (a terminate, a throw, payload writes) do
+    /// nothing, as in OptiX they are never reached. Write the payload before, and leave the
+    /// program at once: `return ctx.ignore_intersection();` (or `?`).
     pub fn ignore_intersection(&self) -> ProgramResult {
-        Err(Interrupt(InterruptKind::IgnoreIntersection))
+        self.no_return
+            .call(|| Err(Interrupt(InterruptKind::IgnoreIntersection)))
     }
 
     /// `optixTerminateRay`: the candidate is accepted and traversal ends; the closest-hit
-    /// program then runs. Return it from the program.
+    /// program then runs. It takes effect when called, as
+    /// [`ignore_intersection`](Self::ignore_intersection) does: leave the program at once with
+    /// `return ctx.terminate_ray();` (or `?`).
     pub fn terminate_ray(&self) -> ProgramResult {
-        Err(Interrupt(InterruptKind::TerminateRay))
+        self.no_return
+            .call(|| Err(Interrupt(InterruptKind::TerminateRay)))
     }
 }
 
@@ -453,6 +529,7 @@ pub struct MissCtx<'a, P> {
     pub(crate) frame: Frame<'a, P>,
     pub(crate) ray: RayState,
     pub(crate) payload: &'a mut [u32],
+    pub(crate) no_return: NoReturn,
 }
 
 impl<P> MissCtx<'_, P> {
@@ -469,8 +546,10 @@ impl<P> MissCtx<'_, P> {
     }
 
     /// `optixTrace` from a miss program.
+    /// An exception it raises takes effect when it returns: pass it on with `?`.
     pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
-        trace::trace(self.frame, ray, payload)
+        self.no_return
+            .call(|| trace::trace(self.frame, ray, payload))
     }
 }
 
@@ -485,6 +564,7 @@ pub struct IntersectionCtx<'a, 'v, P> {
     pub(crate) reporter: &'v mut dyn trace::Reporter<P>,
     pub(crate) path: Option<&'v Path<'v>>,
     pub(crate) place: &'v Placement,
+    pub(crate) no_return: NoReturn,
 }
 
 impl<P> IntersectionCtx<'_, '_, P> {
@@ -531,8 +611,11 @@ impl<P> IntersectionCtx<'_, '_, P> {
     pub fn payload(&self, i: usize) -> u32 {
         self.reporter.payload_ref().get(i).copied().unwrap_or(0)
     }
-    /// `optixSetPayload_i`.
+    /// `optixSetPayload_i` (ignored after a device call that does not return).
     pub fn set_payload(&mut self, i: usize, v: u32) {
+        if self.no_return.is_set() {
+            return;
+        }
         if let Some(p) = self.reporter.payload().get_mut(i) {
             *p = v;
         }
@@ -542,13 +625,18 @@ impl<P> IntersectionCtx<'_, '_, P> {
     /// and up to `num_attribute_values` attribute words. Outside `[tmin, tmax]` it is ignored and `Ok(false)` comes
     /// back; otherwise the any-hit program runs: `Ok(false)` if it ignored the hit, `Ok(true)`
     /// if the hit was accepted (the interval then ends at `t`). If the any-hit program
-    /// terminated the ray, an [`Interrupt`] comes back: pass it on with `?`.
+    /// terminated the ray or raised, an [`Interrupt`] comes back; it takes effect when this
+    /// returns (traversal ends, whatever the program then returns, and later reports do
+    /// nothing): pass it on with `?`.
     pub fn report_intersection(
         &mut self,
         t: f32,
         hit_kind: u8,
         attributes: &[u32],
     ) -> Result<bool, Interrupt> {
+        if let Some(i) = self.no_return.get() {
+            return Err(i);
+        }
         if !(t >= self.ray.tmin && t <= self.tmax) {
             return Ok(false);
         }
@@ -567,7 +655,9 @@ impl<P> IntersectionCtx<'_, '_, P> {
         let n = attributes.len().min(limit);
         hit.attributes = [0; 8];
         hit.attributes[..n].copy_from_slice(&attributes[..n]);
-        let accepted = self.reporter.report(self.frame, &self.ray, &hit)?;
+        let accepted = self
+            .no_return
+            .call(|| self.reporter.report(self.frame, &self.ray, &hit))?;
         if accepted {
             self.tmax = t;
         }
@@ -603,6 +693,7 @@ impl<P> ExceptionCtx<'_, P> {
 /// The context of a direct callable: no payload, no tracing (guide §15).
 pub struct DirectCallableCtx<'a, P> {
     pub(crate) frame: Frame<'a, P>,
+    pub(crate) no_return: NoReturn,
 }
 
 impl<P> DirectCallableCtx<'_, P> {
@@ -614,6 +705,7 @@ impl<P> DirectCallableCtx<'_, P> {
 /// The context of a continuation callable: it may trace and call other callables (guide §15).
 pub struct ContinuationCallableCtx<'a, P> {
     pub(crate) frame: Frame<'a, P>,
+    pub(crate) no_return: NoReturn,
 }
 
 impl<P> ContinuationCallableCtx<'_, P> {
@@ -623,7 +715,9 @@ impl<P> ContinuationCallableCtx<'_, P> {
     continuation_call_fn!();
 
     /// `optixTrace` from a continuation callable.
+    /// An exception it raises takes effect when it returns: pass it on with `?`.
     pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
-        trace::trace(self.frame, ray, payload)
+        self.no_return
+            .call(|| trace::trace(self.frame, ray, payload))
     }
 }

@@ -5,7 +5,7 @@ use crate::ias::InstanceRecord;
 use crate::interrupt::{Interrupt, InterruptKind, ProgramResult};
 use crate::program::context::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx, Frame,
-    IntersectionCtx, LaunchShared, MissCtx, RayGenCtx,
+    IntersectionCtx, LaunchShared, MissCtx, NoReturn, RayGenCtx,
 };
 use crate::program::group::GroupPrograms;
 use crate::traversal::{
@@ -203,8 +203,6 @@ struct PipelineVisitor<'a, 'p, 's, P> {
     payload: &'p mut [u32],
     best: Option<HitState>,
     pending: Option<Interrupt>,
-    /// An any-hit program terminated the ray during a report.
-    terminated: bool,
 }
 
 impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
@@ -287,8 +285,12 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
                     path: self.path.as_ref(),
                     gas: self.gas,
                     place: &self.place,
+                    no_return: NoReturn::default(),
                 };
-                match ah(&mut ctx) {
+                // What the program called first wins over what it returned (§13.13): an
+                // ignore or terminate it dropped still takes effect.
+                let r = ah(&mut ctx);
+                match ctx.no_return.outcome(r) {
                     Ok(()) => {}
                     Err(Interrupt(InterruptKind::IgnoreIntersection)) => return Decision::Ignore,
                     Err(Interrupt(InterruptKind::TerminateRay)) => terminate = true,
@@ -467,9 +469,12 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             reporter: self,
             path: path.as_ref(),
             place: &place,
+            no_return: NoReturn::default(),
         };
         let result = is(&mut ctx);
-        let mut stop = match result {
+        // A terminate or exception from a report (recorded at the report) ends traversal even
+        // if the program dropped it: in OptiX the report never returns.
+        let mut stop = match ctx.no_return.outcome(result) {
             Ok(()) => false,
             Err(Interrupt(InterruptKind::TerminateRay)) => true,
             Err(Interrupt(InterruptKind::IgnoreIntersection)) => false,
@@ -478,8 +483,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
                 true
             }
         };
-        // A terminate or exception from a report ends traversal even if the program dropped it.
-        stop |= self.terminated || self.pending.is_some();
+        stop |= self.pending.is_some();
         let after = self.best.map(|h| h.t);
         let t = if after != before { after } else { None };
         (t, stop)
@@ -499,13 +503,10 @@ impl<P> Reporter<P> for PipelineVisitor<'_, '_, '_, P> {
         match self.candidate(*hit, gflags) {
             Decision::Ignore => Ok(false),
             Decision::Accept => Ok(true),
-            Decision::AcceptAndTerminate => {
-                // Remembered, so that an intersection program that drops the interrupt still
-                // cannot continue traversal: in OptiX the report never returns.
-                self.terminated = true;
-                Err(Interrupt(InterruptKind::TerminateRay))
-            }
-            // The exception stays pending for the same reason.
+            // The intersection program's context records the interrupt, so that a program that
+            // drops it still cannot continue traversal: in OptiX the report never returns.
+            Decision::AcceptAndTerminate => Err(Interrupt(InterruptKind::TerminateRay)),
+            // The exception also stays pending.
             Decision::Abort => Err(self
                 .pending
                 .unwrap_or(Interrupt(InterruptKind::TerminateRay))),
@@ -655,7 +656,6 @@ fn trace_into<P>(
             payload: &mut *payload,
             best: None,
             pending: None,
-            terminated: false,
         };
         with_stack(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
         if let Some(e) = v.pending {
@@ -682,8 +682,10 @@ fn trace_into<P>(
             },
             ray: *state,
             payload,
+            no_return: NoReturn::default(),
         };
-        return only_exceptions(ms(&mut ctx));
+        let r = ms(&mut ctx);
+        return only_exceptions(ctx.no_return.outcome(r));
     }
     Ok(())
 }
@@ -716,12 +718,15 @@ impl<P> PipelineVisitor<'_, '_, '_, P> {
             path: self.best_path.as_ref(),
             gas: self.best_gas,
             place: &self.best_place,
+            no_return: NoReturn::default(),
         };
-        only_exceptions(ch(&mut ctx))
+        let r = ch(&mut ctx);
+        only_exceptions(ctx.no_return.outcome(r))
     }
 }
 
-/// Closest-hit and miss programs cannot ignore or terminate; only exceptions pass.
+/// Closest-hit and miss programs cannot ignore or terminate; only exceptions pass (whether
+/// returned or only recorded at the call: the caller passes the outcome).
 fn only_exceptions(r: ProgramResult) -> ProgramResult {
     match r {
         Err(Interrupt(InterruptKind::Exception(e))) => Err(Interrupt(InterruptKind::Exception(e))),
@@ -746,8 +751,13 @@ pub(crate) fn run_raygen<P>(
     let GroupPrograms::RayGen(rg) = &launch.pipeline.groups[raygen_group].inner.programs else {
         return None;
     };
-    let mut ctx = RayGenCtx { frame };
-    let Err(Interrupt(InterruptKind::Exception(e))) = rg(&mut ctx) else {
+    let mut ctx = RayGenCtx {
+        frame,
+        no_return: NoReturn::default(),
+    };
+    // An exception recorded at a call ends the launch index whatever the program returned.
+    let r = rg(&mut ctx);
+    let Err(Interrupt(InterruptKind::Exception(e))) = ctx.no_return.outcome(r) else {
         return None;
     };
     if let Some(region) = &launch.sbt.exception {
@@ -810,10 +820,13 @@ macro_rules! callable_call {
                     calls,
                     ..frame
                 },
+                no_return: NoReturn::default(),
             };
             // The erased program fills the result half of the caller's (args, result) slot.
             let mut slot: (Option<A>, Option<R>) = (Some(args), None);
-            let ok = program(&mut ctx, &mut slot)?;
+            // An exception the callable raised ends the launch index even if it dropped it.
+            let r = program(&mut ctx, &mut slot);
+            let ok = ctx.no_return.outcome(r)?;
             match (ok, slot.1) {
                 (true, Some(r)) => Ok(r),
                 _ => Err(Interrupt::exception(
