@@ -30,11 +30,25 @@ impl Rng {
     }
 }
 
-/// Builds a GAS over a mesh.
+/// The build input of a mesh.
+fn mesh_input(mesh: &Mesh) -> oxray::BuildInput<'_> {
+    TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles))
+        .into()
+}
+
+/// Builds a GAS over a mesh on the CPU, for the CPU benchmark's per-ray and instanced queries.
 pub fn build_gas(mesh: &Mesh, flags: BuildFlags) -> Result<Gas, oxray::BuildError> {
-    let input = TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
-        .indices(IndexBuffer::u32x3(&mesh.triangles));
-    Gas::build(&BuildOptions::new(flags), &[input.into()])
+    Gas::build(&BuildOptions::new(flags), &[mesh_input(mesh)])
+}
+
+/// Builds a GAS over a mesh on `device`.
+pub fn build_gas_on(
+    device: &oxray::Device,
+    mesh: &Mesh,
+    flags: BuildFlags,
+) -> Result<oxray::Gas, oxray::BuildError> {
+    device.build_gas(&BuildOptions::new(flags), &[mesh_input(mesh)])
 }
 
 fn center_radius(mesh: &Mesh) -> (Vec3, f32) {

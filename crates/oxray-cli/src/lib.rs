@@ -1,10 +1,10 @@
 //! The library behind the `oxray` command-line tool: the logic of its `bench`, `raycast`, `info`
-//! and GPU commands. Scene and mesh loading live in `oxray-scene`, the path tracer in
+//! commands on any device. Scene and mesh loading live in `oxray-scene`, the path tracer in
 //! `oxray-render`.
 
 #![warn(missing_docs)]
 
 pub mod bench;
-pub mod gpu;
+pub mod device;
 pub mod info;
 pub mod raycast;

@@ -83,10 +83,10 @@ enum Command {
         /// Worker threads (default: all cores).
         #[arg(long)]
         threads: Option<usize>,
-        /// Where to trace: the CPU, or GPU 0 through CUDA (the GAS is built on the CPU either
-        /// way; without CUDA, --backend cuda is an error).
-        #[arg(long, value_enum, default_value_t)]
-        backend: oxray_cli::gpu::Backend,
+        /// The device that builds and traces: cpu, cuda (GPU 0), cuda:N or auto (a GPU where
+        /// there is one). Asking for CUDA without one is an error.
+        #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
+        backend: String,
     },
     /// Triangle and instance counts and BVH statistics of a mesh or scene: for glTF, one GAS
     /// per mesh and an IAS over the node placements, as the renderer builds them.
@@ -117,10 +117,10 @@ enum Command {
         /// (CPU backend only).
         #[arg(long)]
         instances: Option<usize>,
-        /// cpu: the CPU table. cuda: the same ray sets on GPU 0 next to the CPU, with hit
-        /// agreement (without CUDA, an error).
-        #[arg(long, value_enum, default_value_t)]
-        backend: oxray_cli::gpu::Backend,
+        /// cpu: the CPU table. cuda, cuda:N, auto: the same ray sets on that device next to
+        /// the CPU, with hit agreement (asking for CUDA without one is an error).
+        #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
+        backend: String,
     },
 }
 
@@ -271,29 +271,17 @@ fn run(cli: Cli) -> Result<()> {
                 .num_threads(threads.unwrap_or(0))
                 .build()
                 .context("cannot start the worker threads")?;
-            if backend == oxray_cli::gpu::Backend::Cuda {
-                let ctx = oxray_cli::gpu::open()?;
-                let r =
-                    pool.install(|| oxray_cli::gpu::raycast(&ctx, &mesh, &rays, &out, occlusion))?;
-                println!(
-                    "{} rays, {} {} ({:.2} Mrays/s kernel, {:.2} Mrays/s with transfers on {})",
-                    r.rays,
-                    r.hits,
-                    if occlusion { "occluded" } else { "hits" },
-                    r.kernel_mrays_per_s,
-                    r.transfer_mrays_per_s,
-                    oxray_cli::gpu::describe(&ctx)
-                );
-                return Ok(());
-            }
-            let r = pool.install(|| oxray_cli::raycast::raycast(&mesh, &rays, &out, occlusion))?;
+            let device = oxray_cli::device::open(&backend)?;
+            let r = pool
+                .install(|| oxray_cli::device::raycast(&device, &mesh, &rays, &out, occlusion))?;
             println!(
-                "{} rays, {} {} ({:.2} Mrays/s on {} threads)",
+                "{} rays, {} {} ({:.2} Mrays/s traced, {:.2} Mrays/s with transfers on {})",
                 r.rays,
                 r.hits,
                 if occlusion { "occluded" } else { "hits" },
-                r.mrays_per_s,
-                pool.current_num_threads()
+                r.traced_mrays_per_s,
+                r.transfer_mrays_per_s,
+                pool.install(|| device.describe())
             );
             Ok(())
         }
@@ -323,12 +311,14 @@ fn run(cli: Cli) -> Result<()> {
             if runs == 0 {
                 bail!("--runs must be at least 1");
             }
-            let cuda = match backend {
-                oxray_cli::gpu::Backend::Cpu => None,
-                oxray_cli::gpu::Backend::Cuda if instances.is_some() => {
+            // The CPU table (the default) has every column; another device gets the comparison
+            // table of its batched queries against the CPU's.
+            let device = match backend.as_str() {
+                "cpu" => None,
+                _ if instances.is_some() => {
                     bail!("--instances needs --backend cpu (the CUDA backend traces GASes only)")
                 }
-                oxray_cli::gpu::Backend::Cuda => Some(oxray_cli::gpu::open()?),
+                name => Some(oxray_cli::device::open(name)?),
             };
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
@@ -360,9 +350,9 @@ fn run(cli: Cli) -> Result<()> {
                 pool.current_num_threads(),
                 side * side
             );
-            if let Some(ctx) = &cuda {
-                println!("GPU: {}", oxray_cli::gpu::describe(ctx));
-                println!("{}", oxray_cli::gpu::BENCH_HEADER);
+            if let Some(device) = &device {
+                println!("device: {}", device.describe());
+                println!("{}", oxray_cli::device::BENCH_HEADER);
             } else {
                 println!(
                     "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace) | pipeline primary closest vs the same rays as queries, alternated |"
@@ -377,9 +367,10 @@ fn run(cli: Cli) -> Result<()> {
                         .and_then(|_| bench::export_hits(dir, name, &gas, &rays))
                         .with_context(|| format!("cannot write to {}", dir.display()))?;
                 }
-                if let Some(ctx) = &cuda {
-                    let rows =
-                        pool.install(|| oxray_cli::gpu::bench_mesh(ctx, name, mesh, &rays, runs))?;
+                if let Some(device) = &device {
+                    let rows = pool.install(|| {
+                        oxray_cli::device::bench_mesh(device, name, mesh, &rays, runs)
+                    })?;
                     for row in rows {
                         println!("{row}");
                     }

@@ -2,7 +2,6 @@
 //! mesh's acceleration structure.
 
 use crate::bench::build_gas;
-use oxray::cpu::Gas;
 use oxray::{BuildFlags, Hit, Ray};
 use oxray_scene::mesh::Mesh;
 use std::path::Path;
@@ -41,17 +40,6 @@ pub enum RaycastError {
     Build(#[from] oxray::BuildError),
 }
 
-/// What a ray cast did.
-#[derive(Clone, Copy, Debug)]
-pub struct RaycastReport {
-    /// Rays cast.
-    pub rays: usize,
-    /// Rays that hit.
-    pub hits: usize,
-    /// Mrays/s of the query itself (without file I/O or the build).
-    pub mrays_per_s: f64,
-}
-
 fn read(path: &Path) -> Result<Vec<u8>, RaycastError> {
     std::fs::read(path).map_err(|source| RaycastError::Io {
         path: path.display().to_string(),
@@ -83,13 +71,14 @@ pub fn parse_rays(bytes: &[u8], path: &str) -> Result<Vec<Ray>, RaycastError> {
         .collect())
 }
 
-/// Loads the mesh and the ray file of a ray cast and builds the mesh's GAS (fast-trace
-/// flags), as `oxray raycast` does for every backend.
-pub fn load_inputs(mesh_path: &Path, rays_path: &Path) -> Result<(Gas, Vec<Ray>), RaycastError> {
+/// Loads the mesh and the ray file of a ray cast.
+pub fn load_mesh_and_rays(
+    mesh_path: &Path,
+    rays_path: &Path,
+) -> Result<(Mesh, Vec<Ray>), RaycastError> {
     let mesh = Mesh::load(mesh_path)?;
     let rays = parse_rays(&read(rays_path)?, &rays_path.display().to_string())?;
-    let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE)?;
-    Ok((gas, rays))
+    Ok((mesh, rays))
 }
 
 /// Encodes closest hits in the hit file format: `t, primitive, u, v` per ray, with `t = +inf`
@@ -121,45 +110,6 @@ pub fn write_results(path: &Path, bytes: &[u8]) -> Result<(), RaycastError> {
     std::fs::write(path, bytes).map_err(|source| RaycastError::Io {
         path: path.display().to_string(),
         source,
-    })
-}
-
-/// Casts the rays of `rays_path` at the mesh and writes the hits (or, with `occlusion`, one u32
-/// 0/1 per ray) to `out_path`. Primitive indices are triangle indices in file order.
-pub fn raycast(
-    mesh_path: &Path,
-    rays_path: &Path,
-    out_path: &Path,
-    occlusion: bool,
-) -> Result<RaycastReport, RaycastError> {
-    let (gas, rays) = load_inputs(mesh_path, rays_path)?;
-    let (out, hits, seconds) = if occlusion {
-        let mut occ = vec![false; rays.len()];
-        let t = Instant::now();
-        gas.occluded_batch(&rays, &mut occ).expect("lengths match");
-        let s = t.elapsed().as_secs_f64();
-        (
-            encode_occlusion(&occ),
-            occ.iter().filter(|&&o| o).count(),
-            s,
-        )
-    } else {
-        let mut hits = vec![None; rays.len()];
-        let t = Instant::now();
-        gas.intersect_batch(&rays, &mut hits)
-            .expect("lengths match");
-        let s = t.elapsed().as_secs_f64();
-        (
-            encode_hits(&hits),
-            hits.iter().filter(|h| h.is_some()).count(),
-            s,
-        )
-    };
-    write_results(out_path, &out)?;
-    Ok(RaycastReport {
-        rays: rays.len(),
-        hits,
-        mrays_per_s: rays.len() as f64 / seconds.max(1e-9) / 1e6,
     })
 }
 

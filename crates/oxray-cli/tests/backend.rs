@@ -29,9 +29,9 @@ fn s(p: &Path) -> String {
 
 /// Whether this machine can run the CUDA backend, decided as the binary decides it.
 fn gpu_available() -> bool {
-    match oxray_cuda::CudaContext::new() {
-        Ok(ctx) => {
-            println!("GPU: {}", ctx.device().name);
+    match oxray::Device::cuda(0) {
+        Ok(device) => {
+            println!("GPU: {}", device.describe());
             true
         }
         Err(e) => {
@@ -143,7 +143,7 @@ fn raycast_cuda_matches_the_cpu_or_fails_with_one_error_line() {
                 "{}",
                 String::from_utf8_lossy(&cuda.stderr)
             );
-            assert!(text.contains("Mrays/s kernel"), "{text}");
+            assert!(text.contains("Mrays/s traced"), "{text}");
             assert!(text.contains("Mrays/s with transfers"), "{text}");
             // Same counts on the summary line, and the same bytes in the file.
             let count = |o: &Output| {
@@ -195,7 +195,7 @@ fn bench_cuda_compares_with_the_cpu_or_fails_with_one_error_line() {
             "{}",
             String::from_utf8_lossy(&out.stderr)
         );
-        assert!(text.contains("| GPU kernel Mrays/s |"), "{text}");
+        assert!(text.contains("| device traced Mrays/s |"), "{text}");
         let rows: Vec<&str> = text
             .lines()
             .filter(|l| l.starts_with("| heightfield |"))

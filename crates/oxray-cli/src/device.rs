@@ -1,0 +1,349 @@
+//! `oxray raycast` and `oxray bench` on any device (`--backend cpu|cuda|cuda:N|auto`), through
+//! the library's [`Device`]: the same host code builds the GAS and traces the rays on every
+//! device. Where a device is asked for that this machine lacks, the command fails with one
+//! error line, never a silent fall-back to the CPU.
+
+use crate::bench::{build_gas_on, median, BenchRays};
+use crate::raycast::{
+    encode_hits, encode_occlusion, load_mesh_and_rays, write_results, RaycastError,
+};
+use oxray::{BatchKind, BuildFlags, Device, DeviceError, Hit, QueryError, Ray};
+use oxray_scene::mesh::Mesh;
+use std::fmt;
+use std::path::Path;
+use std::time::Instant;
+use thiserror::Error;
+
+/// Why a command on a device failed.
+#[derive(Debug, Error)]
+pub enum DeviceCommandError {
+    /// The device could not be opened (for CUDA: this machine has none).
+    #[error("--backend {name}: {source}; use --backend cpu")]
+    Open {
+        /// The name asked for.
+        name: String,
+        /// Why.
+        source: DeviceError,
+    },
+    /// Loading the inputs, building the GAS or writing the results failed.
+    #[error(transparent)]
+    Raycast(#[from] RaycastError),
+    /// A query was refused or the device failed.
+    #[error(transparent)]
+    Query(#[from] QueryError),
+    /// The GAS of a benchmark mesh could not be built.
+    #[error(transparent)]
+    Build(#[from] oxray::BuildError),
+}
+
+/// Checks a `--backend` value without opening the device (for the argument parser).
+pub fn parse_backend(name: &str) -> Result<String, String> {
+    let n = name.trim().to_ascii_lowercase();
+    let ok = matches!(n.as_str(), "cpu" | "cuda" | "gpu" | "auto")
+        || n.strip_prefix("cuda:")
+            .is_some_and(|k| k.parse::<usize>().is_ok());
+    if ok {
+        Ok(n)
+    } else {
+        Err("expected cpu, cuda, cuda:N or auto".into())
+    }
+}
+
+/// Opens the device named by `--backend`.
+pub fn open(name: &str) -> Result<Device, DeviceCommandError> {
+    Device::from_name(name).map_err(|source| DeviceCommandError::Open {
+        name: name.to_string(),
+        source,
+    })
+}
+
+/// Median seconds of `runs` calls of `f` after one warm-up call (which allocates the reused
+/// buffers and lets the device settle).
+fn time<E>(runs: usize, mut f: impl FnMut() -> Result<(), E>) -> Result<f64, E> {
+    f()?;
+    let mut times = Vec::with_capacity(runs);
+    for _ in 0..runs.max(1) {
+        let t = Instant::now();
+        f()?;
+        times.push(t.elapsed().as_secs_f64());
+    }
+    Ok(median(times))
+}
+
+fn mrays(n: usize, seconds: f64) -> f64 {
+    n as f64 / seconds.max(1e-12) / 1e6
+}
+
+/// What a ray cast did.
+#[derive(Clone, Copy, Debug)]
+pub struct RaycastReport {
+    /// Rays cast.
+    pub rays: usize,
+    /// Rays that hit (or, for occlusion, were occluded).
+    pub hits: usize,
+    /// Mrays/s of the traversal alone, rays and results resident on the device.
+    pub traced_mrays_per_s: f64,
+    /// Mrays/s of the one-call query: rays in, traversal, results out.
+    pub transfer_mrays_per_s: f64,
+}
+
+/// `oxray raycast`: builds the mesh's GAS on `device` (fast-trace flags), casts the rays of
+/// `rays_path` and writes the hits (or, with `occlusion`, one u32 0/1 per ray) to `out_path`:
+/// the same bytes on every device. Each speed is that of one call after a warm-up call.
+pub fn raycast(
+    device: &Device,
+    mesh_path: &Path,
+    rays_path: &Path,
+    out_path: &Path,
+    occlusion: bool,
+) -> Result<RaycastReport, DeviceCommandError> {
+    let (mesh, rays) = load_mesh_and_rays(mesh_path, rays_path)?;
+    let gas = build_gas_on(device, &mesh, BuildFlags::PREFER_FAST_TRACE)?;
+    let root = gas.handle();
+    let n = rays.len();
+    let kind = if occlusion {
+        BatchKind::Any
+    } else {
+        BatchKind::Closest
+    };
+    let traced = {
+        let mut batch = device.upload_rays(&rays, kind)?;
+        time(1, || device.trace_batch(&root, &mut batch))?
+    };
+    let (out, hits, with_transfers) = if occlusion {
+        let mut occ = vec![false; n];
+        let with = time(1, || device.intersect_any(&root, &rays, &mut occ))?;
+        let count = occ.iter().filter(|&&o| o).count();
+        (encode_occlusion(&occ), count, with)
+    } else {
+        let mut hits = vec![None; n];
+        let with = time(1, || device.intersect_closest(&root, &rays, &mut hits))?;
+        let count = hits.iter().filter(|h| h.is_some()).count();
+        (encode_hits(&hits), count, with)
+    };
+    write_results(out_path, &out)?;
+    Ok(RaycastReport {
+        rays: n,
+        hits,
+        traced_mrays_per_s: mrays(n, traced),
+        transfer_mrays_per_s: mrays(n, with_transfers),
+    })
+}
+
+/// The header of the `oxray bench --backend DEVICE` table (markdown, two lines).
+pub const BENCH_HEADER: &str = "| mesh | tris | rays | query | CPU Mrays/s | device traced Mrays/s | device with transfers Mrays/s | traced / CPU | hit rate | hits identical to CPU |\n|---|---:|---|---|---:|---:|---:|---:|---:|---:|";
+
+/// One row of the device benchmark: one ray set and one query on one mesh.
+#[derive(Clone, Debug)]
+pub struct DeviceBenchRow {
+    /// Mesh name.
+    pub name: String,
+    /// Triangles.
+    pub triangles: usize,
+    /// `coherent`, `incoherent` or `shadow`.
+    pub set: &'static str,
+    /// `closest` or `any`.
+    pub query: &'static str,
+    /// Mrays/s of the CPU device on the same rays and build.
+    pub cpu: f64,
+    /// Mrays/s of the traversal alone on the device (rays and results resident).
+    pub traced: f64,
+    /// Mrays/s of the one-call query (rays in, traversal, results out).
+    pub with_transfers: f64,
+    /// Percentage of rays whose device result equals the CPU's: the whole [`Hit`] for closest
+    /// hit, the flag for any hit.
+    pub identical_pct: f64,
+    /// Percentage of rays that hit.
+    pub hit_rate_pct: f64,
+}
+
+impl fmt::Display for DeviceBenchRow {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "| {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.1}x | {:.1}% | {:.4}% |",
+            self.name,
+            self.triangles,
+            self.set,
+            self.query,
+            self.cpu,
+            self.traced,
+            self.with_transfers,
+            self.traced / self.cpu.max(1e-12),
+            self.hit_rate_pct,
+            self.identical_pct
+        )
+    }
+}
+
+/// `oxray bench --backend DEVICE` on one mesh: the GAS of the CPU benchmark (default build
+/// flags) built on `device` and on the CPU, and the benchmark's ray sets traced on both, closest
+/// and any hit, each timed as the median of `runs` after a warm-up. Returns six rows: closest
+/// and any hit for the coherent (primary), incoherent (diffuse) and shadow rays.
+pub fn bench_mesh(
+    device: &Device,
+    name: &str,
+    mesh: &Mesh,
+    rays: &BenchRays,
+    runs: usize,
+) -> Result<Vec<DeviceBenchRow>, DeviceCommandError> {
+    let cpu = Device::cpu();
+    let on_cpu = build_gas_on(&cpu, mesh, BuildFlags::empty())?.handle();
+    let on_device = build_gas_on(device, mesh, BuildFlags::empty())?.handle();
+    let mut rows = Vec::with_capacity(6);
+    for (set, rays) in [
+        ("coherent", &rays.coherent),
+        ("incoherent", &rays.incoherent),
+        ("shadow", &rays.shadow),
+    ] {
+        let [closest, any] = bench_set(device, &on_cpu, &on_device, rays, runs)?;
+        for (query, r) in [("closest", closest), ("any", any)] {
+            rows.push(DeviceBenchRow {
+                name: name.to_string(),
+                triangles: mesh.triangles.len(),
+                set,
+                query,
+                ..r
+            });
+        }
+    }
+    Ok(rows)
+}
+
+/// Times one ray set, closest and any hit; the rows' names are filled in by the caller.
+fn bench_set(
+    device: &Device,
+    on_cpu: &oxray::TraversableHandle,
+    on_device: &oxray::TraversableHandle,
+    rays: &[Ray],
+    runs: usize,
+) -> Result<[DeviceBenchRow; 2], DeviceCommandError> {
+    let n = rays.len();
+    let cpu = Device::cpu();
+    let pct = |k: usize| 100.0 * k as f64 / n.max(1) as f64;
+    let row = |cpu, traced, with_transfers, same, hit| DeviceBenchRow {
+        name: String::new(),
+        triangles: 0,
+        set: "",
+        query: "",
+        cpu: mrays(n, cpu),
+        traced: mrays(n, traced),
+        with_transfers: mrays(n, with_transfers),
+        identical_pct: pct(same),
+        hit_rate_pct: pct(hit),
+    };
+
+    let mut cpu_hits: Vec<Option<Hit>> = vec![None; n];
+    let cpu_s = time(runs, || cpu.intersect_closest(on_cpu, rays, &mut cpu_hits))?;
+    let mut batch = device.upload_rays(rays, BatchKind::Closest)?;
+    let traced = time(runs, || device.trace_batch(on_device, &mut batch))?;
+    drop(batch);
+    let mut dev_hits: Vec<Option<Hit>> = vec![None; n];
+    let with = time(runs, || {
+        device.intersect_closest(on_device, rays, &mut dev_hits)
+    })?;
+    let same = cpu_hits
+        .iter()
+        .zip(&dev_hits)
+        .filter(|(c, g)| c == g)
+        .count();
+    let hit = cpu_hits.iter().filter(|h| h.is_some()).count();
+    let closest = row(cpu_s, traced, with, same, hit);
+    drop((cpu_hits, dev_hits));
+
+    let mut cpu_occ = vec![false; n];
+    let cpu_s = time(runs, || cpu.intersect_any(on_cpu, rays, &mut cpu_occ))?;
+    let mut batch = device.upload_rays(rays, BatchKind::Any)?;
+    let traced = time(runs, || device.trace_batch(on_device, &mut batch))?;
+    drop(batch);
+    let mut dev_occ = vec![false; n];
+    let with = time(runs, || device.intersect_any(on_device, rays, &mut dev_occ))?;
+    let same = cpu_occ.iter().zip(&dev_occ).filter(|(c, g)| c == g).count();
+    let hit = cpu_occ.iter().filter(|&&o| o).count();
+    Ok([closest, row(cpu_s, traced, with, same, hit)])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_device_is_reported_in_one_line_that_suggests_the_cpu() {
+        let e = DeviceCommandError::Open {
+            name: "cuda".into(),
+            source: DeviceError::CudaUnavailable("no CUDA driver found".into()),
+        };
+        let msg = e.to_string();
+        assert!(msg.contains("CUDA is not available"), "{msg}");
+        assert!(msg.contains("--backend cpu"), "{msg}");
+        assert_eq!(msg.lines().count(), 1, "{msg}");
+    }
+
+    #[test]
+    fn backend_names_are_checked_before_any_device_is_opened() {
+        for ok in ["cpu", "CUDA", "cuda:1", "auto"] {
+            assert!(parse_backend(ok).is_ok(), "{ok}");
+        }
+        for bad in ["bogus", "cuda:x", "cuda:", ""] {
+            assert!(parse_backend(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn open_fails_cleanly_or_opens_a_device() {
+        assert_eq!(open("cpu").unwrap().kind(), oxray::BackendKind::Cpu);
+        match open("cuda") {
+            Ok(d) => assert!(d.describe().contains("sm_")),
+            Err(e) => assert!(e.to_string().contains("--backend cpu"), "{e}"),
+        }
+    }
+
+    #[test]
+    fn raycast_on_the_cpu_device_traces_the_ray_file() {
+        let dir = std::env::temp_dir().join(format!("oxray-device-raycast-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mesh = dir.join("tri.obj");
+        std::fs::write(&mesh, "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+        let rays: Vec<u8> = [
+            [0.0f32, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY],
+            [5.0, 5.0, 1.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY],
+        ]
+        .iter()
+        .flatten()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
+        let rays_path = dir.join("rays.bin");
+        std::fs::write(&rays_path, rays).unwrap();
+        let out = dir.join("hits.bin");
+        let r = raycast(&Device::cpu(), &mesh, &rays_path, &out, false).unwrap();
+        assert_eq!((r.rays, r.hits), (2, 1));
+        let bytes = std::fs::read(&out).unwrap();
+        assert_eq!(f32::from_le_bytes(bytes[0..4].try_into().unwrap()), 1.0);
+        assert_eq!(
+            u32::from_le_bytes(bytes[20..24].try_into().unwrap()),
+            u32::MAX
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn bench_rows_print_as_markdown_rows_of_the_header() {
+        let r = DeviceBenchRow {
+            name: "m".into(),
+            triangles: 3,
+            set: "coherent",
+            query: "closest",
+            cpu: 10.0,
+            traced: 500.0,
+            with_transfers: 100.0,
+            identical_pct: 100.0,
+            hit_rate_pct: 50.0,
+        };
+        let line = r.to_string();
+        let columns = |s: &str| s.matches('|').count();
+        let header = BENCH_HEADER.lines().next().unwrap_or_default();
+        assert_eq!(columns(&line), columns(header), "{line}");
+        assert!(line.contains("| 50.0x |"), "{line}");
+        assert!(line.contains("| 50.0% | 100.0000% |"), "{line}");
+    }
+}
