@@ -8,7 +8,7 @@ use glam::Vec3;
 /// The empty box has `min = +inf` and `max = -inf`, so that growing it by any point gives that point.
 ///
 /// ```
-/// use oxray::Aabb;
+/// use oxray_core::Aabb;
 /// use glam::Vec3;
 /// let mut b = Aabb::EMPTY;
 /// b.grow(Vec3::ZERO);

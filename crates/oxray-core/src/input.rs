@@ -204,7 +204,7 @@ impl<'a> SbtIndexOffsets<'a> {
 /// A triangle build input (`OptixBuildInputTriangleArray`, guide §5.1).
 ///
 /// ```
-/// use oxray::{GeometryFlags, IndexBuffer, TriangleInput, VertexBuffer};
+/// use oxray_core::{GeometryFlags, IndexBuffer, TriangleInput, VertexBuffer};
 /// let vertices = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
 /// let triangles = [[0u32, 1, 2]];
 /// let input = TriangleInput::new(VertexBuffer::f32x3(&vertices))

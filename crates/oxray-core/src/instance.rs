@@ -38,7 +38,7 @@ pub const MAX_TRAVERSABLE_GRAPH_DEPTH: u32 = 31;
 /// An instance of a traversable (`OptixInstance`).
 ///
 /// ```
-/// use oxray::{Instance, Transform, TraversableHandle};
+/// use oxray_core::{Instance, Transform, TraversableHandle};
 /// use glam::Vec3;
 /// let instance = Instance::new(TraversableHandle::NULL)
 ///     .transform(Transform::from_translation(Vec3::X))

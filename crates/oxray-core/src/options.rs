@@ -53,7 +53,7 @@ pub enum BuildOperation {
 /// Options of an acceleration-structure build (`OptixAccelBuildOptions`).
 ///
 /// ```
-/// use oxray::{BuildFlags, BuildOptions};
+/// use oxray_core::{BuildFlags, BuildOptions};
 /// let opts = BuildOptions::new(BuildFlags::PREFER_FAST_TRACE);
 /// assert_eq!(opts.flags, BuildFlags::PREFER_FAST_TRACE);
 /// ```

@@ -25,7 +25,7 @@ type LogFn = Arc<dyn Fn(LogLevel, &str, &str) + Send + Sync>;
 /// The device context (`OptixDeviceContext`): validation mode and logging.
 ///
 /// ```
-/// use oxray::{DeviceContext, LogLevel};
+/// use oxray_core::{DeviceContext, LogLevel};
 /// let ctx = DeviceContext::new()
 ///     .validation_mode(true)
 ///     .log_callback(LogLevel::Warning, |level, tag, message| eprintln!("[{level:?}][{tag}] {message}"));

@@ -44,8 +44,8 @@ impl SbtHeader {
 /// A region of the SBT: `count` records `stride` bytes apart, each a header followed by data.
 ///
 /// ```
-/// use oxray::sbt::SbtRegion;
-/// # use oxray::sbt::SbtHeader;
+/// use oxray_core::sbt::SbtRegion;
+/// # use oxray_core::sbt::SbtHeader;
 /// # let header = SbtHeader([0; 32]);
 /// // Two records whose data is an RGB colour; the stride is rounded up to 16 bytes.
 /// let region = SbtRegion::from_records(&[(header, [1.0f32, 0.0, 0.0]), (header, [0.0, 1.0, 0.0])]);
@@ -143,7 +143,7 @@ pub struct ShaderBindingTable {
 /// bits of the trace's stride and offset count (§12).
 ///
 /// ```
-/// use oxray::sbt::hit_group_index;
+/// use oxray_core::sbt::hit_group_index;
 /// // §7.3.5: instance offset 6, SBT-GAS index 2, stride 2, ray type 1.
 /// assert_eq!(hit_group_index(6, 2, 2, 1), 11);
 /// // Bits above the fourth are ignored.

@@ -9,7 +9,7 @@ use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 /// `[m20 m21 m22 t2]`.
 ///
 /// ```
-/// use oxray::Transform;
+/// use oxray_core::Transform;
 /// use glam::Vec3;
 /// let t = Transform::from_translation(Vec3::new(1.0, 2.0, 3.0));
 /// assert_eq!(t.transform_point(Vec3::ZERO), Vec3::new(1.0, 2.0, 3.0));

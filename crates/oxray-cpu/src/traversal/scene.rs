@@ -110,6 +110,14 @@ impl<'s> NodeRef<'s> {
     /// The CPU structure behind a handle, borrowed; `None` for the null handle or a structure
     /// of another backend (which a CPU traversal cannot enter).
     pub fn of(handle: &'s oxray_core::TraversableHandle) -> Option<NodeRef<'s>> {
+        // A static transform reports its child's backend: over another device's structure, it
+        // cannot be entered either.
+        if !matches!(
+            handle.backend(),
+            Some(oxray_core::BackendKind::Cpu | oxray_core::BackendKind::Any)
+        ) {
+            return None;
+        }
         if let Some(g) = handle.downcast_ref::<Gas>() {
             return Some(NodeRef::Gas(g));
         }
