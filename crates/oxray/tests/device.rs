@@ -114,7 +114,10 @@ fn resident_batches_give_the_results_of_the_one_call_queries() {
         let mut want = vec![None; rays.len()];
         device.intersect_closest(&root, &rays, &mut want).unwrap();
         let mut batch = device.upload_rays(&rays, BatchKind::Closest).unwrap();
-        assert_eq!((batch.len(), batch.kind()), (rays.len(), BatchKind::Closest));
+        assert_eq!(
+            (batch.len(), batch.kind()),
+            (rays.len(), BatchKind::Closest)
+        );
         assert_eq!(batch.device_kind(), device.kind());
         device.trace_batch(&root, &mut batch).unwrap();
         device.trace_batch(&root, &mut batch).unwrap();
@@ -265,8 +268,8 @@ fn a_structure_of_another_device_is_refused_with_a_typed_error() {
 #[test]
 fn s13_14_a_trace_of_another_devices_structure_raises_invalid_traversable() {
     use oxray::{
-        DeviceContext, Module, Pipeline, PipelineCompileOptions, PipelineLinkOptions,
-        ProgramGroup, SbtRegion, ShaderBindingTable, TraceRay,
+        DeviceContext, Module, Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup,
+        SbtRegion, ShaderBindingTable, TraceRay,
     };
     #[derive(Clone)]
     struct Params {
