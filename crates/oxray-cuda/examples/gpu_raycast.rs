@@ -15,7 +15,7 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use common::{bench_rays, find_mesh, Mesh};
+use common::{bench_rays, build_gas, find_mesh, icosphere_f32, load_obj, Mesh};
 use oxray_core::{BuildFlags, Ray};
 use oxray_cpu::Gas;
 use oxray_cuda::{
@@ -137,16 +137,16 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         let name = std::path::Path::new(m)
             .file_stem()
             .map_or(m.clone(), |s| s.to_string_lossy().into_owned());
-        meshes.push((name, Mesh::load_obj(std::path::Path::new(m))?));
+        meshes.push((name, load_obj(std::path::Path::new(m))?));
     }
     if args.meshes.is_empty() && args.icosphere.is_none() {
         match find_mesh("stanford-bunny.obj") {
-            Some(p) => meshes.push(("bunny".into(), Mesh::load_obj(&p)?)),
+            Some(p) => meshes.push(("bunny".into(), load_obj(&p)?)),
             None => eprintln!("stanford-bunny.obj not found; using the icosphere only"),
         }
     }
     if let Some(n) = args.icosphere.or(args.meshes.is_empty().then_some(5)) {
-        meshes.push((format!("icosphere-{n}"), Mesh::icosphere(n)));
+        meshes.push((format!("icosphere-{n}"), icosphere_f32(n)));
     }
 
     let ctx = CudaContext::new()?;
@@ -187,7 +187,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     writeln!(layout_md, "|---|---|---:|---:|---:|---:|")?;
     for (name, mesh) in &meshes {
         let t = Instant::now();
-        let gas = mesh.build(BuildFlags::empty())?;
+        let gas = build_gas(mesh, BuildFlags::empty())?;
         eprintln!(
             "{name}: {} triangles, built in {:.1} ms",
             mesh.triangles.len(),

@@ -54,7 +54,9 @@ mod common;
 
 #[cfg(test)]
 mod tests {
-    use super::common::{bench_rays, find_mesh, tricky_rays, Mesh};
+    use super::common::{
+        bench_rays, build_gas, find_mesh, icosphere_f32, load_obj, tricky_rays, Mesh,
+    };
     use super::layout::DeviceLayout;
     use super::reference::trace;
     use super::*;
@@ -122,16 +124,16 @@ mod tests {
             BuildFlags::PREFER_FAST_TRACE,
             BuildFlags::PREFER_FAST_BUILD,
         ] {
-            let mesh = Mesh::icosphere(4);
-            let gas = mesh.build(flags).unwrap();
+            let mesh = icosphere_f32(4);
+            let gas = build_gas(&mesh, flags).unwrap();
             check(&gas, NodeLayout::Bvh4, &all_rays(&mesh, &gas, 64), true);
         }
     }
 
     #[test]
     fn bvh2_layout_traversal_matches_the_cpu_backend() {
-        let mesh = Mesh::icosphere(4);
-        let gas = mesh.build(BuildFlags::PREFER_FAST_TRACE).unwrap();
+        let mesh = icosphere_f32(4);
+        let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
         check(&gas, NodeLayout::Bvh2, &all_rays(&mesh, &gas, 64), false);
     }
 
@@ -141,8 +143,8 @@ mod tests {
             println!("skipping: stanford-bunny.obj not found (set OXRAY_MESH_DIR)");
             return;
         };
-        let mesh = Mesh::load_obj(&path).unwrap();
-        let gas = mesh.build(BuildFlags::PREFER_FAST_TRACE).unwrap();
+        let mesh = load_obj(&path).unwrap();
+        let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
         let rays = all_rays(&mesh, &gas, 96);
         check(&gas, NodeLayout::Bvh4, &rays, true);
         check(&gas, NodeLayout::Bvh2, &rays, false);
@@ -155,7 +157,7 @@ mod tests {
             positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
             triangles: vec![[0, 1, 2]],
         };
-        let gas = mesh.build(BuildFlags::empty()).unwrap();
+        let gas = build_gas(&mesh, BuildFlags::empty()).unwrap();
         let rays: Vec<Ray> = (0..64)
             .map(|i| {
                 let x = (i % 8) as f32 / 7.0;
@@ -171,7 +173,7 @@ mod tests {
             positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
             triangles: vec![[0, 1, 2]],
         };
-        let gas = flat.build(BuildFlags::empty()).unwrap();
+        let gas = build_gas(&flat, BuildFlags::empty()).unwrap();
         for layout in [NodeLayout::Bvh4, NodeLayout::Bvh2] {
             let dl = DeviceLayout::new(&gas.export_triangles().unwrap(), layout).unwrap();
             assert!(!trace(&dl, &rays[0], false).is_hit());
@@ -181,8 +183,8 @@ mod tests {
 
     #[test]
     fn bvh2_nodes_are_half_the_size_and_cover_every_slot() {
-        let mesh = Mesh::icosphere(3);
-        let gas = mesh.build(BuildFlags::empty()).unwrap();
+        let mesh = icosphere_f32(3);
+        let gas = build_gas(&mesh, BuildFlags::empty()).unwrap();
         let export = gas.export_triangles().unwrap();
         let b4 = DeviceLayout::new(&export, NodeLayout::Bvh4).unwrap();
         let b2 = DeviceLayout::new(&export, NodeLayout::Bvh2).unwrap();

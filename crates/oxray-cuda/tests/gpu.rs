@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::{bench_rays, find_mesh, tricky_rays, Mesh};
+use common::{bench_rays, build_gas, find_mesh, icosphere_f32, load_obj, tricky_rays, Mesh};
 use oxray_core::{BuildFlags, Hit, Ray};
 use oxray_cpu::Gas;
 use oxray_cuda::{
@@ -113,8 +113,8 @@ fn rays_for(mesh: &Mesh, gas: &Gas, side: u32) -> Vec<Ray> {
 fn icosphere_gpu_hits_match_cpu_hits() {
     let Some((ctx, _lock)) = gpu() else { return };
     println!("device: {:?}", ctx.device());
-    let mesh = Mesh::icosphere(5);
-    let gas = mesh.build(BuildFlags::PREFER_FAST_TRACE).unwrap();
+    let mesh = icosphere_f32(5);
+    let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
     let rays = rays_for(&mesh, &gas, 256);
     for layout in [NodeLayout::Bvh4, NodeLayout::Bvh2] {
         let gpu = CudaGas::upload_with_layout(&ctx, &gas, layout).unwrap();
@@ -136,9 +136,9 @@ fn bunny_gpu_hits_match_cpu_hits() {
         println!("skipping: stanford-bunny.obj not found (set OXRAY_MESH_DIR)");
         return;
     };
-    let mesh = Mesh::load_obj(&path).unwrap();
+    let mesh = load_obj(&path).unwrap();
     for flags in [BuildFlags::PREFER_FAST_TRACE, BuildFlags::PREFER_FAST_BUILD] {
-        let gas = mesh.build(flags).unwrap();
+        let gas = build_gas(&mesh, flags).unwrap();
         let rays = rays_for(&mesh, &gas, 512);
         for layout in [NodeLayout::Bvh4, NodeLayout::Bvh2] {
             let gpu = CudaGas::upload_with_layout(&ctx, &gas, layout).unwrap();
@@ -156,8 +156,8 @@ fn bunny_gpu_hits_match_cpu_hits() {
 #[test]
 fn device_buffers_and_errors() {
     let Some((ctx, _lock)) = gpu() else { return };
-    let mesh = Mesh::icosphere(2);
-    let gas = mesh.build(BuildFlags::empty()).unwrap();
+    let mesh = icosphere_f32(2);
+    let gas = build_gas(&mesh, BuildFlags::empty()).unwrap();
     let gpu = CudaGas::upload(&ctx, &gas).unwrap();
     assert!(gpu.device_bytes() > 0 && gpu.num_nodes() > 0);
 
