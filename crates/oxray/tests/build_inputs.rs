@@ -809,12 +809,12 @@ fn random_rays(rng: &mut Rng, n: usize) -> Vec<Ray> {
 #[test]
 fn every_vertex_format_with_stride_matches_f32_5_1() {
     let mut mesh = common::icosphere(2);
-    for v in &mut mesh.vertices {
+    for v in &mut mesh.positions {
         *v = v.map(|x| x * 0.9);
     }
     // Extremes of the normalised formats.
-    mesh.vertices[0] = [-1.0, 1.0, -1.0];
-    mesh.vertices[1] = [1.0, -1.0, 0.5];
+    mesh.positions[0] = [-1.0, 1.0, -1.0];
+    mesh.positions[1] = [1.0, -1.0, 0.5];
     let mut rng = Rng::new(7);
     let rays = random_rays(&mut rng, 3000);
     for (format, stride) in [
@@ -826,7 +826,7 @@ fn every_vertex_format_with_stride_matches_f32_5_1() {
         (VertexFormat::Snorm16x2, 10),
     ] {
         let (elems, expected): (Vec<Vec<u8>>, Vec<[f32; 3]>) =
-            mesh.vertices.iter().map(|&p| encode(format, p)).unzip();
+            mesh.positions.iter().map(|&p| encode(format, p)).unzip();
         assert!(elems[0].len() == format.size() && (stride as usize) > format.size());
         let data = strided(&elems, stride as usize, 0xFF);
         let gas = build(&[TriangleInput::new(VertexBuffer::new(
@@ -886,8 +886,8 @@ fn every_vertex_format_with_stride_matches_f32_5_1() {
 #[test]
 fn u16_and_u32_indices_with_stride_match_5_1() {
     let mesh = common::icosphere(3);
-    assert!(mesh.vertices.len() < 65536);
-    let reference = build(&[TriangleInput::new(VertexBuffer::f32x3(&mesh.vertices))
+    assert!(mesh.positions.len() < 65536);
+    let reference = build(&[TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
         .indices(IndexBuffer::u32x3(&mesh.triangles))
         .into()])
     .unwrap();
@@ -912,7 +912,7 @@ fn u16_and_u32_indices_with_stride_match_5_1() {
     let mut rng = Rng::new(8);
     let rays = random_rays(&mut rng, 2000);
     for ix in variants {
-        let gas = build(&[TriangleInput::new(VertexBuffer::f32x3(&mesh.vertices))
+        let gas = build(&[TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
             .indices(ix)
             .into()])
         .unwrap();
@@ -957,14 +957,14 @@ fn pre_transform_moves_the_hits_5_1() {
         0.8, -0.6, 0.1, 5.0, 0.6, 0.8, 0.0, -2.0, 0.0, 0.3, 1.5, 0.25,
     ];
     let moved: Vec<[f32; 3]> = mesh
-        .vertices
+        .positions
         .iter()
         .map(|p| {
             [0, 1, 2]
                 .map(|r| m[4 * r] * p[0] + m[4 * r + 1] * p[1] + m[4 * r + 2] * p[2] + m[4 * r + 3])
         })
         .collect();
-    let a = build(&[TriangleInput::new(VertexBuffer::f32x3(&mesh.vertices))
+    let a = build(&[TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
         .indices(IndexBuffer::u32x3(&mesh.triangles))
         .pre_transform(m)
         .into()])

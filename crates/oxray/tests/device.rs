@@ -53,7 +53,7 @@ fn rays(n: usize) -> Vec<Ray> {
 }
 
 fn sphere_input(mesh: &common::Mesh) -> oxray::BuildInput<'_> {
-    TriangleInput::new(VertexBuffer::f32x3(&mesh.vertices))
+    TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
         .indices(IndexBuffer::u32x3(&mesh.triangles))
         .into()
 }

@@ -257,7 +257,7 @@ fn output_bound_holds_for_indexed_meshes_5() {
     let _guard = serial();
     for s in 0..5 {
         let mesh = common::icosphere(s);
-        let inputs = [TriangleInput::new(VertexBuffer::f32x3(&mesh.vertices))
+        let inputs = [TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
             .indices(IndexBuffer::u32x3(&mesh.triangles))
             .into()];
         let sizes = compute_memory_usage(&BuildOptions::default(), &inputs).unwrap();
@@ -547,10 +547,10 @@ fn build_peak_memory_within_output_plus_temp_5() {
     let offsets: Vec<u16> = (0..mesh.triangles.len()).map(|k| (k % 3) as u16).collect();
     let flags = [GeometryFlags::empty(); 3];
     let inputs = [
-        TriangleInput::new(VertexBuffer::f32x3(&mesh.vertices))
+        TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
             .indices(IndexBuffer::u32x3(&mesh.triangles))
             .into(),
-        TriangleInput::new(VertexBuffer::f32x3(&mesh.vertices))
+        TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
             .indices(IndexBuffer::u32x3(&mesh.triangles))
             .pre_transform([1.0, 0.0, 0.0, 3.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0])
             .flags(&flags)

@@ -18,7 +18,7 @@ const TOLERANCE: f32 = 1e-4;
 fn mesh_gas(mesh: &Mesh) -> Gas {
     Gas::build(
         &BuildOptions::new(BuildFlags::PREFER_FAST_TRACE),
-        &[TriangleInput::new(VertexBuffer::f32x3(&mesh.vertices))
+        &[TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
             .indices(IndexBuffer::u32x3(&mesh.triangles))
             .into()],
     )
@@ -96,7 +96,7 @@ impl Leaks {
 
 /// Faces incident to each vertex.
 fn vertex_faces(mesh: &Mesh) -> Vec<Vec<usize>> {
-    let mut vf = vec![Vec::new(); mesh.vertices.len()];
+    let mut vf = vec![Vec::new(); mesh.positions.len()];
     for (f, t) in mesh.triangles.iter().enumerate() {
         for &k in t {
             vf[k as usize].push(f);
@@ -125,7 +125,7 @@ fn icosphere_case(subdivisions: u32) {
     let outside = [0.05f32, 0.5, 3.0];
 
     // Vertices: from the centre, and from outside along the normal (and slightly tilted).
-    for (i, v) in mesh.vertices.iter().enumerate() {
+    for (i, v) in mesh.positions.iter().enumerate() {
         let p = Vec3::from(*v);
         let n = p.normalize();
         leaks.check(
@@ -511,7 +511,7 @@ fn obj_reader_handles_slashes_and_polygons() {
         "# comment\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1/1/1 2/2/1 3/3/1 4/4/1\nf 1//1 3//1 4//1\n",
     )
     .unwrap();
-    assert_eq!(m.vertices.len(), 4);
+    assert_eq!(m.positions.len(), 4);
     assert_eq!(m.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 2, 3]]);
     assert!(parse_obj("v 0 0 0\nf 1 2 3\n").is_err());
 }
@@ -520,7 +520,7 @@ fn assert_closed_and_outward(m: &Mesh) {
     let edges = m.edge_map();
     assert!(edges.values().all(|f| f.len() == 2), "not closed");
     assert_eq!(
-        m.vertices.len() as i64 - edges.len() as i64 + m.triangles.len() as i64,
+        m.positions.len() as i64 - edges.len() as i64 + m.triangles.len() as i64,
         2,
         "Euler characteristic"
     );
@@ -542,7 +542,7 @@ fn test_meshes_are_closed_and_outward() {
     }
     let m = grid_cube(3);
     assert_eq!(m.triangles.len(), 6 * 9 * 2);
-    assert_eq!(m.vertices.len(), 6 * 16 - 12 * 4 + 8);
+    assert_eq!(m.positions.len(), 6 * 16 - 12 * 4 + 8);
     assert_closed_and_outward(&m);
 }
 
@@ -552,7 +552,7 @@ fn bunny_loads() {
     let Some(mesh) = load_bunny("bunny_loads") else {
         return;
     };
-    assert_eq!((mesh.vertices.len(), mesh.triangles.len()), (35947, 69451));
+    assert_eq!((mesh.positions.len(), mesh.triangles.len()), (35947, 69451));
     let gas = mesh_gas(&mesh);
     assert_eq!(gas.num_primitives(), 69451);
 }

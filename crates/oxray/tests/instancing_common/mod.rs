@@ -1,10 +1,10 @@
-//! Helpers shared by the instancing tests (`tests/instancing_*.rs`): a deterministic generator,
-//! random well-conditioned affine transforms, triangle soups and their flattening into one GAS,
-//! an f64 reference for checking reported hits, and a small multi-ray pipeline harness that
-//! records what the hit programs saw.
+//! Helpers shared by the instancing tests (`tests/instancing_*.rs`): a deterministic generator
+//! with random well-conditioned affine transforms and triangle helpers (from `oxray-testkit`),
+//! triangle soups and their flattening into one GAS, an f64 reference for checking reported
+//! hits, and a small multi-ray pipeline harness that records what the hit programs saw.
 //!
 //! Each test binary uses a different subset of these helpers.
-#![allow(dead_code)]
+#![allow(dead_code, unused_imports)]
 
 pub use glam::{Affine3A, Mat3, Quat, Vec3};
 use oxray::cpu::Gas;
@@ -14,13 +14,12 @@ use oxray::{
     Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, RayFlags, SbtRegion,
     ShaderBindingTable, TraceRay, Transform, TraversableHandle, TriangleInput, VertexBuffer,
 };
+pub use oxray_testkit::mesh::{soup, tri_at, Tri};
+pub use oxray_testkit::Rng;
 use std::sync::{Arc, Mutex};
 
 /// What the tests return, so that `?` works on the library's errors.
 pub type TestResult = Result<(), Box<dyn std::error::Error>>;
-
-/// A triangle as three positions.
-pub type Tri = [[f32; 3]; 3];
 
 /// A proptest configuration with a fixed seed (every run checks the same cases, a failure
 /// reproduces) and no regression files. `OXRAY_PROPTEST_SEED=<u64>` explores other cases.
@@ -38,77 +37,6 @@ pub fn proptest_config(cases: u32) -> proptest::test_runner::Config {
     }
 }
 
-/// A small deterministic generator (SplitMix64).
-#[derive(Clone, Debug)]
-pub struct Rng(u64);
-
-impl Rng {
-    /// A generator from a seed.
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.f32()
-    }
-
-    /// Uniform in `0..n`.
-    pub fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-
-    /// A point uniform in the cube `[lo, hi]^3`.
-    pub fn vec3(&mut self, lo: f32, hi: f32) -> Vec3 {
-        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
-    }
-
-    /// A unit vector, uniform on the sphere.
-    pub fn unit(&mut self) -> Vec3 {
-        loop {
-            let d = self.vec3(-1.0, 1.0);
-            let l = d.length();
-            if l > 0.1 && l <= 1.0 {
-                return d / l;
-            }
-        }
-    }
-
-    /// A random rotation.
-    pub fn rotation(&mut self) -> Quat {
-        Quat::from_axis_angle(self.unit(), self.range(0.0, std::f32::consts::TAU))
-    }
-
-    /// A well-conditioned random affine transform: rotation, then a non-uniform scale with
-    /// factors in `[0.5, 2]` along randomly rotated axes, then a translation in
-    /// `[-spread, spread]^3`. The determinant is positive (no mirroring).
-    pub fn affine(&mut self, spread: f32) -> Affine3A {
-        let scale = Vec3::new(
-            self.range(0.5, 2.0),
-            self.range(0.5, 2.0),
-            self.range(0.5, 2.0),
-        );
-        let r1 = Mat3::from_quat(self.rotation());
-        let r2 = Mat3::from_quat(self.rotation());
-        let linear = r2 * Mat3::from_diagonal(scale) * r1;
-        Affine3A::from_mat3_translation(linear, self.vec3(-spread, spread))
-    }
-}
-
 /// `n` random triangles with vertices within `size` of a centre uniform in `[-extent, extent]^3`.
 pub fn random_soup(rng: &mut Rng, n: usize, extent: f32, size: f32) -> Vec<Tri> {
     (0..n)
@@ -117,17 +45,6 @@ pub fn random_soup(rng: &mut Rng, n: usize, extent: f32, size: f32) -> Vec<Tri> 
             std::array::from_fn(|_| (c + rng.vec3(-size, size)).to_array())
         })
         .collect()
-}
-
-/// A triangle in the plane `z`, counter-clockwise seen from `+z` (so a ray travelling along
-/// `-z` hits its front face), containing `(x, y, z)` well inside it.
-pub fn tri_at(x: f32, y: f32, z: f32, s: f32) -> Tri {
-    [[x - s, y - s, z], [x + s, y - s, z], [x, y + s, z]]
-}
-
-/// Flattens triangles into a soup vertex list.
-pub fn soup(tris: &[Tri]) -> Vec<[f32; 3]> {
-    tris.iter().flat_map(|t| t.iter().copied()).collect()
 }
 
 /// The triangles moved by `t`.

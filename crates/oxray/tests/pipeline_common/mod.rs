@@ -1,9 +1,10 @@
 //! Helpers shared by the pipeline conformance tests (`tests/pipeline_*.rs`): pipeline options, a
-//! deterministic random-number generator, small scenes, and a single-ray harness that launches
-//! one ray-generation program tracing one configurable ray and records every program that ran.
+//! deterministic random-number generator and triangle helpers (from `oxray-testkit`), small
+//! scenes, and a single-ray harness that launches one ray-generation program tracing one
+//! configurable ray and records every program that ran.
 //!
 //! Each test binary uses a different subset of these helpers.
-#![allow(dead_code)]
+#![allow(dead_code, unused_imports)]
 
 pub use glam::Vec3;
 use oxray::cpu::Gas;
@@ -13,13 +14,12 @@ use oxray::{
     Pipeline, PipelineCompileOptions, PipelineLinkOptions, ProgramGroup, ProgramResult, RayFlags,
     SbtRegion, ShaderBindingTable, TraceRay, TraversableHandle, TriangleInput, VertexBuffer,
 };
+pub use oxray_testkit::mesh::{random_soup, soup, tri_at, Tri};
+pub use oxray_testkit::Rng;
 use std::sync::{Arc, Mutex};
 
 /// What the tests return, so that `?` works on the library's errors.
 pub type TestResult = Result<(), Box<dyn std::error::Error>>;
-
-/// A triangle as three positions.
-pub type Tri = [[f32; 3]; 3];
 
 /// Compile options with every exception check on.
 pub fn compile(num_payload_values: u32, num_attribute_values: u32) -> PipelineCompileOptions {
@@ -34,72 +34,6 @@ pub fn compile(num_payload_values: u32, num_attribute_values: u32) -> PipelineCo
 /// Link options of the given trace depth.
 pub fn link(max_trace_depth: u32) -> PipelineLinkOptions {
     PipelineLinkOptions { max_trace_depth }
-}
-
-/// A small deterministic generator (SplitMix64).
-#[derive(Clone, Debug)]
-pub struct Rng(u64);
-
-impl Rng {
-    /// A generator from a seed.
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in `[0, 1)`.
-    pub fn f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32
-    }
-
-    /// Uniform in `[lo, hi)`.
-    pub fn range(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * self.f32()
-    }
-
-    /// A point uniform in the cube `[lo, hi]^3`.
-    pub fn vec3(&mut self, lo: f32, hi: f32) -> Vec3 {
-        Vec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
-    }
-
-    /// A direction with components uniform in `[-1, 1)`, not too short.
-    pub fn dir(&mut self) -> Vec3 {
-        loop {
-            let d = self.vec3(-1.0, 1.0);
-            if d.length() > 0.1 {
-                return d;
-            }
-        }
-    }
-}
-
-/// `n` random triangles with vertices within `size` of a centre uniform in `[0, extent]^3`.
-pub fn random_soup(rng: &mut Rng, n: usize, extent: f32, size: f32) -> Vec<Tri> {
-    (0..n)
-        .map(|_| {
-            let c = rng.vec3(0.0, extent);
-            std::array::from_fn(|_| (c + rng.vec3(-size, size)).to_array())
-        })
-        .collect()
-}
-
-/// A triangle in the plane `z`, counter-clockwise seen from `+z` (so a ray travelling along
-/// `-z` hits its front face), containing the point `(x, y, z)` well inside it.
-pub fn tri_at(x: f32, y: f32, z: f32, s: f32) -> Tri {
-    [[x - s, y - s, z], [x + s, y - s, z], [x, y + s, z]]
-}
-
-/// Flattens triangles into a soup vertex list.
-pub fn soup(tris: &[Tri]) -> Vec<[f32; 3]> {
-    tris.iter().flat_map(|t| t.iter().copied()).collect()
 }
 
 /// A GAS of one triangle-soup input with one SBT record and the given flags.
