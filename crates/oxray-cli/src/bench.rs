@@ -3,32 +3,11 @@
 
 use glam::Vec3;
 use oxray::cpu::{Gas, Ias};
-use oxray::{BuildFlags, BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use oxray::{BuildFlags, BuildOptions, IndexBuffer, Ray, RayRecord, TriangleInput, VertexBuffer};
 use oxray_scene::mesh::Mesh;
+use oxray_testkit::rays;
+use oxray_testkit::rng::Rng;
 use std::time::Instant;
-
-/// A small, fast, deterministic generator (SplitMix64), so benchmark rays are reproducible.
-#[derive(Clone, Debug)]
-pub struct Rng(u64);
-
-impl Rng {
-    /// A generator from a seed.
-    pub fn new(seed: u64) -> Self {
-        Rng(seed)
-    }
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[0, 1)`.
-    pub fn next_f32(&mut self) -> f32 {
-        (self.next_u64() >> 40) as f32 * (1.0 / (1u64 << 24) as f32)
-    }
-}
 
 /// The build input of a mesh.
 fn mesh_input(mesh: &Mesh) -> oxray::BuildInput<'_> {
@@ -52,103 +31,27 @@ pub fn build_gas_on(
 }
 
 fn center_radius(mesh: &Mesh) -> (Vec3, f32) {
-    let (lo, hi) = mesh.bounds();
-    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
-    ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
+    rays::center_radius(&mesh.positions)
 }
 
-/// Primary rays of a `width` x `height` pinhole camera that frames the mesh, in scanline order.
+/// Primary rays of a `width` x `height` pinhole camera that frames the mesh, in scanline order
+/// (the benchmark's generators live in `oxray-testkit`, shared with the tests and the GPU
+/// checks, and stay bit-identical so that results compare across versions).
 pub fn camera_rays(mesh: &Mesh, width: u32, height: u32) -> Vec<Ray> {
-    let (c, r) = center_radius(mesh);
-    let eye = c + Vec3::new(0.35, 0.25, 1.0).normalize() * (2.2 * r);
-    let fwd = (c - eye).normalize();
-    let right = fwd.cross(Vec3::Y).normalize();
-    let up = right.cross(fwd);
-    let tan = (30f32.to_radians() * 0.5).tan();
-    let aspect = width as f32 / height as f32;
-    let mut rays = Vec::with_capacity((width * height) as usize);
-    for y in 0..height {
-        for x in 0..width {
-            let sx = ((x as f32 + 0.5) / width as f32 * 2.0 - 1.0) * tan * aspect;
-            let sy = (1.0 - (y as f32 + 0.5) / height as f32 * 2.0) * tan;
-            let d = (fwd + right * sx + up * sy).normalize();
-            rays.push(Ray::new(eye, d));
-        }
-    }
-    rays
+    rays::camera_rays(&mesh.positions, width, height)
 }
 
-/// A uniform point on a random triangle with its unit normal; `None` when the triangle drawn is
-/// degenerate (the caller draws again).
-fn surface_point(mesh: &Mesh, rng: &mut Rng) -> Option<(Vec3, Vec3)> {
-    let t = mesh.triangles[(rng.next_u64() % mesh.triangles.len() as u64) as usize];
-    let [a, b, c] = t.map(|i| Vec3::from(mesh.positions[i as usize]));
-    let nrm = (b - a).cross(c - a);
-    if nrm.length_squared() == 0.0 || !nrm.is_finite() {
-        return None;
-    }
-    let (mut u, mut v) = (rng.next_f32(), rng.next_f32());
-    if u + v > 1.0 {
-        (u, v) = (1.0 - u, 1.0 - v);
-    }
-    Some((a + (b - a) * u + (c - a) * v, nrm.normalize()))
-}
-
-/// Whether some triangle has an area: without one, [`surface_point`] would never succeed.
-fn has_surface(mesh: &Mesh) -> bool {
-    mesh.triangles.iter().any(|t| {
-        let [a, b, c] = t.map(|i| Vec3::from(mesh.positions[i as usize]));
-        let n = (b - a).cross(c - a);
-        n.length_squared() > 0.0 && n.is_finite()
-    })
-}
-
-/// `n` rays leaving random points of random (non-degenerate) triangles in cosine-distributed
-/// directions about the triangle's normal: the secondary rays of a path tracer.
+/// `n` diffuse (cosine hemisphere) rays from random surface points; none without area.
 pub fn hemisphere_rays(mesh: &Mesh, n: usize, seed: u64) -> Vec<Ray> {
-    let (_, r) = center_radius(mesh);
-    let mut rng = Rng::new(seed);
-    let mut rays = Vec::with_capacity(n);
-    if !has_surface(mesh) {
-        return rays;
-    }
-    while rays.len() < n {
-        let Some((p, nrm)) = surface_point(mesh, &mut rng) else {
-            continue;
-        };
-        let (r1, r2) = (rng.next_f32(), rng.next_f32());
-        let phi = std::f32::consts::TAU * r1;
-        let s = r2.sqrt();
-        let (t1, t2) = nrm.any_orthonormal_pair();
-        let d = (t1 * (phi.cos() * s) + t2 * (phi.sin() * s) + nrm * (1.0 - r2).sqrt()).normalize();
-        rays.push(Ray::with_interval(p, d, 1e-5 * r, f32::INFINITY));
-    }
-    rays
+    rays::hemisphere_rays(&mesh.positions, &mesh.triangles, n, seed)
 }
 
-/// `n` shadow rays: from random surface points to a point light above and in front of the
-/// mesh, with `tmax` stopping at the light. Points facing away from the light still cast their
-/// ray, as a renderer that tests visibility before shading would.
+/// `n` shadow rays from random surface points to a point light; none without area.
 pub fn shadow_rays(mesh: &Mesh, n: usize, seed: u64) -> Vec<Ray> {
-    let (c, r) = center_radius(mesh);
-    let light = c + Vec3::new(0.4, 1.2, 0.8) * (2.0 * r);
-    let mut rng = Rng::new(seed);
-    let mut rays = Vec::with_capacity(n);
-    if !has_surface(mesh) {
-        return rays;
-    }
-    while rays.len() < n {
-        let Some((p, _)) = surface_point(mesh, &mut rng) else {
-            continue;
-        };
-        let to = light - p;
-        let dist = to.length();
-        rays.push(Ray::with_interval(p, to / dist, 1e-5 * r, dist));
-    }
-    rays
+    rays::shadow_rays(&mesh.positions, &mesh.triangles, n, seed)
 }
 
-/// Median of the values.
+/// The median of some timings (0 for none).
 pub fn median(mut xs: Vec<f64>) -> f64 {
     xs.sort_by(f64::total_cmp);
     let n = xs.len();
@@ -265,26 +168,13 @@ pub fn run(
     Ok(res)
 }
 
-/// The ray sets of a benchmark.
-pub struct BenchRays {
-    /// Primary rays: a pinhole camera's (coherent).
-    pub coherent: Vec<Ray>,
-    /// Diffuse rays: cosine-distributed hemisphere rays from surface points (incoherent).
-    pub incoherent: Vec<Ray>,
-    /// Shadow rays: from surface points to a point light, bounded by its distance.
-    pub shadow: Vec<Ray>,
-}
+/// The ray sets of a benchmark: primary (camera), diffuse and shadow rays.
+pub use oxray_testkit::rays::BenchRays;
 
-impl BenchRays {
-    /// Rays for a mesh: a `side` x `side` camera and as many diffuse and shadow rays.
-    pub fn new(mesh: &Mesh, side: u32) -> Self {
-        let n = (side * side) as usize;
-        BenchRays {
-            coherent: camera_rays(mesh, side, side),
-            incoherent: hemisphere_rays(mesh, n, 7),
-            shadow: shadow_rays(mesh, n, 11),
-        }
-    }
+/// The benchmark's rays for a mesh: a `side` x `side` camera and as many diffuse and shadow
+/// rays.
+pub fn bench_rays(mesh: &Mesh, side: u32) -> BenchRays {
+    BenchRays::new(&mesh.positions, &mesh.triangles, side)
 }
 
 /// Writes a mesh and its rays for the side-by-side script (`scripts/bench_embree.py`):
@@ -305,13 +195,19 @@ pub fn export(
     std::fs::write(dir.join(format!("{name}.mesh")), m)?;
     std::fs::write(
         dir.join(format!("{name}.coherent.rays")),
-        bytemuck::cast_slice(&rays.coherent),
+        ray_file_bytes(&rays.coherent),
     )?;
     std::fs::write(
         dir.join(format!("{name}.incoherent.rays")),
-        bytemuck::cast_slice(&rays.incoherent),
+        ray_file_bytes(&rays.incoherent),
     )?;
     Ok(())
+}
+
+/// Rays in the ray-file format: one 32-byte [`RayRecord`] per ray (the time is not stored).
+pub fn ray_file_bytes(rays: &[Ray]) -> Vec<u8> {
+    let records: Vec<RayRecord> = rays.iter().map(|&r| RayRecord::from(r)).collect();
+    bytemuck::cast_slice(&records).to_vec()
 }
 
 /// Writes oxray's closest-hit distances for the exported rays (`NAME.coherent.oxray-hits` and
@@ -473,11 +369,11 @@ pub fn instances(
             );
             let q = Quat::from_euler(
                 glam::EulerRot::XYZ,
-                rng.next_f32() * 6.3,
-                rng.next_f32() * 6.3,
-                rng.next_f32() * 6.3,
+                rng.f32() * 6.3,
+                rng.f32() * 6.3,
+                rng.f32() * 6.3,
             );
-            let s = 0.6 + 0.6 * rng.next_f32();
+            let s = 0.6 + 0.6 * rng.f32();
             let t = Affine3A::from_scale_rotation_translation(Vec3::splat(s), q, g * spacing)
                 * Affine3A::from_translation(-c);
             Instance::new(gas.clone().into())
@@ -514,13 +410,8 @@ pub fn instances(
         .collect();
     let random: Vec<Ray> = (0..side * side)
         .map(|_| {
-            let o = bounds.min
-                + bounds.extent() * Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
-            let d = Vec3::new(
-                rng.next_f32() - 0.5,
-                rng.next_f32() - 0.5,
-                rng.next_f32() - 0.5,
-            );
+            let o = bounds.min + bounds.extent() * Vec3::new(rng.f32(), rng.f32(), rng.f32());
+            let d = Vec3::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5);
             Ray::new(
                 o,
                 if d == Vec3::ZERO {
@@ -586,6 +477,15 @@ mod tests {
         assert_eq!(mismatches, 0);
         let frac = blocked.iter().filter(|&&b| b).count() as f32 / rays.len() as f32;
         assert!(frac > 0.3 && frac < 0.7, "{frac}");
+    }
+
+    #[test]
+    fn exported_rays_are_32_byte_records_that_read_back_as_the_same_rays() {
+        let rays = hemisphere_rays(&Mesh::icosphere(2), 50, 7);
+        let bytes = ray_file_bytes(&rays);
+        assert_eq!(bytes.len(), 32 * rays.len());
+        let back = crate::raycast::parse_rays(&bytes, "test").unwrap();
+        assert_eq!(back, rays);
     }
 
     #[test]

@@ -3,7 +3,7 @@
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use glam::Vec3;
-use oxray_cli::bench::{self, BenchRays};
+use oxray_cli::bench;
 use oxray_render::lights::Environment;
 use oxray_render::RenderOptions;
 use oxray_scene::mesh::Mesh;
@@ -360,7 +360,7 @@ fn run(cli: Cli) -> Result<()> {
                 println!("|---|---:|---|---|---:|---:|---:|---:|---:|---|---:|");
             }
             for (name, mesh) in &sets {
-                let rays = BenchRays::new(mesh, side);
+                let rays = bench::bench_rays(mesh, side);
                 if let Some(dir) = &export {
                     let gas = bench::build_gas(mesh, oxray::BuildFlags::empty())?;
                     bench::export(dir, name, mesh, &rays)
