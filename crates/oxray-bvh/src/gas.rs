@@ -2,6 +2,7 @@
 //! under a 4-wide BVH.
 
 use crate::build::{build_bvh2, BuildConfig};
+use crate::bvh2::Bvh2;
 use crate::bvh4::Bvh4;
 use crate::stats::BvhStats;
 use crate::triangle::is_degenerate;
@@ -123,6 +124,26 @@ impl GasData {
     /// every rule checked. Primitives that can never be hit (a NaN or infinite coordinate, a
     /// zero-area triangle, an inverted box) are left out: they are inactive.
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<GasData, BuildError> {
+        Ok(Self::build_impl(options, inputs, false)?.0)
+    }
+
+    /// [`build`](Self::build), also returning the canonical binary BVH the builder made, with
+    /// its leaves pointing at this structure's leaf slots (`left_first` is the leaf's first
+    /// slot, as in the 4-wide layout): the tree other traversal layouts (a GPU's binary nodes,
+    /// say) are derived from. The CPU backend does not keep it.
+    pub fn build_with_tree(
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(GasData, Bvh2), BuildError> {
+        let (gas, tree) = Self::build_impl(options, inputs, true)?;
+        Ok((gas, tree.unwrap_or_default()))
+    }
+
+    fn build_impl(
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+        keep_tree: bool,
+    ) -> Result<(GasData, Option<Bvh2>), BuildError> {
         let summary = validate_structure(options, inputs)?;
 
         let mut records = Vec::with_capacity(inputs.len());
@@ -184,6 +205,7 @@ impl GasData {
             num_primitives: summary.num_primitives,
         };
 
+        let mut tree = None;
         match gas.kind {
             GasKind::Triangles => {
                 let mut per_input: Vec<Vec<[Vec3; 3]>> = inputs
@@ -217,7 +239,11 @@ impl GasData {
                     .par_iter()
                     .map(|&k| ids[k as usize])
                     .collect();
+                let before = keep_tree.then(|| leaf_starts(&gas.bvh));
                 (gas.triangles, gas.slot_prim) = pack_triangles(&mut gas.bvh, &global, &tris);
+                if let Some(before) = before {
+                    tree = Some(remap_leaves(bvh2, &before, &leaf_starts(&gas.bvh)));
+                }
             }
             GasKind::CustomPrimitives => {
                 let boxes: Vec<Aabb> = inputs
@@ -250,6 +276,8 @@ impl GasData {
                 gas.aabbs = gas.slot_prim.iter().map(|&g| boxes[g as usize]).collect();
                 gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
                 gas.bvh = Bvh4::from(&bvh2);
+                // Custom primitives are not packed: the tree's slots are the structure's.
+                tree = keep_tree.then_some(bvh2);
             }
         }
         // What the structure keeps is exactly what it reports (and what the query bounds).
@@ -260,7 +288,7 @@ impl GasData {
         gas.sbt_offsets.shrink_to_fit();
         gas.inputs.shrink_to_fit();
         gas.record_flags.shrink_to_fit();
-        Ok(gas)
+        Ok((gas, tree))
     }
 
     /// The kind of primitives.
@@ -377,6 +405,28 @@ impl GasData {
 /// Marks an unused lane of a [`Triangle4`] block in [`GasData::slot_prim`].
 pub const NO_PRIMITIVE: u32 = u32::MAX;
 
+/// The first slot of every leaf lane of a 4-wide BVH, in node and lane order.
+fn leaf_starts(bvh: &Bvh4) -> Vec<u32> {
+    bvh.nodes
+        .iter()
+        .flat_map(|n| (0..4).filter(|&l| n.count[l] > 0).map(|l| n.child[l]))
+        .collect()
+}
+
+/// Points the leaves of the binary tree at the slots the packing gave them: the 4-wide layout's
+/// leaves are the binary tree's, so each binary leaf's first slot before packing (`before`)
+/// maps to one after (`after`, in the same order).
+fn remap_leaves(mut tree: Bvh2, before: &[u32], after: &[u32]) -> Bvh2 {
+    let mut map: Vec<(u32, u32)> = before.iter().copied().zip(after.iter().copied()).collect();
+    map.sort_unstable();
+    for node in tree.nodes.iter_mut().filter(|n| n.is_leaf()) {
+        if let Ok(i) = map.binary_search_by_key(&node.left_first, |&(b, _)| b) {
+            node.left_first = map[i].1;
+        }
+    }
+    tree
+}
+
 /// Lays the triangles of every leaf out in blocks of four, leaves in node order, and points the
 /// leaves at their blocks. `global[slot]` is the primitive at binary-BVH slot `slot`.
 fn pack_triangles(
@@ -473,4 +523,113 @@ fn decode_triangles(t: &TriangleInput<'_>) -> Vec<[Vec3; 3]> {
             idx.map(vertex)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use oxray_core::{AabbBuffer, CustomPrimitiveInput, IndexBuffer, VertexBuffer};
+
+    /// The leaf slot ranges reachable in a binary tree, sorted.
+    fn tree_leaves(tree: &Bvh2) -> Vec<(u32, u32)> {
+        let mut out = Vec::new();
+        let mut stack = if tree.nodes.is_empty() {
+            vec![]
+        } else {
+            vec![0usize]
+        };
+        while let Some(n) = stack.pop() {
+            let node = &tree.nodes[n];
+            if node.is_leaf() {
+                out.push((node.left_first, node.count));
+            } else {
+                stack.extend([node.left_first as usize, node.left_first as usize + 1]);
+            }
+        }
+        out.sort_unstable();
+        out
+    }
+
+    fn layout_leaves(gas: &GasData) -> Vec<(u32, u32)> {
+        let mut out: Vec<(u32, u32)> = gas
+            .bvh
+            .nodes
+            .iter()
+            .flat_map(|n| {
+                (0..4)
+                    .filter(|&l| n.count[l] > 0)
+                    .map(|l| (n.child[l], n.count[l]))
+            })
+            .collect();
+        out.sort_unstable();
+        out
+    }
+
+    #[test]
+    fn the_canonical_tree_points_at_the_same_leaf_slots_as_the_4_wide_layout() {
+        // A grid with some degenerate triangles, so that slots and primitives differ.
+        let n = 30u32;
+        let mut v = Vec::new();
+        for y in 0..=n {
+            for x in 0..=n {
+                v.push([x as f32, y as f32, ((x * 7 + y * 3) % 5) as f32 * 0.2]);
+            }
+        }
+        let mut t = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let i = y * (n + 1) + x;
+                t.push([i, i + 1, i + n + 2]);
+                t.push(if x == y {
+                    [i, i, i + 1]
+                } else {
+                    [i, i + n + 2, i + n + 1]
+                });
+            }
+        }
+        for flags in [BuildFlags::empty(), BuildFlags::PREFER_FAST_TRACE] {
+            let input = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u32x3(&t));
+            let options = BuildOptions::new(flags);
+            let (gas, tree) = GasData::build_with_tree(&options, &[input.into()]).unwrap();
+            // The same structure as a plain build.
+            let plain = GasData::build(&options, &[input.into()]).unwrap();
+            assert_eq!(gas.bvh.nodes, plain.bvh.nodes);
+            assert_eq!(gas.slot_prim, plain.slot_prim);
+            let leaves = tree_leaves(&tree);
+            assert_eq!(leaves, layout_leaves(&gas));
+            // Every active slot is in exactly one leaf, and leaf boxes hold their triangles.
+            let covered: u32 = leaves.iter().map(|&(_, c)| c).sum();
+            assert_eq!(covered, gas.num_active_primitives());
+            assert_eq!(tree.nodes[0].bounds(), gas.bounds);
+            for node in tree.nodes.iter().filter(|n| n.is_leaf()) {
+                if !leaves.contains(&(node.left_first, node.count)) {
+                    continue; // a slot of the node array that no node references
+                }
+                for slot in node.left_first..node.left_first + node.count {
+                    assert_ne!(gas.slot_prim[slot as usize], NO_PRIMITIVE);
+                    let tri = gas.triangles[slot as usize / 4].get(slot as usize % 4);
+                    for p in tri {
+                        assert!(node.bounds().contains(p.into()));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn custom_primitive_trees_index_the_structure_slots_directly() {
+        let boxes: Vec<Aabb> = (0..40)
+            .map(|i| Aabb::new(Vec3::splat(i as f32), Vec3::splat(i as f32 + 0.5)))
+            .collect();
+        let input = CustomPrimitiveInput::new(AabbBuffer::new(&boxes));
+        let (gas, tree) =
+            GasData::build_with_tree(&BuildOptions::default(), &[input.into()]).unwrap();
+        assert_eq!(tree_leaves(&tree), layout_leaves(&gas));
+        // No primitives, no tree.
+        let none: [Aabb; 0] = [];
+        let input = CustomPrimitiveInput::new(AabbBuffer::new(&none));
+        let (_, tree) =
+            GasData::build_with_tree(&BuildOptions::default(), &[input.into()]).unwrap();
+        assert!(tree.nodes.is_empty());
+    }
 }

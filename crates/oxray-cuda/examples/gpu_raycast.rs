@@ -15,7 +15,7 @@
 #[path = "../tests/common/mod.rs"]
 mod common;
 
-use common::{bench_rays, build_gas, find_mesh, icosphere_f32, load_obj, Mesh};
+use common::{bench_rays, build_gas_with_tree, find_mesh, icosphere_f32, load_obj, Mesh};
 use oxray_core::{BuildFlags, Ray};
 use oxray_cpu::Gas;
 use oxray_cuda::{
@@ -187,7 +187,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
     writeln!(layout_md, "|---|---|---:|---:|---:|---:|")?;
     for (name, mesh) in &meshes {
         let t = Instant::now();
-        let gas = build_gas(mesh, BuildFlags::empty())?;
+        let (gas, tree) = build_gas_with_tree(mesh, BuildFlags::empty())?;
         eprintln!(
             "{name}: {} triangles, built in {:.1} ms",
             mesh.triangles.len(),
@@ -197,7 +197,7 @@ fn run() -> Result<(), Box<dyn std::error::Error>> {
         let mut gpus = Vec::new();
         for &layout in &args.layouts {
             let t = Instant::now();
-            let g = CudaGas::upload_with_layout(&ctx, &gas, layout)?;
+            let g = CudaGas::upload_with_layout(&ctx, &gas, &tree, layout)?;
             let ms = t.elapsed().as_secs_f64() * 1e3;
             writeln!(
                 layout_md,

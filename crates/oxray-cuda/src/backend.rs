@@ -139,13 +139,13 @@ impl AccelBackend for Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaGas, BuildError> {
-        let data = GasData::build(options, inputs)?;
+        let (data, tree) = GasData::build_with_tree(options, inputs)?;
         if data.kind == GasKind::CustomPrimitives {
             return Err(BuildError::Unsupported(
                 "custom primitives on the CUDA backend (their intersection programs run on the CPU backend)",
             ));
         }
-        CudaGas::upload_with_layout(&self.ctx, &data, self.layout).map_err(build_error)
+        CudaGas::upload_with_layout(&self.ctx, &data, &tree, self.layout).map_err(build_error)
     }
 
     fn build_ias(

@@ -5,7 +5,7 @@ use crate::error::{driver, CudaError};
 use crate::layout::{DeviceLayout, NodeLayout, SlotInfo};
 use bytemuck::{Pod, Zeroable};
 use cudarc::driver::{CudaSlice, LaunchConfig, PushKernelArg};
-use oxray_bvh::{GasData, GasInfo};
+use oxray_bvh::{Bvh2, GasData, GasInfo};
 use oxray_core::{Aabb, BackendKind, Hit, HitKind, Ray, RayRecord, Traversable, TraversableKind};
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -226,9 +226,9 @@ fn check_batch(len: usize) -> Result<(), CudaError> {
 /// use oxray_core::{BuildOptions, Ray, TriangleInput, VertexBuffer};
 /// use oxray_cuda::{CudaContext, CudaGas};
 /// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
-/// let gas = GasData::build(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+/// let (gas, tree) = GasData::build_with_tree(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
 /// let ctx = CudaContext::new()?;
-/// let gpu = CudaGas::upload(&ctx, &gas)?;
+/// let gpu = CudaGas::upload(&ctx, &gas, &tree)?;
 /// let rays = vec![Ray::new([0.0, 0.0, 1.0].into(), [0.0, 0.0, -1.0].into()); 1000];
 /// let hits = gpu.intersect_batch(&rays)?;
 /// assert_eq!(hits[0].unwrap().t, 1.0);
@@ -304,9 +304,11 @@ impl Scratch {
 }
 
 impl CudaGas {
-    /// Uploads a triangle GAS in the default layout ([`NodeLayout::Bvh2`]).
-    pub fn upload(ctx: &CudaContext, gas: &GasData) -> Result<CudaGas, CudaError> {
-        CudaGas::upload_with_layout(ctx, gas, NodeLayout::default())
+    /// Uploads a triangle GAS in the default layout ([`NodeLayout::Bvh2`]); `tree` is the
+    /// canonical binary tree of its build ([`GasData::build_with_tree`]), from which the device
+    /// nodes are derived.
+    pub fn upload(ctx: &CudaContext, gas: &GasData, tree: &Bvh2) -> Result<CudaGas, CudaError> {
+        CudaGas::upload_with_layout(ctx, gas, tree, NodeLayout::default())
     }
 
     /// Uploads a triangle GAS in the given node layout. A GAS of custom primitives is refused
@@ -314,10 +316,11 @@ impl CudaGas {
     pub fn upload_with_layout(
         ctx: &CudaContext,
         gas: &GasData,
+        tree: &Bvh2,
         layout: NodeLayout,
     ) -> Result<CudaGas, CudaError> {
         let export = gas.export_triangles().ok_or(CudaError::CustomPrimitives)?;
-        let host = DeviceLayout::new(&export, layout).map_err(CudaError::TooLarge)?;
+        let host = DeviceLayout::new(&export, tree, layout).map_err(CudaError::TooLarge)?;
         let nodes = ctx
             .stream
             .clone_htod(&host.nodes[..])

@@ -1,12 +1,11 @@
 //! The device layout of a triangle GAS: node and triangle arrays in the form the kernels read,
-//! made from a [`GasExport`].
+//! made from a [`GasExport`] and the canonical binary tree the builder made.
 //!
-//! Two node layouts exist:
+//! Two node layouts exist, both derived from that one tree:
 //!
-//! - [`NodeLayout::Bvh2`], the default: a binary BVH of 64-byte nodes (Aila and Laine's layout)
-//!   made by splitting each 4-wide node into a pair of pairs. Same hits as the CPU, bit for bit,
-//!   up to ties (which of two hits at exactly the same distance is reported). On an H100 its
-//!   closest-hit kernel is 1.2-1.8x faster than the 4-wide one (docs/gpu-backend.md).
+//! - [`NodeLayout::Bvh2`], the default: the builder's binary tree itself, as 64-byte nodes that
+//!   hold both children's boxes (Aila and Laine's layout). Same hits as the CPU, bit for bit, up
+//!   to ties (which of two hits at exactly the same distance is reported).
 //! - [`NodeLayout::Bvh4`]: the CPU backend's 4-wide nodes, byte for byte (128 bytes, one cache
 //!   line, rows of four lanes). The kernel walks them in the CPU kernel's order, so hits are
 //!   bit-identical to the CPU's, ties included; its any-hit kernel is 5-15 % faster.
@@ -14,7 +13,7 @@
 //! Triangles are stored per leaf slot as three `float4` (48 bytes; `w` unused), so that a thread
 //! reads one triangle with three 16-byte loads.
 
-use oxray_bvh::{Bvh4Node, GasExport};
+use oxray_bvh::{Bvh2, Bvh4Node, GasExport};
 use oxray_core::Aabb;
 
 /// The node layout a [`CudaGas`](crate::CudaGas) is uploaded in.
@@ -23,8 +22,8 @@ pub enum NodeLayout {
     /// The CPU backend's 4-wide BVH, unchanged: 128-byte nodes. Hits are bit-identical to the
     /// CPU backend's, ties included.
     Bvh4,
-    /// A binary BVH of 64-byte nodes, split from the 4-wide one: the same hits up to ties, and
-    /// the faster closest-hit kernel. The default.
+    /// The builder's binary BVH as 64-byte nodes: the same hits up to ties, and the faster
+    /// closest-hit kernel. The default.
     #[default]
     Bvh2,
 }
@@ -71,9 +70,10 @@ pub(crate) struct DeviceLayout {
 pub(crate) const MAX_SLOTS: usize = 0x7FFF_FFFF;
 
 impl DeviceLayout {
-    /// Lays out an export. Fails only when it holds more slots or nodes than 31-bit indices
-    /// reach.
-    pub fn new(export: &GasExport, layout: NodeLayout) -> Result<Self, String> {
+    /// Lays out an export; `tree` is the canonical binary tree of the same build, its leaves
+    /// pointing at the export's slots ([`GasData::build_with_tree`](oxray_bvh::GasData::build_with_tree)).
+    /// Fails only when it holds more slots or nodes than 31-bit indices reach.
+    pub fn new(export: &GasExport, tree: &Bvh2, layout: NodeLayout) -> Result<Self, String> {
         if export.slots.len() > MAX_SLOTS {
             return Err(format!(
                 "{} leaf slots; at most {MAX_SLOTS}",
@@ -82,7 +82,7 @@ impl DeviceLayout {
         }
         let nodes = match layout {
             NodeLayout::Bvh4 => bytemuck::cast_slice::<Bvh4Node, u32>(&export.nodes).to_vec(),
-            NodeLayout::Bvh2 => bvh2_words(&export.nodes)?,
+            NodeLayout::Bvh2 => bvh2_words(tree)?,
         };
         let mut triangles = Vec::with_capacity(export.slots.len() * 12);
         let mut slots = Vec::with_capacity(export.slots.len());
@@ -137,76 +137,41 @@ const UNUSED: Bvh2Child = Bvh2Child {
     count: 0,
 };
 
-/// Splits every 4-wide node into binary nodes: two children stay one node, three become a node
-/// over one child and a pair, four a node over two pairs; the pairing taken is the one whose
-/// pair boxes have the least total surface area. Node 0 is the root.
-fn bvh2_words(nodes4: &[Bvh4Node]) -> Result<Vec<u32>, String> {
-    // Binary nodes as child pairs; index 0 is reserved for the root.
+/// The canonical binary tree as device nodes: one node per inner node of the tree, holding its
+/// two children (a leaf child is its slot range); node 0 is the root. A tree whose root is a
+/// leaf becomes one node with one child; an empty tree one node with none.
+fn bvh2_words(tree: &Bvh2) -> Result<Vec<u32>, String> {
     let mut out: Vec<[Bvh2Child; 2]> = vec![[UNUSED; 2]];
-    // (4-wide node, binary node index that receives its split)
-    let mut work = vec![(0usize, 0usize)];
-    while let Some((n4, at)) = work.pop() {
-        let node = &nodes4[n4];
-        let mut kids: Vec<Bvh2Child> = Vec::with_capacity(4);
-        for lane in 0..4 {
-            if !node.is_used(lane) {
-                continue;
+    if let Some(root) = tree.nodes.first() {
+        if root.is_leaf() {
+            out[0][0] = Bvh2Child {
+                bounds: root.bounds(),
+                child: root.left_first,
+                count: root.count,
+            };
+        } else {
+            // (inner node of the tree, device node that receives its children)
+            let mut work = vec![(0usize, 0usize)];
+            while let Some((n, at)) = work.pop() {
+                let first = tree.nodes[n].left_first as usize;
+                for (k, c) in [first, first + 1].into_iter().enumerate() {
+                    let node = &tree.nodes[c];
+                    let (child, count) = if node.is_leaf() {
+                        (node.left_first, node.count)
+                    } else {
+                        let idx = out.len();
+                        out.push([UNUSED; 2]);
+                        work.push((c, idx));
+                        (idx as u32, 0)
+                    };
+                    out[at][k] = Bvh2Child {
+                        bounds: node.bounds(),
+                        child,
+                        count,
+                    };
+                }
             }
-            let count = node.count[lane];
-            let mut child = node.child[lane];
-            if count == 0 {
-                // Inner: give its split a binary node now, fill it later.
-                let idx = out.len();
-                out.push([UNUSED; 2]);
-                work.push((child as usize, idx));
-                child = idx as u32;
-            }
-            kids.push(Bvh2Child {
-                bounds: node.child_bounds(lane),
-                child,
-                count,
-            });
         }
-        let pair = |a: Bvh2Child, b: Bvh2Child, out: &mut Vec<[Bvh2Child; 2]>| {
-            let idx = out.len();
-            out.push([a, b]);
-            Bvh2Child {
-                bounds: a.bounds.union(&b.bounds),
-                child: idx as u32,
-                count: 0,
-            }
-        };
-        let area = |a: &Bvh2Child, b: &Bvh2Child| a.bounds.union(&b.bounds).half_area();
-        out[at] = match kids.len() {
-            0 => [UNUSED; 2],
-            1 => [kids[0], UNUSED],
-            2 => [kids[0], kids[1]],
-            3 => {
-                // Pair the two whose box is smallest; the third stays a direct child.
-                let options = [(0, 1, 2), (0, 2, 1), (1, 2, 0)];
-                let (i, j, k) = options
-                    .into_iter()
-                    .min_by(|x, y| {
-                        area(&kids[x.0], &kids[x.1]).total_cmp(&area(&kids[y.0], &kids[y.1]))
-                    })
-                    .unwrap_or((0, 1, 2));
-                let p = pair(kids[i], kids[j], &mut out);
-                [kids[k], p]
-            }
-            _ => {
-                let options = [(0, 1, 2, 3), (0, 2, 1, 3), (0, 3, 1, 2)];
-                let cost = |o: &(usize, usize, usize, usize)| {
-                    area(&kids[o.0], &kids[o.1]) + area(&kids[o.2], &kids[o.3])
-                };
-                let (a, b, c, d) = options
-                    .into_iter()
-                    .min_by(|x, y| cost(x).total_cmp(&cost(y)))
-                    .unwrap_or((0, 1, 2, 3));
-                let p = pair(kids[a], kids[b], &mut out);
-                let q = pair(kids[c], kids[d], &mut out);
-                [p, q]
-            }
-        };
     }
     if out.len() > MAX_SLOTS {
         return Err(format!("{} binary nodes; at most {MAX_SLOTS}", out.len()));

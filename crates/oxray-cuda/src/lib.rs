@@ -55,11 +55,12 @@ mod common;
 #[cfg(test)]
 mod tests {
     use super::common::{
-        bench_rays, build_gas, find_mesh, icosphere_f32, load_obj, tricky_rays, Mesh,
+        bench_rays, build_gas_with_tree, find_mesh, icosphere_f32, load_obj, tricky_rays, Mesh,
     };
     use super::layout::DeviceLayout;
     use super::reference::trace;
     use super::*;
+    use oxray_bvh::Bvh2;
     use oxray_core::{BuildFlags, Ray};
     use oxray_cpu::Gas;
 
@@ -67,9 +68,9 @@ mod tests {
     /// With `exact`, hits must be bit-identical (primitive included); otherwise distances must be
     /// bit-identical and the primitive may differ only where another primitive is hit at the
     /// same distance.
-    fn check(gas: &Gas, layout: NodeLayout, rays: &[Ray], exact: bool) {
+    fn check(gas: &Gas, tree: &Bvh2, layout: NodeLayout, rays: &[Ray], exact: bool) {
         let export = gas.export_triangles().unwrap();
-        let dl = DeviceLayout::new(&export, layout).unwrap();
+        let dl = DeviceLayout::new(&export, tree, layout).unwrap();
         let mut cpu = vec![None; rays.len()];
         gas.intersect_batch(rays, &mut cpu).unwrap();
         let mut occ = vec![false; rays.len()];
@@ -125,16 +126,28 @@ mod tests {
             BuildFlags::PREFER_FAST_BUILD,
         ] {
             let mesh = icosphere_f32(4);
-            let gas = build_gas(&mesh, flags).unwrap();
-            check(&gas, NodeLayout::Bvh4, &all_rays(&mesh, &gas, 64), true);
+            let (gas, tree) = build_gas_with_tree(&mesh, flags).unwrap();
+            check(
+                &gas,
+                &tree,
+                NodeLayout::Bvh4,
+                &all_rays(&mesh, &gas, 64),
+                true,
+            );
         }
     }
 
     #[test]
     fn bvh2_layout_traversal_matches_the_cpu_backend() {
         let mesh = icosphere_f32(4);
-        let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
-        check(&gas, NodeLayout::Bvh2, &all_rays(&mesh, &gas, 64), false);
+        let (gas, tree) = build_gas_with_tree(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
+        check(
+            &gas,
+            &tree,
+            NodeLayout::Bvh2,
+            &all_rays(&mesh, &gas, 64),
+            false,
+        );
     }
 
     #[test]
@@ -144,10 +157,10 @@ mod tests {
             return;
         };
         let mesh = load_obj(&path).unwrap();
-        let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
+        let (gas, tree) = build_gas_with_tree(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
         let rays = all_rays(&mesh, &gas, 96);
-        check(&gas, NodeLayout::Bvh4, &rays, true);
-        check(&gas, NodeLayout::Bvh2, &rays, false);
+        check(&gas, &tree, NodeLayout::Bvh4, &rays, true);
+        check(&gas, &tree, NodeLayout::Bvh2, &rays, false);
     }
 
     #[test]
@@ -157,7 +170,7 @@ mod tests {
             positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
             triangles: vec![[0, 1, 2]],
         };
-        let gas = build_gas(&mesh, BuildFlags::empty()).unwrap();
+        let (gas, tree) = build_gas_with_tree(&mesh, BuildFlags::empty()).unwrap();
         let rays: Vec<Ray> = (0..64)
             .map(|i| {
                 let x = (i % 8) as f32 / 7.0;
@@ -165,17 +178,17 @@ mod tests {
                 Ray::new([x, y, 1.0].into(), [0.0, 0.0, -1.0].into())
             })
             .collect();
-        check(&gas, NodeLayout::Bvh4, &rays, true);
-        check(&gas, NodeLayout::Bvh2, &rays, true);
+        check(&gas, &tree, NodeLayout::Bvh4, &rays, true);
+        check(&gas, &tree, NodeLayout::Bvh2, &rays, true);
 
         // Only degenerate triangles: nothing to hit.
         let flat = Mesh {
             positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
             triangles: vec![[0, 1, 2]],
         };
-        let gas = build_gas(&flat, BuildFlags::empty()).unwrap();
+        let (gas, tree) = build_gas_with_tree(&flat, BuildFlags::empty()).unwrap();
         for layout in [NodeLayout::Bvh4, NodeLayout::Bvh2] {
-            let dl = DeviceLayout::new(&gas.export_triangles().unwrap(), layout).unwrap();
+            let dl = DeviceLayout::new(&gas.export_triangles().unwrap(), &tree, layout).unwrap();
             assert!(!trace(&dl, &rays[0], false).is_hit());
             assert!(dl.slots.is_empty());
         }
@@ -184,10 +197,10 @@ mod tests {
     #[test]
     fn bvh2_nodes_are_half_the_size_and_cover_every_slot() {
         let mesh = icosphere_f32(3);
-        let gas = build_gas(&mesh, BuildFlags::empty()).unwrap();
+        let (gas, tree) = build_gas_with_tree(&mesh, BuildFlags::empty()).unwrap();
         let export = gas.export_triangles().unwrap();
-        let b4 = DeviceLayout::new(&export, NodeLayout::Bvh4).unwrap();
-        let b2 = DeviceLayout::new(&export, NodeLayout::Bvh2).unwrap();
+        let b4 = DeviceLayout::new(&export, &tree, NodeLayout::Bvh4).unwrap();
+        let b2 = DeviceLayout::new(&export, &tree, NodeLayout::Bvh2).unwrap();
         assert_eq!(b4.nodes.len(), 32 * export.nodes.len());
         assert_eq!(b2.nodes.len() % 16, 0);
         // Every active slot is reached exactly once from the binary root.

@@ -3,7 +3,9 @@
 
 mod common;
 
-use common::{bench_rays, build_gas, find_mesh, icosphere_f32, load_obj, tricky_rays, Mesh};
+use common::{
+    bench_rays, build_gas_with_tree, find_mesh, icosphere_f32, load_obj, tricky_rays, Mesh,
+};
 use oxray_core::{BuildFlags, Hit, Ray};
 use oxray_cpu::Gas;
 use oxray_cuda::{
@@ -114,10 +116,10 @@ fn icosphere_gpu_hits_match_cpu_hits() {
     let Some((ctx, _lock)) = gpu() else { return };
     println!("device: {:?}", ctx.device());
     let mesh = icosphere_f32(5);
-    let gas = build_gas(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
+    let (gas, tree) = build_gas_with_tree(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
     let rays = rays_for(&mesh, &gas, 256);
     for layout in [NodeLayout::Bvh4, NodeLayout::Bvh2] {
-        let gpu = CudaGas::upload_with_layout(&ctx, &gas, layout).unwrap();
+        let gpu = CudaGas::upload_with_layout(&ctx, &gas, &tree, layout).unwrap();
         let a = compare(&gas, &gpu, &rays);
         println!("icosphere {layout:?}: {a:?}");
         assert!(a.fraction() >= 0.9999, "{layout:?}: {a:?}");
@@ -138,10 +140,10 @@ fn bunny_gpu_hits_match_cpu_hits() {
     };
     let mesh = load_obj(&path).unwrap();
     for flags in [BuildFlags::PREFER_FAST_TRACE, BuildFlags::PREFER_FAST_BUILD] {
-        let gas = build_gas(&mesh, flags).unwrap();
+        let (gas, tree) = build_gas_with_tree(&mesh, flags).unwrap();
         let rays = rays_for(&mesh, &gas, 512);
         for layout in [NodeLayout::Bvh4, NodeLayout::Bvh2] {
-            let gpu = CudaGas::upload_with_layout(&ctx, &gas, layout).unwrap();
+            let gpu = CudaGas::upload_with_layout(&ctx, &gas, &tree, layout).unwrap();
             let a = compare(&gas, &gpu, &rays);
             println!("bunny {flags:?} {layout:?}: {a:?}");
             assert!(a.fraction() >= 0.9999, "{layout:?}: {a:?}");
@@ -157,8 +159,8 @@ fn bunny_gpu_hits_match_cpu_hits() {
 fn device_buffers_and_errors() {
     let Some((ctx, _lock)) = gpu() else { return };
     let mesh = icosphere_f32(2);
-    let gas = build_gas(&mesh, BuildFlags::empty()).unwrap();
-    let gpu = CudaGas::upload(&ctx, &gas).unwrap();
+    let (gas, tree) = build_gas_with_tree(&mesh, BuildFlags::empty()).unwrap();
+    let gpu = CudaGas::upload(&ctx, &gas, &tree).unwrap();
     assert!(gpu.device_bytes() > 0 && gpu.num_nodes() > 0);
 
     // Empty batches.
@@ -215,9 +217,11 @@ fn device_buffers_and_errors() {
     // A custom-primitive GAS is refused.
     let boxes = [oxray_core::Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE)];
     let input = oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(&boxes));
-    let custom = Gas::build(&oxray_core::BuildOptions::default(), &[input.into()]).unwrap();
+    let (custom, custom_tree) =
+        oxray_bvh::GasData::build_with_tree(&oxray_core::BuildOptions::default(), &[input.into()])
+            .unwrap();
     assert_eq!(
-        CudaGas::upload(&ctx, &custom).unwrap_err(),
+        CudaGas::upload(&ctx, &custom, &custom_tree).unwrap_err(),
         CudaError::CustomPrimitives
     );
 }

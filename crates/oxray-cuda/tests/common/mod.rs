@@ -5,6 +5,7 @@
 
 #![allow(dead_code)]
 
+use oxray_bvh::{Bvh2, GasData};
 use oxray_core::{
     BuildError, BuildFlags, BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer,
 };
@@ -17,6 +18,15 @@ pub fn build_gas(mesh: &Mesh, flags: BuildFlags) -> Result<Gas, BuildError> {
     let input = TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
         .indices(IndexBuffer::u32x3(&mesh.triangles));
     Gas::build(&BuildOptions::new(flags), &[input.into()])
+}
+
+/// Builds a GAS over the mesh on the CPU backend, with the canonical binary tree of the build
+/// (what the CUDA layouts are derived from).
+pub fn build_gas_with_tree(mesh: &Mesh, flags: BuildFlags) -> Result<(Gas, Bvh2), BuildError> {
+    let input = TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles));
+    let (data, tree) = GasData::build_with_tree(&BuildOptions::new(flags), &[input.into()])?;
+    Ok((Gas::from(data), tree))
 }
 
 /// The coherent and incoherent ray sets of `oxray bench` for a mesh: a `side` x `side` camera
