@@ -288,8 +288,14 @@ impl Scratch {
             );
             self.capacity = cap;
         }
-        self.staged.clear();
-        self.staged.extend(rays.iter().map(|&r| RayRecord::from(r)));
+        // The kernels read 32-byte records; converting in parallel into a buffer kept between
+        // calls costs a fraction of the copy to the device.
+        self.staged.resize(n, RayRecord::zeroed());
+        self.staged
+            .par_iter_mut()
+            .zip(rays.par_iter())
+            .with_min_len(1 << 14)
+            .for_each(|(d, &r)| *d = RayRecord::from(r));
         if let Some(d) = self.rays.as_mut() {
             let mut view = d.slice_mut(..8 * n);
             ctx.stream
