@@ -2,12 +2,12 @@
 //! or in parallel batches. This is the Embree-like path for simulation users and the kernel the
 //! program pipeline is built on.
 
-use crate::ias::InstanceRecord;
 use crate::traversal::{
     traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef, Path, SceneVisitor,
 };
 use crate::Gas;
 use oxray_bvh::triangle::TriangleHit;
+use oxray_bvh::InstanceData as InstanceRecord;
 use oxray_core::{CandidateAction, CustomHit, CustomPrimitive, Hit, HitKind, QueryError, Ray};
 use rayon::prelude::*;
 

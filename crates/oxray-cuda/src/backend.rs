@@ -5,11 +5,13 @@
 use crate::context::CudaContext;
 use crate::error::CudaError;
 use crate::gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays};
+use crate::ias::CudaIas;
 use crate::layout::NodeLayout;
-use oxray_bvh::{GasData, GasKind};
+use cudarc::driver::CudaSlice;
+use oxray_bvh::{GasData, GasKind, IasData};
 use oxray_core::{
-    Aabb, AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, Hit,
-    QueryError, Ray, Traversable, TraversableHandle, TraversableKind,
+    AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, Hit, QueryError,
+    Ray, TraversableHandle,
 };
 
 /// The CUDA backend: one device, its compiled kernels and a node layout for the GASes it
@@ -50,30 +52,6 @@ impl Cuda {
     }
 }
 
-/// An instance acceleration structure on the CUDA backend. The batch kernels trace single GASes
-/// for now, so none can be built ([`Cuda::build_ias`] refuses with `Unsupported`); the type
-/// exists so that the backend boundary is whole.
-#[derive(Debug)]
-pub enum CudaIas {}
-
-impl Traversable for CudaIas {
-    fn traversable_kind(&self) -> TraversableKind {
-        match *self {}
-    }
-    fn bounds(&self) -> Aabb {
-        match *self {}
-    }
-    fn graph_depth(&self) -> u32 {
-        match *self {}
-    }
-    fn backend(&self) -> BackendKind {
-        match *self {}
-    }
-    fn describe(&self) -> String {
-        match *self {}
-    }
-}
-
 /// Rays and room for their results in device memory.
 #[derive(Debug)]
 pub struct CudaBatch {
@@ -85,8 +63,16 @@ pub struct CudaBatch {
 
 #[derive(Debug)]
 enum DeviceResults {
-    Closest(DeviceHits),
+    /// Hit records, and the instance slot of each (filled by IAS queries).
+    Closest(DeviceHits, CudaSlice<u32>),
     Any(DeviceOcclusion),
+}
+
+/// What a query on the CUDA backend starts at.
+enum Root<'h> {
+    Null,
+    Gas(&'h CudaGas),
+    Ias(&'h CudaIas),
 }
 
 fn query_error(e: CudaError) -> QueryError {
@@ -101,19 +87,26 @@ fn build_error(e: CudaError) -> BuildError {
 }
 
 impl Cuda {
-    /// The GAS a query starts at: `Ok(None)` for the null handle.
-    fn root<'h>(&self, handle: &'h TraversableHandle) -> Result<Option<&'h CudaGas>, QueryError> {
-        match (handle.backend(), handle.downcast_ref::<CudaGas>()) {
-            (None, _) => Ok(None),
-            (_, Some(gas)) => Ok(Some(gas)),
-            (Some(BackendKind::Cuda), None) => Err(QueryError::Unsupported(
-                "tracing an instance or transform on the CUDA backend",
-            )),
-            (Some(found), None) => Err(QueryError::ForeignTraversable {
+    /// The structure a query starts at.
+    fn root<'h>(&self, handle: &'h TraversableHandle) -> Result<Root<'h>, QueryError> {
+        let Some(backend) = handle.backend() else {
+            return Ok(Root::Null);
+        };
+        if let Some(gas) = handle.downcast_ref::<CudaGas>() {
+            return Ok(Root::Gas(gas));
+        }
+        if let Some(ias) = handle.downcast_ref::<CudaIas>() {
+            return Ok(Root::Ias(ias));
+        }
+        Err(match backend {
+            BackendKind::Cuda | BackendKind::Any => {
+                QueryError::Unsupported("tracing a transform on the CUDA backend")
+            }
+            found => QueryError::ForeignTraversable {
                 device: BackendKind::Cuda,
                 found,
-            }),
-        }
+            },
+        })
     }
 }
 
@@ -150,12 +143,11 @@ impl AccelBackend for Cuda {
 
     fn build_ias(
         &self,
-        _options: &BuildOptions,
-        _inputs: &[BuildInput<'_>],
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
     ) -> Result<CudaIas, BuildError> {
-        Err(BuildError::Unsupported(
-            "instance acceleration structures on the CUDA backend",
-        ))
+        let (data, tree) = IasData::build_with_tree(options, inputs)?;
+        CudaIas::upload(&self.ctx, data, &tree)
     }
 
     fn intersect_closest(
@@ -171,8 +163,9 @@ impl AccelBackend for Cuda {
             });
         }
         match self.root(root)? {
-            None => hits.fill(None),
-            Some(gas) => gas.intersect_batch_into(rays, hits).map_err(query_error)?,
+            Root::Null => hits.fill(None),
+            Root::Gas(gas) => gas.intersect_batch_into(rays, hits).map_err(query_error)?,
+            Root::Ias(ias) => ias.intersect_batch_into(rays, hits).map_err(query_error)?,
         }
         Ok(())
     }
@@ -190,8 +183,11 @@ impl AccelBackend for Cuda {
             });
         }
         match self.root(root)? {
-            None => occluded.fill(false),
-            Some(gas) => gas
+            Root::Null => occluded.fill(false),
+            Root::Gas(gas) => gas
+                .occluded_batch_into(rays, occluded)
+                .map_err(query_error)?,
+            Root::Ias(ias) => ias
                 .occluded_batch_into(rays, occluded)
                 .map_err(query_error)?,
         }
@@ -201,9 +197,13 @@ impl AccelBackend for Cuda {
     fn upload_batch(&self, rays: &[Ray], kind: BatchKind) -> Result<CudaBatch, QueryError> {
         let d_rays = DeviceRays::upload(&self.ctx, rays).map_err(query_error)?;
         let results = match kind {
-            BatchKind::Closest => {
-                DeviceResults::Closest(DeviceHits::new(&self.ctx, rays.len()).map_err(query_error)?)
-            }
+            BatchKind::Closest => DeviceResults::Closest(
+                DeviceHits::new(&self.ctx, rays.len()).map_err(query_error)?,
+                self.ctx
+                    .stream
+                    .alloc_zeros::<u32>(rays.len().max(1))
+                    .map_err(|e| QueryError::Device(e.to_string()))?,
+            ),
             BatchKind::Any => DeviceResults::Any(
                 DeviceOcclusion::new(&self.ctx, rays.len()).map_err(query_error)?,
             ),
@@ -216,14 +216,21 @@ impl AccelBackend for Cuda {
     }
 
     fn run_batch(&self, root: &TraversableHandle, batch: &mut CudaBatch) -> Result<(), QueryError> {
-        let Some(gas) = self.root(root)? else {
-            return Err(QueryError::Unsupported(
-                "a resident batch on the null handle (every ray misses; use intersect_closest)",
-            ));
-        };
-        match &mut batch.results {
-            DeviceResults::Closest(h) => gas.intersect_device(&batch.rays, h),
-            DeviceResults::Any(o) => gas.occluded_device(&batch.rays, o),
+        let n = batch.rays.len();
+        match (self.root(root)?, &mut batch.results) {
+            (Root::Null, _) => {
+                return Err(QueryError::Unsupported(
+                    "a resident batch on the null handle (every ray misses; use intersect_closest)",
+                ))
+            }
+            (Root::Gas(gas), DeviceResults::Closest(h, _)) => gas.intersect_device(&batch.rays, h),
+            (Root::Gas(gas), DeviceResults::Any(o)) => gas.occluded_device(&batch.rays, o),
+            (Root::Ias(ias), DeviceResults::Closest(h, i)) => {
+                ias.intersect_device(&batch.rays.words, &mut h.words, i, n)
+            }
+            (Root::Ias(ias), DeviceResults::Any(o)) => {
+                ias.occluded_device(&batch.rays.words, &mut o.bytes, n)
+            }
         }
         .map_err(query_error)?;
         batch.traced = Some(root.clone());
@@ -231,7 +238,7 @@ impl AccelBackend for Cuda {
     }
 
     fn download_hits(&self, batch: &CudaBatch, hits: &mut [Option<Hit>]) -> Result<(), QueryError> {
-        let DeviceResults::Closest(h) = &batch.results else {
+        let DeviceResults::Closest(h, insts) = &batch.results else {
             return Err(QueryError::WrongBatchKind("occlusion"));
         };
         if hits.len() != h.len() {
@@ -240,17 +247,30 @@ impl AccelBackend for Cuda {
                 outputs: hits.len(),
             });
         }
-        let Some(gas) = batch
-            .traced
-            .as_ref()
-            .and_then(|t| t.downcast_ref::<CudaGas>())
-        else {
-            return Err(QueryError::Unsupported(
-                "downloading the hits of a batch that was never traced",
-            ));
+        let traced = match &batch.traced {
+            Some(t) => self.root(t)?,
+            None => Root::Null,
         };
         let records = h.download(&self.ctx).map_err(query_error)?;
-        gas.resolve_into(&records, hits);
+        match traced {
+            Root::Gas(gas) => gas.resolve_into(&records, hits),
+            Root::Ias(ias) => {
+                let mut slots = vec![0u32; h.len()];
+                if !slots.is_empty() {
+                    self.ctx
+                        .stream
+                        .memcpy_dtoh(&insts.slice(..h.len()), &mut slots[..])
+                        .map_err(|e| QueryError::Device(e.to_string()))?;
+                    self.ctx.synchronize().map_err(query_error)?;
+                }
+                ias.resolve_into(&records, &slots, hits);
+            }
+            Root::Null => {
+                return Err(QueryError::Unsupported(
+                    "downloading the hits of a batch that was never traced",
+                ))
+            }
+        }
         Ok(())
     }
 

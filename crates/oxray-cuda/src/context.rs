@@ -52,6 +52,8 @@ pub(crate) struct Kernels {
     pub occluded_bvh4: CudaFunction,
     pub closest_bvh2: CudaFunction,
     pub occluded_bvh2: CudaFunction,
+    pub closest_ias: CudaFunction,
+    pub occluded_ias: CudaFunction,
 }
 
 /// A CUDA device ready to trace: driver and NVRTC loaded, a context and stream on the device,
@@ -173,6 +175,8 @@ impl CudaContext {
             occluded_bvh4: load("oxray_occluded_bvh4")?,
             closest_bvh2: load("oxray_closest_bvh2")?,
             occluded_bvh2: load("oxray_occluded_bvh2")?,
+            closest_ias: load("oxray_closest_ias")?,
+            occluded_ias: load("oxray_occluded_ias")?,
         };
         let stream = guarded("creating a stream", || ctx.new_stream())?;
         Ok(CudaContext {
@@ -190,6 +194,11 @@ impl CudaContext {
         })
     }
 
+    /// Whether two handles share one context (device memory of one is valid in the other).
+    pub fn same_context(&self, other: &CudaContext) -> bool {
+        Arc::ptr_eq(&self.kernels, &other.kernels)
+    }
+
     /// The device.
     pub fn device(&self) -> &DeviceInfo {
         &self.info
@@ -203,6 +212,8 @@ impl CudaContext {
             ("oxray_occluded_bvh4", &k.occluded_bvh4),
             ("oxray_closest_bvh2", &k.closest_bvh2),
             ("oxray_occluded_bvh2", &k.occluded_bvh2),
+            ("oxray_closest_ias", &k.closest_ias),
+            ("oxray_occluded_ias", &k.occluded_ias),
         ]
         .into_iter()
         .map(|(name, f)| {
@@ -280,6 +291,33 @@ mod tests {
         assert!(o.contains(&"--gpu-architecture=compute_90".to_string()));
         assert!(o.contains(&"--fmad=false".to_string()));
         assert!(o.iter().any(|s| s.starts_with("-DOXRAY_STACK_SIZE=")));
+    }
+
+    #[test]
+    fn the_kernels_compile_with_nvrtc_where_it_is_present() {
+        // SAFETY: only tries to open the library by its usual names (dlopen).
+        if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+            assert!(
+                std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
+                "OXRAY_REQUIRE_NVRTC is set but libnvrtc cannot be loaded"
+            );
+            println!("skipping: libnvrtc not found (set LD_LIBRARY_PATH to compile the kernels)");
+            return;
+        }
+        let ptx = match compile((9, 0)) {
+            Ok(p) => p.to_src(),
+            Err(e) => panic!("{e}"),
+        };
+        for entry in [
+            "oxray_closest_bvh4",
+            "oxray_occluded_bvh4",
+            "oxray_closest_bvh2",
+            "oxray_occluded_bvh2",
+            "oxray_closest_ias",
+            "oxray_occluded_ias",
+        ] {
+            assert!(ptx.contains(&format!(".entry {entry}")), "{entry} missing");
+        }
     }
 
     #[test]

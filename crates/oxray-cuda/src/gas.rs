@@ -51,7 +51,7 @@ impl HitRecord {
 /// A batch of rays in device memory.
 #[derive(Debug)]
 pub struct DeviceRays {
-    words: CudaSlice<u32>,
+    pub(crate) words: CudaSlice<u32>,
     len: usize,
 }
 
@@ -106,7 +106,7 @@ impl DeviceRays {
 /// Closest-hit results in device memory, one [`HitRecord`] per ray.
 #[derive(Debug)]
 pub struct DeviceHits {
-    words: CudaSlice<u32>,
+    pub(crate) words: CudaSlice<u32>,
     len: usize,
 }
 
@@ -160,7 +160,7 @@ impl DeviceHits {
 /// Occlusion results in device memory, one byte per ray (1: occluded).
 #[derive(Debug)]
 pub struct DeviceOcclusion {
-    bytes: CudaSlice<u8>,
+    pub(crate) bytes: CudaSlice<u8>,
     len: usize,
 }
 
@@ -206,7 +206,7 @@ fn records(rays: &[Ray]) -> Vec<RayRecord> {
     rays.par_iter().map(|&r| RayRecord::from(r)).collect()
 }
 
-fn check_batch(len: usize) -> Result<(), CudaError> {
+pub(crate) fn check_batch(len: usize) -> Result<(), CudaError> {
     if len > u32::MAX as usize {
         return Err(CudaError::TooLarge(format!(
             "a batch of {len} rays; at most {} per launch",
@@ -252,27 +252,30 @@ pub struct CudaGas {
 
 /// Device and host buffers reused by the one-call queries.
 #[derive(Debug, Default)]
-struct Scratch {
+pub(crate) struct Scratch {
     /// Rays the device buffers hold room for.
     capacity: usize,
-    rays: Option<CudaSlice<u32>>,
-    hits: Option<CudaSlice<u32>>,
-    occluded: Option<CudaSlice<u8>>,
-    records: Vec<HitRecord>,
-    flags: Vec<u8>,
+    pub(crate) rays: Option<CudaSlice<u32>>,
+    pub(crate) hits: Option<CudaSlice<u32>>,
+    pub(crate) occluded: Option<CudaSlice<u8>>,
+    /// Instance slot of each hit (IAS queries).
+    pub(crate) insts: Option<CudaSlice<u32>>,
+    pub(crate) records: Vec<HitRecord>,
+    pub(crate) inst_records: Vec<u32>,
+    pub(crate) flags: Vec<u8>,
     /// Host staging of the rays' kernel records.
     staged: Vec<RayRecord>,
 }
 
 impl Scratch {
     /// Makes room for `n` rays and copies them to the device.
-    fn load(&mut self, ctx: &CudaContext, rays: &[Ray]) -> Result<(), CudaError> {
+    pub(crate) fn load(&mut self, ctx: &CudaContext, rays: &[Ray]) -> Result<(), CudaError> {
         let n = rays.len();
         check_batch(n)?;
         if n > self.capacity || self.rays.is_none() {
             let cap = n.max(1).next_power_of_two();
             // Free the old buffers first.
-            (self.rays, self.hits, self.occluded) = (None, None, None);
+            (self.rays, self.hits, self.occluded, self.insts) = (None, None, None, None);
             let s = &ctx.stream;
             self.rays = Some(
                 s.alloc_zeros::<u32>(8 * cap)
@@ -285,6 +288,10 @@ impl Scratch {
             self.occluded = Some(
                 s.alloc_zeros::<u8>(cap)
                     .map_err(driver("allocating occlusion results"))?,
+            );
+            self.insts = Some(
+                s.alloc_zeros::<u32>(cap)
+                    .map_err(driver("allocating instance results"))?,
             );
             self.capacity = cap;
         }
@@ -367,6 +374,16 @@ impl CudaGas {
     /// Bytes of nodes and triangles in device memory.
     pub fn device_bytes(&self) -> usize {
         self.device_bytes
+    }
+
+    /// The device arrays of nodes and triangles (for an IAS over this GAS).
+    pub(crate) fn device_arrays(&self) -> (&CudaSlice<u32>, &CudaSlice<u32>) {
+        (&self.nodes, &self.triangles)
+    }
+
+    /// What a hit on leaf slot `slot` reports.
+    pub(crate) fn slot_info(&self, slot: u32) -> Option<&SlotInfo> {
+        self.slots.get(slot as usize)
     }
 
     /// What the structure was built from: counts, flags, bounds, BVH statistics.
@@ -667,7 +684,7 @@ impl Traversable for CudaGas {
     }
 }
 
-fn grid(n: u32) -> LaunchConfig {
+pub(crate) fn grid(n: u32) -> LaunchConfig {
     LaunchConfig {
         grid_dim: (n.div_ceil(BLOCK), 1, 1),
         block_dim: (BLOCK, 1, 1),

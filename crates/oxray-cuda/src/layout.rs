@@ -48,9 +48,12 @@ impl NodeLayout {
 
 /// What a hit on a leaf slot reports: primitive index, SBT-GAS index, build input.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) struct SlotInfo {
+pub struct SlotInfo {
+    /// Primitive index with the input's offset.
     pub primitive_index: u32,
+    /// SBT-GAS index.
     pub sbt_gas_index: u32,
+    /// Build input.
     pub build_input: u32,
 }
 
@@ -187,4 +190,72 @@ fn bvh2_words(tree: &Bvh2) -> Result<Vec<u32>, String> {
         words.extend_from_slice(&[c0.child, c1.child, c0.count, c1.count]);
     }
     Ok(words)
+}
+
+/// The device's view of an instance's child: its index among the IAS's children (for the host)
+/// and its binary nodes and triangles in device memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct ChildRef {
+    pub index: u32,
+    pub nodes_addr: u64,
+    pub triangles_addr: u64,
+}
+
+/// Words per instance slot: the world-to-object rows (12), the world box's corners (2 x 4, the
+/// lower one's `w` holding the child index), and the child's two device addresses (4).
+pub(crate) const INSTANCE_WORDS: usize = 24;
+
+/// One level of instances over GASes as the IAS kernels read it: the top-level binary tree
+/// (its leaves are instance slots) and the instance table in slot order.
+#[derive(Clone, Debug)]
+pub(crate) struct IasLayout {
+    pub nodes: Vec<u32>,
+    pub instances: Vec<u32>,
+}
+
+impl IasLayout {
+    /// Lays out an IAS; `children[slot]` is the device view of the child of the instance in
+    /// that slot (`None`: never hit).
+    pub fn new(
+        ias: &oxray_bvh::IasData,
+        tree: &Bvh2,
+        children: &[Option<ChildRef>],
+    ) -> Result<Self, String> {
+        if ias.instances.len() > MAX_SLOTS {
+            return Err(format!(
+                "{} instances; at most {MAX_SLOTS}",
+                ias.instances.len()
+            ));
+        }
+        let nodes = bvh2_words(tree)?;
+        let mut instances = Vec::with_capacity(ias.instances.len() * INSTANCE_WORDS);
+        for (slot, inst) in ias.instances.iter().enumerate() {
+            for f in inst.world_to_object.0 {
+                instances.push(f.to_bits());
+            }
+            let b = ias.boxes[slot];
+            let child = children.get(slot).copied().flatten();
+            let index = child.map_or(u32::MAX, |c| c.index);
+            instances.extend_from_slice(&[
+                b.min.x.to_bits(),
+                b.min.y.to_bits(),
+                b.min.z.to_bits(),
+                index,
+            ]);
+            instances.extend_from_slice(&[
+                b.max.x.to_bits(),
+                b.max.y.to_bits(),
+                b.max.z.to_bits(),
+                0,
+            ]);
+            let (n, t) = child.map_or((0, 0), |c| (c.nodes_addr, c.triangles_addr));
+            instances.extend_from_slice(&[n as u32, (n >> 32) as u32, t as u32, (t >> 32) as u32]);
+        }
+        Ok(IasLayout { nodes, instances })
+    }
+
+    /// Bytes on the device.
+    pub fn device_bytes(&self) -> usize {
+        4 * (self.nodes.len() + self.instances.len())
+    }
 }

@@ -38,15 +38,17 @@ mod backend;
 mod context;
 mod error;
 mod gas;
+mod ias;
 mod layout;
 #[cfg(test)]
 mod reference;
 
-pub use backend::{Cuda, CudaBatch, CudaIas};
+pub use backend::{Cuda, CudaBatch};
 pub use context::{CudaContext, DeviceInfo, KernelInfo, KERNEL_SOURCE};
 pub use error::CudaError;
 pub use gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, HitRecord};
-pub use layout::NodeLayout;
+pub use ias::CudaIas;
+pub use layout::{NodeLayout, SlotInfo};
 
 #[cfg(test)]
 #[path = "../tests/common/mod.rs"]
@@ -239,5 +241,136 @@ mod tests {
         let gas = Gas::build(&oxray_core::BuildOptions::default(), &[input.into()]).unwrap();
         assert!(gas.export_triangles().is_none());
         assert!(CudaError::CustomPrimitives.to_string().contains("triangle"));
+    }
+
+    /// One level of instances over two meshes, with random transforms (non-uniform scales,
+    /// mirrors), a flipped-facing instance, a zero-mask instance, a null one and an empty GAS.
+    fn instanced_scene() -> (
+        oxray_cpu::Ias,
+        crate::layout::IasLayout,
+        Vec<Option<DeviceLayout>>,
+        Vec<Ray>,
+    ) {
+        use oxray_core::{Instance, InstanceFlags, Transform, TraversableHandle};
+        use oxray_testkit::rng::Rng;
+        let sphere = icosphere_f32(3);
+        let plane = Mesh {
+            positions: vec![
+                [-1.0, -1.0, 0.0],
+                [1.0, -1.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [-1.0, 1.0, 0.0],
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+        };
+        let flat = Mesh {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+            triangles: vec![[0, 1, 2]],
+        };
+        let built: Vec<(Gas, Bvh2)> = [&sphere, &plane, &flat]
+            .iter()
+            .map(|m| build_gas_with_tree(m, BuildFlags::empty()).unwrap())
+            .collect();
+        let layouts: Vec<DeviceLayout> = built
+            .iter()
+            .map(|(g, t)| {
+                let e = g.export_triangles().unwrap();
+                DeviceLayout::new(&e, t, NodeLayout::Bvh2).unwrap()
+            })
+            .collect();
+        let handles: Vec<TraversableHandle> = built
+            .iter()
+            .map(|(g, _)| TraversableHandle::from(g.clone()))
+            .collect();
+        let mut rng = Rng::new(5);
+        let mut instances: Vec<Instance> = (0..60)
+            .map(|i| {
+                let mut a = rng.affine(6.0);
+                if i % 7 == 0 {
+                    a.matrix3.x_axis = -a.matrix3.x_axis; // a mirror
+                }
+                let mut inst = Instance::new(handles[i % 3].clone())
+                    .transform(Transform::from_affine(&a))
+                    .instance_id(100 + i as u32);
+                if i % 5 == 1 {
+                    inst = inst.flags(InstanceFlags::FLIP_TRIANGLE_FACING);
+                }
+                if i == 9 {
+                    inst = inst.visibility_mask(0);
+                }
+                inst
+            })
+            .collect();
+        instances.push(Instance::new(TraversableHandle::NULL));
+        let input = [oxray_core::BuildInput::from(&instances[..])];
+        let options = oxray_core::BuildOptions::default();
+        let cpu = oxray_cpu::Ias::build(&options, &input).unwrap();
+        let (data, tree) = oxray_bvh::IasData::build_with_tree(&options, &input).unwrap();
+        // The children of the device table, by slot, as `CudaIas::upload` makes them.
+        let mut children = Vec::new();
+        let refs: Vec<Option<crate::layout::ChildRef>> = data
+            .instances
+            .iter()
+            .enumerate()
+            .map(|(slot, inst)| {
+                let which = handles.iter().position(|h| h.same_as(&inst.child));
+                children.push(which.map(|w| layouts[w].clone()));
+                (which.is_some() && inst.mask != 0).then_some(crate::layout::ChildRef {
+                    index: slot as u32,
+                    nodes_addr: 1,
+                    triangles_addr: 1,
+                })
+            })
+            .collect();
+        let top = crate::layout::IasLayout::new(&data, &tree, &refs).unwrap();
+        let mut rays: Vec<Ray> = (0..20_000)
+            .map(|_| {
+                let o = rng.vec3(-12.0, 12.0);
+                Ray::new(o, rng.vec3(-6.0, 6.0) - o)
+            })
+            .collect();
+        rays.push(Ray::new(glam::Vec3::NAN, glam::Vec3::Z));
+        (cpu, top, children, rays)
+    }
+
+    #[test]
+    fn ias_layout_traversal_matches_the_cpu_backend() {
+        use super::reference::trace_ias;
+        let (cpu, top, children, rays) = instanced_scene();
+        let mut ties = 0;
+        let mut hits = 0;
+        for (i, r) in rays.iter().enumerate() {
+            let want = cpu.intersect(r);
+            let (rec, slot) = trace_ias(&top, &children, r, false);
+            match (want, rec.is_hit()) {
+                (None, false) => {}
+                (Some(h), true) => {
+                    hits += 1;
+                    assert_eq!(h.t.to_bits(), rec.t.to_bits(), "ray {i}: {r:?}");
+                    let inst = &cpu.instances[slot as usize];
+                    if h.instance_index == inst.index {
+                        assert_eq!(
+                            (h.u.to_bits(), h.v.to_bits()),
+                            (rec.u.to_bits(), rec.v.to_bits())
+                        );
+                        let flip = inst
+                            .flags
+                            .contains(oxray_core::InstanceFlags::FLIP_TRIANGLE_FACING);
+                        assert_eq!(
+                            h.hit_kind.is_triangle_front_face(),
+                            rec.is_front_face() != flip
+                        );
+                        assert_eq!(h.instance_id, inst.instance_id);
+                    } else {
+                        ties += 1;
+                    }
+                }
+                (w, _) => panic!("ray {i} {r:?}: cpu {w:?}, layout {rec:?}"),
+            }
+            let (any, _) = trace_ias(&top, &children, r, true);
+            assert_eq!(any.is_hit(), cpu.occluded(r), "ray {i} occlusion");
+        }
+        assert!(hits > 2_000, "{hits} hits");
+        assert!(ties * 100 <= rays.len(), "{ties} ties");
     }
 }

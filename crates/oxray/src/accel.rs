@@ -218,11 +218,25 @@ impl Traversable for Gas {
 #[derive(Clone)]
 pub(crate) enum IasRepr {
     Cpu(Arc<oxray_cpu::Ias>),
+    #[cfg(feature = "cuda")]
+    Cuda(Arc<oxray_cuda::CudaIas>),
+}
+
+/// Calls `$body` with `$i` bound to the IAS data of whichever backend holds it.
+macro_rules! on_ias {
+    ($ias:expr, $i:ident => $cpu:expr, $cuda:expr) => {
+        match &$ias.0 {
+            IasRepr::Cpu($i) => $cpu,
+            #[cfg(feature = "cuda")]
+            IasRepr::Cuda($i) => $cuda,
+        }
+    };
 }
 
 /// An instance acceleration structure (IAS) on some device, from [`Device::build_ias`]. It
-/// keeps every child it references alive. The CPU backend builds IASes today; the CUDA backend
-/// refuses them with `Unsupported` until its kernels trace instances.
+/// keeps every child it references alive. The CPU backend builds any graph (IASes of IASes,
+/// transforms); the CUDA backend one level of instances over GASes, refusing deeper graphs
+/// with `Unsupported`.
 ///
 /// ```
 /// use oxray::{BuildOptions, Device, Instance, Ray, Transform, TriangleInput, VertexBuffer};
@@ -257,49 +271,48 @@ impl Ias {
 
     /// A handle for instances and traces.
     pub fn handle(&self) -> TraversableHandle {
-        match &self.0 {
-            IasRepr::Cpu(i) => i.clone().into(),
-        }
+        on_ias!(self, i => i.clone().into(), i.clone().into())
     }
 
     /// The CPU structure, if it lives on the CPU.
     pub fn as_cpu(&self) -> Option<&oxray_cpu::Ias> {
-        match &self.0 {
-            IasRepr::Cpu(i) => Some(i),
-        }
+        on_ias!(self, i => Some(i), { let _ = i; None })
+    }
+
+    /// The CUDA structure, if it lives on a CUDA device.
+    #[cfg(feature = "cuda")]
+    pub fn as_cuda(&self) -> Option<&oxray_cuda::CudaIas> {
+        on_ias!(self, _i => None, Some(_i))
     }
 
     /// The backend whose memory holds it.
     pub fn device_kind(&self) -> BackendKind {
-        BackendKind::Cpu
+        on_ias!(self, _i => BackendKind::Cpu, BackendKind::Cuda)
+    }
+
+    /// The built data: instances in slot order, world boxes, flags.
+    fn data(&self) -> &oxray_bvh::IasData {
+        on_ias!(self, i => i.data(), i.data())
     }
 
     /// Instances in the build input.
     pub fn num_instances(&self) -> u32 {
-        match &self.0 {
-            IasRepr::Cpu(i) => i.num_instances(),
-        }
+        self.data().num_instances
     }
 
     /// The world box of every instance that can be hit.
     pub fn bounds(&self) -> Aabb {
-        match &self.0 {
-            IasRepr::Cpu(i) => i.bounds(),
-        }
+        self.data().bounds
     }
 
     /// Levels of the traversable graph from this IAS down (an IAS over GASes is 2).
     pub fn graph_depth(&self) -> u32 {
-        match &self.0 {
-            IasRepr::Cpu(i) => i.graph_depth(),
-        }
+        self.data().depth
     }
 
     /// Statistics of the BVH over the instances.
     pub fn stats(&self) -> BvhStats {
-        match &self.0 {
-            IasRepr::Cpu(i) => i.stats(),
-        }
+        self.data().stats()
     }
 
     /// Closest hits of a batch on the structure's device.
@@ -308,16 +321,28 @@ impl Ias {
         rays: &[Ray],
         hits: &mut [Option<Hit>],
     ) -> Result<(), QueryError> {
-        match &self.0 {
-            IasRepr::Cpu(i) => i.intersect_batch(rays, hits),
-        }
+        on_ias!(
+            self,
+            i => i.intersect_batch(rays, hits),
+            {
+                let handle = TraversableHandle::from(i.clone());
+                let cuda = oxray_cuda::Cuda::from_context(i.context().clone());
+                oxray_core::AccelBackend::intersect_closest(&cuda, &handle, rays, hits)
+            }
+        )
     }
 
     /// Occlusion of a batch on the structure's device.
     pub fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) -> Result<(), QueryError> {
-        match &self.0 {
-            IasRepr::Cpu(i) => i.occluded_batch(rays, occluded),
-        }
+        on_ias!(
+            self,
+            i => i.occluded_batch(rays, occluded),
+            {
+                let handle = TraversableHandle::from(i.clone());
+                let cuda = oxray_cuda::Cuda::from_context(i.context().clone());
+                oxray_core::AccelBackend::intersect_any(&cuda, &handle, rays, occluded)
+            }
+        )
     }
 }
 
@@ -329,9 +354,7 @@ impl From<oxray_cpu::Ias> for Ias {
 
 impl std::fmt::Debug for Ias {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match &self.0 {
-            IasRepr::Cpu(i) => write!(f, "Ias({})", i.describe()),
-        }
+        write!(f, "Ias({})", on_ias!(self, i => i.describe(), i.describe()))
     }
 }
 
@@ -355,6 +378,8 @@ impl Traversable for Ias {
     fn into_object(self: Arc<Self>) -> Arc<dyn Traversable> {
         match &self.0 {
             IasRepr::Cpu(i) => i.clone(),
+            #[cfg(feature = "cuda")]
+            IasRepr::Cuda(i) => i.clone(),
         }
     }
 }

@@ -192,7 +192,7 @@ impl Device {
     }
 
     /// Builds an IAS on this device from one instance build input (guide §5.4). Every child
-    /// must live on this device.
+    /// must live on this device; the CUDA backend builds one level of instances over GASes.
     pub fn build_ias(
         &self,
         options: &BuildOptions,
@@ -201,7 +201,7 @@ impl Device {
         Ok(Ias::from_repr(match &self.repr {
             DeviceRepr::Cpu(b) => IasRepr::Cpu(Arc::new(b.build_ias(options, inputs)?)),
             #[cfg(feature = "cuda")]
-            DeviceRepr::Cuda(b) => match b.build_ias(options, inputs)? {},
+            DeviceRepr::Cuda(b) => IasRepr::Cuda(Arc::new(b.build_ias(options, inputs)?)),
         }))
     }
 

@@ -103,6 +103,95 @@ fn every_device_finds_the_same_hits_bit_for_bit() {
 }
 
 #[test]
+fn every_device_traces_one_level_of_instances_alike() {
+    use oxray::{InstanceFlags, Transform};
+    let sphere = icosphere(3);
+    let mut rng = Rng::new(3);
+    let rays: Vec<Ray> = (0..20_000)
+        .map(|_| {
+            let o = rng.vec3(-10.0, 10.0);
+            Ray::new(o, rng.vec3(-5.0, 5.0) - o)
+        })
+        .collect();
+    let mut reference: Option<(Vec<Option<Hit>>, Vec<bool>)> = None;
+    for device in devices() {
+        let gas = device
+            .build_gas(&BuildOptions::default(), &[sphere_input(&sphere)])
+            .unwrap();
+        let mut rng = Rng::new(9);
+        let instances: Vec<Instance> = (0..40)
+            .map(|i| {
+                let t = glam::Affine3A::from_scale_rotation_translation(
+                    Vec3::new(
+                        rng.range(0.5, 2.0),
+                        rng.range(0.5, 2.0),
+                        rng.range(0.5, 2.0),
+                    ),
+                    glam::Quat::from_axis_angle(rng.dir(), rng.range(0.0, 6.0)),
+                    rng.vec3(-6.0, 6.0),
+                );
+                let inst = Instance::new(gas.handle())
+                    .transform(Transform::from_affine(&t))
+                    .instance_id(7 * i);
+                if i % 3 == 0 {
+                    inst.flags(InstanceFlags::FLIP_TRIANGLE_FACING)
+                } else {
+                    inst
+                }
+            })
+            .collect();
+        let ias = device
+            .build_ias(&BuildOptions::default(), &[(&instances[..]).into()])
+            .unwrap();
+        assert_eq!(
+            (ias.device_kind(), ias.num_instances()),
+            (device.kind(), 40)
+        );
+        // Two levels: every graph on the CPU; one level of instances over GASes on CUDA.
+        let top = [Instance::new(ias.handle())];
+        let two = device.build_ias(&BuildOptions::default(), &[(&top[..]).into()]);
+        match device.kind() {
+            BackendKind::Cpu => assert_eq!(two.unwrap().graph_depth(), 3),
+            _ => assert!(matches!(two, Err(BuildError::Unsupported(_)))),
+        }
+        let mut hits = vec![None; rays.len()];
+        device
+            .intersect_closest(&ias.handle(), &rays, &mut hits)
+            .unwrap();
+        let mut occ = vec![false; rays.len()];
+        device
+            .intersect_any(&ias.handle(), &rays, &mut occ)
+            .unwrap();
+        assert!(hits.iter().filter(|h| h.is_some()).count() > 2_000);
+        // Resident batches agree with the one-call queries.
+        let mut batch = device.upload_rays(&rays, BatchKind::Closest).unwrap();
+        device.trace_batch(&ias.handle(), &mut batch).unwrap();
+        let mut again = vec![None; rays.len()];
+        device.download_hits(&batch, &mut again).unwrap();
+        assert_eq!(again, hits, "{device:?}");
+        match &reference {
+            None => reference = Some((hits, occ)),
+            Some((want, want_occ)) => {
+                assert_eq!(want_occ, &occ, "{device:?}");
+                let mut ties = 0;
+                for (a, b) in want.iter().zip(&hits) {
+                    let (a, b) = (a.unwrap_or(dummy_hit()), b.unwrap_or(dummy_hit()));
+                    assert_eq!(a.t.to_bits(), b.t.to_bits(), "{device:?}");
+                    if a.instance_index == b.instance_index
+                        && a.primitive_index == b.primitive_index
+                    {
+                        assert_eq!(a, b, "{device:?}");
+                    } else {
+                        ties += 1;
+                    }
+                }
+                assert!(ties * 100 <= rays.len(), "{ties} ties on {device:?}");
+            }
+        }
+    }
+}
+
+#[test]
 fn resident_batches_give_the_results_of_the_one_call_queries() {
     let mesh = icosphere(3);
     let rays = rays(5_000);

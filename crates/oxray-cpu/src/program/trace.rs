@@ -1,7 +1,6 @@
 //! `optixTrace` on the CPU: the rules of guide §13.2–§13.7 and §13.13 applied to the candidates
 //! the traversal kernel finds, with the hit group of each chosen by the §7.3 formula.
 
-use crate::ias::InstanceRecord;
 use crate::interrupt::{Interrupt, InterruptKind, ProgramResult};
 use crate::program::context::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx, Frame,
@@ -15,6 +14,7 @@ use crate::Gas;
 use glam::Vec3;
 use oxray_bvh::triangle::TriangleHit;
 use oxray_bvh::GasKind;
+use oxray_bvh::InstanceData as InstanceRecord;
 use oxray_core::sbt::hit_group_index;
 use oxray_core::{
     Exception, ExceptionCode, GeometryFlags, PrimitiveTypeFlags, Ray, RayFlags, TraversableHandle,
@@ -538,9 +538,9 @@ fn check_graph<P>(
             NodeRef::Ias(ias) => {
                 graph.contains(G::ALLOW_SINGLE_LEVEL_INSTANCING)
                     && ias
-                        .instances
+                        .nodes
                         .iter()
-                        .all(|i| matches!(i.node, None | Some(crate::gas::CpuNode::Gas(_))))
+                        .all(|n| matches!(n, None | Some(crate::gas::CpuNode::Gas(_))))
             }
             NodeRef::Static(_) => false,
         };

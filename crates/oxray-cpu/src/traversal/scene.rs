@@ -8,9 +8,9 @@ use super::leaf::{AabbLeaves, LeafEnd, LeafIntersector, TriangleLeaves};
 use super::node::Bvh4;
 use super::ray::PreparedRay;
 use crate::gas::CpuNode;
-use crate::ias::InstanceRecord;
 use crate::{Gas, Ias};
 use oxray_bvh::GasKind;
+use oxray_bvh::InstanceData as InstanceRecord;
 use oxray_core::ray::min_ignore_nan;
 use oxray_core::{Ray, StaticTransform, Transform, MAX_TRAVERSABLE_GRAPH_DEPTH};
 
@@ -221,7 +221,7 @@ impl<'s, V: SceneVisitor<'s>> LeafIntersector<V> for InstanceLeaves<'s, '_> {
             if inst.mask & visitor.ray_mask() == 0 {
                 continue;
             }
-            let Some(child) = inst.node.as_ref() else {
+            let Some(child) = self.ias.nodes[slot].as_ref() else {
                 continue;
             };
             let Some(path) = self.path.push(Level::Instance(inst)) else {

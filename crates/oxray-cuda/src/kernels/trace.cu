@@ -1,5 +1,5 @@
-// oxray CUDA trace kernels: closest hit and occlusion of a batch of rays against a triangle GAS
-// exported by the CPU backend.
+// oxray CUDA trace kernels: closest hit and occlusion of a batch of rays against a triangle GAS,
+// or against one level of instances over triangle GASes.
 //
 // Every floating-point operation below is the one the CPU backend performs, in the same order,
 // and the module is compiled with --fmad=false (no contraction into FMA), --ftz=false and IEEE
@@ -56,13 +56,9 @@ __device__ __forceinline__ float safe_inv(float d) {
     return d == 0.0f ? F32_INF : 1.0f / d;
 }
 
-__device__ __forceinline__ bool load_ray(const float4* __restrict__ rays, u32 i, TraceRay& r) {
-    float4 a = rays[2 * i];
-    float4 b = rays[2 * i + 1];
-    r.org = make_float3(a.x, a.y, a.z);
-    r.tmin = a.w;
-    r.dir = make_float3(b.x, b.y, b.z);
-    r.tmax = b.w;
+// PreparedRay::new: validates the ray (org, dir, tmin, tmax set) and computes the per-ray
+// constants of the box and triangle tests. False for an invalid ray, which hits nothing.
+__device__ __forceinline__ bool prepare_ray(TraceRay& r) {
     if (!ray_valid(r)) return false;
     r.inv = make_float3(safe_inv(r.dir.x), safe_inv(r.dir.y), safe_inv(r.dir.z));
     r.neg_x = !(r.inv.x >= 0.0f);
@@ -86,6 +82,16 @@ __device__ __forceinline__ bool load_ray(const float4* __restrict__ rays, u32 i,
     r.sy = comp(r.dir, ky) / dz;
     r.sz = 1.0f / dz;
     return true;
+}
+
+__device__ __forceinline__ bool load_ray(const float4* __restrict__ rays, u32 i, TraceRay& r) {
+    float4 a = rays[2 * i];
+    float4 b = rays[2 * i + 1];
+    r.org = make_float3(a.x, a.y, a.z);
+    r.tmin = a.w;
+    r.dir = make_float3(b.x, b.y, b.z);
+    r.tmax = b.w;
+    return prepare_ray(r);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -442,6 +448,133 @@ __device__ __forceinline__ Best trace_bvh2(const TraceRay& r, const float4* __re
 }
 
 // ---------------------------------------------------------------------------------------------
+// One level of instances over GASes: an IAS whose top-level tree is a binary BVH (the layout
+// above) whose leaves are instance slots. Each slot is six float4: the world-to-object rows
+// (3), the world box's lower and upper corners (.w: the child's index, for the host), and the
+// child GAS's binary nodes and triangles as two 64-bit device addresses (0: no child). Walked
+// as the CPU walks an IAS: the instance box test, the ray carried into object space with the
+// interval as it has shrunk, the child traversed, the interval shrunk to an accepted hit.
+// ---------------------------------------------------------------------------------------------
+
+// PreparedRay::hits_box: the scalar test of one instance's world box.
+__device__ __forceinline__ bool hits_box(const TraceRay& r, float4 lo, float4 hi, float tmin,
+                                         float tmax) {
+    float t0 = tmin;
+    float t1 = F32_INF;
+    float nx = r.neg_x ? hi.x : lo.x, fx = r.neg_x ? lo.x : hi.x;
+    float ny = r.neg_y ? hi.y : lo.y, fy = r.neg_y ? lo.y : hi.y;
+    float nz = r.neg_z ? hi.z : lo.z, fz = r.neg_z ? lo.z : hi.z;
+    t0 = max_keep((nx - r.org.x) * r.inv.x, t0);
+    t1 = min_keep((fx - r.org.x) * r.inv.x, t1);
+    t0 = max_keep((ny - r.org.y) * r.inv.y, t0);
+    t1 = min_keep((fy - r.org.y) * r.inv.y, t1);
+    t0 = max_keep((nz - r.org.z) * r.inv.z, t0);
+    t1 = min_keep((fz - r.org.z) * r.inv.z, t1);
+    return t0 <= min_keep(t1 * ROBUST_FAR, tmax * TMAX_SLACK);
+}
+
+struct IasBest {
+    Best hit;
+    u32 inst;  // instance slot of the hit; MISS_SLOT for none
+};
+
+template <bool ANY>
+__device__ __forceinline__ IasBest trace_ias(const TraceRay& r, const float4* __restrict__ top,
+                                             const float4* __restrict__ insts) {
+    IasBest best;
+    best.hit.t = F32_INF;
+    best.hit.u = 0.0f;
+    best.hit.v = 0.0f;
+    best.hit.slot = MISS_SLOT;
+    best.inst = MISS_SLOT;
+    float tmin = r.tmin;
+    float tmax = r.tmax;
+    float box_tmax = tmax * TMAX_SLACK;
+    Entry stack[OXRAY_STACK_SIZE];
+    int sp = 0;
+    Entry cur;
+    cur.child = 0;
+    cur.count = 0;
+    cur.dist = tmin;
+    for (;;) {
+        if (cur.count == 0) {
+            const float4* n = top + 4 * (size_t)cur.child;
+            float4 n0 = n[0], n1 = n[1], n2 = n[2];
+            uint4 links = reinterpret_cast<const uint4*>(n)[3];
+            float d0, d1;
+            bool h0 = slab(r, r.neg_x ? n0.y : n0.x, r.neg_y ? n0.w : n0.z, r.neg_z ? n2.y : n2.x,
+                           r.neg_x ? n0.x : n0.y, r.neg_y ? n0.z : n0.w, r.neg_z ? n2.x : n2.y,
+                           tmin, box_tmax, d0);
+            bool h1 = slab(r, r.neg_x ? n1.y : n1.x, r.neg_y ? n1.w : n1.z, r.neg_z ? n2.w : n2.z,
+                           r.neg_x ? n1.x : n1.y, r.neg_y ? n1.z : n1.w, r.neg_z ? n2.z : n2.w,
+                           tmin, box_tmax, d1);
+            Entry a, b;
+            a.child = links.x;
+            a.count = links.z;
+            a.dist = d0;
+            b.child = links.y;
+            b.count = links.w;
+            b.dist = d1;
+            if (h0 && h1) {
+                if (b.dist < a.dist) {
+                    stack[sp++] = a;
+                    cur = b;
+                } else {
+                    stack[sp++] = b;
+                    cur = a;
+                }
+                continue;
+            }
+            if (h0) {
+                cur = a;
+                continue;
+            }
+            if (h1) {
+                cur = b;
+                continue;
+            }
+        } else {
+            for (u32 s = cur.child; s < cur.child + cur.count; ++s) {
+                const float4* inst = insts + 6 * (size_t)s;
+                if (!hits_box(r, inst[3], inst[4], tmin, tmax)) continue;
+                uint4 ptrs = reinterpret_cast<const uint4*>(inst)[5];
+                const float4* nodes = reinterpret_cast<const float4*>(
+                    ((unsigned long long)ptrs.y << 32) | (unsigned long long)ptrs.x);
+                const float4* tris = reinterpret_cast<const float4*>(
+                    ((unsigned long long)ptrs.w << 32) | (unsigned long long)ptrs.z);
+                if (nodes == nullptr) continue;
+                float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
+                TraceRay o;
+                // Transform::transform_point and transform_vector, in the CPU's order.
+                o.org = make_float3(m0.x * r.org.x + m0.y * r.org.y + m0.z * r.org.z + m0.w,
+                                    m1.x * r.org.x + m1.y * r.org.y + m1.z * r.org.z + m1.w,
+                                    m2.x * r.org.x + m2.y * r.org.y + m2.z * r.org.z + m2.w);
+                o.dir = make_float3(m0.x * r.dir.x + m0.y * r.dir.y + m0.z * r.dir.z,
+                                    m1.x * r.dir.x + m1.y * r.dir.y + m1.z * r.dir.z,
+                                    m2.x * r.dir.x + m2.y * r.dir.y + m2.z * r.dir.z);
+                o.tmin = tmin;
+                o.tmax = tmax;
+                if (!prepare_ray(o)) continue;
+                Best h = trace_bvh2<ANY>(o, nodes, tris);
+                if (h.slot != MISS_SLOT) {
+                    // A hit at the current tmax replaces the one found before, as on the CPU.
+                    best.hit = h;
+                    best.inst = s;
+                    if (ANY) return best;
+                    tmax = h.t;
+                    box_tmax = tmax * TMAX_SLACK;
+                }
+            }
+        }
+        for (;;) {
+            if (sp == 0) return best;
+            cur = stack[--sp];
+            if (cur.dist <= box_tmax) break;
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Entry points. Rays are eight f32 (ox, oy, oz, tmin, dx, dy, dz, tmax); a closest-hit record is
 // (t, slot | back-face bit, u, v) with t = +inf and slot = 0xffffffff for a miss; an occlusion
 // result is one byte, 1 for occluded. An invalid ray hits nothing.
@@ -507,5 +640,37 @@ extern "C" __global__ void __launch_bounds__(128)
     TraceRay r;
     bool hit = false;
     if (load_ray(rays, i, r)) hit = trace_bvh2<true>(r, nodes, tris).slot != MISS_SLOT;
+    occluded[i] = hit ? 1 : 0;
+}
+
+extern "C" __global__ void __launch_bounds__(128)
+    oxray_closest_ias(const float4* __restrict__ top, const float4* __restrict__ insts,
+                      const float4* __restrict__ rays, uint4* __restrict__ hits,
+                      u32* __restrict__ inst_out, u32 n) {
+    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    TraceRay r;
+    IasBest b;
+    if (load_ray(rays, i, r)) {
+        b = trace_ias<false>(r, top, insts);
+    } else {
+        b.hit.t = F32_INF;
+        b.hit.u = b.hit.v = 0.0f;
+        b.hit.slot = MISS_SLOT;
+        b.inst = MISS_SLOT;
+    }
+    store_hit(hits, i, b.hit);
+    inst_out[i] = b.inst;
+}
+
+extern "C" __global__ void __launch_bounds__(128)
+    oxray_occluded_ias(const float4* __restrict__ top, const float4* __restrict__ insts,
+                       const float4* __restrict__ rays, unsigned char* __restrict__ occluded,
+                       u32 n) {
+    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    TraceRay r;
+    bool hit = false;
+    if (load_ray(rays, i, r)) hit = trace_ias<true>(r, top, insts).inst != MISS_SLOT;
     occluded[i] = hit ? 1 : 0;
 }

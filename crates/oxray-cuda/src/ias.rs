@@ -1,0 +1,367 @@
+//! An instance acceleration structure on the device: one level of instances over triangle
+//! GASes of the same device (the graph of OptiX's `ALLOW_SINGLE_LEVEL_INSTANCING`).
+
+use crate::context::CudaContext;
+use crate::error::{driver, CudaError};
+use crate::gas::{check_batch, grid, CudaGas, HitRecord, Scratch};
+use crate::layout::{ChildRef, IasLayout, NodeLayout};
+use bytemuck::Zeroable;
+use cudarc::driver::{CudaSlice, DevicePtr, PushKernelArg};
+use oxray_bvh::{Bvh2, IasData};
+use oxray_core::{
+    Aabb, BackendKind, BuildError, Hit, HitKind, InstanceFlags, Ray, Traversable, TraversableKind,
+};
+use rayon::prelude::*;
+use std::sync::{Arc, Mutex};
+
+/// An IAS in device memory: its top-level binary tree and an instance table holding the
+/// world-to-object transform, world box and device addresses of each child GAS. Queries give
+/// the CPU backend's hits: distances, barycentrics and facing bit for bit, with the instance's
+/// id and index; which of two hits at exactly the same distance is reported may differ (the
+/// top-level layouts differ, as for [`NodeLayout::Bvh2`]).
+#[derive(Debug)]
+pub struct CudaIas {
+    ctx: CudaContext,
+    nodes: CudaSlice<u32>,
+    instances: CudaSlice<u32>,
+    /// The instances, boxes and flags, in slot order (it keeps the children alive too).
+    data: IasData,
+    /// The child GAS of every slot, for resolving hits.
+    children: Vec<Option<Arc<CudaGas>>>,
+    device_bytes: usize,
+    scratch: Mutex<Scratch>,
+}
+
+impl CudaIas {
+    /// Uploads a built IAS whose children are GASes of `ctx` in the binary layout, or null.
+    /// Instances of IASes or transforms are refused (`Unsupported`), and so are children of
+    /// another device. An instance with a zero visibility mask is uploaded as null: a batched
+    /// query's ray mask is `0xFF`, so it is never traversed.
+    pub fn upload(ctx: &CudaContext, data: IasData, tree: &Bvh2) -> Result<CudaIas, BuildError> {
+        let mut children = Vec::with_capacity(data.instances.len());
+        let mut refs = Vec::with_capacity(data.instances.len());
+        for (slot, inst) in data.instances.iter().enumerate() {
+            let child = &inst.child;
+            let Some(backend) = child.backend() else {
+                children.push(None);
+                refs.push(None);
+                continue;
+            };
+            let Some(gas) = child.downcast_arc::<CudaGas>() else {
+                return Err(match backend {
+                    BackendKind::Cuda | BackendKind::Any => BuildError::Unsupported(
+                        "instances of IASes or transforms on the CUDA backend (one level of instances over GASes is traced)",
+                    ),
+                    found => BuildError::ForeignTraversable {
+                        instance: inst.index,
+                        device: BackendKind::Cuda,
+                        found,
+                    },
+                });
+            };
+            if !gas.context().same_context(ctx) {
+                return Err(BuildError::Device(format!(
+                    "instance {}: its GAS lives in another CUDA context",
+                    inst.index
+                )));
+            }
+            if gas.layout() != NodeLayout::Bvh2 {
+                return Err(BuildError::Unsupported(
+                    "instances of GASes in the BVH4 node layout on the CUDA backend",
+                ));
+            }
+            if inst.mask == 0 {
+                children.push(None);
+                refs.push(None);
+                continue;
+            }
+            let addrs = {
+                let (n, t) = gas.device_arrays();
+                let (nodes_addr, _n) = n.device_ptr(&ctx.stream);
+                let (triangles_addr, _t) = t.device_ptr(&ctx.stream);
+                (nodes_addr, triangles_addr)
+            };
+            refs.push(Some(ChildRef {
+                index: slot as u32,
+                nodes_addr: addrs.0,
+                triangles_addr: addrs.1,
+            }));
+            children.push(Some(gas));
+        }
+        let host = IasLayout::new(&data, tree, &refs).map_err(BuildError::Device)?;
+        let upload = |words: &[u32], what: &'static str| {
+            let words: &[u32] = if words.is_empty() { &[0; 4] } else { words };
+            ctx.stream
+                .clone_htod(words)
+                .map_err(driver(what))
+                .map_err(|e| BuildError::Device(e.to_string()))
+        };
+        let nodes = upload(&host.nodes, "copying IAS nodes to the device")?;
+        let instances = upload(&host.instances, "copying instances to the device")?;
+        ctx.synchronize()
+            .map_err(|e| BuildError::Device(e.to_string()))?;
+        Ok(CudaIas {
+            ctx: ctx.clone(),
+            nodes,
+            instances,
+            device_bytes: host.device_bytes(),
+            data,
+            children,
+            scratch: Mutex::new(Scratch::default()),
+        })
+    }
+
+    /// The built data: instances, world boxes, flags, BVH statistics.
+    pub fn data(&self) -> &IasData {
+        &self.data
+    }
+
+    /// Bytes of the top-level nodes and the instance table in device memory (the children's
+    /// are their own).
+    pub fn device_bytes(&self) -> usize {
+        self.device_bytes
+    }
+
+    /// The context it lives in.
+    pub fn context(&self) -> &CudaContext {
+        &self.ctx
+    }
+
+    /// Closest hits of a batch into `hits`: rays up, the kernel, hits down and resolved.
+    pub fn intersect_batch_into(
+        &self,
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) -> Result<(), CudaError> {
+        if rays.len() != hits.len() {
+            return Err(CudaError::LengthMismatch {
+                rays: rays.len(),
+                outputs: hits.len(),
+            });
+        }
+        let n = rays.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let s = &mut *guard;
+        s.load(&self.ctx, rays)?;
+        let (Some(d_rays), Some(d_hits), Some(d_insts)) =
+            (s.rays.as_ref(), s.hits.as_mut(), s.insts.as_mut())
+        else {
+            return Err(CudaError::Driver {
+                during: "tracing",
+                message: "scratch buffers missing".into(),
+            });
+        };
+        self.launch_closest(d_rays, d_hits, d_insts, n as u32)?;
+        s.records.resize(n, HitRecord::zeroed());
+        s.inst_records.resize(n, 0);
+        let stream = &self.ctx.stream;
+        stream
+            .memcpy_dtoh(
+                &d_hits.slice(..4 * n),
+                bytemuck::cast_slice_mut::<HitRecord, u32>(&mut s.records[..n]),
+            )
+            .map_err(driver("copying hit records to the host"))?;
+        stream
+            .memcpy_dtoh(&d_insts.slice(..n), &mut s.inst_records[..n])
+            .map_err(driver("copying instance records to the host"))?;
+        self.ctx.synchronize()?;
+        self.resolve_into(&s.records[..n], &s.inst_records[..n], hits);
+        Ok(())
+    }
+
+    /// Occlusion of a batch into `occluded`.
+    pub fn occluded_batch_into(
+        &self,
+        rays: &[Ray],
+        occluded: &mut [bool],
+    ) -> Result<(), CudaError> {
+        if rays.len() != occluded.len() {
+            return Err(CudaError::LengthMismatch {
+                rays: rays.len(),
+                outputs: occluded.len(),
+            });
+        }
+        let n = rays.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let s = &mut *guard;
+        s.load(&self.ctx, rays)?;
+        let (Some(d_rays), Some(d_occ)) = (s.rays.as_ref(), s.occluded.as_mut()) else {
+            return Err(CudaError::Driver {
+                during: "tracing",
+                message: "scratch buffers missing".into(),
+            });
+        };
+        self.launch_occluded(d_rays, d_occ, n as u32)?;
+        s.flags.resize(n, 0);
+        self.ctx
+            .stream
+            .memcpy_dtoh(&d_occ.slice(..n), &mut s.flags[..n])
+            .map_err(driver("copying occlusion results to the host"))?;
+        self.ctx.synchronize()?;
+        for (o, &f) in occluded.iter_mut().zip(&s.flags[..n]) {
+            *o = f != 0;
+        }
+        Ok(())
+    }
+
+    /// Traces rays already on the device (8 words each) into `hits` (4 words each) and `insts`
+    /// (one instance slot each); returns when the kernel is done.
+    pub(crate) fn intersect_device(
+        &self,
+        rays: &CudaSlice<u32>,
+        hits: &mut CudaSlice<u32>,
+        insts: &mut CudaSlice<u32>,
+        n: usize,
+    ) -> Result<(), CudaError> {
+        check_batch(n)?;
+        if n == 0 {
+            return Ok(());
+        }
+        self.launch_closest(rays, hits, insts, n as u32)?;
+        self.ctx.synchronize()
+    }
+
+    /// Traces occlusion of rays already on the device into `out` (a byte each).
+    pub(crate) fn occluded_device(
+        &self,
+        rays: &CudaSlice<u32>,
+        out: &mut CudaSlice<u8>,
+        n: usize,
+    ) -> Result<(), CudaError> {
+        check_batch(n)?;
+        if n == 0 {
+            return Ok(());
+        }
+        self.launch_occluded(rays, out, n as u32)?;
+        self.ctx.synchronize()
+    }
+
+    fn launch_closest(
+        &self,
+        rays: &CudaSlice<u32>,
+        hits: &mut CudaSlice<u32>,
+        insts: &mut CudaSlice<u32>,
+        n: u32,
+    ) -> Result<(), CudaError> {
+        debug_assert!(
+            rays.len() >= 8 * n as usize
+                && hits.len() >= 4 * n as usize
+                && insts.len() >= n as usize
+        );
+        let mut launch = self
+            .ctx
+            .stream
+            .launch_builder(&self.ctx.kernels.closest_ias);
+        launch
+            .arg(&self.nodes)
+            .arg(&self.instances)
+            .arg(rays)
+            .arg(hits)
+            .arg(insts)
+            .arg(&n);
+        // SAFETY: the kernel's parameters are (const float4* top, const float4* insts,
+        // const float4* rays, uint4* hits, u32* inst_out, u32 n), matching the arguments: device
+        // buffers of 32-bit words holding the `IasLayout` (every child index and slot range in
+        // bounds; every non-null child address is the nodes or triangles of a live `CudaGas` in
+        // this context, kept alive by `self.children` and never written after its upload), at
+        // least 8 words per ray, 4 per hit and 1 per instance result for `n` rays.
+        unsafe { launch.launch(grid(n)) }
+            .map_err(driver("launching the IAS closest-hit kernel"))?;
+        Ok(())
+    }
+
+    fn launch_occluded(
+        &self,
+        rays: &CudaSlice<u32>,
+        out: &mut CudaSlice<u8>,
+        n: u32,
+    ) -> Result<(), CudaError> {
+        debug_assert!(rays.len() >= 8 * n as usize && out.len() >= n as usize);
+        let mut launch = self
+            .ctx
+            .stream
+            .launch_builder(&self.ctx.kernels.occluded_ias);
+        launch
+            .arg(&self.nodes)
+            .arg(&self.instances)
+            .arg(rays)
+            .arg(out)
+            .arg(&n);
+        // SAFETY: as in `launch_closest`, with the output at least a byte per ray for `n` rays.
+        unsafe { launch.launch(grid(n)) }.map_err(driver("launching the IAS occlusion kernel"))?;
+        Ok(())
+    }
+
+    /// Turns hit records and instance slots into [`Hit`]s.
+    pub(crate) fn resolve_into(
+        &self,
+        records: &[HitRecord],
+        insts: &[u32],
+        out: &mut [Option<Hit>],
+    ) {
+        const CHUNK: usize = 1 << 14;
+        records
+            .par_chunks(CHUNK)
+            .zip(insts.par_chunks(CHUNK))
+            .zip(out.par_chunks_mut(CHUNK))
+            .for_each(|((r, i), o)| {
+                for ((r, &i), o) in r.iter().zip(i).zip(o) {
+                    *o = self.resolve_one(r, i);
+                }
+            });
+    }
+
+    fn resolve_one(&self, r: &HitRecord, slot: u32) -> Option<Hit> {
+        if !r.is_hit() {
+            return None;
+        }
+        let inst = self.data.instances.get(slot as usize)?;
+        let gas = self.children.get(slot as usize)?.as_ref()?;
+        let s = gas.slot_info(r.slot_index())?;
+        // FLIP_TRIANGLE_FACING of the instance swaps the faces (guide §5.4).
+        let flip = inst.flags.contains(InstanceFlags::FLIP_TRIANGLE_FACING);
+        Some(Hit {
+            t: r.t,
+            u: r.u,
+            v: r.v,
+            primitive_index: s.primitive_index,
+            sbt_gas_index: s.sbt_gas_index,
+            build_input: s.build_input,
+            hit_kind: if r.is_front_face() != flip {
+                HitKind::TRIANGLE_FRONT_FACE
+            } else {
+                HitKind::TRIANGLE_BACK_FACE
+            },
+            instance_id: inst.instance_id,
+            instance_index: inst.index,
+        })
+    }
+}
+
+impl Traversable for CudaIas {
+    fn traversable_kind(&self) -> TraversableKind {
+        TraversableKind::Ias
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.data.bounds
+    }
+
+    fn graph_depth(&self) -> u32 {
+        self.data.depth
+    }
+
+    fn backend(&self) -> BackendKind {
+        BackendKind::Cuda
+    }
+
+    fn describe(&self) -> String {
+        format!("CUDA IAS of {} instances", self.data.num_instances)
+    }
+}
