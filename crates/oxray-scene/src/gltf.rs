@@ -8,6 +8,7 @@
 //! unchecked, checks every accessor's bounds, types and sizes before handing it to the crate's
 //! reader, and reads images and cameras from the JSON directly.
 
+use super::image::ImageError;
 use super::{
     image, AlphaMode, Camera, InstanceDesc, LightKind, MaterialDesc, MeshDesc, Primitive,
     PunctualLight, SceneDesc, SceneError, Texture, TextureRef, Wrap,
@@ -18,7 +19,7 @@ use ::gltf::{accessor::DataType, accessor::Dimensions, Accessor, Document};
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Elements an accessor without a buffer view may declare: such an accessor is all zeros (plus
 /// sparse values), so its count is not bounded by any data, and a larger count would let a tiny
@@ -45,7 +46,7 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
 /// materials then have no texture references).
 pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| SceneError::Io {
+    let bytes = crate::files::read_input(path).map_err(|e| SceneError::Io {
         path: name.clone(),
         message: e.to_string(),
     })?;
@@ -64,14 +65,18 @@ pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneE
     validate_json(&root).map_err(malformed)?;
     let doc = Document::from_json_without_validation(root);
     let base = path.parent().unwrap_or(Path::new("."));
-    let buffers = load_buffers(&doc, base, bin, &name)?;
+    let mut sources = vec![path.to_path_buf()];
+    let buffers = load_buffers(&doc, base, bin, &name, &mut sources)?;
     let input_size = bytes.len() + buffers.iter().map(Vec::len).sum::<usize>();
     let mut loader = Loader {
         name: name.clone(),
         doc: &doc,
         buffers: &buffers,
         budget: BASE_BUDGET.saturating_add(input_size.saturating_mul(EXPANSION)),
-        scene: SceneDesc::default(),
+        scene: SceneDesc {
+            sources,
+            ..Default::default()
+        },
     };
     loader.materials(base, textures).map_err(malformed)?;
     loader.meshes().map_err(malformed)?;
@@ -184,6 +189,7 @@ fn load_buffers(
     base: &Path,
     mut bin: Option<&[u8]>,
     name: &str,
+    sources: &mut Vec<PathBuf>,
 ) -> Result<Vec<Vec<u8>>, SceneError> {
     let malformed = |message: String| SceneError::Malformed {
         path: name.to_string(),
@@ -207,7 +213,8 @@ fn load_buffers(
                     let file = base.join(uri_path(uri).map_err(|e| {
                         malformed(format!("buffer {i}: unsupported URI {uri:?} ({e})"))
                     })?);
-                    std::fs::read(&file).map_err(|e| SceneError::Io {
+                    sources.push(file.clone());
+                    crate::files::read_input(&file).map_err(|e| SceneError::Io {
                         path: name.to_string(),
                         message: format!("buffer {i}: cannot read {} ({e})", file.display()),
                     })?
@@ -631,19 +638,31 @@ impl Loader<'_> {
             .collect();
         images.sort_unstable();
         images.dedup();
-        let sources: Vec<(usize, String, Result<Vec<u8>, String>)> = images
-            .iter()
-            .map(|&i| {
-                let (label, bytes) = self.image_bytes(i, base);
-                (i, label, bytes)
-            })
-            .collect();
-        let decoded: Vec<(usize, String, Result<Texture, String>)> = sources
+        let mut sources = Vec::with_capacity(images.len());
+        for &i in &images {
+            let (label, file, bytes) = self.image_bytes(i, base);
+            self.scene.sources.extend(file);
+            sources.push((i, label, bytes));
+        }
+        // Every image's decoded size is checked against the limits before any is decoded.
+        let mut sizes = Vec::new();
+        for (_, label, bytes) in &sources {
+            let size = match bytes {
+                Ok(b) => image::decoded_size(b),
+                Err(ImageError::Fatal(e)) => Err(ImageError::Fatal(e.clone())),
+                Err(ImageError::Skip(_)) => continue,
+            };
+            match size {
+                Ok(size) => sizes.push(size),
+                Err(ImageError::Fatal(e)) => return Err(format!("texture {label}: {e}")),
+                Err(ImageError::Skip(_)) => {}
+            }
+        }
+        image::check_total(sizes)?;
+        let decoded: Vec<(usize, String, Result<Texture, ImageError>)> = sources
             .into_par_iter()
             .map(|(i, label, bytes)| {
-                let tex = bytes.and_then(|b| {
-                    image::decode(&label, &b).map_err(|e| format!("cannot decode ({e})"))
-                });
+                let tex = bytes.and_then(|b| image::decode(&label, &b));
                 (i, label, tex)
             })
             .collect();
@@ -653,7 +672,8 @@ impl Loader<'_> {
                 Ok(t) => {
                     decoded_by_image.insert(i, Some(t));
                 }
-                Err(e) => {
+                Err(ImageError::Fatal(e)) => return Err(format!("texture {label}: {e}")),
+                Err(ImageError::Skip(e)) => {
                     self.warn(format!("texture {label}: {e}; rendering without it"));
                     decoded_by_image.insert(i, None);
                 }
@@ -702,40 +722,60 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// The bytes of image `i` and a label for messages; failing to get them is a warning.
-    fn image_bytes(&self, i: usize, base: &Path) -> (String, Result<Vec<u8>, String>) {
+    /// The bytes of image `i`, a label for messages and the file read, if any; failing to get
+    /// them is a warning, unless the file is not a regular file or is over the size limit.
+    fn image_bytes(
+        &self,
+        i: usize,
+        base: &Path,
+    ) -> (String, Option<PathBuf>, Result<Vec<u8>, ImageError>) {
+        let skip = |e: &str| Err(ImageError::Skip(e.to_string()));
         let Some(img) = self.doc.as_json().images.get(i) else {
-            return (format!("image {i}"), Err("missing image".into()));
+            return (format!("image {i}"), None, skip("missing image"));
         };
         if let Some(view) = &img.buffer_view {
             let label = img.name.clone().unwrap_or_else(|| format!("image {i}"));
             let Some(v) = self.doc.views().nth(view.value()) else {
-                return (label, Err("missing buffer view".into()));
+                return (label, None, skip("missing buffer view"));
             };
             let bytes = self
                 .buffers
                 .get(v.buffer().index())
                 .and_then(|b| b.get(v.offset()..v.offset().checked_add(v.length())?));
             return match bytes {
-                Some(b) => (label, Ok(b.to_vec())),
-                None => (label, Err("buffer view lies outside its buffer".into())),
+                Some(b) => (label, None, Ok(b.to_vec())),
+                None => (label, None, skip("buffer view lies outside its buffer")),
             };
         }
         let Some(uri) = &img.uri else {
-            return (format!("image {i}"), Err("no uri or bufferView".into()));
+            return (format!("image {i}"), None, skip("no uri or bufferView"));
         };
         if let Some(data) = uri.strip_prefix("data:") {
             let label = img.name.clone().unwrap_or_else(|| format!("image {i}"));
             return (
                 label,
-                decode_data_uri(data).map_err(|e| format!("bad data URI ({e})")),
+                None,
+                decode_data_uri(data).map_err(|e| ImageError::Skip(format!("bad data URI ({e})"))),
             );
         }
         let label = uri.clone();
-        let bytes = uri_path(uri)
-            .map_err(|e| format!("unsupported URI ({e})"))
-            .and_then(|p| std::fs::read(base.join(p)).map_err(|e| format!("cannot read ({e})")));
-        (label, bytes)
+        match uri_path(uri) {
+            Err(e) => (
+                label,
+                None,
+                Err(ImageError::Skip(format!("unsupported URI ({e})"))),
+            ),
+            Ok(p) => {
+                let file = base.join(p);
+                let bytes = image::read_file(&file).map_err(|e| match e {
+                    ImageError::Skip(e) => {
+                        ImageError::Skip(e.replace("cannot read it", "cannot read"))
+                    }
+                    fatal => fatal,
+                });
+                (label, Some(file), bytes)
+            }
+        }
     }
 
     /// Converts every mesh; primitives without a material get a default one.

@@ -88,7 +88,7 @@ impl Mesh {
         let mesh = match ext.as_deref() {
             Some("obj") => load_obj(path, &name)?,
             Some("ply") => {
-                let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+                let bytes = crate::files::read_input(path).map_err(|source| MeshError::Io {
                     path: name.clone(),
                     source,
                 })?;
@@ -258,10 +258,11 @@ fn load_obj(path: &Path, name: &str) -> Result<Mesh, MeshError> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+    let bytes = crate::files::read_input(path).map_err(|source| MeshError::Io {
         path: name.to_string(),
         source,
     })?;
+    let bytes = crate::text::fix_obj(crate::text::to_utf8(bytes));
     // Material libraries are not read: only the geometry is needed, and tobj's MTL parser panics
     // on some malformed files (a colour with fewer than three numbers).
     check_obj_indices(&bytes).map_err(|message| MeshError::Obj {
