@@ -292,3 +292,270 @@ fn a_closed_pipe_ends_quietly_and_a_full_disk_is_an_error() {
     }
     std::fs::remove_dir_all(&d).ok();
 }
+
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = 0xffff_ffffu32;
+    for &b in bytes {
+        c ^= b as u32;
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                0xedb8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+fn chunk(out: &mut Vec<u8>, ty: &[u8; 4], data: &[u8]) {
+    out.extend((data.len() as u32).to_be_bytes());
+    let mut body = ty.to_vec();
+    body.extend_from_slice(data);
+    out.extend_from_slice(&body);
+    out.extend(crc32(&body).to_be_bytes());
+}
+
+/// A PNG that declares `w` x `h` (8-bit, `color` type) with the given extra chunks before a
+/// small IDAT: a decompression bomb for large sizes.
+fn crafted_png(w: u32, h: u32, color: u8, extra: &[(&[u8; 4], Vec<u8>)]) -> Vec<u8> {
+    let mut out = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend(w.to_be_bytes());
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, color, 0, 0, 0]);
+    chunk(&mut out, b"IHDR", &ihdr);
+    for (ty, data) in extra {
+        chunk(&mut out, ty, data);
+    }
+    // zlib of a 1x1 row: filter 0, index 0 (stored block).
+    chunk(
+        &mut out,
+        b"IDAT",
+        &[
+            0x78, 0x01, 0x01, 0x02, 0x00, 0xfd, 0xff, 0, 0, 0x00, 0x02, 0x00, 0x01,
+        ],
+    );
+    chunk(&mut out, b"IEND", &[]);
+    out
+}
+
+/// An OBJ triangle whose materials use the given texture files, one material each.
+fn obj_with_textures(d: &Path, textures: &[&str]) -> PathBuf {
+    let mut mtl = String::new();
+    let mut obj =
+        String::from("mtllib scene.mtl\nv -1 -1 0\nv 1 -1 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\n");
+    for (i, t) in textures.iter().enumerate() {
+        mtl += &format!("newmtl m{i}\nKd 1 1 1\nmap_Kd {t}\n");
+        obj += &format!("usemtl m{i}\nf 1/1 2/2 3/3\n");
+    }
+    std::fs::write(d.join("scene.mtl"), mtl).unwrap();
+    let p = d.join("scene.obj");
+    std::fs::write(&p, obj).unwrap();
+    p
+}
+
+#[test]
+fn image_bombs_and_texture_budgets_are_errors_before_decoding() {
+    let d = dir("bombs");
+    std::fs::write(d.join("bomb.png"), crafted_png(16384, 16384, 6, &[])).unwrap();
+    let scene = obj_with_textures(&d, &["bomb.png"]);
+    let out = d.join("out.png");
+    let t = Instant::now();
+    let o = run(&["info", s(&scene)], None);
+    // `info` on OBJ reads the geometry only; `render` loads the textures.
+    assert!(o.status.success());
+    let mut args = vec!["render", s(&scene), "-o", s(&out)];
+    args.extend(SMALL);
+    assert_one_error(&run(&args, None), "over the limit of 256 MiB per image");
+    assert!(t.elapsed() < Duration::from_secs(10));
+    // Several images that each fit but together do not (the limit lowered to keep it small).
+    for i in 0..3 {
+        std::fs::write(
+            d.join(format!("t{i}.png")),
+            png_bytes(512, 512, [9, 9, 9, 255]),
+        )
+        .unwrap();
+    }
+    let scene = obj_with_textures(&d, &["t0.png", "t1.png", "t2.png"]);
+    let mut args = vec!["render", s(&scene), "-o", s(&out)];
+    args.extend(SMALL);
+    let o = oxray()
+        .args(&args)
+        .env("OXRAY_MAX_TEXTURES_MB", "2")
+        .output()
+        .unwrap();
+    assert_one_error(&o, "OXRAY_MAX_TEXTURES_MB");
+    let o = oxray()
+        .args(&args)
+        .env("OXRAY_MAX_TEXTURES_MB", "3")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = oxray()
+        .args(&args)
+        .env("OXRAY_MAX_TEXTURES_MB", "lots")
+        .output()
+        .unwrap();
+    assert_one_error(&o, "OXRAY_MAX_TEXTURES_MB must be a whole number");
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn a_palette_png_with_a_bad_palette_is_a_warning_not_a_panic() {
+    let d = dir("palette");
+    // Colour type 3 with a 4-byte PLTE (not a multiple of 3).
+    let png = crafted_png(1, 1, 3, &[(b"PLTE", vec![255, 0, 0, 7])]);
+    std::fs::write(d.join("pal.png"), png).unwrap();
+    let scene = obj_with_textures(&d, &["pal.png"]);
+    let out = d.join("out.png");
+    let mut args = vec!["render", s(&scene), "-o", s(&out)];
+    args.extend(SMALL);
+    let o = run(&args, None);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(err.lines().all(|l| l.starts_with("warning: ")), "{err}");
+    assert!(err.contains("pal.png"), "{err}");
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn devices_and_fifos_are_refused_without_reading() {
+    let d = dir("devices");
+    let gltf = d.join("zero.gltf");
+    std::fs::write(
+        &gltf,
+        r#"{"asset":{"version":"2.0"},"buffers":[{"byteLength":4294967295,"uri":"/dev/zero"}]}"#,
+    )
+    .unwrap();
+    let t = Instant::now();
+    assert_one_error(&run(&["info", s(&gltf)], None), "not a regular file");
+    let fifo = d.join("fifo.png");
+    let made = Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|s| s.success()) {
+        let scene = obj_with_textures(&d, &["fifo.png"]);
+        let out = d.join("out.png");
+        let mut args = vec!["render", s(&scene), "-o", s(&out)];
+        args.extend(SMALL);
+        assert_one_error(&run(&args, None), "not a regular file");
+        let rays = d.join("rays.fifo");
+        Command::new("mkfifo").arg(&rays).status().unwrap();
+        let o = run(
+            &[
+                "raycast",
+                s(&scene),
+                "--rays",
+                s(&rays),
+                "--out",
+                s(&d.join("h.bin")),
+            ],
+            None,
+        );
+        assert_one_error(&o, "not a regular file");
+    }
+    assert!(t.elapsed() < Duration::from_secs(10));
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn ray_files_and_flattened_instances_are_bounded_before_allocating() {
+    let d = dir("bounds");
+    let mesh = d.join("tri.obj");
+    std::fs::write(&mesh, "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    // A 2 GiB ray file (sparse: nothing is written) is refused from its size.
+    let rays = d.join("big.rays");
+    std::fs::File::create(&rays)
+        .unwrap()
+        .set_len(2 << 30)
+        .unwrap();
+    let hits = d.join("hits.bin");
+    let t = Instant::now();
+    let o = run(
+        &["raycast", s(&mesh), "--rays", s(&rays), "--out", s(&hits)],
+        None,
+    );
+    assert_one_error(&o, "OXRAY_MAX_RAYS");
+    assert!(t.elapsed() < Duration::from_secs(5), "{:?}", t.elapsed());
+    std::fs::File::create(&rays).unwrap().set_len(33).unwrap();
+    let o = run(
+        &["raycast", s(&mesh), "--rays", s(&rays), "--out", s(&hits)],
+        None,
+    );
+    assert_one_error(&o, "not a whole number of 32-byte rays");
+    // A small glTF whose many instances flatten past the geometry limit.
+    let nodes: Vec<String> = (0..30000).map(|_| r#"{"mesh":0}"#.to_string()).collect();
+    let roots: Vec<String> = (0..30000).map(|i| i.to_string()).collect();
+    let gltf = d.join("many.gltf");
+    std::fs::write(
+        &gltf,
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"scenes":[{{"nodes":[{}]}}],"nodes":[{}],"meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],"accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"}}],"bufferViews":[{{"buffer":0,"byteLength":36}}],"buffers":[{{"byteLength":36,"uri":"data:application/octet-stream;base64,AAAAAAAAAAAAAAAAAACAPwAAAAAAAAAAAAAAAAAAgD8AAAAA"}}]}}"#,
+            roots.join(","),
+            nodes.join(",")
+        ),
+    )
+    .unwrap();
+    std::fs::write(
+        &rays,
+        ray_bytes(&[[0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, 1e30]]),
+    )
+    .unwrap();
+    let args = ["raycast", s(&gltf), "--rays", s(&rays), "--out", s(&hits)];
+    let o = oxray()
+        .args(args)
+        .env("OXRAY_MAX_GEOMETRY_MB", "1")
+        .output()
+        .unwrap();
+    assert_one_error(&o, "30000 instances flatten to");
+    let o = oxray().args(args).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn raycast_counts_invalid_rays_and_clamps_a_negative_tmin() {
+    let d = dir("invalid-rays");
+    let mesh = d.join("tri.obj");
+    std::fs::write(&mesh, "v -1 -1 0\nv 1 -1 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    let inf = f32::INFINITY;
+    let nan = f32::NAN;
+    let rays = d.join("rays.bin");
+    std::fs::write(
+        &rays,
+        ray_bytes(&[
+            // A plain hit at t = 5, with tmin = -1e30: clamped, still a hit.
+            [0.0, 0.0, 5.0, -1e30, 0.0, 0.0, -1.0, inf],
+            // NaN origin, zero direction, NaN tmax, tmin > tmax: not traced.
+            [nan, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, inf],
+            [0.0, 0.0, 5.0, 0.0, 0.0, 0.0, 0.0, inf],
+            [0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, nan],
+            [0.0, 0.0, 5.0, 6.0, 0.0, 0.0, -1.0, 4.0],
+            // A valid hit.
+            [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, -1.0, inf],
+        ]),
+    )
+    .unwrap();
+    let hits = d.join("hits.bin");
+    let o = run(
+        &["raycast", s(&mesh), "--rays", s(&rays), "--out", s(&hits)],
+        None,
+    );
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stdout.starts_with("6 rays, 2 hits, 4 invalid"), "{stdout}");
+    assert!(
+        stderr.contains("4 invalid rays written as misses"),
+        "{stderr}"
+    );
+    assert!(stderr.contains("1 rays with tmin < 0"), "{stderr}");
+    let h = std::fs::read(&hits).unwrap();
+    let t = |i: usize| f32::from_le_bytes(h[16 * i..16 * i + 4].try_into().unwrap());
+    assert_eq!(t(0), 5.0);
+    for i in 1..5 {
+        assert_eq!(t(i), inf, "ray {i}");
+    }
+    assert_eq!(t(5), 1.0);
+    std::fs::remove_dir_all(&d).ok();
+}
