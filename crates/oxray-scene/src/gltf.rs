@@ -259,7 +259,9 @@ fn validate_json(root: &json::Root) -> Result<(), String> {
         // Extensions are checked by `check_extensions`; an accessor without a buffer view is
         // zero-filled, as the specification allows.
         let handled = path.starts_with("extensionsRequired")
-            || path.starts_with("accessors[") && path.ends_with(".bufferView");
+            || path.starts_with("accessors[")
+                && path.ends_with(".bufferView")
+                && matches!(error, json::validation::Error::Missing);
         if !(bounds && path.contains("POSITION") || handled) {
             errors.push(format!("{path}: {error}"));
         }
@@ -1085,7 +1087,12 @@ impl Loader<'_> {
         }
         // A file (or scene) without nodes places nothing; show each mesh once, untransformed,
         // as viewers do.
-        if instances.is_empty() && !self.scene.meshes.is_empty() {
+        let nothing_placed = n == 0
+            || doc
+                .default_scene()
+                .or_else(|| doc.scenes().next())
+                .is_some_and(|s| s.nodes().next().is_none());
+        if nothing_placed && !self.scene.meshes.is_empty() {
             instances = (0..self.scene.meshes.len())
                 .map(|m| {
                     (
