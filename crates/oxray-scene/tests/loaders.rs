@@ -573,7 +573,7 @@ fn quantized_positions_load_with_khr_mesh_quantization() {
 }
 
 #[test]
-fn unsupported_required_extensions_glTF_1_and_ignored_features_are_named() {
+fn unsupported_required_extensions_gltf_1_0_and_ignored_features_are_named() {
     let bin: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.]
         .iter()
         .flat_map(|f| f.to_le_bytes())
