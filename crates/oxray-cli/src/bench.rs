@@ -179,7 +179,8 @@ pub fn bench_rays(mesh: &Mesh, side: u32) -> BenchRays {
 
 /// Writes a mesh and its rays for the side-by-side script (`scripts/bench_embree.py`):
 /// `NAME.mesh` (u32 vertex count, u32 triangle count, f32x3 vertices, u32x3 triangles),
-/// `NAME.coherent.rays` and `NAME.incoherent.rays` (f32[8] per ray), all little endian.
+/// `NAME.coherent.rays` and `NAME.incoherent.rays` (f32[8] per ray), all little endian. Each
+/// file is written atomically.
 pub fn export(
     dir: &std::path::Path,
     name: &str,
@@ -192,14 +193,14 @@ pub fn export(
     m.extend((mesh.triangles.len() as u32).to_le_bytes());
     m.extend_from_slice(bytemuck::cast_slice(&mesh.positions));
     m.extend_from_slice(bytemuck::cast_slice(&mesh.triangles));
-    std::fs::write(dir.join(format!("{name}.mesh")), m)?;
-    std::fs::write(
-        dir.join(format!("{name}.coherent.rays")),
-        ray_file_bytes(&rays.coherent),
+    write_bytes_atomic(&dir.join(format!("{name}.mesh")), &m)?;
+    write_bytes_atomic(
+        &dir.join(format!("{name}.coherent.rays")),
+        &ray_file_bytes(&rays.coherent),
     )?;
-    std::fs::write(
-        dir.join(format!("{name}.incoherent.rays")),
-        ray_file_bytes(&rays.incoherent),
+    write_bytes_atomic(
+        &dir.join(format!("{name}.incoherent.rays")),
+        &ray_file_bytes(&rays.incoherent),
     )?;
     Ok(())
 }
@@ -229,13 +230,15 @@ pub fn export_hits(
             .iter()
             .map(|h| h.map_or(f32::INFINITY, |h| h.t))
             .collect();
-        std::fs::write(
-            dir.join(format!("{name}.{set}.oxray-hits")),
+        write_bytes_atomic(
+            &dir.join(format!("{name}.{set}.oxray-hits")),
             bytemuck::cast_slice(&t),
         )?;
     }
     Ok(())
 }
+
+use oxray_scene::files::write_bytes_atomic;
 
 /// Launch parameters of the pipeline benchmark.
 #[derive(Clone)]

@@ -5,7 +5,8 @@
 
 use crate::bench::{build_gas_on, median, BenchRays};
 use crate::raycast::{
-    encode_hits, encode_occlusion, load_mesh_and_rays, write_results, RaycastError,
+    check_rays, encode_hits, encode_occlusion, load_mesh_and_rays, write_results, RayCheck,
+    RaycastError,
 };
 use oxray::{BatchKind, BuildFlags, Device, DeviceError, Hit, QueryError, Ray};
 use oxray_scene::mesh::Mesh;
@@ -81,6 +82,8 @@ pub struct RaycastReport {
     pub rays: usize,
     /// Rays that hit (or, for occlusion, were occluded).
     pub hits: usize,
+    /// The rays not traced (invalid) and those whose negative `tmin` was clamped.
+    pub check: RayCheck,
     /// Mrays/s of the traversal alone, rays and results resident on the device.
     pub traced_mrays_per_s: f64,
     /// Mrays/s of the one-call query: rays in, traversal, results out.
@@ -90,6 +93,10 @@ pub struct RaycastReport {
 /// `oxray raycast`: builds the mesh's GAS on `device` (fast-trace flags), casts the rays of
 /// `rays_path` and writes the hits (or, with `occlusion`, one u32 0/1 per ray) to `out_path`:
 /// the same bytes on every device. Each speed is that of one call after a warm-up call.
+///
+/// Before any work, `out_path` is checked to be neither the mesh nor the ray file and to lie
+/// in a writable folder; it is written atomically. Rays follow [`check_rays`]: a negative
+/// `tmin` is clamped to 0, and invalid rays are written as misses and counted in the report.
 pub fn raycast(
     device: &Device,
     mesh_path: &Path,
@@ -97,7 +104,10 @@ pub fn raycast(
     out_path: &Path,
     occlusion: bool,
 ) -> Result<RaycastReport, DeviceCommandError> {
-    let (mesh, rays) = load_mesh_and_rays(mesh_path, rays_path)?;
+    oxray_scene::files::check_output(out_path, &[mesh_path, rays_path])
+        .map_err(RaycastError::Output)?;
+    let (mesh, all_rays) = load_mesh_and_rays(mesh_path, rays_path)?;
+    let (index, rays, check) = check_rays(&all_rays);
     let gas = build_gas_on(device, &mesh, BuildFlags::PREFER_FAST_TRACE)?;
     let root = gas.handle();
     let n = rays.len();
@@ -110,21 +120,31 @@ pub fn raycast(
         let mut batch = device.upload_rays(&rays, kind)?;
         time(1, || device.trace_batch(&root, &mut batch))?
     };
+    // Results of the traced rays scattered back to file order; invalid rays stay misses.
     let (out, hits, with_transfers) = if occlusion {
         let mut occ = vec![false; n];
         let with = time(1, || device.intersect_any(&root, &rays, &mut occ))?;
         let count = occ.iter().filter(|&&o| o).count();
-        (encode_occlusion(&occ), count, with)
+        let mut all = vec![false; all_rays.len()];
+        for (&i, o) in index.iter().zip(occ) {
+            all[i] = o;
+        }
+        (encode_occlusion(&all), count, with)
     } else {
         let mut hits = vec![None; n];
         let with = time(1, || device.intersect_closest(&root, &rays, &mut hits))?;
         let count = hits.iter().filter(|h| h.is_some()).count();
-        (encode_hits(&hits), count, with)
+        let mut all = vec![None; all_rays.len()];
+        for (&i, h) in index.iter().zip(hits) {
+            all[i] = h;
+        }
+        (encode_hits(&all), count, with)
     };
     write_results(out_path, &out)?;
     Ok(RaycastReport {
-        rays: n,
+        rays: all_rays.len(),
         hits,
+        check,
         traced_mrays_per_s: mrays(n, traced),
         transfer_mrays_per_s: mrays(n, with_transfers),
     })

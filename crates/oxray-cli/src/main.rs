@@ -14,7 +14,8 @@ use std::path::{Path, PathBuf};
 #[command(
     name = "oxray",
     version,
-    about = "oxray: a programmable ray-tracing engine"
+    about = "oxray: a programmable ray-tracing engine",
+    after_help = LIMITS_HELP
 )]
 struct Cli {
     #[command(subcommand)]
@@ -28,8 +29,10 @@ enum Command {
     Render {
         /// The scene file; omit for the built-in Cornell box.
         scene: Option<PathBuf>,
-        /// Output image: .png (tone-mapped sRGB) or .exr (linear). Default: the scene file's
-        /// name with .png in the current directory, or cornell.png.
+        /// Output image: .png (tone-mapped sRGB) or .exr (linear); an existing file is replaced
+        /// (atomically), but never one the render reads. Default: NAME.oxray.png in the current
+        /// directory, NAME being the scene file's name without extension (cornell without a
+        /// scene); an existing file of that name is replaced only if oxray wrote it.
         #[arg(short, long)]
         output: Option<PathBuf>,
         /// Image size, WxH.
@@ -74,8 +77,8 @@ enum Command {
         /// The ray file.
         #[arg(long)]
         rays: PathBuf,
-        /// Where to write the results.
-        #[arg(long)]
+        /// Where to write the results (replaced atomically; never the mesh or the ray file).
+        #[arg(long, short)]
         out: PathBuf,
         /// Any hit instead of closest hit.
         #[arg(long)]
@@ -124,11 +127,60 @@ enum Command {
     },
 }
 
+const LIMITS_HELP: &str = "Limits (checked before allocating; raise them with these environment variables): input files up to OXRAY_MAX_FILE_MB (default 2048), one decoded image up to OXRAY_MAX_IMAGE_MB (256), a scene's textures up to OXRAY_MAX_TEXTURES_MB (1024), geometry flattened for raycast up to OXRAY_MAX_GEOMETRY_MB (2048), ray files up to OXRAY_MAX_RAYS rays (33554432).";
+
 fn main() {
-    if let Err(e) = run(Cli::parse()) {
+    // A panic inside a guarded decoder is reported as an ordinary error; any other is a bug,
+    // reported in one line.
+    std::panic::set_hook(Box::new(|info| {
+        if oxray_scene::files::in_guarded_code() {
+            return;
+        }
+        let msg = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_default();
+        let at = info
+            .location()
+            .map(|l| format!(" at {}:{}", l.file(), l.line()))
+            .unwrap_or_default();
+        eprintln!(
+            "error: internal error (a bug in oxray): {}{at}",
+            msg.lines().next().unwrap_or("")
+        );
+    }));
+    let cli = Cli::parse();
+    let result = oxray_scene::files::Limits::from_env()
+        .map_err(anyhow::Error::msg)
+        .and_then(|_| run(cli));
+    if let Err(e) = result {
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }
+}
+
+/// Prints a line on standard output. A closed pipe (`oxray info f | head -0`) ends the program
+/// quietly with status 0, as Unix tools do; another write error (a full disk) is an error.
+fn say(line: impl std::fmt::Display) -> Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    match writeln!(out, "{line}").and_then(|_| out.flush()) {
+        Ok(()) => Ok(()),
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => std::process::exit(0),
+        Err(e) => Err(anyhow::anyhow!("cannot write to standard output: {e}")),
+    }
+}
+
+/// The default image of `oxray render`: `NAME.oxray.png` in the current directory, NAME being
+/// the scene file's name without its extension (`cornell` for the built-in scene). The
+/// `.oxray` part keeps it from ever being one of the scene's own textures.
+fn default_output(scene: Option<&Path>) -> PathBuf {
+    let stem = scene
+        .and_then(|p| p.file_stem())
+        .map_or("cornell".into(), |s| s.to_string_lossy().into_owned());
+    PathBuf::from(format!("{stem}.oxray.png"))
 }
 
 fn default_meshes() -> Vec<PathBuf> {
@@ -174,17 +226,26 @@ fn run(cli: Cli) -> Result<()> {
             if !(env_intensity.is_finite() && env_intensity >= 0.0) {
                 bail!("--env-intensity must be a finite number >= 0, got {env_intensity}");
             }
-            let output = output.unwrap_or_else(|| {
-                let stem = scene
-                    .as_deref()
-                    .and_then(|p| p.file_stem())
-                    .map_or("cornell".into(), |s| s.to_string_lossy().into_owned());
-                PathBuf::from(format!("{stem}.png"))
-            });
+            let named = output.is_some();
+            let output = output.unwrap_or_else(|| default_output(scene.as_deref()));
             let ext = oxray_scene::file_extension(&output);
             if !matches!(ext.as_deref(), Some("png") | Some("exr")) {
                 bail!(
                     "cannot write {}: unknown image format (expected .png or .exr)",
+                    output.display()
+                );
+            }
+            // Checked before any work: the output is none of the inputs and its folder takes
+            // a new file; a default name never replaces a file oxray did not write.
+            let env_file = env
+                .as_deref()
+                .filter(|e| !matches!(*e, "sky" | "none") && e.parse::<f32>().is_err())
+                .map(PathBuf::from);
+            let inputs: Vec<&Path> = scene.iter().chain(&env_file).map(|p| p.as_path()).collect();
+            oxray_scene::files::check_output(&output, &inputs).map_err(anyhow::Error::msg)?;
+            if !named && output.exists() && !oxray_render::output::written_by_oxray(&output) {
+                bail!(
+                    "{} exists and was not written by oxray; name it with -o to replace it, or choose another name",
                     output.display()
                 );
             }
@@ -197,6 +258,17 @@ fn run(cli: Cli) -> Result<()> {
                 Some(path) => (pool.install(|| SceneDesc::load(path))?, "sky"),
                 None => (oxray_scene::cornell_box(), "none"),
             };
+            if let Some(read) = desc
+                .sources
+                .iter()
+                .find(|r| oxray_scene::files::same_file(&output, r))
+            {
+                bail!(
+                    "{} is read by the scene ({}); choose another output file",
+                    output.display(),
+                    read.display()
+                );
+            }
             if ground {
                 desc.add_ground();
             }
@@ -250,14 +322,13 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
             image.save(&output).map_err(anyhow::Error::msg)?;
-            println!(
+            say(format_args!(
                 "wrote {} ({w}x{h}, {spp} spp, {} triangles, {} instances): loaded in {loaded:.1} s, total {:.1} s",
                 output.display(),
                 desc.triangle_count(),
                 desc.instances.len(),
                 start.elapsed().as_secs_f64()
-            );
-            Ok(())
+            ))
         }
         Command::Raycast {
             mesh,
@@ -274,15 +345,19 @@ fn run(cli: Cli) -> Result<()> {
             let device = oxray_cli::device::open(&backend)?;
             let r = pool
                 .install(|| oxray_cli::device::raycast(&device, &mesh, &rays, &out, occlusion))?;
-            println!(
-                "{} rays, {} {} ({:.2} Mrays/s traced, {:.2} Mrays/s with transfers on {})",
+            say(format_args!(
+                "{} rays, {} {}, {} invalid ({:.2} Mrays/s traced, {:.2} Mrays/s with transfers on {})",
                 r.rays,
                 r.hits,
                 if occlusion { "occluded" } else { "hits" },
+                r.check.invalid(),
                 r.traced_mrays_per_s,
                 r.transfer_mrays_per_s,
                 pool.install(|| device.describe())
-            );
+            ))?;
+            if let Some(summary) = r.check.summary() {
+                eprintln!("warning: {}: {summary}", rays.display());
+            }
             Ok(())
         }
         Command::Info { mesh } => {
@@ -290,9 +365,9 @@ fn run(cli: Cli) -> Result<()> {
             if matches!(ext.as_deref(), Some("gltf") | Some("glb")) {
                 let report =
                     oxray_cli::info::scene_info(&mesh).map_err(|e| anyhow::anyhow!("{e}"))?;
-                println!("{report}");
+                say(format_args!("{report}"))?;
             } else {
-                println!("{}", oxray_cli::raycast::info(&mesh)?);
+                say(format_args!("{}", oxray_cli::raycast::info(&mesh)?))?;
             }
             Ok(())
         }
@@ -331,9 +406,9 @@ fn run(cli: Cli) -> Result<()> {
                 meshes
             };
             if paths.is_empty() {
-                println!(
+                say(format_args!(
                     "(no meshes given and ../shared/data absent: using a generated icosphere)"
-                );
+                ))?;
                 sets.push(("icosphere-7".into(), Mesh::icosphere(7)));
             }
             for p in paths {
@@ -345,19 +420,21 @@ fn run(cli: Cli) -> Result<()> {
                     .to_string();
                 sets.push((name, mesh));
             }
-            println!(
+            say(format_args!(
                 "threads: {}, rays per set: {}, median of {runs} runs",
                 pool.current_num_threads(),
                 side * side
-            );
+            ))?;
             if let Some(device) = &device {
-                println!("device: {}", device.describe());
-                println!("{}", oxray_cli::device::BENCH_HEADER);
+                say(format_args!("device: {}", device.describe()))?;
+                say(format_args!("{}", oxray_cli::device::BENCH_HEADER))?;
             } else {
-                println!(
+                say(format_args!(
                     "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace) | pipeline primary closest vs the same rays as queries, alternated |"
-                );
-                println!("|---|---:|---|---|---:|---:|---:|---:|---:|---|---:|");
+                ))?;
+                say(format_args!(
+                    "|---|---:|---|---|---:|---:|---:|---:|---:|---|---:|"
+                ))?;
             }
             for (name, mesh) in &sets {
                 let rays = bench::bench_rays(mesh, side);
@@ -372,14 +449,14 @@ fn run(cli: Cli) -> Result<()> {
                         oxray_cli::device::bench_mesh(device, name, mesh, &rays, runs)
                     })?;
                     for row in rows {
-                        println!("{row}");
+                        say(format_args!("{row}"))?;
                     }
                     continue;
                 }
                 let r = pool
                     .install(|| bench::run(name, mesh, runs, &rays).map_err(|e| e.to_string()))
                     .map_err(anyhow::Error::msg)?;
-                println!(
+                say(format_args!(
                     "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) |",
                     r.name, r.triangles, r.build_ms[0], r.build_ms[1], r.build_ms[2],
                     r.sah[0], r.sah[1], r.sah[2],
@@ -388,7 +465,7 @@ fn run(cli: Cli) -> Result<()> {
                     r.pipeline_mrays.0,
                     r.pipeline_mrays.1,
                     100.0 * r.pipeline_mrays.0 / r.pipeline_mrays.1,
-                );
+                ))?;
                 eprintln!(
                     "  {}: {:.1} Mtris/s build, hit rate primary {:.1}%, diffuse {:.1}%, shadow rays blocked {:.1}%",
                     r.name,
@@ -405,10 +482,10 @@ fn run(cli: Cli) -> Result<()> {
                 let r = pool
                     .install(|| bench::instances(mesh, n, side, runs).map_err(|e| e.to_string()))
                     .map_err(anyhow::Error::msg)?;
-                println!();
-                println!("| instanced mesh | instances | triangles (instanced) | IAS build ms | camera closest Mrays/s | random closest Mrays/s | camera hit rate |");
-                println!("|---|---:|---:|---:|---:|---:|---:|");
-                println!(
+                say("")?;
+                say(format_args!("| instanced mesh | instances | triangles (instanced) | IAS build ms | camera closest Mrays/s | random closest Mrays/s | camera hit rate |"))?;
+                say(format_args!("|---|---:|---:|---:|---:|---:|---:|"))?;
+                say(format_args!(
                     "| {name} | {} | {} | {:.1} | {:.2} | {:.2} | {:.1}% |",
                     r.instances,
                     r.mesh_triangles as u64 * r.instances as u64,
@@ -416,7 +493,7 @@ fn run(cli: Cli) -> Result<()> {
                     r.coherent_mrays,
                     r.incoherent_mrays,
                     100.0 * r.hit_rate
-                );
+                ))?;
             }
             Ok(())
         }

@@ -33,28 +33,66 @@ pub enum RaycastError {
         /// The file.
         path: String,
         /// Its size.
-        len: usize,
+        len: u64,
     },
+    /// The ray file has more rays than the limit allows.
+    #[error("{path}: {rays} rays is over the limit of {limit} (raise it with OXRAY_MAX_RAYS)")]
+    TooManyRays {
+        /// The file.
+        path: String,
+        /// Rays in the file.
+        rays: u64,
+        /// The limit.
+        limit: u64,
+    },
+    /// The output would replace an input, or cannot be written.
+    #[error("{0}")]
+    Output(String),
     /// The acceleration structure could not be built.
     #[error(transparent)]
     Build(#[from] oxray::BuildError),
 }
 
-fn read(path: &Path) -> Result<Vec<u8>, RaycastError> {
-    std::fs::read(path).map_err(|source| RaycastError::Io {
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> RaycastError + '_ {
+    move |source| RaycastError::Io {
         path: path.display().to_string(),
         source,
-    })
+    }
+}
+
+/// Checks a ray file's size from its metadata (a regular file holding a whole number of rays,
+/// at most [`Limits::rays`](oxray_scene::files::Limits)) before reading it.
+pub fn read_ray_file(path: &Path) -> Result<Vec<u8>, RaycastError> {
+    let name = path.display().to_string();
+    let len = oxray_scene::files::regular_file_size(path).map_err(io_error(path))?;
+    check_ray_bytes(len, &name)?;
+    let bytes =
+        oxray_scene::files::read_limited(path, len, "OXRAY_MAX_RAYS").map_err(io_error(path))?;
+    check_ray_bytes(bytes.len() as u64, &name)?;
+    Ok(bytes)
+}
+
+fn check_ray_bytes(len: u64, path: &str) -> Result<(), RaycastError> {
+    if !len.is_multiple_of(RAY_BYTES as u64) {
+        return Err(RaycastError::RayFileSize {
+            path: path.to_string(),
+            len,
+        });
+    }
+    let limit = oxray_scene::files::Limits::get().rays;
+    if len / RAY_BYTES as u64 > limit {
+        return Err(RaycastError::TooManyRays {
+            path: path.to_string(),
+            rays: len / RAY_BYTES as u64,
+            limit,
+        });
+    }
+    Ok(())
 }
 
 /// Decodes a ray file.
 pub fn parse_rays(bytes: &[u8], path: &str) -> Result<Vec<Ray>, RaycastError> {
-    if !bytes.len().is_multiple_of(RAY_BYTES) {
-        return Err(RaycastError::RayFileSize {
-            path: path.to_string(),
-            len: bytes.len(),
-        });
-    }
+    check_ray_bytes(bytes.len() as u64, path)?;
     Ok(bytes
         .chunks_exact(RAY_BYTES)
         .map(|c| {
@@ -71,14 +109,105 @@ pub fn parse_rays(bytes: &[u8], path: &str) -> Result<Vec<Ray>, RaycastError> {
         .collect())
 }
 
-/// Loads the mesh and the ray file of a ray cast.
+/// Loads the mesh and the ray file of a ray cast. The ray file's size is checked before
+/// the mesh is loaded.
 pub fn load_mesh_and_rays(
     mesh_path: &Path,
     rays_path: &Path,
 ) -> Result<(Mesh, Vec<Ray>), RaycastError> {
+    let name = rays_path.display().to_string();
+    let len = oxray_scene::files::regular_file_size(rays_path).map_err(io_error(rays_path))?;
+    check_ray_bytes(len, &name)?;
     let mesh = Mesh::load(mesh_path)?;
-    let rays = parse_rays(&read(rays_path)?, &rays_path.display().to_string())?;
+    let rays = parse_rays(&read_ray_file(rays_path)?, &name)?;
     Ok((mesh, rays))
+}
+
+/// Why a ray of a ray file is not traced: the rules of the guide (§13.14, `Ray::validate`),
+/// after a negative `tmin` has been clamped to 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCheck {
+    /// Rays traced.
+    pub valid: usize,
+    /// Rays whose negative `tmin` was clamped to 0 (they are traced, and counted in `valid`).
+    pub clamped_tmin: usize,
+    /// Rays with a NaN or infinite origin or direction component.
+    pub non_finite: usize,
+    /// Rays whose direction is zero.
+    pub zero_direction: usize,
+    /// Rays with a NaN `tmin` or `tmax`.
+    pub nan_interval: usize,
+    /// Rays whose `tmin` (after clamping) is greater than `tmax`.
+    pub empty_interval: usize,
+}
+
+impl RayCheck {
+    /// Rays not traced.
+    pub fn invalid(&self) -> usize {
+        self.non_finite + self.zero_direction + self.nan_interval + self.empty_interval
+    }
+
+    /// A one-line summary of the rays not traced and clamped, or `None` when every ray is valid
+    /// as given.
+    pub fn summary(&self) -> Option<String> {
+        if self.invalid() == 0 && self.clamped_tmin == 0 {
+            return None;
+        }
+        let mut parts = Vec::new();
+        for (n, what) in [
+            (self.non_finite, "non-finite origin or direction"),
+            (self.zero_direction, "zero direction"),
+            (self.nan_interval, "NaN tmin or tmax"),
+            (self.empty_interval, "tmin > tmax"),
+        ] {
+            if n > 0 {
+                parts.push(format!("{n} {what}"));
+            }
+        }
+        let mut s = format!("{} invalid rays written as misses", self.invalid());
+        if !parts.is_empty() {
+            s += &format!(" ({})", parts.join(", "));
+        }
+        if self.clamped_tmin > 0 {
+            s += &format!(
+                "; {} rays with tmin < 0 traced from tmin = 0",
+                self.clamped_tmin
+            );
+        }
+        Some(s)
+    }
+}
+
+/// Applies the ray rules of `oxray raycast`: a negative `tmin` is clamped to 0 (the ray is
+/// traced from its origin: a surface behind the origin is never reported); a ray that is then
+/// invalid by the guide's rules (`Ray::validate`: NaN or infinite origin or direction, zero
+/// direction, NaN `tmin`/`tmax`, `tmin > tmax`) is not traced and is written as a miss.
+/// Returns the indices of the rays to trace, the rays themselves (clamped), and the counts.
+pub fn check_rays(rays: &[Ray]) -> (Vec<usize>, Vec<Ray>, RayCheck) {
+    use oxray::RayError;
+    let mut check = RayCheck::default();
+    let mut index = Vec::with_capacity(rays.len());
+    let mut valid = Vec::with_capacity(rays.len());
+    for (i, r) in rays.iter().enumerate() {
+        let mut r = *r;
+        let clamped = r.tmin < 0.0;
+        if clamped {
+            r.tmin = 0.0;
+        }
+        match r.validate() {
+            Ok(()) => {
+                check.valid += 1;
+                check.clamped_tmin += clamped as usize;
+                index.push(i);
+                valid.push(r);
+            }
+            Err(RayError::NonFiniteOrigin | RayError::NonFiniteDirection) => check.non_finite += 1,
+            Err(RayError::ZeroDirection) => check.zero_direction += 1,
+            Err(RayError::NanInterval) => check.nan_interval += 1,
+            Err(_) => check.empty_interval += 1,
+        }
+    }
+    (index, valid, check)
 }
 
 /// Encodes closest hits in the hit file format: `t, primitive, u, v` per ray, with `t = +inf`
@@ -105,12 +234,9 @@ pub fn encode_occlusion(occluded: &[bool]) -> Vec<u8> {
         .collect()
 }
 
-/// Writes a result file.
+/// Writes a result file atomically (a temporary file renamed into place).
 pub fn write_results(path: &Path, bytes: &[u8]) -> Result<(), RaycastError> {
-    std::fs::write(path, bytes).map_err(|source| RaycastError::Io {
-        path: path.display().to_string(),
-        source,
-    })
+    oxray_scene::files::write_bytes_atomic(path, bytes).map_err(io_error(path))
 }
 
 /// Statistics of a mesh file's acceleration structure.

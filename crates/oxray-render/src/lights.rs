@@ -262,6 +262,16 @@ impl Environment {
     pub fn load(path: &Path, scale: f32) -> Result<Self, String> {
         let name = path.display();
         let ext = oxray_scene::file_extension(path);
+        // A regular file within the input size limit (a FIFO would hang the reader).
+        let limits = oxray_scene::files::Limits::get();
+        let len = oxray_scene::files::regular_file_size(path)
+            .map_err(|e| format!("{name}: cannot read the environment: {e}"))?;
+        if len > limits.file_bytes {
+            return Err(format!(
+                "{name}: the environment map is {len} bytes, over the {} limit (raise it with OXRAY_MAX_FILE_MB)",
+                oxray_scene::files::mib(limits.file_bytes)
+            ));
+        }
         match ext.as_deref() {
             Some("exr") => {
                 use exr::prelude::*;

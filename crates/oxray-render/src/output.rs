@@ -1,6 +1,29 @@
-//! Rendered images and their files: PNG (tone-mapped sRGB) and OpenEXR (linear).
+//! Rendered images and their files: PNG (tone-mapped sRGB) and OpenEXR (linear). Files are
+//! written atomically (`oxray_scene::files::write_atomic`): to a temporary file in the target
+//! folder, renamed into place once complete, so a failed or killed write never leaves a
+//! truncated image nor loses the previous one.
 
 use std::path::Path;
+
+/// The keyword and text of the PNG text chunk that marks an image as written by oxray.
+pub const PNG_SOFTWARE: (&str, &str) = ("Software", "oxray");
+
+/// Whether `path` is a PNG file that oxray wrote (it carries the [`PNG_SOFTWARE`] text
+/// chunk): the `oxray` tool replaces such a file under its default output name, and no other.
+pub fn written_by_oxray(path: &Path) -> bool {
+    let Ok(file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let decoder = png::Decoder::new(std::io::BufReader::new(file));
+    let Ok(reader) = decoder.read_info() else {
+        return false;
+    };
+    reader
+        .info()
+        .uncompressed_latin1_text
+        .iter()
+        .any(|t| t.keyword == PNG_SOFTWARE.0 && t.text == PNG_SOFTWARE.1)
+}
 
 /// A linear RGBA image, row-major from the top row.
 #[derive(Clone, Debug, PartialEq)]
@@ -44,17 +67,15 @@ impl Image {
             .collect()
     }
 
-    /// Writes the image; the extension picks the format: `.exr` is linear 32-bit float RGBA,
-    /// `.png` tone-mapped 8-bit sRGB, anything else an error.
+    /// Writes the image atomically; the extension picks the format: `.exr` is linear 32-bit
+    /// float RGBA, `.png` tone-mapped 8-bit sRGB, anything else an error.
     pub fn save(&self, path: &Path) -> Result<(), String> {
         let ext = oxray_scene::file_extension(path);
         let name = path.display();
         match ext.as_deref() {
-            Some("exr") => self
-                .write_exr(path)
+            Some("exr") => write_atomic(path, |tmp| self.write_exr(tmp))
                 .map_err(|e| format!("cannot write {name}: {e}")),
-            Some("png") => self
-                .write_png(path)
+            Some("png") => write_atomic(path, |tmp| self.write_png(tmp))
                 .map_err(|e| format!("cannot write {name}: {e}")),
             _ => Err(format!(
                 "cannot write {name}: unknown image format (expected .png or .exr)"
@@ -62,16 +83,21 @@ impl Image {
         }
     }
 
-    fn write_png(&self, path: &Path) -> Result<(), Box<dyn std::error::Error>> {
-        let file = std::io::BufWriter::new(std::fs::File::create(path)?);
-        let mut enc = png::Encoder::new(file, self.width, self.height);
+    fn write_png(&self, path: &Path) -> Result<(), WriteError> {
+        let mut file = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let mut enc = png::Encoder::new(&mut file, self.width, self.height);
         enc.set_color(png::ColorType::Rgba);
         enc.set_depth(png::BitDepth::Eight);
-        enc.write_header()?.write_image_data(&self.to_srgb8())?;
+        enc.add_text_chunk(PNG_SOFTWARE.0.into(), PNG_SOFTWARE.1.into())?;
+        let mut writer = enc.write_header()?;
+        writer.write_image_data(&self.to_srgb8())?;
+        // Finishing and flushing report the errors of the last bytes (a full disk).
+        writer.finish()?;
+        std::io::Write::flush(&mut file)?;
         Ok(())
     }
 
-    fn write_exr(&self, path: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    fn write_exr(&self, path: &Path) -> Result<(), WriteError> {
         let w = self.width as usize;
         exr::prelude::write_rgba_file(path, w, self.height as usize, |x, y| {
             let p = self.pixels[y * w + x];
@@ -80,6 +106,36 @@ impl Image {
         Ok(())
     }
 }
+
+/// Why an image could not be written: the message of the encoder or of the file system.
+#[derive(Debug)]
+pub struct WriteError(String);
+
+impl std::fmt::Display for WriteError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl From<std::io::Error> for WriteError {
+    fn from(e: std::io::Error) -> Self {
+        WriteError(e.to_string())
+    }
+}
+
+impl From<png::EncodingError> for WriteError {
+    fn from(e: png::EncodingError) -> Self {
+        WriteError(e.to_string())
+    }
+}
+
+impl From<exr::error::Error> for WriteError {
+    fn from(e: exr::error::Error) -> Self {
+        WriteError(e.to_string())
+    }
+}
+
+use oxray_scene::files::write_atomic;
 
 #[cfg(test)]
 mod tests {

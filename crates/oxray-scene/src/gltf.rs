@@ -8,6 +8,7 @@
 //! unchecked, checks every accessor's bounds, types and sizes before handing it to the crate's
 //! reader, and reads images and cameras from the JSON directly.
 
+use super::image::ImageError;
 use super::{
     image, AlphaMode, Camera, InstanceDesc, LightKind, MaterialDesc, MeshDesc, Primitive,
     PunctualLight, SceneDesc, SceneError, Texture, TextureRef, Wrap,
@@ -18,7 +19,7 @@ use ::gltf::{accessor::DataType, accessor::Dimensions, Accessor, Document};
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Elements an accessor without a buffer view may declare: such an accessor is all zeros (plus
 /// sparse values), so its count is not bounded by any data, and a larger count would let a tiny
@@ -45,7 +46,7 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
 /// materials then have no texture references).
 pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| SceneError::Io {
+    let bytes = crate::files::read_input(path).map_err(|e| SceneError::Io {
         path: name.clone(),
         message: e.to_string(),
     })?;
@@ -58,21 +59,35 @@ pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneE
     } else {
         (&bytes[..], None)
     };
-    let root = json::Root::from_slice(json_bytes)
-        .map_err(|e| malformed(format!("invalid glTF JSON: {e}")))?;
+    let root = parse_root(json_bytes).map_err(malformed)?;
+    let extension_warning = check_extensions(&root).map_err(malformed)?;
     check_references(&root).map_err(malformed)?;
     validate_json(&root).map_err(malformed)?;
     let doc = Document::from_json_without_validation(root);
     let base = path.parent().unwrap_or(Path::new("."));
-    let buffers = load_buffers(&doc, base, bin, &name)?;
+    let mut sources = vec![path.to_path_buf()];
+    let buffers = load_buffers(&doc, base, bin, &name, &mut sources)?;
     let input_size = bytes.len() + buffers.iter().map(Vec::len).sum::<usize>();
     let mut loader = Loader {
         name: name.clone(),
         doc: &doc,
         buffers: &buffers,
         budget: BASE_BUDGET.saturating_add(input_size.saturating_mul(EXPANSION)),
-        scene: SceneDesc::default(),
+        quantized: doc
+            .as_json()
+            .extensions_used
+            .iter()
+            .chain(&doc.as_json().extensions_required)
+            .any(|e| e == "KHR_mesh_quantization"),
+        scene: SceneDesc {
+            sources,
+            ..Default::default()
+        },
     };
+    loader
+        .scene
+        .warnings
+        .extend(extension_warning.map(|w| format!("{name}: {w}")));
     loader.materials(base, textures).map_err(malformed)?;
     loader.meshes().map_err(malformed)?;
     loader.nodes().map_err(malformed)?;
@@ -93,6 +108,9 @@ fn split_glb(b: &[u8]) -> Result<(&[u8], Option<&[u8]>), String> {
             b.len()
         ));
     };
+    if version == 1 {
+        return Err(GLTF1.into());
+    }
     if version != 2 {
         return Err(format!("unsupported GLB version {version} (expected 2)"));
     }
@@ -134,6 +152,81 @@ fn split_glb(b: &[u8]) -> Result<(&[u8], Option<&[u8]>), String> {
     Ok((json, bin))
 }
 
+const GLTF1: &str = "this is a glTF 1.0 file; oxray reads glTF 2.0 only (convert it, for example with gltf-pipeline or Blender)";
+
+/// Parses the JSON document: glTF 1.0 is recognised and named, and what glTF 2.0 allows but
+/// the `gltf` crate refuses is mended first (a scene without `nodes`).
+fn parse_root(bytes: &[u8]) -> Result<json::Root, String> {
+    let mut value: json::Value =
+        json::deserialize::from_slice(bytes).map_err(|e| format!("invalid glTF JSON: {e}"))?;
+    let version = value
+        .get("asset")
+        .and_then(|a| a.get("version"))
+        .and_then(|v| v.as_str());
+    // glTF 1.0 keeps its objects in dictionaries, 2.0 in arrays.
+    let dictionaries = ["meshes", "accessors", "nodes", "scenes"]
+        .iter()
+        .any(|k| value.get(k).is_some_and(|v| v.is_object()));
+    if version.is_some_and(|v| v.starts_with("1.")) || version.is_none() && dictionaries {
+        return Err(GLTF1.into());
+    }
+    if let Some(scenes) = value.get_mut("scenes").and_then(|s| s.as_array_mut()) {
+        for scene in scenes.iter_mut().filter_map(|s| s.as_object_mut()) {
+            scene
+                .entry("nodes")
+                .or_insert_with(|| json::Value::Array(Vec::new()));
+        }
+    }
+    json::deserialize::from_value(value).map_err(|e| format!("invalid glTF JSON: {e}"))
+}
+
+/// Extensions whose data oxray reads.
+const READ_EXTENSIONS: &[&str] = &[
+    "KHR_mesh_quantization",
+    "KHR_texture_transform",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_transmission",
+    "KHR_materials_ior",
+    "KHR_lights_punctual",
+];
+
+/// A required extension oxray cannot read is an error that names it; used extensions it
+/// ignores are named once, in one warning (returned).
+fn check_extensions(root: &json::Root) -> Result<Option<String>, String> {
+    if let Some(ext) = root
+        .extensions_required
+        .iter()
+        .find(|e| !READ_EXTENSIONS.contains(&e.as_str()))
+    {
+        let what = match ext.as_str() {
+            "KHR_draco_mesh_compression" => " (Draco-compressed geometry)",
+            "EXT_meshopt_compression" | "KHR_meshopt_compression" => {
+                " (meshoptimizer-compressed buffers)"
+            }
+            "KHR_texture_basisu" => " (KTX2/Basis Universal textures)",
+            _ => "",
+        };
+        return Err(format!(
+            "the file requires extension {ext}{what}, which oxray does not support"
+        ));
+    }
+    let mut ignored: Vec<&str> = root
+        .extensions_used
+        .iter()
+        .map(String::as_str)
+        .filter(|e| !READ_EXTENSIONS.contains(e))
+        .collect();
+    ignored.sort_unstable();
+    ignored.dedup();
+    Ok((!ignored.is_empty()).then(|| {
+        format!(
+            "ignoring extension{} {} (not supported by oxray)",
+            if ignored.len() > 1 { "s" } else { "" },
+            ignored.join(", ")
+        )
+    }))
+}
+
 /// Checks the references that the `gltf` crate's validation dereferences before checking them.
 fn check_references(root: &json::Root) -> Result<(), String> {
     for (mi, mesh) in root.meshes.iter().enumerate() {
@@ -163,7 +256,13 @@ fn validate_json(root: &json::Root) -> Result<(), String> {
     root.validate(root, json::Path::new, &mut |path, error| {
         let path = path().to_string();
         let bounds = path.ends_with(".min") || path.ends_with(".max");
-        if !(bounds && path.contains("POSITION")) {
+        // Extensions are checked by `check_extensions`; an accessor without a buffer view is
+        // zero-filled, as the specification allows.
+        let handled = path.starts_with("extensionsRequired")
+            || path.starts_with("accessors[")
+                && path.ends_with(".bufferView")
+                && matches!(error, json::validation::Error::Missing);
+        if !(bounds && path.contains("POSITION") || handled) {
             errors.push(format!("{path}: {error}"));
         }
     });
@@ -184,6 +283,7 @@ fn load_buffers(
     base: &Path,
     mut bin: Option<&[u8]>,
     name: &str,
+    sources: &mut Vec<PathBuf>,
 ) -> Result<Vec<Vec<u8>>, SceneError> {
     let malformed = |message: String| SceneError::Malformed {
         path: name.to_string(),
@@ -207,7 +307,8 @@ fn load_buffers(
                     let file = base.join(uri_path(uri).map_err(|e| {
                         malformed(format!("buffer {i}: unsupported URI {uri:?} ({e})"))
                     })?);
-                    std::fs::read(&file).map_err(|e| SceneError::Io {
+                    sources.push(file.clone());
+                    crate::files::read_input(&file).map_err(|e| SceneError::Io {
                         path: name.to_string(),
                         message: format!("buffer {i}: cannot read {} ({e})", file.display()),
                     })?
@@ -308,10 +409,20 @@ enum Kind {
 impl Kind {
     fn accepts(self, dims: Dimensions, ty: DataType) -> bool {
         match self {
-            Kind::Vec3 => dims == Dimensions::Vec3 && ty == DataType::F32,
+            // KHR_mesh_quantization adds (normalized or not) 8- and 16-bit integers.
+            Kind::Vec3 => {
+                dims == Dimensions::Vec3
+                    && matches!(
+                        ty,
+                        DataType::F32 | DataType::I8 | DataType::U8 | DataType::I16 | DataType::U16
+                    )
+            }
             Kind::Uv => {
                 dims == Dimensions::Vec2
-                    && matches!(ty, DataType::F32 | DataType::U8 | DataType::U16)
+                    && matches!(
+                        ty,
+                        DataType::F32 | DataType::I8 | DataType::U8 | DataType::I16 | DataType::U16
+                    )
             }
             Kind::Index => {
                 dims == Dimensions::Scalar
@@ -322,8 +433,8 @@ impl Kind {
 
     fn describe(self) -> &'static str {
         match self {
-            Kind::Vec3 => "VEC3 of FLOAT",
-            Kind::Uv => "VEC2 of FLOAT, UNSIGNED_BYTE or UNSIGNED_SHORT",
+            Kind::Vec3 => "VEC3 of FLOAT, BYTE, UNSIGNED_BYTE, SHORT or UNSIGNED_SHORT",
+            Kind::Uv => "VEC2 of FLOAT, BYTE, UNSIGNED_BYTE, SHORT or UNSIGNED_SHORT",
             Kind::Index => "SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT",
         }
     }
@@ -352,6 +463,8 @@ struct Loader<'a> {
     buffers: &'a [Vec<u8>],
     /// Bytes of decoded geometry still allowed.
     budget: usize,
+    /// Whether the file uses `KHR_mesh_quantization` (integer positions and normals).
+    quantized: bool,
     scene: SceneDesc,
 }
 
@@ -407,6 +520,23 @@ impl Loader<'_> {
     /// charges its decoded size to the budget.
     fn check_accessor(&mut self, a: &Accessor, kind: Kind) -> Result<Layout, String> {
         let what = format!("accessor {}", a.index());
+        // Core glTF 2.0 allows integer vertex data only for normalized texture coordinates;
+        // KHR_mesh_quantization allows the rest.
+        let core = match kind {
+            Kind::Vec3 => a.data_type() == DataType::F32,
+            Kind::Uv => {
+                a.data_type() == DataType::F32
+                    || a.normalized() && matches!(a.data_type(), DataType::U8 | DataType::U16)
+            }
+            Kind::Index => true,
+        };
+        if !core && !self.quantized {
+            return Err(format!(
+                "{what}: {:?} of {:?} needs KHR_mesh_quantization, which the file does not list in extensionsUsed",
+                a.dimensions(),
+                a.data_type(),
+            ));
+        }
         if !kind.accepts(a.dimensions(), a.data_type()) {
             return Err(format!(
                 "{what}: {:?} of {:?} where {} is expected",
@@ -471,35 +601,53 @@ impl Loader<'_> {
     }
 
     fn read_vec3(&mut self, a: &Accessor) -> Result<Vec<[f32; 3]>, String> {
-        match self.check_accessor(a, Kind::Vec3)? {
-            Layout::Zeros => Ok(vec![[0.0; 3]; a.count()]),
-            Layout::Readable => {
-                let it = ::gltf::accessor::Iter::<[f32; 3]>::new(a.clone(), |b| self.buffer(b))
-                    .ok_or_else(|| format!("accessor {} cannot be read", a.index()))?;
-                Ok(it.collect())
-            }
+        if let Layout::Zeros = self.check_accessor(a, Kind::Vec3)? {
+            return Ok(vec![[0.0; 3]; a.count()]);
         }
+        self.read_floats::<3>(a)
     }
 
     fn read_uv(&mut self, a: &Accessor) -> Result<Vec<[f32; 2]>, String> {
-        use ::gltf::accessor::Iter;
-        let layout = self.check_accessor(a, Kind::Uv)?;
-        if let Layout::Zeros = layout {
+        if let Layout::Zeros = self.check_accessor(a, Kind::Uv)? {
             return Ok(vec![[0.0; 2]; a.count()]);
         }
+        self.read_floats::<2>(a)
+    }
+
+    /// Reads a checked accessor of `N` components as floats: integer components are
+    /// normalized when the accessor says so (`c / 255`, `max(c / 127, -1)`, ...) and converted
+    /// as they are otherwise (glTF 2.0 and `KHR_mesh_quantization`).
+    fn read_floats<const N: usize>(&self, a: &Accessor) -> Result<Vec<[f32; N]>, String>
+    where
+        [f32; N]: ::gltf::accessor::Item,
+        [i8; N]: ::gltf::accessor::Item,
+        [u8; N]: ::gltf::accessor::Item,
+        [i16; N]: ::gltf::accessor::Item,
+        [u16; N]: ::gltf::accessor::Item,
+    {
+        use ::gltf::accessor::Iter;
         let err = || format!("accessor {} cannot be read", a.index());
         let get = |b| self.buffer(b);
-        // Integer texture coordinates are normalized (the only form glTF allows for them).
+        let norm = a.normalized();
+        let conv = |x: f32, max: f32| if norm { (x / max).max(-1.0) } else { x };
         Ok(match a.data_type() {
-            DataType::U8 => Iter::<[u8; 2]>::new(a.clone(), get)
+            DataType::I8 => Iter::<[i8; N]>::new(a.clone(), get)
                 .ok_or_else(err)?
-                .map(|[u, v]| [u as f32 / 255.0, v as f32 / 255.0])
+                .map(|v| v.map(|c| conv(c as f32, 127.0)))
                 .collect(),
-            DataType::U16 => Iter::<[u16; 2]>::new(a.clone(), get)
+            DataType::U8 => Iter::<[u8; N]>::new(a.clone(), get)
                 .ok_or_else(err)?
-                .map(|[u, v]| [u as f32 / 65535.0, v as f32 / 65535.0])
+                .map(|v| v.map(|c| conv(c as f32, 255.0)))
                 .collect(),
-            _ => Iter::<[f32; 2]>::new(a.clone(), get)
+            DataType::I16 => Iter::<[i16; N]>::new(a.clone(), get)
+                .ok_or_else(err)?
+                .map(|v| v.map(|c| conv(c as f32, 32767.0)))
+                .collect(),
+            DataType::U16 => Iter::<[u16; N]>::new(a.clone(), get)
+                .ok_or_else(err)?
+                .map(|v| v.map(|c| conv(c as f32, 65535.0)))
+                .collect(),
+            _ => Iter::<[f32; N]>::new(a.clone(), get)
                 .ok_or_else(err)?
                 .collect(),
         })
@@ -631,19 +779,31 @@ impl Loader<'_> {
             .collect();
         images.sort_unstable();
         images.dedup();
-        let sources: Vec<(usize, String, Result<Vec<u8>, String>)> = images
-            .iter()
-            .map(|&i| {
-                let (label, bytes) = self.image_bytes(i, base);
-                (i, label, bytes)
-            })
-            .collect();
-        let decoded: Vec<(usize, String, Result<Texture, String>)> = sources
+        let mut sources = Vec::with_capacity(images.len());
+        for &i in &images {
+            let (label, file, bytes) = self.image_bytes(i, base);
+            self.scene.sources.extend(file);
+            sources.push((i, label, bytes));
+        }
+        // Every image's decoded size is checked against the limits before any is decoded.
+        let mut sizes = Vec::new();
+        for (_, label, bytes) in &sources {
+            let size = match bytes {
+                Ok(b) => image::decoded_size(b),
+                Err(ImageError::Fatal(e)) => Err(ImageError::Fatal(e.clone())),
+                Err(ImageError::Skip(_)) => continue,
+            };
+            match size {
+                Ok(size) => sizes.push(size),
+                Err(ImageError::Fatal(e)) => return Err(format!("texture {label}: {e}")),
+                Err(ImageError::Skip(_)) => {}
+            }
+        }
+        image::check_total(sizes)?;
+        let decoded: Vec<(usize, String, Result<Texture, ImageError>)> = sources
             .into_par_iter()
             .map(|(i, label, bytes)| {
-                let tex = bytes.and_then(|b| {
-                    image::decode(&label, &b).map_err(|e| format!("cannot decode ({e})"))
-                });
+                let tex = bytes.and_then(|b| image::decode(&label, &b));
                 (i, label, tex)
             })
             .collect();
@@ -653,7 +813,8 @@ impl Loader<'_> {
                 Ok(t) => {
                     decoded_by_image.insert(i, Some(t));
                 }
-                Err(e) => {
+                Err(ImageError::Fatal(e)) => return Err(format!("texture {label}: {e}")),
+                Err(ImageError::Skip(e)) => {
                     self.warn(format!("texture {label}: {e}; rendering without it"));
                     decoded_by_image.insert(i, None);
                 }
@@ -702,45 +863,66 @@ impl Loader<'_> {
         Ok(())
     }
 
-    /// The bytes of image `i` and a label for messages; failing to get them is a warning.
-    fn image_bytes(&self, i: usize, base: &Path) -> (String, Result<Vec<u8>, String>) {
+    /// The bytes of image `i`, a label for messages and the file read, if any; failing to get
+    /// them is a warning, unless the file is not a regular file or is over the size limit.
+    fn image_bytes(
+        &self,
+        i: usize,
+        base: &Path,
+    ) -> (String, Option<PathBuf>, Result<Vec<u8>, ImageError>) {
+        let skip = |e: &str| Err(ImageError::Skip(e.to_string()));
         let Some(img) = self.doc.as_json().images.get(i) else {
-            return (format!("image {i}"), Err("missing image".into()));
+            return (format!("image {i}"), None, skip("missing image"));
         };
         if let Some(view) = &img.buffer_view {
             let label = img.name.clone().unwrap_or_else(|| format!("image {i}"));
             let Some(v) = self.doc.views().nth(view.value()) else {
-                return (label, Err("missing buffer view".into()));
+                return (label, None, skip("missing buffer view"));
             };
             let bytes = self
                 .buffers
                 .get(v.buffer().index())
                 .and_then(|b| b.get(v.offset()..v.offset().checked_add(v.length())?));
             return match bytes {
-                Some(b) => (label, Ok(b.to_vec())),
-                None => (label, Err("buffer view lies outside its buffer".into())),
+                Some(b) => (label, None, Ok(b.to_vec())),
+                None => (label, None, skip("buffer view lies outside its buffer")),
             };
         }
         let Some(uri) = &img.uri else {
-            return (format!("image {i}"), Err("no uri or bufferView".into()));
+            return (format!("image {i}"), None, skip("no uri or bufferView"));
         };
         if let Some(data) = uri.strip_prefix("data:") {
             let label = img.name.clone().unwrap_or_else(|| format!("image {i}"));
             return (
                 label,
-                decode_data_uri(data).map_err(|e| format!("bad data URI ({e})")),
+                None,
+                decode_data_uri(data).map_err(|e| ImageError::Skip(format!("bad data URI ({e})"))),
             );
         }
         let label = uri.clone();
-        let bytes = uri_path(uri)
-            .map_err(|e| format!("unsupported URI ({e})"))
-            .and_then(|p| std::fs::read(base.join(p)).map_err(|e| format!("cannot read ({e})")));
-        (label, bytes)
+        match uri_path(uri) {
+            Err(e) => (
+                label,
+                None,
+                Err(ImageError::Skip(format!("unsupported URI ({e})"))),
+            ),
+            Ok(p) => {
+                let file = base.join(p);
+                let bytes = image::read_file(&file).map_err(|e| match e {
+                    ImageError::Skip(e) => {
+                        ImageError::Skip(e.replace("cannot read it", "cannot read"))
+                    }
+                    fatal => fatal,
+                });
+                (label, Some(file), bytes)
+            }
+        }
     }
 
     /// Converts every mesh; primitives without a material get a default one.
     fn meshes(&mut self) -> Result<(), String> {
         let mut default_material = None;
+        let mut ignored = std::collections::BTreeSet::new();
         for mesh in self.doc.meshes() {
             let mi = mesh.index();
             let mut desc = MeshDesc {
@@ -753,6 +935,18 @@ impl Loader<'_> {
             let mut skipped = false;
             for prim in mesh.primitives() {
                 let pi = prim.index();
+                for (semantic, _) in prim.attributes() {
+                    // Tangents are derived from the positions and texture coordinates.
+                    if !matches!(
+                        semantic,
+                        Semantic::Positions
+                            | Semantic::Normals
+                            | Semantic::Tangents
+                            | Semantic::TexCoords(0)
+                    ) {
+                        ignored.insert(semantic.to_string());
+                    }
+                }
                 let mode = prim.mode();
                 if !matches!(
                     mode,
@@ -816,6 +1010,14 @@ impl Loader<'_> {
                 ));
             }
             self.scene.meshes.push(desc);
+        }
+        if !ignored.is_empty() {
+            let names: Vec<String> = ignored.into_iter().collect();
+            self.warn(format!(
+                "ignoring vertex attribute{} {} (oxray uses POSITION, NORMAL, TANGENT and TEXCOORD_0)",
+                if names.len() > 1 { "s" } else { "" },
+                names.join(", ")
+            ));
         }
         Ok(())
     }
@@ -882,6 +1084,27 @@ impl Loader<'_> {
             for child in node.children().collect::<Vec<_>>().into_iter().rev() {
                 stack.push((child.index(), global));
             }
+        }
+        // A file (or scene) without nodes places nothing; show each mesh once, untransformed,
+        // as viewers do.
+        let nothing_placed = n == 0
+            || doc
+                .default_scene()
+                .or_else(|| doc.scenes().next())
+                .is_some_and(|s| s.nodes().next().is_none());
+        if nothing_placed && !self.scene.meshes.is_empty() {
+            instances = (0..self.scene.meshes.len())
+                .map(|m| {
+                    (
+                        m,
+                        InstanceDesc {
+                            mesh: m as u32,
+                            transform: Mat4::IDENTITY,
+                        },
+                    )
+                })
+                .collect();
+            self.warn("no node places a mesh; placing each mesh once at the origin".into());
         }
         lights.sort_by_key(|(ni, _)| *ni);
         self.scene.lights = lights.into_iter().map(|(_, l)| l).collect();

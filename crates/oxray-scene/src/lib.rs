@@ -32,10 +32,12 @@
 #![warn(missing_docs)]
 
 mod cornell;
+pub mod files;
 pub mod gltf;
 mod image;
 pub mod mesh;
 pub mod obj;
+mod text;
 
 pub use cornell::cornell_box;
 
@@ -64,6 +66,9 @@ pub struct SceneDesc {
     pub warnings: Vec<String>,
     /// The instance [`SceneDesc::add_ground`] added, if any.
     pub ground: Option<usize>,
+    /// Every file the loader read (the scene file, its buffers, material libraries and
+    /// images), so that a caller can refuse to write over one of them.
+    pub sources: Vec<std::path::PathBuf>,
 }
 
 /// A mesh: one or more primitives, each with its own material.
@@ -372,7 +377,9 @@ impl SceneDesc {
                     path: name.clone(),
                     message: strip_path(&e.to_string(), &name),
                 })?;
-                SceneDesc::from_mesh(&name, mesh)
+                let mut scene = SceneDesc::from_mesh(&name, mesh);
+                scene.sources.push(path.to_path_buf());
+                scene
             }
             _ => return Err(SceneError::UnknownFormat { path: name }),
         };

@@ -58,6 +58,18 @@ pub enum MeshError {
         /// The limit.
         limit: u64,
     },
+    /// The flattened scene is over the geometry memory limit.
+    #[error("{path}: its {instances} instances flatten to {} of geometry, over the limit of {} (raise it with OXRAY_MAX_GEOMETRY_MB)", crate::files::mib(*bytes), crate::files::mib(*limit))]
+    Budget {
+        /// The file.
+        path: String,
+        /// Instances in the scene.
+        instances: usize,
+        /// Bytes the flattened mesh would take.
+        bytes: u64,
+        /// The limit.
+        limit: u64,
+    },
     /// A face refers to a vertex that does not exist.
     #[error(
         "{path}: triangle {triangle} refers to vertex {index} but there are {vertices} vertices"
@@ -88,7 +100,7 @@ impl Mesh {
         let mesh = match ext.as_deref() {
             Some("obj") => load_obj(path, &name)?,
             Some("ply") => {
-                let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+                let bytes = crate::files::read_input(path).map_err(|source| MeshError::Io {
                     path: name.clone(),
                     source,
                 })?;
@@ -202,8 +214,9 @@ impl Mesh {
     }
 }
 
-/// Most vertices or triangles a flattened scene may have: indices are `u32`, and instancing lets a
-/// small file describe far more geometry than fits in memory once copied per instance.
+/// Most vertices or triangles a flattened scene may have: indices are `u32`. Instancing lets a
+/// small file describe far more geometry than fits in memory once copied per instance, so the
+/// bytes are bounded too ([`Limits::geometry_bytes`](crate::files::Limits)).
 const MAX_FLAT: u64 = 1 << 28;
 
 /// Copies every instance's primitives into one world-space mesh, in instance order, then
@@ -227,6 +240,16 @@ fn flatten(scene: &crate::SceneDesc, name: &str) -> Result<Mesh, MeshError> {
         return Err(MeshError::TooLarge {
             path: name.to_string(),
             limit: MAX_FLAT,
+        });
+    }
+    let bytes = (vertices + triangles).saturating_mul(12);
+    let limit = crate::files::Limits::get().geometry_bytes;
+    if bytes > limit {
+        return Err(MeshError::Budget {
+            path: name.to_string(),
+            instances: scene.instances.len(),
+            bytes,
+            limit,
         });
     }
     let mut mesh = Mesh {
@@ -258,10 +281,11 @@ fn load_obj(path: &Path, name: &str) -> Result<Mesh, MeshError> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
+    let bytes = crate::files::read_input(path).map_err(|source| MeshError::Io {
         path: name.to_string(),
         source,
     })?;
+    let bytes = crate::text::fix_obj(crate::text::to_utf8(bytes));
     // Material libraries are not read: only the geometry is needed, and tobj's MTL parser panics
     // on some malformed files (a colour with fewer than three numbers).
     check_obj_indices(&bytes).map_err(|message| MeshError::Obj {
@@ -498,6 +522,22 @@ pub fn parse_ply(bytes: &[u8]) -> Result<Mesh, String> {
         let is_vertex = e.name == "vertex";
         let is_face = e.name == "face";
         let is_strip = e.name == "tristrips";
+        // An element without properties takes no bytes, whatever its count: there is nothing
+        // to read (looping over a count of 2^63 would never end).
+        if e.props.is_empty() {
+            continue;
+        }
+        // Each instance of an element with properties takes at least one byte (a binary
+        // scalar, an ASCII digit and its separator, or a list count), so a larger count means
+        // a corrupt header: refused before any time or memory is spent on it.
+        if e.count > bytes.len().saturating_sub(r.pos) {
+            return Err(format!(
+                "element {:?} declares {} instances, more than the {} bytes of data can hold",
+                e.name,
+                e.count,
+                bytes.len().saturating_sub(r.pos)
+            ));
+        }
         if is_vertex {
             for axis in ["x", "y", "z"] {
                 if !e.props.iter().any(|p| p.name == axis && p.list.is_none()) {
@@ -624,6 +664,17 @@ mod tests {
         assert!(parse_ply(ply).is_err());
         assert!(parse_ply(b"hello").is_err());
         assert!(parse_ply(b"ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\nproperty float z\nend_header\n").is_err());
+    }
+
+    #[test]
+    fn elements_without_properties_and_huge_counts_end_at_once() {
+        // The 214-byte file that never finished: nothing to read, 2^63 times.
+        let ply = b"ply\nformat binary_little_endian 1.0\nelement junk 9223372036854775807\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0\0";
+        let t = std::time::Instant::now();
+        assert_eq!(parse_ply(ply).unwrap().positions.len(), 3);
+        let huge = b"ply\nformat ascii 1.0\nelement face 9223372036854775807\nproperty list uchar int vertex_indices\nend_header\n3 0 1 2\n";
+        assert!(parse_ply(huge).unwrap_err().contains("more than"));
+        assert!(t.elapsed().as_secs() < 1);
     }
 
     #[test]

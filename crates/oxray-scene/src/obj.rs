@@ -16,6 +16,7 @@
 //!
 //! A missing or unreadable `.mtl` or texture is a warning; the geometry still loads.
 
+use super::image::ImageError;
 use super::{
     image, AlphaMode, InstanceDesc, MaterialDesc, MeshDesc, Primitive, SceneDesc, SceneError,
     Texture, TextureRef,
@@ -29,10 +30,12 @@ use std::path::{Path, PathBuf};
 /// Loads an `.obj` file with the material libraries it names.
 pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
     let name = path.display().to_string();
-    let bytes = std::fs::read(path).map_err(|e| SceneError::Io {
+    let bytes = crate::files::read_input(path).map_err(|e| SceneError::Io {
         path: name.clone(),
         message: e.to_string(),
     })?;
+    let bytes = crate::text::fix_obj(crate::text::to_utf8(bytes));
+    let sources = RefCell::new(vec![path.to_path_buf()]);
     crate::mesh::check_obj_indices(&bytes).map_err(|e| SceneError::Malformed {
         path: name.clone(),
         message: format!("malformed OBJ: {e}"),
@@ -51,8 +54,11 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
     let (models, materials) = tobj::load_obj_buf(&mut &bytes[..], &opts, |mtl| {
         let file = base.join(mtl);
         let label = mtl.display().to_string();
-        let text = match std::fs::read(&file) {
-            Ok(b) => String::from_utf8_lossy(&b).into_owned(),
+        let text = match crate::files::read_input(&file) {
+            Ok(b) => {
+                sources.borrow_mut().push(file.clone());
+                String::from_utf8(crate::text::to_utf8(b)).unwrap_or_default()
+            }
             Err(e) => {
                 warnings.borrow_mut().push(format!(
                     "{name}: material library {label}: cannot read ({e}); using default materials"
@@ -90,6 +96,7 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
     let material_dirs = material_dirs.into_inner();
     let mut scene = SceneDesc {
         warnings: warnings.into_inner(),
+        sources: sources.into_inner(),
         ..Default::default()
     };
 
@@ -111,21 +118,49 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
         .collect();
     files.sort();
     files.dedup_by(|a, b| a.0 == b.0);
-    let decoded: Vec<(PathBuf, String, Result<Texture, String>)> = files
+    // Read, then check every image's decoded size against the limits before decoding any.
+    let fatal = |message: String| SceneError::Malformed {
+        path: name.clone(),
+        message,
+    };
+    let read: Vec<(PathBuf, String, Result<Vec<u8>, ImageError>)> = files
         .into_par_iter()
         .map(|(file, label)| {
-            let t = image::load_file(texture_file(&label), &file);
+            let bytes = image::read_file(&file);
+            (file, label, bytes)
+        })
+        .collect();
+    let mut sizes = Vec::new();
+    for (_, label, bytes) in &read {
+        let size = match bytes {
+            Ok(b) => image::decoded_size(b),
+            Err(ImageError::Fatal(e)) => Err(ImageError::Fatal(e.clone())),
+            Err(ImageError::Skip(_)) => continue,
+        };
+        match size {
+            Ok(size) => sizes.push(size),
+            Err(ImageError::Fatal(e)) => return Err(fatal(format!("texture {label}: {e}"))),
+            Err(ImageError::Skip(_)) => {}
+        }
+    }
+    image::check_total(sizes).map_err(fatal)?;
+    let decoded: Vec<(PathBuf, String, Result<Texture, ImageError>)> = read
+        .into_par_iter()
+        .map(|(file, label, bytes)| {
+            let t = bytes.and_then(|b| image::decode(texture_file(&label), &b));
             (file, label, t)
         })
         .collect();
     let mut by_file: HashMap<PathBuf, Option<u32>> = HashMap::new();
     for (file, label, t) in decoded {
+        scene.sources.push(file.clone());
         match t {
             Ok(t) => {
                 scene.textures.push(t);
                 by_file.insert(file, Some(scene.textures.len() as u32 - 1));
             }
-            Err(e) => {
+            Err(ImageError::Fatal(e)) => return Err(fatal(format!("texture {label}: {e}"))),
+            Err(ImageError::Skip(e)) => {
                 scene.warnings.push(format!(
                     "{name}: texture {label}: {e}; rendering without it"
                 ));

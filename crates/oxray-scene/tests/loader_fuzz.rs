@@ -426,6 +426,45 @@ fn mutated_fixtures_never_panic_hang_or_over_allocate() {
             glb: false,
             cases: 400,
         },
+        // Seeds of the hostile and real files of issue 12: a palette PNG (bad PLTE lengths
+        // crashed the decoder), a PNG header declaring 16384 x 16384 (a decompression bomb),
+        // PLY elements without properties and huge counts (a hang), quantized and
+        // meshopt-compressed glTF.
+        Target {
+            file: "palette.png",
+            fixture: "palette.png",
+            text: false,
+            glb: false,
+            cases: 300,
+        },
+        Target {
+            file: "huge.png",
+            fixture: "huge.png",
+            text: false,
+            glb: false,
+            cases: 150,
+        },
+        Target {
+            file: "elements.ply",
+            fixture: "elements.ply",
+            text: true,
+            glb: false,
+            cases: 400,
+        },
+        Target {
+            file: "quantized.gltf",
+            fixture: "quantized.gltf",
+            text: true,
+            glb: false,
+            cases: 600,
+        },
+        Target {
+            file: "meshopt.gltf",
+            fixture: "meshopt.gltf",
+            text: true,
+            glb: false,
+            cases: 300,
+        },
         Target {
             file: "quad_ascii.ply",
             fixture: "quad_ascii.ply",
@@ -474,7 +513,7 @@ fn mutated_fixtures_never_panic_hang_or_over_allocate() {
                     format!("{stem}.obj"),
                     obj.replace("materials.mtl", &mutated).into_bytes(),
                 )),
-                "tex2x2.png" => {
+                f if f.ends_with(".png") => {
                     files.push((
                         format!("{stem}.mtl"),
                         mtl.replace("tex2x2.png", &mutated).into_bytes(),
@@ -799,4 +838,35 @@ fn regression_obj_face_index_out_of_range() {
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf -3/-1 -2/-1 -1/-1\n";
     let p = regression("obj-relative", &[("a.obj", obj.as_bytes())]);
     assert_eq!(SceneDesc::load(&p).unwrap().triangle_count(), 1);
+}
+
+#[test]
+fn new_seed_fixtures_load_or_fail_as_intended() {
+    let s = SceneDesc::load(&data("quantized.gltf")).unwrap();
+    let p = &s.meshes[0].primitives[0];
+    assert_eq!(p.positions[1], [1.0, 0.0, 0.0]);
+    assert_eq!(p.normals[0], [0.0, 0.0, 1.0]);
+    let m = Mesh::load(&data("elements.ply")).unwrap();
+    assert_eq!(m.triangles.len(), 2);
+    expect_error(
+        &data("meshopt.gltf"),
+        "requires extension EXT_meshopt_compression",
+    );
+    // The palette PNG decodes; the header bomb is refused before decoding.
+    let dir = tmp_dir("seeds");
+    for png in ["palette.png", "huge.png"] {
+        std::fs::copy(data(png), dir.join(png)).unwrap();
+        std::fs::write(dir.join("m.mtl"), format!("newmtl m\nmap_Kd {png}\n")).unwrap();
+        std::fs::write(
+            dir.join("m.obj"),
+            "mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n",
+        )
+        .unwrap();
+        let r = SceneDesc::load(&dir.join("m.obj"));
+        if png == "palette.png" {
+            assert_eq!(r.unwrap().textures.len(), 1);
+        } else {
+            assert!(r.unwrap_err().to_string().contains("16384x16384"));
+        }
+    }
 }

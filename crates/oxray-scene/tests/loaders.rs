@@ -421,7 +421,9 @@ fn shared_smallpine_loads_with_one_warning_for_the_empty_normal_map() {
     };
     let s = SceneDesc::load(&p).unwrap();
     assert_eq!(s.materials.len(), 2);
-    assert_eq!(s.warnings.len(), 1, "{:#?}", s.warnings);
+    // The empty normal map, and the unused second texture coordinate set, named once.
+    assert_eq!(s.warnings.len(), 2, "{:#?}", s.warnings);
+    assert!(s.warnings[1].contains("ignoring vertex attribute TEXCOORD_1"));
     assert!(
         s.warnings[0].contains("M_TreeAtlas_normal.png"),
         "{}",
@@ -468,7 +470,9 @@ fn shared_drone_loads() {
         return;
     };
     let s = SceneDesc::load(&p).unwrap();
-    assert!(s.warnings.is_empty(), "{:#?}", s.warnings);
+    // Only the unused texture coordinate sets are named.
+    assert_eq!(s.warnings.len(), 1, "{:#?}", s.warnings);
+    assert!(s.warnings[0].contains("TEXCOORD_1, TEXCOORD_2, TEXCOORD_3, TEXCOORD_4 "));
     assert_eq!(s.materials.len(), 3);
     assert_eq!(s.textures.len(), 10);
     assert!(
@@ -511,4 +515,171 @@ fn shared_cornell_box_obj_materials() {
         Mesh::load(&p).unwrap().triangles.len() as u64,
         s.triangle_count()
     );
+}
+
+/// A glTF triangle whose buffer is `bin` in `tri.bin` next to it, with `accessors`,
+/// `bufferViews` and `extra` top-level members spliced in.
+fn gltf_with_bin(test: &str, bin: &[u8], accessors: &str, views: &str, extra: &str) -> PathBuf {
+    let dir = tmp_dir(test);
+    std::fs::write(dir.join("tri.bin"), bin).unwrap();
+    let path = dir.join("tri.gltf");
+    std::fs::write(
+        &path,
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0}}}}]}}],
+            "accessors":[{accessors}],"bufferViews":[{views}],
+            "buffers":[{{"byteLength":{},"uri":"tri.bin"}}]{extra}}}"#,
+            bin.len()
+        ),
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn quantized_positions_load_with_khr_mesh_quantization() {
+    // Three SHORT positions, normalized, each padded to 8 bytes (accessor alignment).
+    let mut bin = Vec::new();
+    for p in [[0i16, 0, 0], [32767, 0, 0], [0, -32767, 0]] {
+        for c in p {
+            bin.extend(c.to_le_bytes());
+        }
+        bin.extend([0, 0]);
+    }
+    let path = gltf_with_bin(
+        "quantized",
+        &bin,
+        r#"{"bufferView":0,"componentType":5122,"normalized":true,"count":3,"type":"VEC3"}"#,
+        r#"{"buffer":0,"byteLength":24,"byteStride":8}"#,
+        r#","extensionsUsed":["KHR_mesh_quantization"],"extensionsRequired":["KHR_mesh_quantization"]"#,
+    );
+    let s = SceneDesc::load(&path).unwrap();
+    assert_eq!(
+        s.meshes[0].primitives[0].positions,
+        vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, -1.0, 0.0]]
+    );
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    // Not normalized: the integers as they are.
+    let path = gltf_with_bin(
+        "quantized-int",
+        &bin,
+        r#"{"bufferView":0,"componentType":5122,"count":3,"type":"VEC3"}"#,
+        r#"{"buffer":0,"byteLength":24,"byteStride":8}"#,
+        r#","extensionsRequired":["KHR_mesh_quantization"]"#,
+    );
+    let s = SceneDesc::load(&path).unwrap();
+    assert_eq!(s.meshes[0].primitives[0].positions[1], [32767.0, 0.0, 0.0]);
+}
+
+#[test]
+fn unsupported_required_extensions_gltf_1_0_and_ignored_features_are_named() {
+    let bin: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
+    let acc = r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"}"#;
+    let view = r#"{"buffer":0,"byteLength":36}"#;
+    for (ext, what) in [
+        ("KHR_draco_mesh_compression", "Draco"),
+        ("EXT_meshopt_compression", "meshoptimizer"),
+        ("KHR_texture_basisu", "KTX2"),
+    ] {
+        let extra = format!(r#","extensionsUsed":["{ext}"],"extensionsRequired":["{ext}"]"#);
+        let path = gltf_with_bin("required", &bin, acc, view, &extra);
+        let e = SceneDesc::load(&path).unwrap_err();
+        assert_one_line_error(&e, &path);
+        let msg = e.to_string();
+        assert!(
+            msg.contains(&format!("requires extension {ext}"))
+                && msg.contains(what)
+                && msg.contains("which oxray does not support"),
+            "{msg}"
+        );
+        assert!(!msg.contains("invalid glTF"), "{msg}");
+    }
+    // Used but not required: loads, with one warning naming them.
+    let path = gltf_with_bin(
+        "used",
+        &bin,
+        acc,
+        view,
+        r#","extensionsUsed":["KHR_materials_clearcoat","KHR_materials_sheen"]"#,
+    );
+    let s = SceneDesc::load(&path).unwrap();
+    let w: Vec<_> = s
+        .warnings
+        .iter()
+        .filter(|w| w.contains("ignoring extension"))
+        .collect();
+    assert_eq!(w.len(), 1, "{:?}", s.warnings);
+    assert!(
+        w[0].contains("KHR_materials_clearcoat, KHR_materials_sheen"),
+        "{w:?}"
+    );
+    // glTF 1.0.
+    let (path, r) = load_text(
+        "gltf1",
+        "old.gltf",
+        r#"{"asset":{"version":"1.0"},"meshes":{"m":{"primitives":[]}}}"#,
+    );
+    let e = r.unwrap_err();
+    assert_one_line_error(&e, &path);
+    assert!(e.to_string().contains("glTF 1.0"), "{e}");
+}
+
+#[test]
+fn scenes_without_nodes_colours_and_accessors_without_buffer_views_load() {
+    let bin: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
+    // A scene without "nodes", a file whose only placement is missing, COLOR_0 and
+    // TEXCOORD_1 (ignored, named once), and a NORMAL accessor without a buffer view (zeros).
+    let dir = tmp_dir("no-nodes");
+    std::fs::write(dir.join("tri.bin"), &bin).unwrap();
+    let path = dir.join("tri.gltf");
+    std::fs::write(
+        &path,
+        r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{}],
+        "meshes":[{"primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":1,"TEXCOORD_1":2}}]}],
+        "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"},
+                     {"componentType":5126,"count":3,"type":"VEC3"},
+                     {"componentType":5126,"count":3,"type":"VEC2"}],
+        "bufferViews":[{"buffer":0,"byteLength":36}],
+        "buffers":[{"byteLength":36,"uri":"tri.bin"}]}"#,
+    )
+    .unwrap();
+    let s = SceneDesc::load(&path).unwrap();
+    assert_eq!(s.instances.len(), 1);
+    assert_eq!(s.meshes[0].primitives[0].normals, vec![[0.0; 3]; 3]);
+    let has = |n: &str| s.warnings.iter().filter(|w| w.contains(n)).count();
+    assert_eq!(
+        has("ignoring vertex attributes COLOR_0, TEXCOORD_1"),
+        1,
+        "{:?}",
+        s.warnings
+    );
+    assert_eq!(has("placing each mesh once"), 1, "{:?}", s.warnings);
+}
+
+#[test]
+fn obj_with_latin1_names_and_a_bare_usemtl_loads() {
+    let dir = tmp_dir("latin1");
+    // "rosé" in Latin-1, in both files.
+    std::fs::write(dir.join("m.mtl"), b"newmtl ros\xe9\nKd 0.9 0.1 0.2\n").unwrap();
+    let obj = dir.join("m.obj");
+    std::fs::write(
+        &obj,
+        b"mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nusemtl ros\xe9\nf 1 2 3\nusemtl\nf 1 2 4\n",
+    )
+    .unwrap();
+    let s = SceneDesc::load(&obj).unwrap();
+    let rose = s.materials.iter().position(|m| m.name == "rosé").unwrap();
+    assert_eq!(s.materials[rose].base_color[0], 0.9);
+    let prims: Vec<_> = s.meshes.iter().flat_map(|m| &m.primitives).collect();
+    assert_eq!(prims.len(), 2);
+    assert_eq!(prims[0].material as usize, rose);
+    assert_ne!(prims[1].material as usize, rose);
+    assert_eq!(Mesh::load(&obj).unwrap().triangles.len(), 2);
 }
