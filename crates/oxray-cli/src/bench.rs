@@ -2,7 +2,7 @@
 //! (random hemisphere from surface points) rays, closest hit and any hit.
 
 use glam::Vec3;
-use oxray::cpu::{Gas, Ias};
+use oxray::cpu::Gas;
 use oxray::{BuildFlags, BuildOptions, IndexBuffer, Ray, RayRecord, TriangleInput, VertexBuffer};
 use oxray_scene::mesh::Mesh;
 use oxray_testkit::rays;
@@ -351,6 +351,7 @@ pub struct InstanceBenchResult {
 /// Builds an IAS of `n` randomly rotated and scaled copies of `mesh` on a cubic grid and traces
 /// `side * side` camera rays and as many random rays through it.
 pub fn instances(
+    device: &oxray::Device,
     mesh: &Mesh,
     n: usize,
     side: u32,
@@ -358,7 +359,7 @@ pub fn instances(
 ) -> Result<InstanceBenchResult, Box<dyn std::error::Error>> {
     use glam::{Affine3A, Quat};
     use oxray::{Instance, Transform};
-    let gas = std::sync::Arc::new(build_gas(mesh, BuildFlags::empty())?);
+    let gas = build_gas_on(device, mesh, BuildFlags::empty())?;
     let (c, r) = center_radius(mesh);
     let per_side = (n as f64).cbrt().ceil() as usize;
     let spacing = 2.5 * r;
@@ -379,7 +380,7 @@ pub fn instances(
             let s = 0.6 + 0.6 * rng.f32();
             let t = Affine3A::from_scale_rotation_translation(Vec3::splat(s), q, g * spacing)
                 * Affine3A::from_translation(-c);
-            Instance::new(gas.clone().into())
+            Instance::new(gas.handle())
                 .transform(Transform::from_affine(&t))
                 .instance_id(i as u32)
         })
@@ -388,10 +389,7 @@ pub fn instances(
     let mut ias = None;
     for _ in 0..runs {
         let t = Instant::now();
-        ias = Some(Ias::build(
-            &oxray::BuildOptions::default(),
-            &[(&instances[..]).into()],
-        )?);
+        ias = Some(device.build_ias(&oxray::BuildOptions::default(), &[(&instances[..]).into()])?);
         times.push(t.elapsed().as_secs_f64() * 1e3);
     }
     let ias = ias.expect("runs >= 1");
@@ -426,21 +424,20 @@ pub fn instances(
         })
         .collect();
     let mut hits = vec![None; camera.len()];
-    let time = |rays: &[Ray], hits: &mut [Option<oxray::Hit>]| {
-        ias.intersect_batch(rays, hits).expect("lengths match");
-        median(
-            (0..runs)
-                .map(|_| {
-                    let t = Instant::now();
-                    ias.intersect_batch(rays, hits).expect("lengths match");
-                    t.elapsed().as_secs_f64()
-                })
-                .collect(),
-        )
+    let root = ias.handle();
+    let time = |rays: &[Ray], hits: &mut [Option<oxray::Hit>]| -> Result<f64, oxray::QueryError> {
+        device.intersect_closest(&root, rays, hits)?;
+        let mut times = Vec::with_capacity(runs);
+        for _ in 0..runs {
+            let t = Instant::now();
+            device.intersect_closest(&root, rays, hits)?;
+            times.push(t.elapsed().as_secs_f64());
+        }
+        Ok(median(times))
     };
-    let coherent = camera.len() as f64 / time(&camera, &mut hits) / 1e6;
+    let coherent = camera.len() as f64 / time(&camera, &mut hits)? / 1e6;
     let hit_rate = hits.iter().filter(|h| h.is_some()).count() as f64 / hits.len() as f64;
-    let incoherent = random.len() as f64 / time(&random, &mut hits) / 1e6;
+    let incoherent = random.len() as f64 / time(&random, &mut hits)? / 1e6;
     Ok(InstanceBenchResult {
         instances: n,
         mesh_triangles: mesh.triangles.len(),

@@ -390,9 +390,6 @@ fn run(cli: Cli) -> Result<()> {
             // table of its batched queries against the CPU's.
             let device = match backend.as_str() {
                 "cpu" => None,
-                _ if instances.is_some() => {
-                    bail!("--instances needs --backend cpu (the CUDA backend traces GASes only)")
-                }
                 name => Some(oxray_cli::device::open(name)?),
             };
             let pool = rayon::ThreadPoolBuilder::new()
@@ -479,10 +476,17 @@ fn run(cli: Cli) -> Result<()> {
                 if n == 0 || n > 1 << 28 {
                     bail!("--instances must be in 1..=2^28, got {n}");
                 }
+                let on = device.clone().unwrap_or_default();
                 let r = pool
-                    .install(|| bench::instances(mesh, n, side, runs).map_err(|e| e.to_string()))
+                    .install(|| {
+                        bench::instances(&on, mesh, n, side, runs).map_err(|e| e.to_string())
+                    })
                     .map_err(anyhow::Error::msg)?;
                 say("")?;
+                say(format_args!(
+                    "instances traced on {}",
+                    pool.install(|| on.describe())
+                ))?;
                 say(format_args!("| instanced mesh | instances | triangles (instanced) | IAS build ms | camera closest Mrays/s | random closest Mrays/s | camera hit rate |"))?;
                 say(format_args!("|---|---:|---:|---:|---:|---:|---:|"))?;
                 say(format_args!(

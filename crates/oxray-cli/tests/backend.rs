@@ -219,7 +219,8 @@ fn bench_cuda_compares_with_the_cpu_or_fails_with_one_error_line() {
 }
 
 #[test]
-fn bench_cuda_refuses_instances() {
+fn bench_instances_run_on_the_device_or_fail_with_one_error_line() {
+    let gpu = gpu_available();
     let out = oxray()
         .args([
             "bench",
@@ -235,8 +236,19 @@ fn bench_cuda_refuses_instances() {
         ])
         .output()
         .unwrap();
-    assert_clean_cuda_failure(&out, "bench --instances");
-    assert!(String::from_utf8_lossy(&out.stderr).contains("--backend cpu"));
+    if gpu {
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        assert!(text.contains("instances traced on NVIDIA"), "{text}");
+        assert!(text.contains("| instanced mesh |"), "{text}");
+    } else {
+        assert_clean_cuda_failure(&out, "bench --instances");
+        assert!(String::from_utf8_lossy(&out.stderr).contains("--backend cpu"));
+    }
 }
 
 #[test]

@@ -40,6 +40,7 @@ impl CudaIas {
     pub fn upload(ctx: &CudaContext, data: IasData, tree: &Bvh2) -> Result<CudaIas, BuildError> {
         let mut children = Vec::with_capacity(data.instances.len());
         let mut refs = Vec::with_capacity(data.instances.len());
+        let mut addresses: std::collections::HashMap<usize, (u64, u64)> = Default::default();
         for (slot, inst) in data.instances.iter().enumerate() {
             let child = &inst.child;
             let Some(backend) = child.backend() else {
@@ -75,12 +76,15 @@ impl CudaIas {
                 refs.push(None);
                 continue;
             }
-            let addrs = {
+            // Many instances share a child: its addresses are looked up once (each lookup
+            // records a stream event).
+            let key = Arc::as_ptr(&gas) as usize;
+            let addrs = *addresses.entry(key).or_insert_with(|| {
                 let (n, t) = gas.device_arrays();
                 let (nodes_addr, _n) = n.device_ptr(&ctx.stream);
                 let (triangles_addr, _t) = t.device_ptr(&ctx.stream);
                 (nodes_addr, triangles_addr)
-            };
+            });
             refs.push(Some(ChildRef {
                 index: slot as u32,
                 nodes_addr: addrs.0,
