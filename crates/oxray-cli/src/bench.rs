@@ -179,7 +179,7 @@ pub fn bench_rays(mesh: &Mesh, side: u32) -> BenchRays {
 
 /// Writes a mesh and its rays for the side-by-side script (`scripts/bench_embree.py`):
 /// `NAME.mesh` (u32 vertex count, u32 triangle count, f32x3 vertices, u32x3 triangles),
-/// `NAME.coherent.rays` and `NAME.incoherent.rays` (f32[8] per ray), all little endian. Each
+/// `NAME.coherent.rays` and `NAME.incoherent.rays` (`f32[8]` per ray), all little endian. Each
 /// file is written atomically.
 pub fn export(
     dir: &std::path::Path,

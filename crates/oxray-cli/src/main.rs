@@ -67,7 +67,7 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
-    /// Cast a file of rays (little-endian f32[8]: ox, oy, oz, tmin, dx, dy, dz, tmax) at a
+    /// Cast a file of rays (little-endian `f32[8]`: ox, oy, oz, tmin, dx, dy, dz, tmax) at a
     /// mesh; write hits (f32 t, u32 primitive, f32 u, f32 v; t = +inf and primitive 0xFFFFFFFF
     /// on a miss) or, with --occlusion, one u32 0/1 per ray. Primitive indices are triangles in
     /// file order (polygons fan-triangulated, strips unrolled).

@@ -12,7 +12,7 @@ pub const SBT_RECORD_ALIGNMENT: usize = 16;
 const HEADER_MAGIC: [u8; 8] = *b"oxraySBT";
 
 /// An opaque record header naming a program group, made by
-/// [`ProgramGroup::pack_header`](crate::ProgramGroup::pack_header) (`optixSbtRecordPackHeader`).
+/// a program group's `pack_header` (`optixSbtRecordPackHeader`).
 /// Headers may be copied byte-wise and reused by every pipeline that holds the group.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SbtHeader(pub [u8; SBT_RECORD_HEADER_SIZE]);

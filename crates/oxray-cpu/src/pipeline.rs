@@ -105,7 +105,7 @@ impl<P> Pipeline<P> {
     /// that raises an exception ends there, runs the exception program if the SBT has one, and
     /// is counted in the report. Without an exception record the built-in exception program of
     /// guide §13.14 stands in: the first five exceptions (by launch index) are sent to the
-    /// context's log callback at [`LogLevel::Error`] if one is set, and otherwise printed to
+    /// context's log callback at [`LogLevel::Error`](oxray_core::LogLevel::Error) if one is set, and otherwise printed to
     /// stderr, one line each: `[oxray][EXCEPTION] launch index [x, y, z]: <exception>`. In
     /// validation mode they are also logged with an exception record.
     pub fn launch(

@@ -267,7 +267,104 @@ pub(crate) struct Scratch {
     staged: Vec<RayRecord>,
 }
 
+/// Queues a closest-hit kernel over `n` rays: (rays, hit records, instance slots, n).
+pub(crate) type ClosestLaunch<'a> = &'a dyn Fn(
+    &CudaSlice<u32>,
+    &mut CudaSlice<u32>,
+    &mut CudaSlice<u32>,
+    u32,
+) -> Result<(), CudaError>;
+/// Queues an occlusion kernel over `n` rays: (rays, flags, n).
+pub(crate) type AnyLaunch<'a> =
+    &'a dyn Fn(&CudaSlice<u32>, &mut CudaSlice<u8>, u32) -> Result<(), CudaError>;
+
+fn missing() -> CudaError {
+    CudaError::Driver {
+        during: "tracing",
+        message: "scratch buffers missing".into(),
+    }
+}
+
 impl Scratch {
+    /// One closest-hit query: rays up, `launch`, hit records (and, with `instances`, the
+    /// instance slot of each hit) down. The records are left in `self.records` and
+    /// `self.inst_records`.
+    pub(crate) fn closest(
+        &mut self,
+        ctx: &CudaContext,
+        rays: &[Ray],
+        instances: bool,
+        launch: ClosestLaunch<'_>,
+    ) -> Result<(), CudaError> {
+        let n = rays.len();
+        self.records.clear();
+        self.inst_records.clear();
+        if n == 0 {
+            return Ok(());
+        }
+        self.load(ctx, rays)?;
+        let (Some(d_rays), Some(d_hits), Some(d_insts)) =
+            (self.rays.as_ref(), self.hits.as_mut(), self.insts.as_mut())
+        else {
+            return Err(missing());
+        };
+        launch(d_rays, d_hits, d_insts, n as u32)?;
+        self.records.resize(n, HitRecord::zeroed());
+        ctx.stream
+            .memcpy_dtoh(
+                &d_hits.slice(..4 * n),
+                bytemuck::cast_slice_mut::<HitRecord, u32>(&mut self.records[..n]),
+            )
+            .map_err(driver("copying hit records to the host"))?;
+        if instances {
+            self.inst_records.resize(n, 0);
+            ctx.stream
+                .memcpy_dtoh(&d_insts.slice(..n), &mut self.inst_records[..n])
+                .map_err(driver("copying instance records to the host"))?;
+        }
+        ctx.synchronize()
+    }
+
+    /// One occlusion query into `occluded`: rays up, `launch`, flags down.
+    pub(crate) fn any(
+        &mut self,
+        ctx: &CudaContext,
+        rays: &[Ray],
+        occluded: &mut [bool],
+        launch: AnyLaunch<'_>,
+    ) -> Result<(), CudaError> {
+        if rays.len() != occluded.len() {
+            return Err(CudaError::LengthMismatch {
+                rays: rays.len(),
+                outputs: occluded.len(),
+            });
+        }
+        let n = rays.len();
+        if n == 0 {
+            return Ok(());
+        }
+        self.load(ctx, rays)?;
+        let (Some(d_rays), Some(d_occ)) = (self.rays.as_ref(), self.occluded.as_mut()) else {
+            return Err(missing());
+        };
+        launch(d_rays, d_occ, n as u32)?;
+        self.flags.resize(n, 0);
+        ctx.stream
+            .memcpy_dtoh(&d_occ.slice(..n), &mut self.flags[..n])
+            .map_err(driver("copying occlusion results to the host"))?;
+        ctx.synchronize()?;
+        const CHUNK: usize = 1 << 16;
+        occluded
+            .par_chunks_mut(CHUNK)
+            .zip(self.flags[..n].par_chunks(CHUNK))
+            .for_each(|(o, f)| {
+                for (o, &f) in o.iter_mut().zip(f) {
+                    *o = f != 0;
+                }
+            });
+        Ok(())
+    }
+
     /// Makes room for `n` rays and copies them to the device.
     pub(crate) fn load(&mut self, ctx: &CudaContext, rays: &[Ray]) -> Result<(), CudaError> {
         let n = rays.len();
@@ -429,32 +526,11 @@ impl CudaGas {
 
     /// Traces a batch with the reused buffers and hands the records to `f`.
     fn with_records(&self, rays: &[Ray], f: impl FnOnce(&[HitRecord])) -> Result<(), CudaError> {
-        let n = rays.len();
-        if n == 0 {
-            f(&[]);
-            return Ok(());
-        }
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        let s = &mut *guard;
-        s.load(&self.ctx, rays)?;
-        let (Some(d_rays), Some(d_hits)) = (s.rays.as_ref(), s.hits.as_mut()) else {
-            return Err(CudaError::Driver {
-                during: "tracing",
-                message: "scratch buffers missing".into(),
-            });
-        };
-        self.launch_closest(d_rays, d_hits, n as u32)?;
-        s.records.resize(n, HitRecord::zeroed());
-        let view = d_hits.slice(..4 * n);
-        self.ctx
-            .stream
-            .memcpy_dtoh(
-                &view,
-                bytemuck::cast_slice_mut::<HitRecord, u32>(&mut s.records[..n]),
-            )
-            .map_err(driver("copying hit records to the host"))?;
-        self.ctx.synchronize()?;
-        f(&s.records[..n]);
+        guard.closest(&self.ctx, rays, false, &|r, h, _, n| {
+            self.launch_closest(r, h, n)
+        })?;
+        f(&guard.records);
         Ok(())
     }
 
@@ -471,43 +547,10 @@ impl CudaGas {
         rays: &[Ray],
         occluded: &mut [bool],
     ) -> Result<(), CudaError> {
-        if rays.len() != occluded.len() {
-            return Err(CudaError::LengthMismatch {
-                rays: rays.len(),
-                outputs: occluded.len(),
-            });
-        }
-        let n = rays.len();
-        if n == 0 {
-            return Ok(());
-        }
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        let s = &mut *guard;
-        s.load(&self.ctx, rays)?;
-        let (Some(d_rays), Some(d_occ)) = (s.rays.as_ref(), s.occluded.as_mut()) else {
-            return Err(CudaError::Driver {
-                during: "tracing",
-                message: "scratch buffers missing".into(),
-            });
-        };
-        self.launch_occluded(d_rays, d_occ, n as u32)?;
-        s.flags.resize(n, 0);
-        let view = d_occ.slice(..n);
-        self.ctx
-            .stream
-            .memcpy_dtoh(&view, &mut s.flags[..n])
-            .map_err(driver("copying occlusion results to the host"))?;
-        self.ctx.synchronize()?;
-        const CHUNK: usize = 1 << 16;
-        occluded
-            .par_chunks_mut(CHUNK)
-            .zip(s.flags[..n].par_chunks(CHUNK))
-            .for_each(|(o, f)| {
-                for (o, &f) in o.iter_mut().zip(f) {
-                    *o = f != 0;
-                }
-            });
-        Ok(())
+        guard.any(&self.ctx, rays, occluded, &|r, o, n| {
+            self.launch_occluded(r, o, n)
+        })
     }
 
     /// Traces rays already on the device into `hits`; returns when the kernel is done.

@@ -5,7 +5,6 @@ use crate::context::CudaContext;
 use crate::error::{driver, CudaError};
 use crate::gas::{check_batch, grid, CudaGas, HitRecord, Scratch};
 use crate::layout::{ChildRef, IasLayout, NodeLayout};
-use bytemuck::Zeroable;
 use cudarc::driver::{CudaSlice, DevicePtr, PushKernelArg};
 use oxray_bvh::{Bvh2, IasData};
 use oxray_core::{
@@ -143,36 +142,11 @@ impl CudaIas {
                 outputs: hits.len(),
             });
         }
-        let n = rays.len();
-        if n == 0 {
-            return Ok(());
-        }
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        let s = &mut *guard;
-        s.load(&self.ctx, rays)?;
-        let (Some(d_rays), Some(d_hits), Some(d_insts)) =
-            (s.rays.as_ref(), s.hits.as_mut(), s.insts.as_mut())
-        else {
-            return Err(CudaError::Driver {
-                during: "tracing",
-                message: "scratch buffers missing".into(),
-            });
-        };
-        self.launch_closest(d_rays, d_hits, d_insts, n as u32)?;
-        s.records.resize(n, HitRecord::zeroed());
-        s.inst_records.resize(n, 0);
-        let stream = &self.ctx.stream;
-        stream
-            .memcpy_dtoh(
-                &d_hits.slice(..4 * n),
-                bytemuck::cast_slice_mut::<HitRecord, u32>(&mut s.records[..n]),
-            )
-            .map_err(driver("copying hit records to the host"))?;
-        stream
-            .memcpy_dtoh(&d_insts.slice(..n), &mut s.inst_records[..n])
-            .map_err(driver("copying instance records to the host"))?;
-        self.ctx.synchronize()?;
-        self.resolve_into(&s.records[..n], &s.inst_records[..n], hits);
+        guard.closest(&self.ctx, rays, true, &|r, h, i, n| {
+            self.launch_closest(r, h, i, n)
+        })?;
+        self.resolve_into(&guard.records, &guard.inst_records, hits);
         Ok(())
     }
 
@@ -182,36 +156,10 @@ impl CudaIas {
         rays: &[Ray],
         occluded: &mut [bool],
     ) -> Result<(), CudaError> {
-        if rays.len() != occluded.len() {
-            return Err(CudaError::LengthMismatch {
-                rays: rays.len(),
-                outputs: occluded.len(),
-            });
-        }
-        let n = rays.len();
-        if n == 0 {
-            return Ok(());
-        }
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        let s = &mut *guard;
-        s.load(&self.ctx, rays)?;
-        let (Some(d_rays), Some(d_occ)) = (s.rays.as_ref(), s.occluded.as_mut()) else {
-            return Err(CudaError::Driver {
-                during: "tracing",
-                message: "scratch buffers missing".into(),
-            });
-        };
-        self.launch_occluded(d_rays, d_occ, n as u32)?;
-        s.flags.resize(n, 0);
-        self.ctx
-            .stream
-            .memcpy_dtoh(&d_occ.slice(..n), &mut s.flags[..n])
-            .map_err(driver("copying occlusion results to the host"))?;
-        self.ctx.synchronize()?;
-        for (o, &f) in occluded.iter_mut().zip(&s.flags[..n]) {
-            *o = f != 0;
-        }
-        Ok(())
+        guard.any(&self.ctx, rays, occluded, &|r, o, n| {
+            self.launch_occluded(r, o, n)
+        })
     }
 
     /// Traces rays already on the device (8 words each) into `hits` (4 words each) and `insts`

@@ -382,16 +382,13 @@ __device__ __forceinline__ Best trace_bvh4(const TraceRay& r, const float4* __re
 // A binary BVH of 64-byte nodes (Aila and Laine's layout): rows (c0.lo.x, c0.hi.x, c0.lo.y,
 // c0.hi.y), (c1.lo.x, c1.hi.x, c1.lo.y, c1.hi.y), (c0.lo.z, c0.hi.z, c1.lo.z, c1.hi.z) and
 // (child0, child1, count0, count1), with the CPU's box and triangle tests.
-template <bool ANY>
-__device__ __forceinline__ Best trace_bvh2(const TraceRay& r, const float4* __restrict__ nodes,
-                                           const float4* __restrict__ tris) {
-    Best best;
-    best.t = F32_INF;
-    best.u = 0.0f;
-    best.v = 0.0f;
-    best.slot = MISS_SLOT;
-    float tmin = r.tmin;
-    float tmax = r.tmax;
+//
+// Walked nearest child first; the slot range of every leaf the ray enters goes to
+// `leaf(start, count, tmax)`, which may shrink `tmax` and returns true to end the walk. Both the
+// triangles of a GAS and the instances of an IAS are leaves of this one walk.
+template <typename Leaf>
+__device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __restrict__ nodes,
+                                          float tmin, float tmax, Leaf&& leaf) {
     float box_tmax = tmax * TMAX_SLACK;
     Entry stack[OXRAY_STACK_SIZE];
     int sp = 0;
@@ -437,14 +434,31 @@ __device__ __forceinline__ Best trace_bvh2(const TraceRay& r, const float4* __re
                 continue;
             }
         } else {
-            if (leaf<ANY>(r, tris, cur.child, cur.count, tmin, tmax, box_tmax, best)) return best;
+            float before = tmax;
+            if (leaf(cur.child, cur.count, tmax)) return;
+            if (tmax != before) box_tmax = tmax * TMAX_SLACK;
         }
         for (;;) {
-            if (sp == 0) return best;
+            if (sp == 0) return;
             cur = stack[--sp];
             if (cur.dist <= box_tmax) break;
         }
     }
+}
+
+template <bool ANY>
+__device__ __forceinline__ Best trace_bvh2(const TraceRay& r, const float4* __restrict__ nodes,
+                                           const float4* __restrict__ tris) {
+    Best best;
+    best.t = F32_INF;
+    best.u = 0.0f;
+    best.v = 0.0f;
+    best.slot = MISS_SLOT;
+    walk_bvh2(r, nodes, r.tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
+        float box_tmax;  // the walk keeps its own
+        return leaf<ANY>(r, tris, start, count, r.tmin, tmax, box_tmax, best);
+    });
+    return best;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -487,91 +501,41 @@ __device__ __forceinline__ IasBest trace_ias(const TraceRay& r, const float4* __
     best.hit.v = 0.0f;
     best.hit.slot = MISS_SLOT;
     best.inst = MISS_SLOT;
-    float tmin = r.tmin;
-    float tmax = r.tmax;
-    float box_tmax = tmax * TMAX_SLACK;
-    Entry stack[OXRAY_STACK_SIZE];
-    int sp = 0;
-    Entry cur;
-    cur.child = 0;
-    cur.count = 0;
-    cur.dist = tmin;
-    for (;;) {
-        if (cur.count == 0) {
-            const float4* n = top + 4 * (size_t)cur.child;
-            float4 n0 = n[0], n1 = n[1], n2 = n[2];
-            uint4 links = reinterpret_cast<const uint4*>(n)[3];
-            float d0, d1;
-            bool h0 = slab(r, r.neg_x ? n0.y : n0.x, r.neg_y ? n0.w : n0.z, r.neg_z ? n2.y : n2.x,
-                           r.neg_x ? n0.x : n0.y, r.neg_y ? n0.z : n0.w, r.neg_z ? n2.x : n2.y,
-                           tmin, box_tmax, d0);
-            bool h1 = slab(r, r.neg_x ? n1.y : n1.x, r.neg_y ? n1.w : n1.z, r.neg_z ? n2.w : n2.z,
-                           r.neg_x ? n1.x : n1.y, r.neg_y ? n1.z : n1.w, r.neg_z ? n2.z : n2.w,
-                           tmin, box_tmax, d1);
-            Entry a, b;
-            a.child = links.x;
-            a.count = links.z;
-            a.dist = d0;
-            b.child = links.y;
-            b.count = links.w;
-            b.dist = d1;
-            if (h0 && h1) {
-                if (b.dist < a.dist) {
-                    stack[sp++] = a;
-                    cur = b;
-                } else {
-                    stack[sp++] = b;
-                    cur = a;
-                }
-                continue;
-            }
-            if (h0) {
-                cur = a;
-                continue;
-            }
-            if (h1) {
-                cur = b;
-                continue;
-            }
-        } else {
-            for (u32 s = cur.child; s < cur.child + cur.count; ++s) {
-                const float4* inst = insts + 6 * (size_t)s;
-                if (!hits_box(r, inst[3], inst[4], tmin, tmax)) continue;
-                uint4 ptrs = reinterpret_cast<const uint4*>(inst)[5];
-                const float4* nodes = reinterpret_cast<const float4*>(
-                    ((unsigned long long)ptrs.y << 32) | (unsigned long long)ptrs.x);
-                const float4* tris = reinterpret_cast<const float4*>(
-                    ((unsigned long long)ptrs.w << 32) | (unsigned long long)ptrs.z);
-                if (nodes == nullptr) continue;
-                float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
-                TraceRay o;
-                // Transform::transform_point and transform_vector, in the CPU's order.
-                o.org = make_float3(m0.x * r.org.x + m0.y * r.org.y + m0.z * r.org.z + m0.w,
-                                    m1.x * r.org.x + m1.y * r.org.y + m1.z * r.org.z + m1.w,
-                                    m2.x * r.org.x + m2.y * r.org.y + m2.z * r.org.z + m2.w);
-                o.dir = make_float3(m0.x * r.dir.x + m0.y * r.dir.y + m0.z * r.dir.z,
-                                    m1.x * r.dir.x + m1.y * r.dir.y + m1.z * r.dir.z,
-                                    m2.x * r.dir.x + m2.y * r.dir.y + m2.z * r.dir.z);
-                o.tmin = tmin;
-                o.tmax = tmax;
-                if (!prepare_ray(o)) continue;
-                Best h = trace_bvh2<ANY>(o, nodes, tris);
-                if (h.slot != MISS_SLOT) {
-                    // A hit at the current tmax replaces the one found before, as on the CPU.
-                    best.hit = h;
-                    best.inst = s;
-                    if (ANY) return best;
-                    tmax = h.t;
-                    box_tmax = tmax * TMAX_SLACK;
-                }
+    const float tmin = r.tmin;
+    walk_bvh2(r, top, tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
+        for (u32 s = start; s < start + count; ++s) {
+            const float4* inst = insts + 6 * (size_t)s;
+            if (!hits_box(r, inst[3], inst[4], tmin, tmax)) continue;
+            uint4 ptrs = reinterpret_cast<const uint4*>(inst)[5];
+            const float4* nodes = reinterpret_cast<const float4*>(
+                ((unsigned long long)ptrs.y << 32) | (unsigned long long)ptrs.x);
+            const float4* tris = reinterpret_cast<const float4*>(
+                ((unsigned long long)ptrs.w << 32) | (unsigned long long)ptrs.z);
+            if (nodes == nullptr) continue;
+            float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
+            TraceRay o;
+            // Transform::transform_point and transform_vector, in the CPU's order.
+            o.org = make_float3(m0.x * r.org.x + m0.y * r.org.y + m0.z * r.org.z + m0.w,
+                                m1.x * r.org.x + m1.y * r.org.y + m1.z * r.org.z + m1.w,
+                                m2.x * r.org.x + m2.y * r.org.y + m2.z * r.org.z + m2.w);
+            o.dir = make_float3(m0.x * r.dir.x + m0.y * r.dir.y + m0.z * r.dir.z,
+                                m1.x * r.dir.x + m1.y * r.dir.y + m1.z * r.dir.z,
+                                m2.x * r.dir.x + m2.y * r.dir.y + m2.z * r.dir.z);
+            o.tmin = tmin;
+            o.tmax = tmax;
+            if (!prepare_ray(o)) continue;
+            Best h = trace_bvh2<ANY>(o, nodes, tris);
+            if (h.slot != MISS_SLOT) {
+                // A hit at the current tmax replaces the one found before, as on the CPU.
+                best.hit = h;
+                best.inst = s;
+                if (ANY) return true;
+                tmax = h.t;
             }
         }
-        for (;;) {
-            if (sp == 0) return best;
-            cur = stack[--sp];
-            if (cur.dist <= box_tmax) break;
-        }
-    }
+        return false;
+    });
+    return best;
 }
 
 // ---------------------------------------------------------------------------------------------
