@@ -582,7 +582,6 @@ fn unsupported_required_extensions_gltf_1_0_and_ignored_features_are_named() {
     let view = r#"{"buffer":0,"byteLength":36}"#;
     for (ext, what) in [
         ("KHR_draco_mesh_compression", "Draco"),
-        ("EXT_meshopt_compression", "meshoptimizer"),
         ("KHR_texture_basisu", "KTX2"),
     ] {
         let extra = format!(r#","extensionsUsed":["{ext}"],"extensionsRequired":["{ext}"]"#);
@@ -682,4 +681,195 @@ fn obj_with_latin1_names_and_a_bare_usemtl_loads() {
     assert_eq!(prims[0].material as usize, rose);
     assert_ne!(prims[1].material as usize, rose);
     assert_eq!(Mesh::load(&obj).unwrap().triangles.len(), 2);
+}
+
+// The meshopt fixtures were made by gltfpack 1.3 (the npm package `gltfpack`) from one UV sphere
+// (8 segments, 6 rings, 63 vertices with normals and texture coordinates):
+// - `meshopt_plain.glb`: `-kv`, quantized and not compressed, the reference;
+// - `meshopt_sphere.glb`: `-cc -kv`, EXT_meshopt_compression required, OCTAHEDRAL normals;
+// - `meshopt.gltf` (a fuzzer seed): the same, its buffer embedded as a data URI;
+// - `meshopt_khr.glb`: `-cc -ce khr -kv -vpf -vtf`, KHR_meshopt_compression with EXPONENTIAL
+//   float positions and texture coordinates;
+// - `meshopt_fallback.gltf` (+ `.bin`, `.fallback.bin`): `-c -cf -kv`, the extension used but not
+//   required, with an uncompressed fallback buffer.
+
+/// A primitive's triangles as (position, texture coordinate) triplets, each triangle rotated to
+/// start at its smallest vertex, sorted, with the normal of each such vertex: what does not
+/// depend on the order of vertices and of triangles (which compression changes).
+#[allow(clippy::type_complexity)]
+fn canonical(
+    p: &oxray_scene::Primitive,
+) -> (
+    Vec<[[u32; 5]; 3]>,
+    std::collections::BTreeMap<[u32; 5], [f32; 3]>,
+) {
+    let key = |i: u32| {
+        let (v, t) = (p.positions[i as usize], p.uvs[i as usize]);
+        [v[0], v[1], v[2], t[0], t[1]].map(f32::to_bits)
+    };
+    let mut tris: Vec<[[u32; 5]; 3]> = p
+        .triangles
+        .iter()
+        .map(|t| {
+            let k = t.map(key);
+            let m = (0..3).min_by_key(|&i| k[i]).unwrap();
+            [k[m], k[(m + 1) % 3], k[(m + 2) % 3]]
+        })
+        .collect();
+    tris.sort_unstable();
+    let normals = (0..p.positions.len() as u32)
+        .map(|i| (key(i), p.normals[i as usize]))
+        .collect();
+    (tris, normals)
+}
+
+#[test]
+fn meshopt_compressed_files_decode_to_the_uncompressed_geometry() {
+    let plain = SceneDesc::load(&data("meshopt_plain.glb")).unwrap();
+    let (tris, normals) = canonical(&plain.meshes[0].primitives[0]);
+    assert_eq!(tris.len(), 80);
+    for file in [
+        "meshopt_sphere.glb",
+        "meshopt.gltf",
+        "meshopt_fallback.gltf",
+    ] {
+        let s = SceneDesc::load(&data(file)).unwrap();
+        assert!(s.warnings.is_empty(), "{file}: {:?}", s.warnings);
+        let (t, n) = canonical(&s.meshes[0].primitives[0]);
+        assert_eq!(t, tris, "{file}");
+        assert_eq!(s.instances, plain.instances, "{file}");
+        // The octahedral filter stores the normals differently, as precisely.
+        assert_eq!(n.len(), normals.len());
+        for (k, n) in &n {
+            let r = normals[k];
+            assert!(
+                close_within(Vec3::from(*n), Vec3::from(r), 0.02),
+                "{file}: {n:?} {r:?}"
+            );
+        }
+    }
+    // Float positions through the EXPONENTIAL filter: a unit sphere whose normals point out.
+    let s = SceneDesc::load(&data("meshopt_khr.glb")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let p = &s.meshes[0].primitives[0];
+    assert_eq!(p.triangles.len(), 80);
+    for (pos, n) in p.positions.iter().zip(&p.normals) {
+        let w = world(&s, 0, *pos);
+        assert!((w.length() - 1.0).abs() < 1e-3, "{w}");
+        assert!(
+            close_within(Vec3::from(*n).normalize(), w.normalize(), 0.02),
+            "{n:?} {w}"
+        );
+    }
+    let uv_max = p.uvs.iter().flatten().fold(0f32, |a, &b| a.max(b));
+    assert!((uv_max - 1.0).abs() < 1e-3, "{uv_max}");
+}
+
+fn close_within(a: Vec3, b: Vec3, tol: f32) -> bool {
+    (a - b).abs().max_element() <= tol
+}
+
+#[test]
+fn meshopt_fallback_buffers_are_read_only_when_decoding_is_not_possible() {
+    let reference = SceneDesc::load(&data("meshopt_fallback.gltf")).unwrap();
+    let reference = canonical(&reference.meshes[0].primitives[0]);
+    let dir = tmp_dir("meshopt-fallback");
+    let names = [
+        "meshopt_fallback.gltf",
+        "meshopt_fallback.bin",
+        "meshopt_fallback.fallback.bin",
+    ];
+    for n in names {
+        std::fs::copy(data(n), dir.join(n)).unwrap();
+    }
+    let gltf = dir.join(names[0]);
+    let fallback = dir.join(names[2]);
+    // Decoded without the fallback buffer, whose file is still listed as the scene's.
+    std::fs::remove_file(&fallback).unwrap();
+    let s = SceneDesc::load(&gltf).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(canonical(&s.meshes[0].primitives[0]), reference);
+    assert!(s.sources.contains(&fallback), "{:?}", s.sources);
+    // Compressed data that does not decode: the fallback is used, with a warning per view.
+    std::fs::copy(data(names[2]), &fallback).unwrap();
+    let compressed = std::fs::read(data(names[1])).unwrap();
+    std::fs::write(dir.join(names[1]), vec![0u8; compressed.len()]).unwrap();
+    let s = SceneDesc::load(&gltf).unwrap();
+    assert_eq!(canonical(&s.meshes[0].primitives[0]), reference);
+    let used = |s: &SceneDesc| {
+        s.warnings
+            .iter()
+            .filter(|w| w.contains("using the uncompressed fallback"))
+            .count()
+    };
+    assert_eq!(used(&s), 4, "{:?}", s.warnings);
+    assert!(s.warnings[0].contains("cannot decode its EXT_meshopt_compression data"));
+    // ... and without the fallback either, an error naming both.
+    std::fs::remove_file(&fallback).unwrap();
+    let e = SceneDesc::load(&gltf).unwrap_err();
+    assert_one_line_error(&e, &gltf);
+    let msg = e.to_string();
+    assert!(
+        msg.contains("cannot decode")
+            && msg.contains("fallback buffer 1 ")
+            && msg.contains("cannot read"),
+        "{msg}"
+    );
+    // An unknown filter is a reason to fall back too (the extension is not required).
+    std::fs::copy(data(names[1]), dir.join(names[1])).unwrap();
+    std::fs::copy(data(names[2]), &fallback).unwrap();
+    let text = std::fs::read_to_string(&gltf).unwrap();
+    let text = text.replacen(
+        r#""mode":"TRIANGLES""#,
+        r#""mode":"TRIANGLES","filter":"FUTURE""#,
+        1,
+    );
+    std::fs::write(&gltf, text).unwrap();
+    let s = SceneDesc::load(&gltf).unwrap();
+    assert_eq!(used(&s), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("unknown filter \"FUTURE\""),
+        "{:?}",
+        s.warnings
+    );
+    assert_eq!(canonical(&s.meshes[0].primitives[0]), reference);
+}
+
+#[test]
+fn required_meshopt_data_that_does_not_decode_is_a_one_line_error() {
+    let text = std::fs::read_to_string(data("meshopt.gltf")).unwrap();
+    for (from, to, needle) in [
+        (
+            r#""mode":"TRIANGLES""#,
+            r#""mode":"STRIPS""#,
+            "unknown mode",
+        ),
+        (r#""count":240"#, r#""count":241"#, "not a multiple of 3"),
+        (r#""count":240"#, r#""count":999999999999"#, "do not fit"),
+        (
+            r#""filter":"OCTAHEDRAL""#,
+            r#""filter":"QUATERNION""#,
+            "QUATERNION",
+        ),
+        (
+            r#""byteOffset":0,"byteLength":395"#,
+            r#""byteOffset":0,"byteLength":99999"#,
+            "outside",
+        ),
+        (
+            r#""byteOffset":0,"byteLength":395"#,
+            r#""byteOffset":0,"byteLength":20"#,
+            "malformed",
+        ),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let (path, r) = load_text("meshopt-required", "m.gltf", &text.replacen(from, to, 1));
+        let e = r.unwrap_err();
+        assert_one_line_error(&e, &path);
+        let msg = e.to_string();
+        assert!(
+            msg.contains("cannot decode its EXT_meshopt_compression data") && msg.contains(needle),
+            "{needle}: {msg}"
+        );
+    }
 }
