@@ -587,6 +587,9 @@ enum Kind {
     Vec3,
     /// TEXCOORD_n: VEC2 of FLOAT, normalized UNSIGNED_BYTE or normalized UNSIGNED_SHORT.
     Uv,
+    /// COLOR_0: VEC3 or VEC4 of FLOAT, normalized UNSIGNED_BYTE or normalized UNSIGNED_SHORT
+    /// (`KHR_mesh_quantization` adds nothing here).
+    Color,
     /// Indices: SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT.
     Index,
 }
@@ -609,6 +612,10 @@ impl Kind {
                         DataType::F32 | DataType::I8 | DataType::U8 | DataType::I16 | DataType::U16
                     )
             }
+            Kind::Color => {
+                matches!(dims, Dimensions::Vec3 | Dimensions::Vec4)
+                    && matches!(ty, DataType::F32 | DataType::U8 | DataType::U16)
+            }
             Kind::Index => {
                 dims == Dimensions::Scalar
                     && matches!(ty, DataType::U8 | DataType::U16 | DataType::U32)
@@ -620,6 +627,9 @@ impl Kind {
         match self {
             Kind::Vec3 => "VEC3 of FLOAT, BYTE, UNSIGNED_BYTE, SHORT or UNSIGNED_SHORT",
             Kind::Uv => "VEC2 of FLOAT, BYTE, UNSIGNED_BYTE, SHORT or UNSIGNED_SHORT",
+            Kind::Color => {
+                "VEC3 or VEC4 of FLOAT, normalized UNSIGNED_BYTE or normalized UNSIGNED_SHORT"
+            }
             Kind::Index => "SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT",
         }
     }
@@ -629,6 +639,7 @@ impl Kind {
         match self {
             Kind::Vec3 => 12,
             Kind::Uv => 8,
+            Kind::Color => 16,
             Kind::Index => 4,
         }
     }
@@ -709,12 +720,25 @@ impl Loader<'_> {
         // KHR_mesh_quantization allows the rest.
         let core = match kind {
             Kind::Vec3 => a.data_type() == DataType::F32,
-            Kind::Uv => {
+            Kind::Uv | Kind::Color => {
                 a.data_type() == DataType::F32
                     || a.normalized() && matches!(a.data_type(), DataType::U8 | DataType::U16)
             }
             Kind::Index => true,
         };
+        if !core && matches!(kind, Kind::Color) {
+            return Err(format!(
+                "{what}: {:?} of {:?}{} where {} is expected",
+                a.dimensions(),
+                a.data_type(),
+                if a.normalized() {
+                    ""
+                } else {
+                    " (not normalized)"
+                },
+                kind.describe()
+            ));
+        }
         if !core && !self.quantized {
             return Err(format!(
                 "{what}: {:?} of {:?} needs KHR_mesh_quantization, which the file does not list in extensionsUsed",
@@ -797,6 +821,52 @@ impl Loader<'_> {
             return Ok(vec![[0.0; 2]; a.count()]);
         }
         self.read_floats::<2>(a)
+    }
+
+    /// Reads COLOR_0 as linear RGBA (alpha 1 for RGB colours).
+    fn read_color(&mut self, a: &Accessor) -> Result<Vec<[f32; 4]>, String> {
+        let rgb = a.dimensions() == Dimensions::Vec3;
+        if let Layout::Zeros = self.check_accessor(a, Kind::Color)? {
+            let alpha = if rgb { 1.0 } else { 0.0 };
+            return Ok(vec![[0.0, 0.0, 0.0, alpha]; a.count()]);
+        }
+        Ok(if rgb {
+            self.read_floats::<3>(a)?
+                .into_iter()
+                .map(|[r, g, b]| [r, g, b, 1.0])
+                .collect()
+        } else {
+            self.read_floats::<4>(a)?
+        })
+    }
+
+    /// Reads an optional attribute of `n` vertices; one that cannot be used (bad layout, wrong
+    /// count, over the budget) is dropped with a warning instead of failing the file.
+    fn optional<T>(
+        &mut self,
+        at: &dyn Fn(String) -> String,
+        name: &str,
+        accessor: Option<Accessor>,
+        n: usize,
+        read: fn(&mut Self, &Accessor) -> Result<Vec<T>, String>,
+    ) -> Vec<T> {
+        let Some(a) = accessor else {
+            return Vec::new();
+        };
+        match read(self, &a) {
+            Ok(v) if v.len() == n => v,
+            Ok(v) => {
+                self.warn(at(format!(
+                    "{} {name} values for {n} positions; ignoring them",
+                    v.len()
+                )));
+                Vec::new()
+            }
+            Err(e) => {
+                self.warn(at(format!("ignoring {name}: {e}")));
+                Vec::new()
+            }
+        }
     }
 
     /// Reads a checked accessor of `N` components as floats: integer components are
@@ -896,9 +966,9 @@ impl Loader<'_> {
                 let Some((texture, set, transform)) = r else {
                     continue;
                 };
-                if set != 0 {
+                if set > 1 {
                     self.warn(format!(
-                        "material {} uses texture coordinate set {set}; only set 0 is supported, so the texture is ignored",
+                        "material {} uses texture coordinate set {set}; only sets 0 and 1 are supported, so the texture is ignored",
                         m.index().unwrap_or(0)
                     ));
                     continue;
@@ -912,7 +982,7 @@ impl Loader<'_> {
                     ));
                 }
                 if textures {
-                    slots[slot] = Some((texture, transform));
+                    slots[slot] = Some((texture, set, transform));
                     wanted.push(texture);
                 }
             }
@@ -1027,8 +1097,8 @@ impl Loader<'_> {
         let mut scene = std::mem::take(&mut self.scene);
         for (mut desc, slots) in materials {
             let mut r = slots.map(|s| {
-                s.and_then(|(t, transform)| {
-                    let r = texture_ref(t, &mut scene)?;
+                s.and_then(|(t, set, transform)| {
+                    let r = texture_ref(t, &mut scene)?.with_tex_coord(set);
                     Some(match transform {
                         Some((offset, rotation, scale)) => {
                             r.with_khr_transform(offset, rotation, scale)
@@ -1127,7 +1197,8 @@ impl Loader<'_> {
                         Semantic::Positions
                             | Semantic::Normals
                             | Semantic::Tangents
-                            | Semantic::TexCoords(0)
+                            | Semantic::TexCoords(0 | 1)
+                            | Semantic::Colors(0)
                     ) {
                         ignored.insert(semantic.to_string());
                     }
@@ -1168,6 +1239,20 @@ impl Loader<'_> {
                     )));
                     uvs.clear();
                 }
+                let uvs1 = self.optional(
+                    &at,
+                    "TEXCOORD_1",
+                    prim.get(&Semantic::TexCoords(1)),
+                    n,
+                    Self::read_uv,
+                );
+                let colors = self.optional(
+                    &at,
+                    "COLOR_0",
+                    prim.get(&Semantic::Colors(0)),
+                    n,
+                    Self::read_color,
+                );
                 let indices = match prim.indices() {
                     Some(a) => self.read_indices(&a).map_err(at)?,
                     None => (0..n as u32).collect(),
@@ -1184,6 +1269,8 @@ impl Loader<'_> {
                     positions,
                     normals,
                     uvs,
+                    uvs1,
+                    colors,
                     triangles,
                     material,
                 });
@@ -1199,7 +1286,7 @@ impl Loader<'_> {
         if !ignored.is_empty() {
             let names: Vec<String> = ignored.into_iter().collect();
             self.warn(format!(
-                "ignoring vertex attribute{} {} (oxray uses POSITION, NORMAL, TANGENT and TEXCOORD_0)",
+                "ignoring vertex attribute{} {} (oxray uses POSITION, NORMAL, TANGENT, TEXCOORD_0, TEXCOORD_1 and COLOR_0)",
                 if names.len() > 1 { "s" } else { "" },
                 names.join(", ")
             ));

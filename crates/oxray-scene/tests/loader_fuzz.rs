@@ -465,6 +465,21 @@ fn mutated_fixtures_never_panic_hang_or_over_allocate() {
             glb: false,
             cases: 300,
         },
+        // Vertex colours and a second texture coordinate set.
+        Target {
+            file: "colors.gltf",
+            fixture: "colors.gltf",
+            text: true,
+            glb: false,
+            cases: 300,
+        },
+        Target {
+            file: "texcoord1.gltf",
+            fixture: "texcoord1.gltf",
+            text: true,
+            glb: false,
+            cases: 300,
+        },
         Target {
             file: "quad_ascii.ply",
             fixture: "quad_ascii.ply",

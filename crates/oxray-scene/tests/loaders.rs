@@ -421,9 +421,13 @@ fn shared_smallpine_loads_with_one_warning_for_the_empty_normal_map() {
     };
     let s = SceneDesc::load(&p).unwrap();
     assert_eq!(s.materials.len(), 2);
-    // The empty normal map, and the unused second texture coordinate set, named once.
-    assert_eq!(s.warnings.len(), 2, "{:#?}", s.warnings);
-    assert!(s.warnings[1].contains("ignoring vertex attribute TEXCOORD_1"));
+    // The empty normal map, named once; the second texture coordinate set is read.
+    assert_eq!(s.warnings.len(), 1, "{:#?}", s.warnings);
+    assert!(s
+        .meshes
+        .iter()
+        .flat_map(|m| &m.primitives)
+        .any(|p| p.uvs1.len() == p.positions.len() && !p.uvs1.is_empty()));
     assert!(
         s.warnings[0].contains("M_TreeAtlas_normal.png"),
         "{}",
@@ -472,7 +476,7 @@ fn shared_drone_loads() {
     let s = SceneDesc::load(&p).unwrap();
     // Only the unused texture coordinate sets are named.
     assert_eq!(s.warnings.len(), 1, "{:#?}", s.warnings);
-    assert!(s.warnings[0].contains("TEXCOORD_1, TEXCOORD_2, TEXCOORD_3, TEXCOORD_4 "));
+    assert!(s.warnings[0].contains("attributes TEXCOORD_2, TEXCOORD_3, TEXCOORD_4 "));
     assert_eq!(s.materials.len(), 3);
     assert_eq!(s.textures.len(), 10);
     assert!(
@@ -633,15 +637,16 @@ fn scenes_without_nodes_colours_and_accessors_without_buffer_views_load() {
         .iter()
         .flat_map(|f| f.to_le_bytes())
         .collect();
-    // A scene without "nodes", a file whose only placement is missing, COLOR_0 and
-    // TEXCOORD_1 (ignored, named once), and a NORMAL accessor without a buffer view (zeros).
+    // A scene without "nodes", a file whose only placement is missing, COLOR_1 and
+    // TEXCOORD_2 (ignored, named once), COLOR_0 and a NORMAL accessor without a buffer view
+    // (zeros).
     let dir = tmp_dir("no-nodes");
     std::fs::write(dir.join("tri.bin"), &bin).unwrap();
     let path = dir.join("tri.gltf");
     std::fs::write(
         &path,
         r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{}],
-        "meshes":[{"primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":1,"TEXCOORD_1":2}}]}],
+        "meshes":[{"primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":1,"COLOR_1":1,"TEXCOORD_2":2}}]}],
         "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"},
                      {"componentType":5126,"count":3,"type":"VEC3"},
                      {"componentType":5126,"count":3,"type":"VEC2"}],
@@ -652,9 +657,13 @@ fn scenes_without_nodes_colours_and_accessors_without_buffer_views_load() {
     let s = SceneDesc::load(&path).unwrap();
     assert_eq!(s.instances.len(), 1);
     assert_eq!(s.meshes[0].primitives[0].normals, vec![[0.0; 3]; 3]);
+    assert_eq!(
+        s.meshes[0].primitives[0].colors,
+        vec![[0.0, 0.0, 0.0, 1.0]; 3]
+    );
     let has = |n: &str| s.warnings.iter().filter(|w| w.contains(n)).count();
     assert_eq!(
-        has("ignoring vertex attributes COLOR_0, TEXCOORD_1"),
+        has("ignoring vertex attributes COLOR_1, TEXCOORD_2"),
         1,
         "{:?}",
         s.warnings
@@ -872,4 +881,161 @@ fn required_meshopt_data_that_does_not_decode_is_a_one_line_error() {
             "{needle}: {msg}"
         );
     }
+}
+
+/// A glTF triangle with a COLOR_0 accessor (`accessor`, reading buffer view 1) over `colour`
+/// bytes, after the 36 bytes of positions.
+fn gltf_with_colour(test: &str, colour: &[u8], accessor: &str, view: &str) -> PathBuf {
+    let mut bin: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
+    bin.extend(colour);
+    let dir = tmp_dir(test);
+    std::fs::write(dir.join("tri.bin"), &bin).unwrap();
+    let path = dir.join("tri.gltf");
+    std::fs::write(
+        &path,
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0,"COLOR_0":1}}}}]}}],
+            "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"}},{accessor}],
+            "bufferViews":[{{"buffer":0,"byteLength":36}},{view}],
+            "buffers":[{{"byteLength":{},"uri":"tri.bin"}}]}}"#,
+            bin.len()
+        ),
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn vertex_colours_load_in_every_layout_the_specification_allows() {
+    // Float RGB (the fixture the renderer's test uses): alpha 1.
+    let s = SceneDesc::load(&data("colors.gltf")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let (red, blue) = ([1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0]);
+    assert_eq!(s.meshes[0].primitives[0].colors, vec![red, blue, blue, red]);
+    // Normalized UNSIGNED_BYTE RGBA.
+    let path = gltf_with_colour(
+        "colour-u8",
+        &[255, 0, 0, 255, 0, 51, 0, 0, 0, 0, 255, 102],
+        r#"{"bufferView":1,"componentType":5121,"normalized":true,"count":3,"type":"VEC4"}"#,
+        r#"{"buffer":0,"byteOffset":36,"byteLength":12}"#,
+    );
+    let s = SceneDesc::load(&path).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(
+        s.meshes[0].primitives[0].colors,
+        vec![
+            [1.0, 0.0, 0.0, 1.0],
+            [0.0, 0.2, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.4]
+        ]
+    );
+    // Normalized UNSIGNED_SHORT RGB, each element padded to 8 bytes.
+    let mut u16s = Vec::new();
+    for c in [[65535u16, 0, 0, 0], [0, 13107, 0, 0], [0, 0, 65535, 0]] {
+        u16s.extend(c.iter().flat_map(|x| x.to_le_bytes()));
+    }
+    let path = gltf_with_colour(
+        "colour-u16",
+        &u16s,
+        r#"{"bufferView":1,"componentType":5123,"normalized":true,"count":3,"type":"VEC3"}"#,
+        r#"{"buffer":0,"byteOffset":36,"byteLength":24,"byteStride":8}"#,
+    );
+    let s = SceneDesc::load(&path).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(
+        s.meshes[0].primitives[0].colors,
+        vec![
+            [1.0, 0.0, 0.0, 1.0],
+            [0.0, 0.2, 0.0, 1.0],
+            [0.0, 0.0, 1.0, 1.0]
+        ]
+    );
+    // What the specification does not allow, or a count that does not match, is dropped with
+    // a warning; the geometry still loads.
+    for (accessor, needle) in [
+        (
+            r#"{"bufferView":1,"componentType":5121,"count":3,"type":"VEC4"}"#,
+            "not normalized",
+        ),
+        (
+            r#"{"bufferView":1,"componentType":5121,"normalized":true,"count":6,"type":"VEC2"}"#,
+            "VEC3 or VEC4",
+        ),
+        (
+            r#"{"bufferView":1,"componentType":5121,"normalized":true,"count":2,"type":"VEC4"}"#,
+            "2 COLOR_0 values for 3 positions",
+        ),
+    ] {
+        let path = gltf_with_colour(
+            "colour-bad",
+            &[255; 12],
+            accessor,
+            r#"{"buffer":0,"byteOffset":36,"byteLength":12}"#,
+        );
+        let s = SceneDesc::load(&path).unwrap();
+        assert!(s.meshes[0].primitives[0].colors.is_empty());
+        assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+        assert!(
+            s.warnings[0].contains("COLOR_0") && s.warnings[0].contains(needle),
+            "{needle}: {:?}",
+            s.warnings
+        );
+    }
+}
+
+#[test]
+fn the_second_texture_coordinate_set_is_read_and_textures_may_use_it() {
+    let s = SceneDesc::load(&data("texcoord1.gltf")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let p = &s.meshes[0].primitives[0];
+    assert_eq!(p.uvs, vec![[0.25, 0.25]; 4]);
+    assert_eq!(p.uvs1, vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]);
+    let r = s.materials[0].base_color_texture.unwrap();
+    assert_eq!(r.tex_coord, 1);
+    assert_eq!(s.textures[r.texture as usize].texels, TEX2X2);
+    let text = std::fs::read_to_string(data("texcoord1.gltf")).unwrap();
+    let slot = r#""baseColorTexture":{"index":0,"texCoord":1}"#;
+    assert!(text.contains(slot));
+    // KHR_texture_transform's texCoord overrides the slot's.
+    let (_, r) = load_text(
+        "texcoord-khr",
+        "t.gltf",
+        &text.replace(
+            slot,
+            r#""baseColorTexture":{"index":0,"extensions":{"KHR_texture_transform":{"texCoord":1,"scale":[2,2]}}}"#,
+        ),
+    );
+    let s = r.unwrap();
+    let r = s.materials[0].base_color_texture.unwrap();
+    assert_eq!((r.tex_coord, r.map(1.0, 1.0)), (1, (2.0, 2.0)));
+    // Set 0 stays the default.
+    let (_, r) = load_text(
+        "texcoord-0",
+        "t.gltf",
+        &text.replace(slot, r#""baseColorTexture":{"index":0}"#),
+    );
+    assert_eq!(
+        r.unwrap().materials[0]
+            .base_color_texture
+            .unwrap()
+            .tex_coord,
+        0
+    );
+    // A set beyond 1: the texture is dropped with a warning.
+    let (_, r) = load_text(
+        "texcoord-2",
+        "t.gltf",
+        &text.replace(slot, r#""baseColorTexture":{"index":0,"texCoord":2}"#),
+    );
+    let s = r.unwrap();
+    assert!(s.materials[0].base_color_texture.is_none());
+    assert!(
+        s.warnings.len() == 1 && s.warnings[0].contains("only sets 0 and 1"),
+        "{:?}",
+        s.warnings
+    );
 }
