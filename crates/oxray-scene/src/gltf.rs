@@ -97,6 +97,7 @@ pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneE
             .iter()
             .chain(&doc.as_json().extensions_required)
             .any(|e| e == "KHR_mesh_quantization"),
+        dropped: Default::default(),
         scene: SceneDesc {
             sources,
             ..Default::default()
@@ -661,6 +662,8 @@ struct Loader<'a> {
     budget: usize,
     /// Whether the file uses `KHR_mesh_quantization` (integer positions and normals).
     quantized: bool,
+    /// Optional attributes dropped, by name: how many primitives, and the first reason.
+    dropped: std::collections::BTreeMap<&'static str, (usize, String)>,
     scene: SceneDesc,
 }
 
@@ -841,11 +844,12 @@ impl Loader<'_> {
     }
 
     /// Reads an optional attribute of `n` vertices; one that cannot be used (bad layout, wrong
-    /// count, over the budget) is dropped with a warning instead of failing the file.
+    /// count, over the budget) is dropped instead of failing the file, and named in one
+    /// warning per attribute (see [`Loader::meshes`]).
     fn optional<T>(
         &mut self,
         at: &dyn Fn(String) -> String,
-        name: &str,
+        name: &'static str,
         accessor: Option<Accessor>,
         n: usize,
         read: fn(&mut Self, &Accessor) -> Result<Vec<T>, String>,
@@ -853,20 +857,14 @@ impl Loader<'_> {
         let Some(a) = accessor else {
             return Vec::new();
         };
-        match read(self, &a) {
-            Ok(v) if v.len() == n => v,
-            Ok(v) => {
-                self.warn(at(format!(
-                    "{} {name} values for {n} positions; ignoring them",
-                    v.len()
-                )));
-                Vec::new()
-            }
-            Err(e) => {
-                self.warn(at(format!("ignoring {name}: {e}")));
-                Vec::new()
-            }
-        }
+        let why = match read(self, &a) {
+            Ok(v) if v.len() == n => return v,
+            Ok(v) => format!("{} values for {n} positions", v.len()),
+            Err(e) => e,
+        };
+        let entry = self.dropped.entry(name).or_insert((0, at(why)));
+        entry.0 += 1;
+        Vec::new()
     }
 
     /// Reads a checked accessor of `N` components as floats: integer components are
@@ -1282,6 +1280,13 @@ impl Loader<'_> {
                 ));
             }
             self.scene.meshes.push(desc);
+        }
+        for (name, (count, first)) in std::mem::take(&mut self.dropped) {
+            let more = match count {
+                1 => String::new(),
+                n => format!(" (and in {} more primitives)", n - 1),
+            };
+            self.warn(format!("ignoring {name}: {first}{more}"));
         }
         if !ignored.is_empty() {
             let names: Vec<String> = ignored.into_iter().collect();

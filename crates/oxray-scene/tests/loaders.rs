@@ -967,7 +967,7 @@ fn vertex_colours_load_in_every_layout_the_specification_allows() {
         ),
         (
             r#"{"bufferView":1,"componentType":5121,"normalized":true,"count":2,"type":"VEC4"}"#,
-            "2 COLOR_0 values for 3 positions",
+            "2 values for 3 positions",
         ),
     ] {
         let path = gltf_with_colour(
@@ -980,11 +980,30 @@ fn vertex_colours_load_in_every_layout_the_specification_allows() {
         assert!(s.meshes[0].primitives[0].colors.is_empty());
         assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
         assert!(
-            s.warnings[0].contains("COLOR_0") && s.warnings[0].contains(needle),
-            "{needle}: {:?}",
+            s.warnings[0].contains("ignoring COLOR_0: mesh 0 primitive 0: accessor 1")
+                || s.warnings[0].contains("ignoring COLOR_0: mesh 0 primitive 0: 2 values"),
+            "{:?}",
             s.warnings
         );
+        assert!(s.warnings[0].contains(needle), "{needle}: {:?}", s.warnings);
     }
+    // Named once however many primitives have it.
+    let text = std::fs::read_to_string(data("colors.gltf")).unwrap();
+    let prim = r#"{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":3},"indices":3,"material":0}"#;
+    let text = text.replace(
+        r#""primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":2},"indices":3,"material":0}]"#,
+        &format!(r#""primitives":[{prim},{prim},{prim}]"#),
+    );
+    let (_, r) = load_text("colour-once", "c.gltf", &text);
+    let s = r.unwrap();
+    assert_eq!(s.meshes[0].primitives.len(), 3);
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("ignoring COLOR_0: mesh 0 primitive 0: accessor 3")
+            && s.warnings[0].ends_with("(and in 2 more primitives)"),
+        "{:?}",
+        s.warnings
+    );
 }
 
 #[test]
