@@ -20,7 +20,8 @@ pub struct LightTriangle {
     pub e2: Vec3,
     /// Unit normal out of the front face.
     pub normal: Vec3,
-    /// Texture coordinates of the vertices (zero without a UV set).
+    /// Texture coordinates of the vertices in the set of the material's emissive texture (zero
+    /// without that set).
     pub uv: [Vec2; 3],
     /// Material index.
     pub material: u32,
@@ -83,6 +84,16 @@ impl TriangleLights {
                 if w <= 0.0 {
                     continue;
                 }
+                let emissive_set = scene
+                    .materials
+                    .get(prim.material as usize)
+                    .and_then(|m| m.emissive_texture)
+                    .map_or(0, |t| t.tex_coord);
+                let set = if emissive_set == 1 {
+                    &prim.uvs1
+                } else {
+                    &prim.uvs
+                };
                 for t in &prim.triangles {
                     let p = t.map(|i| {
                         inst.transform
@@ -96,7 +107,7 @@ impl TriangleLights {
                     if !(area > 0.0 && area.is_finite()) {
                         continue;
                     }
-                    let uv = t.map(|i| prim.uvs.get(i as usize).map_or(Vec2::ZERO, |&u| u.into()));
+                    let uv = t.map(|i| set.get(i as usize).map_or(Vec2::ZERO, |&u| u.into()));
                     triangles.push(LightTriangle {
                         p0: p[0],
                         normal,

@@ -103,10 +103,13 @@ fn power_heuristic(a: f32, b: f32) -> f32 {
     }
 }
 
-fn tex(p: &Params, r: Option<TextureRef>, uv: Vec2, srgb: bool) -> Vec4 {
+/// Samples texture reference `r` at the texture coordinates of sets 0 and 1 (`uvs`), in the
+/// set it names; white without a texture.
+fn tex(p: &Params, r: Option<TextureRef>, uvs: &[Vec2; 2], srgb: bool) -> Vec4 {
     let Some(r) = r else {
         return Vec4::ONE;
     };
+    let uv = uvs[(r.tex_coord as usize).min(1)];
     match p.scene.textures.get(r.texture as usize) {
         Some(t) => {
             let (u, v) = r.map(uv.x, uv.y);
@@ -116,9 +119,9 @@ fn tex(p: &Params, r: Option<TextureRef>, uv: Vec2, srgb: bool) -> Vec4 {
     }
 }
 
-/// Emitted radiance of `m` at `uv`.
-fn emission(p: &Params, m: &MaterialDesc, uv: Vec2) -> Vec3 {
-    Vec3::from(m.emissive) * tex(p, m.emissive_texture, uv, true).truncate()
+/// Emitted radiance of `m` at texture coordinates `uvs` (sets 0 and 1).
+fn emission(p: &Params, m: &MaterialDesc, uvs: &[Vec2; 2]) -> Vec3 {
+    Vec3::from(m.emissive) * tex(p, m.emissive_texture, uvs, true).truncate()
 }
 
 fn interpolate<T: Copy + Into<V>, V>(attr: &[T], t: [u32; 3], b: [f32; 3]) -> Option<V>
@@ -132,7 +135,19 @@ where
     Some(a(0) * b[0] + a(1) * b[1] + a(2) * b[2])
 }
 
-/// Coverage in [0, 1] of an alpha-tested material at a hit.
+/// Both texture coordinate sets at barycentrics `b` of triangle `t` (zero for a set the
+/// primitive does not have).
+fn uvs_at(prim: &Primitive, t: [u32; 3], b: [f32; 3]) -> [Vec2; 2] {
+    [&prim.uvs, &prim.uvs1].map(|set| interpolate(set, t, b).unwrap_or(Vec2::ZERO))
+}
+
+/// The vertex colour at barycentrics `b` of triangle `t` (white without colours).
+fn color_at(prim: &Primitive, t: [u32; 3], b: [f32; 3]) -> Vec4 {
+    interpolate::<[f32; 4], Vec4>(&prim.colors, t, b).unwrap_or(Vec4::ONE)
+}
+
+/// Coverage in [0, 1] of an alpha-tested material at a hit: the base colour's alpha times the
+/// texture's and the vertex colour's.
 fn alpha_at(
     p: &Params,
     m: &MaterialDesc,
@@ -144,8 +159,8 @@ fn alpha_at(
         return 1.0;
     };
     let b = [1.0 - bary[0] - bary[1], bary[0], bary[1]];
-    let uv: Vec2 = interpolate(&prim.uvs, t, b).unwrap_or(Vec2::ZERO);
-    m.base_color[3] * tex(p, m.base_color_texture, uv, true).w
+    let uvs = uvs_at(prim, t, b);
+    m.base_color[3] * tex(p, m.base_color_texture, &uvs, true).w * color_at(prim, t, b).w
 }
 
 /// The material and primitive a hit-group record names (both `None`-safe: a record the scene
@@ -194,7 +209,10 @@ struct Shading {
     ng: Vec3,
     /// Shading normal, in the hemisphere of `ng`.
     ns: Vec3,
-    uv: Vec2,
+    /// Texture coordinates of sets 0 and 1.
+    uvs: [Vec2; 2],
+    /// Vertex colour (white without one).
+    color: Vec4,
     /// Whether the ray hit the front face (the side the winding order makes outward).
     front: bool,
 }
@@ -212,9 +230,8 @@ fn shading(ctx: &ClosestHitCtx<Params>, m: &MaterialDesc, prim: &Primitive) -> S
     let t = prim.triangles.get(ctx.primitive_index() as usize).copied();
     let [b1, b2] = ctx.triangle_barycentrics();
     let bary = [1.0 - b1 - b2, b1, b2];
-    let uv: Vec2 = t
-        .and_then(|t| interpolate(&prim.uvs, t, bary))
-        .unwrap_or(Vec2::ZERO);
+    let uvs = t.map_or([Vec2::ZERO; 2], |t| uvs_at(prim, t, bary));
+    let color = t.map_or(Vec4::ONE, |t| color_at(prim, t, bary));
     let mut ns = t
         .and_then(|t| interpolate::<[f32; 3], Vec3>(&prim.normals, t, bary))
         .map(|n| ctx.transform_normal_to_world(n).normalize_or(ng))
@@ -223,10 +240,16 @@ fn shading(ctx: &ClosestHitCtx<Params>, m: &MaterialDesc, prim: &Primitive) -> S
         ns = -ns;
     }
     if let (Some(nt), Some(t)) = (m.normal_texture, t) {
-        if !prim.uvs.is_empty() {
-            // Tangent frame from the triangle's positions and texture coordinates.
-            let uvs = t.map(|i| Vec2::from(prim.uvs[i as usize]));
-            let (d1, d2) = (uvs[1] - uvs[0], uvs[2] - uvs[0]);
+        let set = if nt.tex_coord == 1 {
+            &prim.uvs1
+        } else {
+            &prim.uvs
+        };
+        if !set.is_empty() {
+            // Tangent frame from the triangle's positions and the normal map's texture
+            // coordinates.
+            let tuv = t.map(|i| Vec2::from(set[i as usize]));
+            let (d1, d2) = (tuv[1] - tuv[0], tuv[2] - tuv[0]);
             let det = d1.x * d2.y - d2.x * d1.y;
             if det.abs() > 1e-12 {
                 let (e1, e2) = (b - a, c - a);
@@ -237,7 +260,7 @@ fn shading(ctx: &ClosestHitCtx<Params>, m: &MaterialDesc, prim: &Primitive) -> S
                     if det < 0.0 {
                         bitangent = -bitangent;
                     }
-                    let n = tex(p, Some(nt), uv, false).truncate() * 2.0 - Vec3::ONE;
+                    let n = tex(p, Some(nt), &uvs, false).truncate() * 2.0 - Vec3::ONE;
                     let n = Vec3::new(n.x * m.normal_scale, n.y * m.normal_scale, n.z);
                     let mapped = (tangent * n.x + bitangent * n.y + ns * n.z).normalize_or(ns);
                     if mapped.dot(ng) > 0.0 {
@@ -254,7 +277,8 @@ fn shading(ctx: &ClosestHitCtx<Params>, m: &MaterialDesc, prim: &Primitive) -> S
         point,
         ng,
         ns,
-        uv,
+        uvs,
+        color,
         front,
     }
 }
@@ -307,7 +331,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
     // Single-sided materials emit from their front face only (the side glTF's winding order and
     // the instance transform's handedness make outward).
     let le = if sh.front || m.double_sided {
-        emission(p, m, sh.uv)
+        emission(p, m, &sh.uvs)
     } else {
         Vec3::ZERO
     };
@@ -326,9 +350,10 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
     if s.depth >= p.max_depth {
         s.done = 1;
     } else {
-        let base_tex = tex(p, m.base_color_texture, sh.uv, true);
-        let mr = tex(p, m.metallic_roughness_texture, sh.uv, false);
-        let base = Vec3::from_slice(&m.base_color[..3]) * base_tex.truncate();
+        let base_tex = tex(p, m.base_color_texture, &sh.uvs, true);
+        let mr = tex(p, m.metallic_roughness_texture, &sh.uvs, false);
+        // glTF: the vertex colour multiplies the base colour factor and texture.
+        let base = Vec3::from_slice(&m.base_color[..3]) * base_tex.truncate() * sh.color.truncate();
         let surf = Surface::new(
             base,
             m.metallic * mr.z,
@@ -423,7 +448,8 @@ fn next_event(
         return Ok(Vec3::ZERO);
     }
     let uv = tri.uv[0] * (1.0 - b1 - b2) + tri.uv[1] * b1 + tri.uv[2] * b2;
-    let le = emission(p, lm, uv);
+    // The light's texture coordinates are those of its emissive texture's set.
+    let le = emission(p, lm, &[uv, uv]);
     let pdf = (1.0 - p.p_env) * area_pdf * dist * dist / cos_l;
     if le == Vec3::ZERO || pdf.is_nan() || pdf <= 0.0 {
         return Ok(Vec3::ZERO);

@@ -6,7 +6,10 @@
 //! with a buffer view and no MIME type, a POSITION accessor index beyond the accessor list).
 //! This loader therefore splits GLB files itself, checks the references that validation reads
 //! unchecked, checks every accessor's bounds, types and sizes before handing it to the crate's
-//! reader, and reads images and cameras from the JSON directly.
+//! reader, and reads images and cameras from the JSON directly. Buffer views compressed with
+//! `EXT_meshopt_compression` / `KHR_meshopt_compression` are decoded first, by meshoptimizer.
+
+mod compression;
 
 use super::image::ImageError;
 use super::{
@@ -59,26 +62,42 @@ pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneE
     } else {
         (&bytes[..], None)
     };
-    let root = parse_root(json_bytes).map_err(malformed)?;
+    let (root, plan) = parse_root(json_bytes).map_err(malformed)?;
     let extension_warning = check_extensions(&root).map_err(malformed)?;
     check_references(&root).map_err(malformed)?;
     validate_json(&root).map_err(malformed)?;
     let doc = Document::from_json_without_validation(root);
     let base = path.parent().unwrap_or(Path::new("."));
     let mut sources = vec![path.to_path_buf()];
-    let buffers = load_buffers(&doc, base, bin, &name, &mut sources)?;
+    let mut buffers = load_buffers(&doc, base, bin, &name, &mut sources, &plan.fallback)?;
     let input_size = bytes.len() + buffers.iter().map(Vec::len).sum::<usize>();
+    let mut budget = BASE_BUDGET.saturating_add(input_size.saturating_mul(EXPANSION));
+    let mut warnings = Vec::new();
+    let doc = if plan.views.is_empty() {
+        doc
+    } else {
+        let mut decompress = Decompress {
+            base,
+            name: &name,
+            buffers: &mut buffers,
+            budget: &mut budget,
+            sources: &mut sources,
+            warnings: &mut warnings,
+        };
+        decompress.run(doc, plan).map_err(malformed)?
+    };
     let mut loader = Loader {
         name: name.clone(),
         doc: &doc,
         buffers: &buffers,
-        budget: BASE_BUDGET.saturating_add(input_size.saturating_mul(EXPANSION)),
+        budget,
         quantized: doc
             .as_json()
             .extensions_used
             .iter()
             .chain(&doc.as_json().extensions_required)
             .any(|e| e == "KHR_mesh_quantization"),
+        dropped: Default::default(),
         scene: SceneDesc {
             sources,
             ..Default::default()
@@ -88,6 +107,7 @@ pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneE
         .scene
         .warnings
         .extend(extension_warning.map(|w| format!("{name}: {w}")));
+    loader.scene.warnings.append(&mut warnings);
     loader.materials(base, textures).map_err(malformed)?;
     loader.meshes().map_err(malformed)?;
     loader.nodes().map_err(malformed)?;
@@ -155,8 +175,9 @@ fn split_glb(b: &[u8]) -> Result<(&[u8], Option<&[u8]>), String> {
 const GLTF1: &str = "this is a glTF 1.0 file; oxray reads glTF 2.0 only (convert it, for example with gltf-pipeline or Blender)";
 
 /// Parses the JSON document: glTF 1.0 is recognised and named, and what glTF 2.0 allows but
-/// the `gltf` crate refuses is mended first (a scene without `nodes`).
-fn parse_root(bytes: &[u8]) -> Result<json::Root, String> {
+/// the `gltf` crate refuses is mended first (a scene without `nodes`). The meshopt compression
+/// of buffer views, which the crate drops, is read from the JSON here.
+fn parse_root(bytes: &[u8]) -> Result<(json::Root, compression::Plan), String> {
     let mut value: json::Value =
         json::deserialize::from_slice(bytes).map_err(|e| format!("invalid glTF JSON: {e}"))?;
     let version = value
@@ -177,11 +198,16 @@ fn parse_root(bytes: &[u8]) -> Result<json::Root, String> {
                 .or_insert_with(|| json::Value::Array(Vec::new()));
         }
     }
-    json::deserialize::from_value(value).map_err(|e| format!("invalid glTF JSON: {e}"))
+    let plan = compression::Plan::scan(&value);
+    let root =
+        json::deserialize::from_value(value).map_err(|e| format!("invalid glTF JSON: {e}"))?;
+    Ok((root, plan))
 }
 
 /// Extensions whose data oxray reads.
 const READ_EXTENSIONS: &[&str] = &[
+    "EXT_meshopt_compression",
+    "KHR_meshopt_compression",
     "KHR_mesh_quantization",
     "KHR_texture_transform",
     "KHR_materials_emissive_strength",
@@ -200,9 +226,6 @@ fn check_extensions(root: &json::Root) -> Result<Option<String>, String> {
     {
         let what = match ext.as_str() {
             "KHR_draco_mesh_compression" => " (Draco-compressed geometry)",
-            "EXT_meshopt_compression" | "KHR_meshopt_compression" => {
-                " (meshoptimizer-compressed buffers)"
-            }
             "KHR_texture_basisu" => " (KTX2/Basis Universal textures)",
             _ => "",
         };
@@ -278,53 +301,216 @@ fn validate_json(root: &json::Root) -> Result<(), String> {
 }
 
 /// Reads every buffer: the GLB binary chunk, a `data:` URI or a file next to the glTF file.
+/// Fallback buffers of meshopt compression (`fallback[i]`) are left empty: they are read only
+/// where a view cannot be decoded (their files are still listed in `sources`).
 fn load_buffers(
     doc: &Document,
     base: &Path,
     mut bin: Option<&[u8]>,
     name: &str,
     sources: &mut Vec<PathBuf>,
+    fallback: &[bool],
 ) -> Result<Vec<Vec<u8>>, SceneError> {
+    let mut out = Vec::new();
+    for buffer in doc.buffers() {
+        if fallback.get(buffer.index()).copied().unwrap_or(false) {
+            if let ::gltf::buffer::Source::Uri(uri) = buffer.source() {
+                if let (false, Ok(p)) = (uri.starts_with("data:"), uri_path(uri)) {
+                    sources.push(base.join(p));
+                }
+            }
+            out.push(Vec::new());
+            continue;
+        }
+        let uri = match buffer.source() {
+            ::gltf::buffer::Source::Bin => None,
+            ::gltf::buffer::Source::Uri(uri) => Some(uri),
+        };
+        let i = buffer.index();
+        out.push(read_buffer(
+            i,
+            uri,
+            buffer.length(),
+            base,
+            &mut bin,
+            name,
+            sources,
+        )?);
+    }
+    Ok(out)
+}
+
+/// Reads buffer `i` of `length` bytes (see [`load_buffers`]); a buffer without URI takes the
+/// GLB binary chunk.
+fn read_buffer(
+    i: usize,
+    uri: Option<&str>,
+    length: usize,
+    base: &Path,
+    bin: &mut Option<&[u8]>,
+    name: &str,
+    sources: &mut Vec<PathBuf>,
+) -> Result<Vec<u8>, SceneError> {
     let malformed = |message: String| SceneError::Malformed {
         path: name.to_string(),
         message,
     };
-    let mut out = Vec::new();
-    for buffer in doc.buffers() {
-        let i = buffer.index();
-        let data = match buffer.source() {
-            ::gltf::buffer::Source::Bin => bin
-                .take()
-                .ok_or_else(|| {
-                    malformed(format!("buffer {i} refers to a missing GLB binary chunk"))
-                })?
-                .to_vec(),
-            ::gltf::buffer::Source::Uri(uri) => {
-                if let Some(data) = uri.strip_prefix("data:") {
-                    decode_data_uri(data)
-                        .map_err(|e| malformed(format!("buffer {i}: bad data URI ({e})")))?
-                } else {
-                    let file = base.join(uri_path(uri).map_err(|e| {
-                        malformed(format!("buffer {i}: unsupported URI {uri:?} ({e})"))
-                    })?);
+    let data = match uri {
+        None => bin
+            .take()
+            .ok_or_else(|| malformed(format!("buffer {i} refers to a missing GLB binary chunk")))?
+            .to_vec(),
+        Some(uri) => {
+            if let Some(data) = uri.strip_prefix("data:") {
+                decode_data_uri(data)
+                    .map_err(|e| malformed(format!("buffer {i}: bad data URI ({e})")))?
+            } else {
+                let file = base.join(uri_path(uri).map_err(|e| {
+                    malformed(format!("buffer {i}: unsupported URI {uri:?} ({e})"))
+                })?);
+                if !sources.contains(&file) {
                     sources.push(file.clone());
-                    crate::files::read_input(&file).map_err(|e| SceneError::Io {
-                        path: name.to_string(),
-                        message: format!("buffer {i}: cannot read {} ({e})", file.display()),
-                    })?
+                }
+                crate::files::read_input(&file).map_err(|e| SceneError::Io {
+                    path: name.to_string(),
+                    message: format!("buffer {i}: cannot read {} ({e})", file.display()),
+                })?
+            }
+        }
+    };
+    if data.len() < length {
+        return Err(malformed(format!(
+            "buffer {i} has {} bytes but its byteLength is {length}",
+            data.len(),
+        )));
+    }
+    Ok(data)
+}
+
+/// Decodes the meshopt-compressed buffer views of a file: each decoded view gets a buffer of
+/// its own (appended to `buffers`, the view pointing at it from offset 0). A view that cannot be
+/// decoded is an error when the file requires the extension; otherwise its uncompressed
+/// fallback data is read instead, as the extension's specification asks, with a warning.
+struct Decompress<'a> {
+    base: &'a Path,
+    name: &'a str,
+    buffers: &'a mut Vec<Vec<u8>>,
+    /// Decoded bytes still allowed (shared with the geometry's budget).
+    budget: &'a mut usize,
+    sources: &'a mut Vec<PathBuf>,
+    warnings: &'a mut Vec<String>,
+}
+
+impl Decompress<'_> {
+    fn run(&mut self, doc: Document, plan: compression::Plan) -> Result<Document, String> {
+        let mut root = doc.into_json();
+        for (vi, ext, compressed) in plan.views {
+            let Some(view) = root.buffer_views.get(vi) else {
+                continue;
+            };
+            let view_len = view.byte_length.0 as usize;
+            let view_stride = view.byte_stride.map(|s| s.0);
+            match compressed.and_then(|c| self.decode(&c, view_len, view_stride)) {
+                Ok(bytes) => {
+                    let mut buffer = root
+                        .buffers
+                        .get(view.buffer.value())
+                        .cloned()
+                        .ok_or_else(|| format!("buffer view {vi} refers to a missing buffer"))?;
+                    buffer.uri = None;
+                    buffer.extensions = None;
+                    buffer.byte_length = json::validation::USize64(bytes.len() as u64);
+                    let view = &mut root.buffer_views[vi];
+                    view.buffer = json::Index::new(root.buffers.len() as u32);
+                    view.byte_offset = Some(json::validation::USize64(0));
+                    root.buffers.push(buffer);
+                    self.buffers.push(bytes);
+                }
+                Err(e) => {
+                    if root.extensions_required.iter().any(|r| r == ext) {
+                        return Err(format!(
+                            "buffer view {vi}: cannot decode its {ext} data ({e})"
+                        ));
+                    }
+                    let b = view.buffer.value();
+                    let have = self.buffers.get(b).is_some_and(|d| !d.is_empty());
+                    if !have && plan.fallback.get(b).copied().unwrap_or(false) {
+                        self.read_fallback(&root, b).map_err(|f| {
+                            format!("buffer view {vi}: cannot decode its {ext} data ({e}), and its fallback buffer {b} {f}")
+                        })?;
+                    }
+                    self.warnings.push(format!(
+                        "{}: buffer view {vi}: cannot decode its {ext} data ({e}); using the uncompressed fallback",
+                        self.name
+                    ));
                 }
             }
-        };
-        if data.len() < buffer.length() {
-            return Err(malformed(format!(
-                "buffer {i} has {} bytes but its byteLength is {}",
-                data.len(),
-                buffer.length()
-            )));
         }
-        out.push(data);
+        Ok(Document::from_json_without_validation(root))
     }
-    Ok(out)
+
+    /// Decodes one view after checking it against the budget; the result is the view's length
+    /// (the decoded bytes, zero-padded where the view is longer).
+    fn decode(
+        &mut self,
+        c: &compression::Compressed,
+        view_len: usize,
+        view_stride: Option<usize>,
+    ) -> Result<Vec<u8>, String> {
+        compression::check(c)?;
+        if c.mode == compression::Mode::Attributes && view_stride.is_some_and(|s| s != c.stride) {
+            return Err(format!(
+                "byteStride {} differs from the buffer view's {}",
+                c.stride,
+                view_stride.unwrap_or(0)
+            ));
+        }
+        let len = c.decoded_len().ok_or("the decoded size overflows")?;
+        if len > view_len {
+            return Err(format!(
+                "{} elements of {} bytes do not fit in the {view_len}-byte buffer view",
+                c.count, c.stride
+            ));
+        }
+        if view_len > *self.budget {
+            return Err(format!(
+                "{view_len} decoded bytes are more than the file's size allows"
+            ));
+        }
+        let source = self
+            .buffers
+            .get(c.buffer)
+            .ok_or_else(|| format!("buffer {} does not exist", c.buffer))?;
+        let mut bytes = compression::decode(c, source)?;
+        *self.budget -= view_len;
+        bytes.resize(view_len, 0);
+        Ok(bytes)
+    }
+
+    /// Reads fallback buffer `b`, which [`load_buffers`] skipped.
+    fn read_fallback(&mut self, root: &json::Root, b: usize) -> Result<(), String> {
+        let buffer = &root.buffers[b];
+        let Some(uri) = &buffer.uri else {
+            return Err("has no data".into());
+        };
+        let length = buffer.byte_length.0 as usize;
+        let data = read_buffer(
+            b,
+            Some(uri),
+            length,
+            self.base,
+            &mut None,
+            self.name,
+            self.sources,
+        )
+        .map_err(|e| {
+            let e = crate::strip_path(&e.to_string(), self.name);
+            let prefix = format!("buffer {b}: ");
+            e.strip_prefix(&prefix).unwrap_or(&e).to_string()
+        })?;
+        self.buffers[b] = data;
+        Ok(())
+    }
 }
 
 /// Turns a relative URI into a relative path: percent-decoded, without scheme.
@@ -402,6 +588,9 @@ enum Kind {
     Vec3,
     /// TEXCOORD_n: VEC2 of FLOAT, normalized UNSIGNED_BYTE or normalized UNSIGNED_SHORT.
     Uv,
+    /// COLOR_0: VEC3 or VEC4 of FLOAT, normalized UNSIGNED_BYTE or normalized UNSIGNED_SHORT
+    /// (`KHR_mesh_quantization` adds nothing here).
+    Color,
     /// Indices: SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT.
     Index,
 }
@@ -424,6 +613,10 @@ impl Kind {
                         DataType::F32 | DataType::I8 | DataType::U8 | DataType::I16 | DataType::U16
                     )
             }
+            Kind::Color => {
+                matches!(dims, Dimensions::Vec3 | Dimensions::Vec4)
+                    && matches!(ty, DataType::F32 | DataType::U8 | DataType::U16)
+            }
             Kind::Index => {
                 dims == Dimensions::Scalar
                     && matches!(ty, DataType::U8 | DataType::U16 | DataType::U32)
@@ -435,6 +628,9 @@ impl Kind {
         match self {
             Kind::Vec3 => "VEC3 of FLOAT, BYTE, UNSIGNED_BYTE, SHORT or UNSIGNED_SHORT",
             Kind::Uv => "VEC2 of FLOAT, BYTE, UNSIGNED_BYTE, SHORT or UNSIGNED_SHORT",
+            Kind::Color => {
+                "VEC3 or VEC4 of FLOAT, normalized UNSIGNED_BYTE or normalized UNSIGNED_SHORT"
+            }
             Kind::Index => "SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT",
         }
     }
@@ -444,6 +640,7 @@ impl Kind {
         match self {
             Kind::Vec3 => 12,
             Kind::Uv => 8,
+            Kind::Color => 16,
             Kind::Index => 4,
         }
     }
@@ -465,6 +662,8 @@ struct Loader<'a> {
     budget: usize,
     /// Whether the file uses `KHR_mesh_quantization` (integer positions and normals).
     quantized: bool,
+    /// Optional attributes dropped, by name: how many primitives, and the first reason.
+    dropped: std::collections::BTreeMap<&'static str, (usize, String)>,
     scene: SceneDesc,
 }
 
@@ -524,12 +723,25 @@ impl Loader<'_> {
         // KHR_mesh_quantization allows the rest.
         let core = match kind {
             Kind::Vec3 => a.data_type() == DataType::F32,
-            Kind::Uv => {
+            Kind::Uv | Kind::Color => {
                 a.data_type() == DataType::F32
                     || a.normalized() && matches!(a.data_type(), DataType::U8 | DataType::U16)
             }
             Kind::Index => true,
         };
+        if !core && matches!(kind, Kind::Color) {
+            return Err(format!(
+                "{what}: {:?} of {:?}{} where {} is expected",
+                a.dimensions(),
+                a.data_type(),
+                if a.normalized() {
+                    ""
+                } else {
+                    " (not normalized)"
+                },
+                kind.describe()
+            ));
+        }
         if !core && !self.quantized {
             return Err(format!(
                 "{what}: {:?} of {:?} needs KHR_mesh_quantization, which the file does not list in extensionsUsed",
@@ -612,6 +824,47 @@ impl Loader<'_> {
             return Ok(vec![[0.0; 2]; a.count()]);
         }
         self.read_floats::<2>(a)
+    }
+
+    /// Reads COLOR_0 as linear RGBA (alpha 1 for RGB colours).
+    fn read_color(&mut self, a: &Accessor) -> Result<Vec<[f32; 4]>, String> {
+        let rgb = a.dimensions() == Dimensions::Vec3;
+        if let Layout::Zeros = self.check_accessor(a, Kind::Color)? {
+            let alpha = if rgb { 1.0 } else { 0.0 };
+            return Ok(vec![[0.0, 0.0, 0.0, alpha]; a.count()]);
+        }
+        Ok(if rgb {
+            self.read_floats::<3>(a)?
+                .into_iter()
+                .map(|[r, g, b]| [r, g, b, 1.0])
+                .collect()
+        } else {
+            self.read_floats::<4>(a)?
+        })
+    }
+
+    /// Reads an optional attribute of `n` vertices; one that cannot be used (bad layout, wrong
+    /// count, over the budget) is dropped instead of failing the file, and named in one
+    /// warning per attribute (see [`Loader::meshes`]).
+    fn optional<T>(
+        &mut self,
+        at: &dyn Fn(String) -> String,
+        name: &'static str,
+        accessor: Option<Accessor>,
+        n: usize,
+        read: fn(&mut Self, &Accessor) -> Result<Vec<T>, String>,
+    ) -> Vec<T> {
+        let Some(a) = accessor else {
+            return Vec::new();
+        };
+        let why = match read(self, &a) {
+            Ok(v) if v.len() == n => return v,
+            Ok(v) => format!("{} values for {n} positions", v.len()),
+            Err(e) => e,
+        };
+        let entry = self.dropped.entry(name).or_insert((0, at(why)));
+        entry.0 += 1;
+        Vec::new()
     }
 
     /// Reads a checked accessor of `N` components as floats: integer components are
@@ -711,9 +964,9 @@ impl Loader<'_> {
                 let Some((texture, set, transform)) = r else {
                     continue;
                 };
-                if set != 0 {
+                if set > 1 {
                     self.warn(format!(
-                        "material {} uses texture coordinate set {set}; only set 0 is supported, so the texture is ignored",
+                        "material {} uses texture coordinate set {set}; only sets 0 and 1 are supported, so the texture is ignored",
                         m.index().unwrap_or(0)
                     ));
                     continue;
@@ -727,7 +980,7 @@ impl Loader<'_> {
                     ));
                 }
                 if textures {
-                    slots[slot] = Some((texture, transform));
+                    slots[slot] = Some((texture, set, transform));
                     wanted.push(texture);
                 }
             }
@@ -842,8 +1095,8 @@ impl Loader<'_> {
         let mut scene = std::mem::take(&mut self.scene);
         for (mut desc, slots) in materials {
             let mut r = slots.map(|s| {
-                s.and_then(|(t, transform)| {
-                    let r = texture_ref(t, &mut scene)?;
+                s.and_then(|(t, set, transform)| {
+                    let r = texture_ref(t, &mut scene)?.with_tex_coord(set);
                     Some(match transform {
                         Some((offset, rotation, scale)) => {
                             r.with_khr_transform(offset, rotation, scale)
@@ -942,7 +1195,8 @@ impl Loader<'_> {
                         Semantic::Positions
                             | Semantic::Normals
                             | Semantic::Tangents
-                            | Semantic::TexCoords(0)
+                            | Semantic::TexCoords(0 | 1)
+                            | Semantic::Colors(0)
                     ) {
                         ignored.insert(semantic.to_string());
                     }
@@ -983,6 +1237,20 @@ impl Loader<'_> {
                     )));
                     uvs.clear();
                 }
+                let uvs1 = self.optional(
+                    &at,
+                    "TEXCOORD_1",
+                    prim.get(&Semantic::TexCoords(1)),
+                    n,
+                    Self::read_uv,
+                );
+                let colors = self.optional(
+                    &at,
+                    "COLOR_0",
+                    prim.get(&Semantic::Colors(0)),
+                    n,
+                    Self::read_color,
+                );
                 let indices = match prim.indices() {
                     Some(a) => self.read_indices(&a).map_err(at)?,
                     None => (0..n as u32).collect(),
@@ -999,6 +1267,8 @@ impl Loader<'_> {
                     positions,
                     normals,
                     uvs,
+                    uvs1,
+                    colors,
                     triangles,
                     material,
                 });
@@ -1011,10 +1281,17 @@ impl Loader<'_> {
             }
             self.scene.meshes.push(desc);
         }
+        for (name, (count, first)) in std::mem::take(&mut self.dropped) {
+            let more = match count {
+                1 => String::new(),
+                n => format!(" (and in {} more primitives)", n - 1),
+            };
+            self.warn(format!("ignoring {name}: {first}{more}"));
+        }
         if !ignored.is_empty() {
             let names: Vec<String> = ignored.into_iter().collect();
             self.warn(format!(
-                "ignoring vertex attribute{} {} (oxray uses POSITION, NORMAL, TANGENT and TEXCOORD_0)",
+                "ignoring vertex attribute{} {} (oxray uses POSITION, NORMAL, TANGENT, TEXCOORD_0, TEXCOORD_1 and COLOR_0)",
                 if names.len() > 1 { "s" } else { "" },
                 names.join(", ")
             ));

@@ -89,6 +89,11 @@ pub struct Primitive {
     pub normals: Vec<[f32; 3]>,
     /// Per-vertex texture coordinates (set 0), or empty.
     pub uvs: Vec<[f32; 2]>,
+    /// Per-vertex texture coordinates of set 1 (glTF `TEXCOORD_1`), or empty.
+    pub uvs1: Vec<[f32; 2]>,
+    /// Per-vertex linear RGBA colours (glTF `COLOR_0`; alpha 1 for RGB colours), multiplied
+    /// with the base colour and its alpha; or empty.
+    pub colors: Vec<[f32; 4]>,
     /// Triangles as vertex-index triplets, every index `< positions.len()`.
     pub triangles: Vec<[u32; 3]>,
     /// Index into [`SceneDesc::materials`].
@@ -110,14 +115,16 @@ pub enum AlphaMode {
     Blend,
 }
 
-/// A texture reference: texture coordinate set 0 mapped through a 2x3 affine transform
-/// (glTF `KHR_texture_transform`) before sampling.
+/// A texture reference: a texture coordinate set (0 or 1) mapped through a 2x3 affine
+/// transform (glTF `KHR_texture_transform`) before sampling.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TextureRef {
     /// Index into [`SceneDesc::textures`].
     pub texture: u32,
     /// Rows of the UV transform: `u' = m[0] u + m[1] v + m[2]`, `v' = m[3] u + m[4] v + m[5]`.
     pub uv_transform: [f32; 6],
+    /// The texture coordinate set: 0 ([`Primitive::uvs`]) or 1 ([`Primitive::uvs1`]).
+    pub tex_coord: u32,
 }
 
 impl TextureRef {
@@ -129,7 +136,14 @@ impl TextureRef {
         TextureRef {
             texture,
             uv_transform: Self::IDENTITY,
+            tex_coord: 0,
         }
+    }
+
+    /// The same reference, reading texture coordinate set `set` (0 or 1).
+    pub fn with_tex_coord(mut self, set: u32) -> Self {
+        self.tex_coord = set;
+        self
     }
 
     /// The transform of `KHR_texture_transform`: scale, then rotate by `rotation` radians
@@ -502,8 +516,9 @@ impl SceneDesc {
                 return Err(format!("texture {ti} ({}) has inconsistent size", t.name));
             }
         }
-        let tex_ok =
-            |r: &Option<TextureRef>| r.is_none_or(|r| (r.texture as usize) < self.textures.len());
+        let tex_ok = |r: &Option<TextureRef>| {
+            r.is_none_or(|r| (r.texture as usize) < self.textures.len() && r.tex_coord <= 1)
+        };
         for (mi, m) in self.materials.iter().enumerate() {
             if !(tex_ok(&m.base_color_texture)
                 && tex_ok(&m.metallic_roughness_texture)
@@ -511,7 +526,7 @@ impl SceneDesc {
                 && tex_ok(&m.normal_texture))
             {
                 return Err(format!(
-                    "material {mi} ({}) refers to a missing texture",
+                    "material {mi} ({}) refers to a missing texture or texture coordinate set",
                     m.name
                 ));
             }
@@ -519,8 +534,11 @@ impl SceneDesc {
         for (mi, mesh) in self.meshes.iter().enumerate() {
             for (pi, p) in mesh.primitives.iter().enumerate() {
                 let n = p.positions.len();
-                if !p.normals.is_empty() && p.normals.len() != n
-                    || !p.uvs.is_empty() && p.uvs.len() != n
+                let bad = |len: usize| len != 0 && len != n;
+                if bad(p.normals.len())
+                    || bad(p.uvs.len())
+                    || bad(p.uvs1.len())
+                    || bad(p.colors.len())
                 {
                     return Err(format!(
                         "mesh {mi} ({}) primitive {pi}: attribute count differs from the {n} positions",

@@ -232,6 +232,7 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
                 uvs,
                 triangles,
                 material,
+                ..Default::default()
             }],
         });
     }

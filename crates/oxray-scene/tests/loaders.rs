@@ -421,9 +421,13 @@ fn shared_smallpine_loads_with_one_warning_for_the_empty_normal_map() {
     };
     let s = SceneDesc::load(&p).unwrap();
     assert_eq!(s.materials.len(), 2);
-    // The empty normal map, and the unused second texture coordinate set, named once.
-    assert_eq!(s.warnings.len(), 2, "{:#?}", s.warnings);
-    assert!(s.warnings[1].contains("ignoring vertex attribute TEXCOORD_1"));
+    // The empty normal map, named once; the second texture coordinate set is read.
+    assert_eq!(s.warnings.len(), 1, "{:#?}", s.warnings);
+    assert!(s
+        .meshes
+        .iter()
+        .flat_map(|m| &m.primitives)
+        .any(|p| p.uvs1.len() == p.positions.len() && !p.uvs1.is_empty()));
     assert!(
         s.warnings[0].contains("M_TreeAtlas_normal.png"),
         "{}",
@@ -472,7 +476,7 @@ fn shared_drone_loads() {
     let s = SceneDesc::load(&p).unwrap();
     // Only the unused texture coordinate sets are named.
     assert_eq!(s.warnings.len(), 1, "{:#?}", s.warnings);
-    assert!(s.warnings[0].contains("TEXCOORD_1, TEXCOORD_2, TEXCOORD_3, TEXCOORD_4 "));
+    assert!(s.warnings[0].contains("attributes TEXCOORD_2, TEXCOORD_3, TEXCOORD_4 "));
     assert_eq!(s.materials.len(), 3);
     assert_eq!(s.textures.len(), 10);
     assert!(
@@ -582,7 +586,6 @@ fn unsupported_required_extensions_gltf_1_0_and_ignored_features_are_named() {
     let view = r#"{"buffer":0,"byteLength":36}"#;
     for (ext, what) in [
         ("KHR_draco_mesh_compression", "Draco"),
-        ("EXT_meshopt_compression", "meshoptimizer"),
         ("KHR_texture_basisu", "KTX2"),
     ] {
         let extra = format!(r#","extensionsUsed":["{ext}"],"extensionsRequired":["{ext}"]"#);
@@ -634,15 +637,16 @@ fn scenes_without_nodes_colours_and_accessors_without_buffer_views_load() {
         .iter()
         .flat_map(|f| f.to_le_bytes())
         .collect();
-    // A scene without "nodes", a file whose only placement is missing, COLOR_0 and
-    // TEXCOORD_1 (ignored, named once), and a NORMAL accessor without a buffer view (zeros).
+    // A scene without "nodes", a file whose only placement is missing, COLOR_1 and
+    // TEXCOORD_2 (ignored, named once), COLOR_0 and a NORMAL accessor without a buffer view
+    // (zeros).
     let dir = tmp_dir("no-nodes");
     std::fs::write(dir.join("tri.bin"), &bin).unwrap();
     let path = dir.join("tri.gltf");
     std::fs::write(
         &path,
         r#"{"asset":{"version":"2.0"},"scene":0,"scenes":[{}],
-        "meshes":[{"primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":1,"TEXCOORD_1":2}}]}],
+        "meshes":[{"primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":1,"COLOR_1":1,"TEXCOORD_2":2}}]}],
         "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"},
                      {"componentType":5126,"count":3,"type":"VEC3"},
                      {"componentType":5126,"count":3,"type":"VEC2"}],
@@ -653,9 +657,13 @@ fn scenes_without_nodes_colours_and_accessors_without_buffer_views_load() {
     let s = SceneDesc::load(&path).unwrap();
     assert_eq!(s.instances.len(), 1);
     assert_eq!(s.meshes[0].primitives[0].normals, vec![[0.0; 3]; 3]);
+    assert_eq!(
+        s.meshes[0].primitives[0].colors,
+        vec![[0.0, 0.0, 0.0, 1.0]; 3]
+    );
     let has = |n: &str| s.warnings.iter().filter(|w| w.contains(n)).count();
     assert_eq!(
-        has("ignoring vertex attributes COLOR_0, TEXCOORD_1"),
+        has("ignoring vertex attributes COLOR_1, TEXCOORD_2"),
         1,
         "{:?}",
         s.warnings
@@ -682,4 +690,371 @@ fn obj_with_latin1_names_and_a_bare_usemtl_loads() {
     assert_eq!(prims[0].material as usize, rose);
     assert_ne!(prims[1].material as usize, rose);
     assert_eq!(Mesh::load(&obj).unwrap().triangles.len(), 2);
+}
+
+// The meshopt fixtures were made by gltfpack 1.3 (the npm package `gltfpack`) from one UV sphere
+// (8 segments, 6 rings, 63 vertices with normals and texture coordinates):
+// - `meshopt_plain.glb`: `-kv`, quantized and not compressed, the reference;
+// - `meshopt_sphere.glb`: `-cc -kv`, EXT_meshopt_compression required, OCTAHEDRAL normals;
+// - `meshopt.gltf` (a fuzzer seed): the same, its buffer embedded as a data URI;
+// - `meshopt_khr.glb`: `-cc -ce khr -kv -vpf -vtf`, KHR_meshopt_compression with EXPONENTIAL
+//   float positions and texture coordinates;
+// - `meshopt_fallback.gltf` (+ `.bin`, `.fallback.bin`): `-c -cf -kv`, the extension used but not
+//   required, with an uncompressed fallback buffer.
+
+/// A primitive's triangles as (position, texture coordinate) triplets, each triangle rotated to
+/// start at its smallest vertex, sorted, with the normal of each such vertex: what does not
+/// depend on the order of vertices and of triangles (which compression changes).
+#[allow(clippy::type_complexity)]
+fn canonical(
+    p: &oxray_scene::Primitive,
+) -> (
+    Vec<[[u32; 5]; 3]>,
+    std::collections::BTreeMap<[u32; 5], [f32; 3]>,
+) {
+    let key = |i: u32| {
+        let (v, t) = (p.positions[i as usize], p.uvs[i as usize]);
+        [v[0], v[1], v[2], t[0], t[1]].map(f32::to_bits)
+    };
+    let mut tris: Vec<[[u32; 5]; 3]> = p
+        .triangles
+        .iter()
+        .map(|t| {
+            let k = t.map(key);
+            let m = (0..3).min_by_key(|&i| k[i]).unwrap();
+            [k[m], k[(m + 1) % 3], k[(m + 2) % 3]]
+        })
+        .collect();
+    tris.sort_unstable();
+    let normals = (0..p.positions.len() as u32)
+        .map(|i| (key(i), p.normals[i as usize]))
+        .collect();
+    (tris, normals)
+}
+
+#[test]
+fn meshopt_compressed_files_decode_to_the_uncompressed_geometry() {
+    let plain = SceneDesc::load(&data("meshopt_plain.glb")).unwrap();
+    let (tris, normals) = canonical(&plain.meshes[0].primitives[0]);
+    assert_eq!(tris.len(), 80);
+    for file in [
+        "meshopt_sphere.glb",
+        "meshopt.gltf",
+        "meshopt_fallback.gltf",
+    ] {
+        let s = SceneDesc::load(&data(file)).unwrap();
+        assert!(s.warnings.is_empty(), "{file}: {:?}", s.warnings);
+        let (t, n) = canonical(&s.meshes[0].primitives[0]);
+        assert_eq!(t, tris, "{file}");
+        assert_eq!(s.instances, plain.instances, "{file}");
+        // The octahedral filter stores the normals differently, as precisely.
+        assert_eq!(n.len(), normals.len());
+        for (k, n) in &n {
+            let r = normals[k];
+            assert!(
+                close_within(Vec3::from(*n), Vec3::from(r), 0.02),
+                "{file}: {n:?} {r:?}"
+            );
+        }
+    }
+    // Float positions through the EXPONENTIAL filter: a unit sphere whose normals point out.
+    let s = SceneDesc::load(&data("meshopt_khr.glb")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let p = &s.meshes[0].primitives[0];
+    assert_eq!(p.triangles.len(), 80);
+    for (pos, n) in p.positions.iter().zip(&p.normals) {
+        let w = world(&s, 0, *pos);
+        assert!((w.length() - 1.0).abs() < 1e-3, "{w}");
+        assert!(
+            close_within(Vec3::from(*n).normalize(), w.normalize(), 0.02),
+            "{n:?} {w}"
+        );
+    }
+    let uv_max = p.uvs.iter().flatten().fold(0f32, |a, &b| a.max(b));
+    assert!((uv_max - 1.0).abs() < 1e-3, "{uv_max}");
+}
+
+fn close_within(a: Vec3, b: Vec3, tol: f32) -> bool {
+    (a - b).abs().max_element() <= tol
+}
+
+#[test]
+fn meshopt_fallback_buffers_are_read_only_when_decoding_is_not_possible() {
+    let reference = SceneDesc::load(&data("meshopt_fallback.gltf")).unwrap();
+    let reference = canonical(&reference.meshes[0].primitives[0]);
+    let dir = tmp_dir("meshopt-fallback");
+    let names = [
+        "meshopt_fallback.gltf",
+        "meshopt_fallback.bin",
+        "meshopt_fallback.fallback.bin",
+    ];
+    for n in names {
+        std::fs::copy(data(n), dir.join(n)).unwrap();
+    }
+    let gltf = dir.join(names[0]);
+    let fallback = dir.join(names[2]);
+    // Decoded without the fallback buffer, whose file is still listed as the scene's.
+    std::fs::remove_file(&fallback).unwrap();
+    let s = SceneDesc::load(&gltf).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(canonical(&s.meshes[0].primitives[0]), reference);
+    assert!(s.sources.contains(&fallback), "{:?}", s.sources);
+    // Compressed data that does not decode: the fallback is used, with a warning per view.
+    std::fs::copy(data(names[2]), &fallback).unwrap();
+    let compressed = std::fs::read(data(names[1])).unwrap();
+    std::fs::write(dir.join(names[1]), vec![0u8; compressed.len()]).unwrap();
+    let s = SceneDesc::load(&gltf).unwrap();
+    assert_eq!(canonical(&s.meshes[0].primitives[0]), reference);
+    let used = |s: &SceneDesc| {
+        s.warnings
+            .iter()
+            .filter(|w| w.contains("using the uncompressed fallback"))
+            .count()
+    };
+    assert_eq!(used(&s), 4, "{:?}", s.warnings);
+    assert!(s.warnings[0].contains("cannot decode its EXT_meshopt_compression data"));
+    // ... and without the fallback either, an error naming both.
+    std::fs::remove_file(&fallback).unwrap();
+    let e = SceneDesc::load(&gltf).unwrap_err();
+    assert_one_line_error(&e, &gltf);
+    let msg = e.to_string();
+    assert!(
+        msg.contains("cannot decode")
+            && msg.contains("fallback buffer 1 ")
+            && msg.contains("cannot read"),
+        "{msg}"
+    );
+    // An unknown filter is a reason to fall back too (the extension is not required).
+    std::fs::copy(data(names[1]), dir.join(names[1])).unwrap();
+    std::fs::copy(data(names[2]), &fallback).unwrap();
+    let text = std::fs::read_to_string(&gltf).unwrap();
+    let text = text.replacen(
+        r#""mode":"TRIANGLES""#,
+        r#""mode":"TRIANGLES","filter":"FUTURE""#,
+        1,
+    );
+    std::fs::write(&gltf, text).unwrap();
+    let s = SceneDesc::load(&gltf).unwrap();
+    assert_eq!(used(&s), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("unknown filter \"FUTURE\""),
+        "{:?}",
+        s.warnings
+    );
+    assert_eq!(canonical(&s.meshes[0].primitives[0]), reference);
+}
+
+#[test]
+fn required_meshopt_data_that_does_not_decode_is_a_one_line_error() {
+    let text = std::fs::read_to_string(data("meshopt.gltf")).unwrap();
+    for (from, to, needle) in [
+        (
+            r#""mode":"TRIANGLES""#,
+            r#""mode":"STRIPS""#,
+            "unknown mode",
+        ),
+        (r#""count":240"#, r#""count":241"#, "not a multiple of 3"),
+        (r#""count":240"#, r#""count":999999999999"#, "do not fit"),
+        (
+            r#""filter":"OCTAHEDRAL""#,
+            r#""filter":"QUATERNION""#,
+            "QUATERNION",
+        ),
+        (
+            r#""byteOffset":0,"byteLength":395"#,
+            r#""byteOffset":0,"byteLength":99999"#,
+            "outside",
+        ),
+        (
+            r#""byteOffset":0,"byteLength":395"#,
+            r#""byteOffset":0,"byteLength":20"#,
+            "malformed",
+        ),
+    ] {
+        assert!(text.contains(from), "{from}");
+        let (path, r) = load_text("meshopt-required", "m.gltf", &text.replacen(from, to, 1));
+        let e = r.unwrap_err();
+        assert_one_line_error(&e, &path);
+        let msg = e.to_string();
+        assert!(
+            msg.contains("cannot decode its EXT_meshopt_compression data") && msg.contains(needle),
+            "{needle}: {msg}"
+        );
+    }
+}
+
+/// A glTF triangle with a COLOR_0 accessor (`accessor`, reading buffer view 1) over `colour`
+/// bytes, after the 36 bytes of positions.
+fn gltf_with_colour(test: &str, colour: &[u8], accessor: &str, view: &str) -> PathBuf {
+    let mut bin: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
+    bin.extend(colour);
+    let dir = tmp_dir(test);
+    std::fs::write(dir.join("tri.bin"), &bin).unwrap();
+    let path = dir.join("tri.gltf");
+    std::fs::write(
+        &path,
+        format!(
+            r#"{{"asset":{{"version":"2.0"}},"scenes":[{{"nodes":[0]}}],"nodes":[{{"mesh":0}}],
+            "meshes":[{{"primitives":[{{"attributes":{{"POSITION":0,"COLOR_0":1}}}}]}}],
+            "accessors":[{{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"}},{accessor}],
+            "bufferViews":[{{"buffer":0,"byteLength":36}},{view}],
+            "buffers":[{{"byteLength":{},"uri":"tri.bin"}}]}}"#,
+            bin.len()
+        ),
+    )
+    .unwrap();
+    path
+}
+
+#[test]
+fn vertex_colours_load_in_every_layout_the_specification_allows() {
+    // Float RGB (the fixture the renderer's test uses): alpha 1.
+    let s = SceneDesc::load(&data("colors.gltf")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let (red, blue) = ([1.0, 0.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0]);
+    assert_eq!(s.meshes[0].primitives[0].colors, vec![red, blue, blue, red]);
+    // Normalized UNSIGNED_BYTE RGBA.
+    let path = gltf_with_colour(
+        "colour-u8",
+        &[255, 0, 0, 255, 0, 51, 0, 0, 0, 0, 255, 102],
+        r#"{"bufferView":1,"componentType":5121,"normalized":true,"count":3,"type":"VEC4"}"#,
+        r#"{"buffer":0,"byteOffset":36,"byteLength":12}"#,
+    );
+    let s = SceneDesc::load(&path).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(
+        s.meshes[0].primitives[0].colors,
+        vec![
+            [1.0, 0.0, 0.0, 1.0],
+            [0.0, 0.2, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.4]
+        ]
+    );
+    // Normalized UNSIGNED_SHORT RGB, each element padded to 8 bytes.
+    let mut u16s = Vec::new();
+    for c in [[65535u16, 0, 0, 0], [0, 13107, 0, 0], [0, 0, 65535, 0]] {
+        u16s.extend(c.iter().flat_map(|x| x.to_le_bytes()));
+    }
+    let path = gltf_with_colour(
+        "colour-u16",
+        &u16s,
+        r#"{"bufferView":1,"componentType":5123,"normalized":true,"count":3,"type":"VEC3"}"#,
+        r#"{"buffer":0,"byteOffset":36,"byteLength":24,"byteStride":8}"#,
+    );
+    let s = SceneDesc::load(&path).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    assert_eq!(
+        s.meshes[0].primitives[0].colors,
+        vec![
+            [1.0, 0.0, 0.0, 1.0],
+            [0.0, 0.2, 0.0, 1.0],
+            [0.0, 0.0, 1.0, 1.0]
+        ]
+    );
+    // What the specification does not allow, or a count that does not match, is dropped with
+    // a warning; the geometry still loads.
+    for (accessor, needle) in [
+        (
+            r#"{"bufferView":1,"componentType":5121,"count":3,"type":"VEC4"}"#,
+            "not normalized",
+        ),
+        (
+            r#"{"bufferView":1,"componentType":5121,"normalized":true,"count":6,"type":"VEC2"}"#,
+            "VEC3 or VEC4",
+        ),
+        (
+            r#"{"bufferView":1,"componentType":5121,"normalized":true,"count":2,"type":"VEC4"}"#,
+            "2 values for 3 positions",
+        ),
+    ] {
+        let path = gltf_with_colour(
+            "colour-bad",
+            &[255; 12],
+            accessor,
+            r#"{"buffer":0,"byteOffset":36,"byteLength":12}"#,
+        );
+        let s = SceneDesc::load(&path).unwrap();
+        assert!(s.meshes[0].primitives[0].colors.is_empty());
+        assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+        assert!(
+            s.warnings[0].contains("ignoring COLOR_0: mesh 0 primitive 0: accessor 1")
+                || s.warnings[0].contains("ignoring COLOR_0: mesh 0 primitive 0: 2 values"),
+            "{:?}",
+            s.warnings
+        );
+        assert!(s.warnings[0].contains(needle), "{needle}: {:?}", s.warnings);
+    }
+    // Named once however many primitives have it.
+    let text = std::fs::read_to_string(data("colors.gltf")).unwrap();
+    let prim = r#"{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":3},"indices":3,"material":0}"#;
+    let text = text.replace(
+        r#""primitives":[{"attributes":{"POSITION":0,"NORMAL":1,"COLOR_0":2},"indices":3,"material":0}]"#,
+        &format!(r#""primitives":[{prim},{prim},{prim}]"#),
+    );
+    let (_, r) = load_text("colour-once", "c.gltf", &text);
+    let s = r.unwrap();
+    assert_eq!(s.meshes[0].primitives.len(), 3);
+    assert_eq!(s.warnings.len(), 1, "{:?}", s.warnings);
+    assert!(
+        s.warnings[0].contains("ignoring COLOR_0: mesh 0 primitive 0: accessor 3")
+            && s.warnings[0].ends_with("(and in 2 more primitives)"),
+        "{:?}",
+        s.warnings
+    );
+}
+
+#[test]
+fn the_second_texture_coordinate_set_is_read_and_textures_may_use_it() {
+    let s = SceneDesc::load(&data("texcoord1.gltf")).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let p = &s.meshes[0].primitives[0];
+    assert_eq!(p.uvs, vec![[0.25, 0.25]; 4]);
+    assert_eq!(p.uvs1, vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]);
+    let r = s.materials[0].base_color_texture.unwrap();
+    assert_eq!(r.tex_coord, 1);
+    assert_eq!(s.textures[r.texture as usize].texels, TEX2X2);
+    let text = std::fs::read_to_string(data("texcoord1.gltf")).unwrap();
+    let slot = r#""baseColorTexture":{"index":0,"texCoord":1}"#;
+    assert!(text.contains(slot));
+    // KHR_texture_transform's texCoord overrides the slot's.
+    let (_, r) = load_text(
+        "texcoord-khr",
+        "t.gltf",
+        &text.replace(
+            slot,
+            r#""baseColorTexture":{"index":0,"extensions":{"KHR_texture_transform":{"texCoord":1,"scale":[2,2]}}}"#,
+        ),
+    );
+    let s = r.unwrap();
+    let r = s.materials[0].base_color_texture.unwrap();
+    assert_eq!((r.tex_coord, r.map(1.0, 1.0)), (1, (2.0, 2.0)));
+    // Set 0 stays the default.
+    let (_, r) = load_text(
+        "texcoord-0",
+        "t.gltf",
+        &text.replace(slot, r#""baseColorTexture":{"index":0}"#),
+    );
+    assert_eq!(
+        r.unwrap().materials[0]
+            .base_color_texture
+            .unwrap()
+            .tex_coord,
+        0
+    );
+    // A set beyond 1: the texture is dropped with a warning.
+    let (_, r) = load_text(
+        "texcoord-2",
+        "t.gltf",
+        &text.replace(slot, r#""baseColorTexture":{"index":0,"texCoord":2}"#),
+    );
+    let s = r.unwrap();
+    assert!(s.materials[0].base_color_texture.is_none());
+    assert!(
+        s.warnings.len() == 1 && s.warnings[0].contains("only sets 0 and 1"),
+        "{:?}",
+        s.warnings
+    );
 }
