@@ -5,8 +5,7 @@
 
 use crate::bench::{build_gas_on, median, BenchRays};
 use crate::raycast::{
-    check_rays, encode_hits, encode_occlusion, load_mesh_and_rays, write_results, RayCheck,
-    RaycastError,
+    check_rays, encode_hits, encode_occlusion, load_inputs, write_results, RayCheck, RaycastError,
 };
 use oxray::{BatchKind, BuildFlags, Device, DeviceError, Hit, QueryError, Ray};
 use oxray_scene::mesh::Mesh;
@@ -106,7 +105,10 @@ pub fn raycast(
 ) -> Result<RaycastReport, DeviceCommandError> {
     oxray_scene::files::check_output(out_path, &[mesh_path, rays_path])
         .map_err(RaycastError::Output)?;
-    let (mesh, all_rays) = load_mesh_and_rays(mesh_path, rays_path)?;
+    let (mesh, sources, all_rays) = load_inputs(mesh_path, rays_path)?;
+    // A glTF's buffer files are inputs too: refused before anything is written.
+    let sources: Vec<&Path> = sources.iter().map(|p| p.as_path()).collect();
+    oxray_scene::files::check_output(out_path, &sources).map_err(RaycastError::Output)?;
     let (index, rays, check) = check_rays(&all_rays);
     let gas = build_gas_on(device, &mesh, BuildFlags::PREFER_FAST_TRACE)?;
     let root = gas.handle();

@@ -109,18 +109,18 @@ pub fn parse_rays(bytes: &[u8], path: &str) -> Result<Vec<Ray>, RaycastError> {
         .collect())
 }
 
-/// Loads the mesh and the ray file of a ray cast. The ray file's size is checked before
-/// the mesh is loaded.
-pub fn load_mesh_and_rays(
+/// Loads the mesh and the ray file of a ray cast, with every file the mesh was read from (a
+/// glTF's buffers too), for the output checks.
+pub fn load_inputs(
     mesh_path: &Path,
     rays_path: &Path,
-) -> Result<(Mesh, Vec<Ray>), RaycastError> {
+) -> Result<(Mesh, Vec<std::path::PathBuf>, Vec<Ray>), RaycastError> {
     let name = rays_path.display().to_string();
     let len = oxray_scene::files::regular_file_size(rays_path).map_err(io_error(rays_path))?;
     check_ray_bytes(len, &name)?;
-    let mesh = Mesh::load(mesh_path)?;
+    let (mesh, sources) = Mesh::load_with_sources(mesh_path)?;
     let rays = parse_rays(&read_ray_file(rays_path)?, &name)?;
-    Ok((mesh, rays))
+    Ok((mesh, sources, rays))
 }
 
 /// Why a ray of a ray file is not traced: the rules of the guide (§13.14, `Ray::validate`),

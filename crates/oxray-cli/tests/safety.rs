@@ -199,6 +199,51 @@ fn raycast_refuses_to_write_over_its_mesh_or_its_rays() {
     std::fs::remove_dir_all(&d).ok();
 }
 
+#[test]
+fn raycast_refuses_to_write_over_a_gltf_buffer_it_read() {
+    // The mesh is a glTF whose geometry is in separate buffer files: they are inputs too.
+    let d = dir("raycast-gltf-out");
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../oxray-scene/tests/data");
+    for f in [
+        "meshopt_fallback.gltf",
+        "meshopt_fallback.bin",
+        "meshopt_fallback.fallback.bin",
+    ] {
+        std::fs::copy(data.join(f), d.join(f)).unwrap();
+    }
+    let (mesh, buffer) = (
+        d.join("meshopt_fallback.gltf"),
+        d.join("meshopt_fallback.bin"),
+    );
+    let rays = d.join("rays.bin");
+    std::fs::write(
+        &rays,
+        ray_bytes(&[[0.0, 0.0, 5.0, 0.0, 0.0, 0.0, -1.0, f32::INFINITY]]),
+    )
+    .unwrap();
+    let before = std::fs::read(&buffer).unwrap();
+    let o = run(
+        &["raycast", s(&mesh), "--rays", s(&rays), "--out", s(&buffer)],
+        None,
+    );
+    assert_one_error(&o, "is also an input");
+    assert_eq!(std::fs::read(&buffer).unwrap(), before);
+    // Another name is fine.
+    let o = run(
+        &[
+            "raycast",
+            s(&mesh),
+            "--rays",
+            s(&rays),
+            "--out",
+            s(&d.join("hits.bin")),
+        ],
+        None,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_dir_all(&d).ok();
+}
+
 /// A render killed while it writes its image leaves the previous image intact: outputs are
 /// written to a temporary file and renamed into place.
 #[test]

@@ -95,6 +95,14 @@ impl Mesh {
     /// index `k` of the result is the `k`-th triangle in that order. Materials, textures and
     /// cameras are not loaded, and the scene loader's warnings are dropped.
     pub fn load(path: &Path) -> Result<Mesh, MeshError> {
+        Ok(Self::load_with_sources(path)?.0)
+    }
+
+    /// [`load`](Self::load), also returning every file that was read (a glTF's buffers and
+    /// images as well as the file itself), so that a command can refuse to write over any of
+    /// them.
+    pub fn load_with_sources(path: &Path) -> Result<(Mesh, Vec<std::path::PathBuf>), MeshError> {
+        let mut sources = vec![path.to_path_buf()];
         let name = path.display().to_string();
         let ext = crate::file_extension(path);
         let mesh = match ext.as_deref() {
@@ -111,12 +119,13 @@ impl Mesh {
             }
             Some("gltf") | Some("glb") => {
                 let scene = crate::gltf::load_impl(path, false)?;
+                sources.clone_from(&scene.sources);
                 flatten(&scene, &name)?
             }
             _ => return Err(MeshError::UnknownFormat { path: name }),
         };
         mesh.check(&name)?;
-        Ok(mesh)
+        Ok((mesh, sources))
     }
 
     fn check(&self, path: &str) -> Result<(), MeshError> {
