@@ -41,7 +41,8 @@ pub mod vertex;
 pub use aabb::Aabb;
 pub use backend::{AccelBackend, BatchKind};
 pub use error::{
-    BufferKind, BuildError, ErrorCode, InputLocation, LaunchError, PipelineError, QueryError,
+    BufferKind, BuildError, ErrorCode, InputLocation, LaunchError, LoadError, PipelineError,
+    QueryError, UpdateRule,
 };
 pub use exception::{Exception, ExceptionCode, ExceptionFlags};
 pub use handle::{BackendKind, Traversable, TraversableHandle, TraversableKind};

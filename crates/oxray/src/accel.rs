@@ -57,6 +57,10 @@ impl Gas {
         Gas(repr)
     }
 
+    pub(crate) fn repr_mut(&mut self) -> &mut GasRepr {
+        &mut self.0
+    }
+
     /// Builds a GAS on the CPU: shorthand for `Device::cpu().build_gas(options, inputs)`.
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Gas, BuildError> {
         Device::cpu().build_gas(options, inputs)
@@ -262,6 +266,10 @@ pub struct Ias(IasRepr);
 impl Ias {
     pub(crate) fn from_repr(repr: IasRepr) -> Ias {
         Ias(repr)
+    }
+
+    pub(crate) fn repr_mut(&mut self) -> &mut IasRepr {
+        &mut self.0
     }
 
     /// Builds an IAS on the CPU: shorthand for `Device::cpu().build_ias(options, inputs)`.

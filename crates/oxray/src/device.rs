@@ -205,6 +205,75 @@ impl Device {
         }))
     }
 
+    /// Updates (refits) a GAS built with `ALLOW_UPDATE` on this device (guide §5.6): the
+    /// options must be the build's with `operation = BuildOperation::Update`, and the inputs
+    /// the build's up to the contents of their buffers (new vertices, boxes, indices, SBT index
+    /// offsets, pre-transform matrix); every rule is checked, with a typed
+    /// [`BuildError::InvalidUpdate`] naming it, before anything changes.
+    ///
+    /// The update is in place when `gas` is the structure's only owner. When something else
+    /// shares it (a clone, a handle, an IAS built over it) it is copy-on-write: `gas` then
+    /// refers to the updated copy and the sharers keep the old structure — as in OptiX, an IAS
+    /// over the GAS must itself be updated ([`update_ias`](Self::update_ias), with instances of
+    /// `gas.handle()`) or rebuilt to see the change. The CUDA backend refuses with
+    /// `Unsupported`.
+    ///
+    /// ```
+    /// use oxray::{BuildFlags, BuildOperation, BuildOptions, Device, Ray, TriangleInput, VertexBuffer};
+    /// use glam::Vec3;
+    /// let device = Device::cpu();
+    /// let mut v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let mut options = BuildOptions::new(BuildFlags::ALLOW_UPDATE);
+    /// let mut gas = device.build_gas(&options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// for p in &mut v {
+    ///     p[2] = -2.0; // the triangle moves away
+    /// }
+    /// options.operation = BuildOperation::Update;
+    /// device.update_gas(&mut gas, &options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let mut hits = [None];
+    /// device.intersect_closest(&gas.handle(), &[Ray::new(Vec3::Z, -Vec3::Z)], &mut hits)?;
+    /// assert_eq!(hits[0].unwrap().t, 3.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn update_gas(
+        &self,
+        gas: &mut Gas,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        match (&self.repr, gas.repr_mut()) {
+            (DeviceRepr::Cpu(b), GasRepr::Cpu(g)) => b.update_gas(g, options, inputs),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(b), GasRepr::Cuda(g)) => b.update_gas(g, options, inputs),
+            #[cfg(feature = "cuda")]
+            _ => Err(BuildError::Unsupported(
+                "updating a structure on another device than the one holding it",
+            )),
+        }
+    }
+
+    /// Updates (refits) an IAS built with `ALLOW_UPDATE` on this device (guide §5.6): new
+    /// instance transforms, ids, SBT offsets, masks and flags for the same number of
+    /// instances over the same children — where a child is an update of the structure the IAS
+    /// was built over (see [`update_gas`](Self::update_gas)), its new bounds are taken. In
+    /// place or copy-on-write as `update_gas`. The CUDA backend refuses with `Unsupported`.
+    pub fn update_ias(
+        &self,
+        ias: &mut Ias,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        match (&self.repr, ias.repr_mut()) {
+            (DeviceRepr::Cpu(b), IasRepr::Cpu(i)) => b.update_ias(i, options, inputs),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(b), IasRepr::Cuda(i)) => b.update_ias(i, options, inputs),
+            #[cfg(feature = "cuda")]
+            _ => Err(BuildError::Unsupported(
+                "updating a structure on another device than the one holding it",
+            )),
+        }
+    }
+
     /// The closest hit of every ray under `root` (`None` for a miss), in parallel. The hits are
     /// the same on every device and for every thread count.
     pub fn intersect_closest(

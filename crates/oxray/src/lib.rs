@@ -89,11 +89,11 @@ pub use oxray_core::{
     BuildInputKind, BuildOperation, BuildOptions, CandidateAction, CustomHit, CustomPrimitive,
     CustomPrimitiveInput, DeviceContext, ErrorCode, Exception, ExceptionCode, ExceptionFlags,
     GeometryFlags, Hit, HitKind, IndexBuffer, IndexFormat, InputLocation, Instance, InstanceFlags,
-    LaunchError, LaunchReport, LogLevel, PipelineCompileOptions, PipelineError,
+    LaunchError, LaunchReport, LoadError, LogLevel, PipelineCompileOptions, PipelineError,
     PipelineLinkOptions, PrimitiveTypeFlags, QueryError, Ray, RayError, RayFlags, RayRecord,
     SbtHeader, SbtIndexOffsets, SbtIndexSize, SbtRegion, ShaderBindingTable, StaticTransform,
     Transform, Traversable, TraversableGraphFlags, TraversableHandle, TraversableKind,
-    TriangleInput, VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
+    TriangleInput, UpdateRule, VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
     MAX_PRIMITIVES_PER_GAS, MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
 

@@ -11,8 +11,8 @@ use oxray::cpu::Gas;
 use oxray::error::BufferKind;
 use oxray::{
     compute_memory_usage, Aabb, AabbBuffer, AccelBufferSizes, BuildError, BuildFlags, BuildInput,
-    BuildOperation, BuildOptions, CustomPrimitiveInput, GeometryFlags, IndexBuffer, IndexFormat,
-    SbtIndexOffsets, TriangleInput, VertexBuffer, VertexFormat,
+    BuildOptions, CustomPrimitiveInput, GeometryFlags, IndexBuffer, IndexFormat, SbtIndexOffsets,
+    TriangleInput, VertexBuffer, VertexFormat,
 };
 use proptest::prelude::*;
 use std::alloc::{GlobalAlloc, Layout, System};
@@ -296,14 +296,6 @@ fn memory_query_rejects_what_the_build_rejects_5() {
         (
             "conflicting flags",
             BuildOptions::new(BuildFlags::PREFER_FAST_BUILD | BuildFlags::PREFER_FAST_TRACE),
-            vec![valid],
-        ),
-        (
-            "update",
-            BuildOptions {
-                flags: BuildFlags::ALLOW_UPDATE,
-                operation: BuildOperation::Update,
-            },
             vec![valid],
         ),
         (
