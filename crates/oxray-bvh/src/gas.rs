@@ -394,15 +394,18 @@ impl GasData {
                 tree = keep_tree.then_some(bvh2);
             }
         }
-        // What the structure keeps is exactly what it reports (and what the query bounds).
-        gas.bvh.nodes.shrink_to_fit();
-        gas.triangles.shrink_to_fit();
-        gas.aabbs.shrink_to_fit();
-        gas.slot_prim.shrink_to_fit();
-        gas.sbt_offsets.shrink_to_fit();
-        gas.inputs.shrink_to_fit();
-        gas.record_flags.shrink_to_fit();
-        gas.shapes.shrink_to_fit();
+        if !keep_inactive {
+            // Only an update checks the inputs' shapes.
+            gas.shapes = Vec::new();
+        }
+        if options.flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            // As OptiX's, the structure occupies its output buffer, of the size the memory
+            // query bounds, until it is compacted (guide §5.8).
+            gas.occupy_output_bound();
+        } else {
+            // What the structure keeps is exactly what it reports: compact from the start.
+            gas.shrink_to_fit();
+        }
         Ok((gas, tree))
     }
 
@@ -492,6 +495,87 @@ impl GasData {
             node_bytes,
             primitive_bytes,
         }
+    }
+
+    fn shrink_to_fit(&mut self) {
+        self.bvh.nodes.shrink_to_fit();
+        self.triangles.shrink_to_fit();
+        self.aabbs.shrink_to_fit();
+        self.slot_prim.shrink_to_fit();
+        self.sbt_offsets.shrink_to_fit();
+        self.inputs.shrink_to_fit();
+        self.record_flags.shrink_to_fit();
+        self.shapes.shrink_to_fit();
+    }
+
+    /// Grows every table to the size the memory query allows it (the output buffer).
+    fn occupy_output_bound(&mut self) {
+        fn grow<T>(v: &mut Vec<T>, bound: usize) {
+            v.reserve_exact(bound.saturating_sub(v.len()));
+        }
+        let n = self.num_primitives as usize;
+        grow(&mut self.bvh.nodes, n.saturating_sub(1).max(1));
+        match self.kind {
+            GasKind::Triangles => {
+                grow(&mut self.triangles, n);
+                grow(&mut self.slot_prim, 4 * n);
+            }
+            GasKind::CustomPrimitives => {
+                grow(&mut self.aabbs, n);
+                grow(&mut self.slot_prim, n);
+            }
+        }
+    }
+
+    /// The bytes the structure takes once compacted: the emitted property `COMPACTED_SIZE`
+    /// (guide §5.8), known before compacting. `None` unless it was built with
+    /// `ALLOW_COMPACTION`.
+    pub fn compacted_size(&self) -> Option<usize> {
+        if !self.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            return None;
+        }
+        fn bytes<T>(v: &[T]) -> usize {
+            std::mem::size_of_val(v)
+        }
+        Some(
+            bytes(&self.bvh.nodes)
+                + bytes(&self.triangles)
+                + bytes(&self.aabbs)
+                + bytes(&self.slot_prim)
+                + bytes(&self.sbt_offsets)
+                + bytes(&self.inputs)
+                + bytes(&self.record_flags)
+                + bytes(&self.shapes),
+        )
+    }
+
+    /// The compacted structure (`optixAccelCompact`, guide §5.8): a copy in exactly sized
+    /// tables, [`compacted_size`](Self::compacted_size) bytes, with the same tree, primitives
+    /// and hits; it references nothing of the source, which may be dropped. It can be
+    /// traversed, updated (if built with `ALLOW_UPDATE`) and saved like its source, and keeps
+    /// its lineage. Refused with [`BuildError::CompactionNotAllowed`] without
+    /// `ALLOW_COMPACTION`.
+    ///
+    /// ```
+    /// use oxray_bvh::GasData;
+    /// use oxray_core::{BuildFlags, BuildOptions, TriangleInput, VertexBuffer};
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let options = BuildOptions::new(BuildFlags::ALLOW_COMPACTION);
+    /// let gas = GasData::build(&options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let size = gas.compacted_size().unwrap();
+    /// let compact = gas.compact()?;
+    /// assert_eq!(compact.memory().output_bytes, size);
+    /// assert!(size <= gas.memory().output_bytes);
+    /// # Ok::<(), oxray_core::BuildError>(())
+    /// ```
+    pub fn compact(&self) -> Result<GasData, BuildError> {
+        if !self.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            return Err(BuildError::CompactionNotAllowed);
+        }
+        // `Vec::clone` allocates exactly the length.
+        let mut out = self.clone();
+        out.shrink_to_fit();
+        Ok(out)
     }
 
     /// What a backend that keeps the structure elsewhere (in GPU memory, say) reports of it.

@@ -368,6 +368,41 @@ impl IasData {
         Ok(())
     }
 
+    /// Bytes the IAS occupies (its own tables; the children are not counted).
+    pub fn memory_bytes(&self) -> usize {
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        bytes(&self.bvh.nodes) + bytes(&self.instances) + bytes(&self.boxes) + bytes(&self.slot_of)
+    }
+
+    /// The bytes of the compacted IAS (emitted property `COMPACTED_SIZE`, guide §5.8); `None`
+    /// unless built with `ALLOW_COMPACTION`.
+    pub fn compacted_size(&self) -> Option<usize> {
+        self.build_flags
+            .contains(BuildFlags::ALLOW_COMPACTION)
+            .then(|| {
+                std::mem::size_of_val(self.bvh.nodes.as_slice())
+                    + std::mem::size_of_val(self.instances.as_slice())
+                    + std::mem::size_of_val(self.boxes.as_slice())
+                    + std::mem::size_of_val(self.slot_of.as_slice())
+            })
+    }
+
+    /// The compacted IAS (guide §5.8): exactly sized tables over the same children, the same
+    /// hits. Refused without `ALLOW_COMPACTION`.
+    pub fn compact(&self) -> Result<IasData, BuildError> {
+        if !self.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            return Err(BuildError::CompactionNotAllowed);
+        }
+        let mut out = self.clone();
+        out.bvh.nodes.shrink_to_fit();
+        out.instances.shrink_to_fit();
+        out.boxes.shrink_to_fit();
+        out.slot_of.shrink_to_fit();
+        Ok(out)
+    }
+
     /// Instances in the build input.
     pub fn num_instances(&self) -> u32 {
         self.num_instances

@@ -274,6 +274,58 @@ impl Device {
         }
     }
 
+    /// Compacts a GAS built with `ALLOW_COMPACTION` (`optixAccelCompact`, guide §5.8): a new
+    /// structure of [`AccelProperty::CompactedSize`] bytes with the same hits, independent of
+    /// the source. It can be traced, updated (if built with `ALLOW_UPDATE`) and saved. The CUDA
+    /// backend refuses with `Unsupported`.
+    ///
+    /// ```
+    /// use oxray::{AccelProperty, BuildFlags, BuildOptions, Device, EmittedProperty, TriangleInput, VertexBuffer};
+    /// let device = Device::cpu();
+    /// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let options = BuildOptions::new(BuildFlags::ALLOW_COMPACTION);
+    /// let gas = device.build_gas(&options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let EmittedProperty::CompactedSize(size) = gas.emit_property(AccelProperty::CompactedSize)? else { unreachable!() };
+    /// if (size as usize) < gas.memory().output_bytes {
+    ///     let compact = device.compact_gas(&gas)?;
+    ///     assert_eq!(compact.memory().output_bytes as u64, size);
+    /// }
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn compact_gas(&self, gas: &Gas) -> Result<Gas, BuildError> {
+        match (&self.repr, gas.repr()) {
+            (DeviceRepr::Cpu(_), GasRepr::Cpu(g)) => Ok(Gas::from_repr(GasRepr::Cpu(Arc::new(
+                oxray_cpu::Gas::from(g.data().compact()?),
+            )))),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(_), GasRepr::Cuda(_)) => {
+                Err(BuildError::Unsupported("compaction on the CUDA backend"))
+            }
+            #[cfg(feature = "cuda")]
+            _ => Err(BuildError::Unsupported(
+                "compacting a structure on another device than the one holding it",
+            )),
+        }
+    }
+
+    /// Compacts an IAS built with `ALLOW_COMPACTION` (guide §5.8), over the same children. The
+    /// CUDA backend refuses with `Unsupported`.
+    pub fn compact_ias(&self, ias: &Ias) -> Result<Ias, BuildError> {
+        match (&self.repr, ias.repr()) {
+            (DeviceRepr::Cpu(_), IasRepr::Cpu(i)) => Ok(Ias::from_repr(IasRepr::Cpu(Arc::new(
+                oxray_cpu::Ias::from_data(i.data().compact()?)?,
+            )))),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(_), IasRepr::Cuda(_)) => {
+                Err(BuildError::Unsupported("compaction on the CUDA backend"))
+            }
+            #[cfg(feature = "cuda")]
+            _ => Err(BuildError::Unsupported(
+                "compacting a structure on another device than the one holding it",
+            )),
+        }
+    }
+
     /// The closest hit of every ray under `root` (`None` for a miss), in parallel. The hits are
     /// the same on every device and for every thread count.
     pub fn intersect_closest(
