@@ -74,7 +74,7 @@ pub struct IasData {
     pub lineage: u64,
 }
 
-fn validate_instance(i: u32, inst: &Instance) -> Result<Transform, BuildError> {
+pub(crate) fn validate_instance(i: u32, inst: &Instance) -> Result<Transform, BuildError> {
     if inst.instance_id > MAX_INSTANCE_ID {
         return Err(BuildError::field(i, "instance_id", inst.instance_id, 28));
     }
@@ -318,7 +318,15 @@ impl IasData {
         list.par_iter()
             .enumerate()
             .map(|(i, inst)| {
-                let old = &self.instances[self.slot_of[i] as usize];
+                let Some(old) = self
+                    .slot_of
+                    .get(i)
+                    .and_then(|&s| self.instances.get(s as usize))
+                else {
+                    return Err(BuildError::InvalidUpdate(UpdateRule::InstanceChild {
+                        instance: i as u32,
+                    }));
+                };
                 if !old.child.same_structure(&inst.child) {
                     return Err(BuildError::InvalidUpdate(UpdateRule::InstanceChild {
                         instance: i as u32,

@@ -34,6 +34,7 @@ pub mod gas;
 pub mod ias;
 pub mod memory;
 mod refit;
+pub mod serialize;
 mod stats;
 pub mod triangle;
 pub mod triangle4;

@@ -277,6 +277,10 @@ impl GasData {
             }
             GasKind::CustomPrimitives => {
                 self.aabbs.par_iter_mut().enumerate().for_each(|(slot, a)| {
+                    if slot_prim[slot] == NO_PRIMITIVE {
+                        *a = Aabb::EMPTY;
+                        return;
+                    }
                     let (i, k) = locate(slot_prim[slot]);
                     let BuildInput::CustomPrimitives(c) = &inputs[i] else {
                         unreachable!("checked: the inputs are custom primitives")

@@ -4,7 +4,7 @@ use crate::device::Device;
 use oxray_bvh::{BvhStats, GasMemory};
 use oxray_core::{
     Aabb, AccelProperty, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind,
-    BuildOptions, EmittedProperty, GeometryFlags, Hit, QueryError, Ray, Traversable,
+    BuildOptions, EmittedProperty, GeometryFlags, Hit, LoadError, QueryError, Ray, Traversable,
     TraversableHandle, TraversableKind,
 };
 use std::sync::Arc;
@@ -168,6 +168,16 @@ impl Gas {
                 }
             ),
         }
+    }
+
+    /// Saves the structure as bytes (versioned and checksummed) that
+    /// [`Device::load_gas`] loads back into a structure with bit-identical hits. The CUDA
+    /// backend refuses with `Unsupported`.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LoadError> {
+        on_gas!(self, g => Ok(g.data().to_bytes()), {
+            let _ = g;
+            Err(LoadError::Unsupported("saving a GAS of the CUDA backend"))
+        })
     }
 
     /// Closest hits of a batch on the structure's device; the same hits on every device and
@@ -355,6 +365,16 @@ impl Ias {
     /// The flags it was built with.
     pub fn build_flags(&self) -> BuildFlags {
         self.data().build_flags
+    }
+
+    /// Saves the IAS without its children; [`Device::load_ias`] loads it back over children
+    /// given by instance index. The CUDA backend refuses with `Unsupported`.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LoadError> {
+        match &self.0 {
+            IasRepr::Cpu(i) => Ok(i.data().to_bytes()),
+            #[cfg(feature = "cuda")]
+            IasRepr::Cuda(_) => Err(LoadError::Unsupported("saving an IAS of the CUDA backend")),
+        }
     }
 
     /// Bytes of the IAS's own tables (its children are not counted).

@@ -3,7 +3,7 @@
 use crate::accel::{Gas, GasRepr, Ias, IasRepr};
 use oxray_core::{
     AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, DeviceContext, Hit,
-    QueryError, Ray, TraversableHandle,
+    LoadError, QueryError, Ray, TraversableHandle,
 };
 use std::sync::Arc;
 use thiserror::Error;
@@ -323,6 +323,62 @@ impl Device {
             _ => Err(BuildError::Unsupported(
                 "compacting a structure on another device than the one holding it",
             )),
+        }
+    }
+
+    /// Loads a GAS saved by [`Gas::to_bytes`] into this device's memory. The bytes are checked
+    /// before use (format, version, checksum, every size and index), so that damaged or
+    /// hostile bytes give a typed [`LoadError`]; the structure traces bit-identical hits. The
+    /// CUDA backend refuses with `Unsupported`.
+    ///
+    /// ```
+    /// use oxray::{BuildOptions, Device, Ray, TriangleInput, VertexBuffer};
+    /// use glam::Vec3;
+    /// let device = Device::cpu();
+    /// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let gas = device.build_gas(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let bytes = gas.to_bytes()?;
+    /// let loaded = device.load_gas(&bytes)?;
+    /// let mut hits = [None];
+    /// device.intersect_closest(&loaded.handle(), &[Ray::new(Vec3::Z, -Vec3::Z)], &mut hits)?;
+    /// assert_eq!(hits[0].unwrap().t, 1.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn load_gas(&self, bytes: &[u8]) -> Result<Gas, LoadError> {
+        match &self.repr {
+            DeviceRepr::Cpu(_) => Ok(Gas::from_repr(GasRepr::Cpu(Arc::new(
+                oxray_cpu::Gas::from(oxray_bvh::GasData::from_bytes(bytes)?),
+            )))),
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda(_) => Err(LoadError::Unsupported("loading a GAS on the CUDA backend")),
+        }
+    }
+
+    /// Loads an IAS saved by [`Ias::to_bytes`] over `children`, one per instance by instance
+    /// index — the structures it was built over or copies of them (loaded, compacted), as
+    /// OptiX's relocation takes one relocated traversable per instance (guide §5.7); the
+    /// saved world boxes are kept. Children must live on this device. The CUDA backend refuses
+    /// with `Unsupported`.
+    pub fn load_ias(&self, bytes: &[u8], children: &[TraversableHandle]) -> Result<Ias, LoadError> {
+        match &self.repr {
+            DeviceRepr::Cpu(_) => {
+                let data = oxray_bvh::IasData::from_bytes(bytes, children)?;
+                let ias = oxray_cpu::Ias::from_data(data).map_err(|e| match e {
+                    BuildError::ForeignTraversable { instance, .. } => LoadError::Child {
+                        instance,
+                        reason: e.to_string(),
+                    },
+                    other => LoadError::Child {
+                        instance: 0,
+                        reason: other.to_string(),
+                    },
+                })?;
+                Ok(Ias::from_repr(IasRepr::Cpu(Arc::new(ias))))
+            }
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda(_) => {
+                Err(LoadError::Unsupported("loading an IAS on the CUDA backend"))
+            }
         }
     }
 
