@@ -51,11 +51,16 @@ impl Bvh4Node {
         self.child_bounds(lane).is_valid()
     }
 
-    fn set(&mut self, lane: usize, b: &Aabb, child: u32, count: u32) {
+    /// Sets the box of child `lane`.
+    pub(crate) fn set_bounds(&mut self, lane: usize, b: &Aabb) {
         for axis in 0..3 {
             self.bounds[axis][lane] = b.min[axis];
             self.bounds[3 + axis][lane] = b.max[axis];
         }
+    }
+
+    fn set(&mut self, lane: usize, b: &Aabb, child: u32, count: u32) {
+        self.set_bounds(lane, b);
         self.child[lane] = child;
         self.count[lane] = count;
     }

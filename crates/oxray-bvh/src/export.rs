@@ -6,7 +6,7 @@
 //! CPU backend's closest-hit and any-hit queries.
 
 use crate::bvh4::Bvh4Node;
-use crate::gas::{GasData, GasKind, NO_PRIMITIVE};
+use crate::gas::{GasData, GasKind};
 use oxray_core::Aabb;
 use rayon::prelude::*;
 
@@ -36,7 +36,8 @@ pub struct ExportedTriangle {
 pub struct GasExport {
     /// The 4-wide BVH, root first (see [`Bvh4Node`]).
     pub nodes: Vec<Bvh4Node>,
-    /// The triangle of each leaf slot; `None` for padding slots that no leaf covers.
+    /// The triangle of each leaf slot; `None` for padding slots that no leaf covers and for
+    /// the slots an `ALLOW_UPDATE` build keeps for inactive primitives (never hit).
     pub slots: Vec<Option<ExportedTriangle>>,
     /// The box around every active triangle (empty when there is none).
     pub bounds: Aabb,
@@ -73,7 +74,8 @@ impl GasData {
         let slots = (0..self.slot_prim.len())
             .into_par_iter()
             .map(|slot| {
-                if self.slot_prim[slot] == NO_PRIMITIVE {
+                // Padding, and the slots an updatable build keeps for inactive primitives.
+                if !self.slot_is_active(slot) {
                     return None;
                 }
                 let (primitive_index, sbt_gas_index, build_input) = self.resolve(slot as u32);
@@ -165,6 +167,23 @@ mod tests {
             }
         }
         assert!(seen.iter().all(|&s| s == 1));
+    }
+
+    #[test]
+    fn inactive_slots_of_an_updatable_gas_are_not_exported() {
+        let (mut v, t) = grid(6);
+        v[0] = v[1]; // triangle 0 degenerate
+        let options = BuildOptions::new(oxray_core::BuildFlags::ALLOW_UPDATE);
+        let input = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u32x3(&t));
+        let gas = Gas::build(&options, &[input.into()]).unwrap();
+        assert_eq!(gas.num_active_primitives() as usize, t.len() - 1);
+        let e = gas.export_triangles().unwrap();
+        assert_eq!(e.num_triangles(), t.len() - 1);
+        assert!(e.slots.iter().flatten().all(|s| s
+            .vertices
+            .iter()
+            .flatten()
+            .all(|c| c.is_finite())));
     }
 
     #[test]

@@ -11,8 +11,8 @@ use bytemuck::Zeroable;
 use glam::Vec3;
 use oxray_core::validate::{validate_sbt_offsets, validate_structure};
 use oxray_core::{
-    Aabb, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOptions, GeometryFlags,
-    InputLocation, TriangleInput,
+    Aabb, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOperation, BuildOptions,
+    GeometryFlags, IndexFormat, InputLocation, TriangleInput, UpdateRule, VertexFormat,
 };
 use rayon::prelude::*;
 
@@ -117,6 +117,80 @@ pub struct GasData {
     pub bounds: Aabb,
     /// Primitives declared over all inputs, inactive ones included.
     pub num_primitives: u32,
+    /// The description of every build input (counts, formats), which an update must repeat
+    /// (guide §5.6).
+    pub shapes: Vec<InputShape>,
+    /// The structure's identity across updates and compaction (see
+    /// [`Traversable::lineage`](oxray_core::Traversable::lineage)).
+    pub lineage: u64,
+}
+
+/// What an update must repeat of a build input (guide §5.6): its type, counts and formats.
+/// Buffer contents (vertices, indices, boxes, SBT index offsets, the pre-transform matrix) may
+/// change.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InputShape {
+    /// Triangles or custom primitives.
+    pub kind: GasKind,
+    /// Vertices (triangles) or boxes (custom primitives).
+    pub num_vertices: u32,
+    /// The vertex format (triangles), as [`VertexFormat`]'s declaration order.
+    pub vertex_format: u8,
+    /// The index format plus one (0: no index buffer).
+    pub index_format: u8,
+    /// Index triplets.
+    pub num_indices: u32,
+    /// Whether a pre-transform is applied.
+    pub pre_transform: bool,
+    /// Bytes of one SBT index offset (0: no SBT index offset buffer).
+    pub sbt_offset_size: u8,
+    /// SBT records of the input.
+    pub num_sbt_records: u32,
+}
+
+impl InputShape {
+    /// The shape of a GAS build input; `None` for an instance input.
+    pub fn of(input: &BuildInput<'_>) -> Option<InputShape> {
+        let sbt_offset_size = input.sbt_index_offsets().map_or(0, |o| o.size.size() as u8);
+        let num_sbt_records = input.flags().len() as u32;
+        match input {
+            BuildInput::Triangles(t) => Some(InputShape {
+                kind: GasKind::Triangles,
+                num_vertices: t.vertices.count,
+                vertex_format: vertex_format_code(t.vertices.format),
+                index_format: t.indices.as_ref().map_or(0, |i| match i.format {
+                    IndexFormat::U16x3 => 1,
+                    IndexFormat::U32x3 => 2,
+                }),
+                num_indices: t.indices.as_ref().map_or(0, |i| i.count),
+                pre_transform: t.pre_transform.is_some(),
+                sbt_offset_size,
+                num_sbt_records,
+            }),
+            BuildInput::CustomPrimitives(c) => Some(InputShape {
+                kind: GasKind::CustomPrimitives,
+                num_vertices: c.aabbs.count,
+                vertex_format: 0,
+                index_format: 0,
+                num_indices: 0,
+                pre_transform: false,
+                sbt_offset_size,
+                num_sbt_records,
+            }),
+            _ => None,
+        }
+    }
+}
+
+fn vertex_format_code(f: VertexFormat) -> u8 {
+    match f {
+        VertexFormat::F32x3 => 0,
+        VertexFormat::F32x2 => 1,
+        VertexFormat::F16x3 => 2,
+        VertexFormat::F16x2 => 3,
+        VertexFormat::Snorm16x3 => 4,
+        VertexFormat::Snorm16x2 => 5,
+    }
 }
 
 impl GasData {
@@ -144,7 +218,13 @@ impl GasData {
         inputs: &[BuildInput<'_>],
         keep_tree: bool,
     ) -> Result<(GasData, Option<Bvh2>), BuildError> {
+        if options.operation == BuildOperation::Update {
+            return Err(BuildError::InvalidUpdate(UpdateRule::NoStructure));
+        }
         let summary = validate_structure(options, inputs)?;
+        // An updatable structure keeps a slot for every primitive, inactive ones included, so
+        // that an update can make them active (and inactive ones never hit).
+        let keep_inactive = options.flags.contains(BuildFlags::ALLOW_UPDATE);
 
         let mut records = Vec::with_capacity(inputs.len());
         let mut record_flags = Vec::with_capacity(summary.num_sbt_records as usize);
@@ -203,6 +283,8 @@ impl GasData {
             record_flags,
             bounds: Aabb::EMPTY,
             num_primitives: summary.num_primitives,
+            shapes: inputs.iter().filter_map(InputShape::of).collect(),
+            lineage: crate::next_lineage(),
         };
 
         let mut tree = None;
@@ -222,10 +304,15 @@ impl GasData {
                 };
                 // An indexed parallel map, then a sequential filter: rayon's filtered collect
                 // would allocate per item.
-                let boxes: Vec<Option<Aabb>> = tris
+                let mut boxes: Vec<Option<Aabb>> = tris
                     .par_iter()
                     .map(|t| (!is_degenerate(t[0], t[1], t[2])).then(|| Aabb::from_points(t)))
                     .collect();
+                let active: Option<Vec<bool>> =
+                    keep_inactive.then(|| boxes.iter().map(Option::is_some).collect());
+                if keep_inactive {
+                    place_inactive(&mut boxes, |i| Aabb::from_points(&tris[i]));
+                }
                 let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
                     .iter()
                     .enumerate()
@@ -243,6 +330,10 @@ impl GasData {
                 (gas.triangles, gas.slot_prim) = pack_triangles(&mut gas.bvh, &global, &tris);
                 if let Some(before) = before {
                     tree = Some(remap_leaves(bvh2, &before, &leaf_starts(&gas.bvh)));
+                }
+                if let Some(active) = active {
+                    crate::refit::deactivate_lanes(&mut gas.triangles, &gas.slot_prim, &active);
+                    gas.bounds = crate::refit::refit_triangle_boxes(&mut gas);
                 }
             }
             GasKind::CustomPrimitives => {
@@ -265,29 +356,56 @@ impl GasData {
                         _ => unreachable!("inputs are homogeneous"),
                     })
                     .collect();
-                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
+                let mut valid: Vec<Option<Aabb>> = boxes
+                    .iter()
+                    .map(|b| b.is_finite_valid().then_some(*b))
+                    .collect();
+                if keep_inactive {
+                    place_inactive(&mut valid, |i| {
+                        let b = boxes[i];
+                        Aabb::from_points(&[b.min, b.max])
+                    });
+                }
+                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = valid
                     .iter()
                     .enumerate()
-                    .filter(|(_, b)| b.is_finite_valid())
-                    .map(|(i, b)| (i as u32, *b))
+                    .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
                     .unzip();
                 let bvh2 = build_bvh2(&bounds, &config);
                 gas.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
-                gas.aabbs = gas.slot_prim.iter().map(|&g| boxes[g as usize]).collect();
+                gas.aabbs = gas
+                    .slot_prim
+                    .iter()
+                    .map(|&g| {
+                        let b = boxes[g as usize];
+                        if b.is_finite_valid() {
+                            b
+                        } else {
+                            Aabb::EMPTY
+                        }
+                    })
+                    .collect();
                 gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
                 gas.bvh = Bvh4::from(&bvh2);
+                if keep_inactive {
+                    gas.bounds = crate::refit::refit_aabb_boxes(&mut gas);
+                }
                 // Custom primitives are not packed: the tree's slots are the structure's.
                 tree = keep_tree.then_some(bvh2);
             }
         }
-        // What the structure keeps is exactly what it reports (and what the query bounds).
-        gas.bvh.nodes.shrink_to_fit();
-        gas.triangles.shrink_to_fit();
-        gas.aabbs.shrink_to_fit();
-        gas.slot_prim.shrink_to_fit();
-        gas.sbt_offsets.shrink_to_fit();
-        gas.inputs.shrink_to_fit();
-        gas.record_flags.shrink_to_fit();
+        if !keep_inactive {
+            // Only an update checks the inputs' shapes.
+            gas.shapes = Vec::new();
+        }
+        if options.flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            // As OptiX's, the structure occupies its output buffer, of the size the memory
+            // query bounds, until it is compacted (guide §5.8).
+            gas.occupy_output_bound();
+        } else {
+            // What the structure keeps is exactly what it reports: compact from the start.
+            gas.shrink_to_fit();
+        }
         Ok((gas, tree))
     }
 
@@ -311,10 +429,22 @@ impl GasData {
 
     /// Primitives that can be hit.
     pub fn num_active_primitives(&self) -> u32 {
-        self.slot_prim
-            .iter()
-            .filter(|&&g| g != NO_PRIMITIVE)
+        (0..self.slot_prim.len())
+            .filter(|&s| self.slot_is_active(s))
             .count() as u32
+    }
+
+    /// Whether leaf slot `slot` holds a primitive that can be hit (an updatable structure keeps
+    /// slots of inactive primitives: their triangle lanes hold NaN, their boxes are empty).
+    #[inline]
+    pub fn slot_is_active(&self, slot: usize) -> bool {
+        if self.slot_prim.get(slot).is_none_or(|&g| g == NO_PRIMITIVE) {
+            return false;
+        }
+        match self.kind {
+            GasKind::Triangles => !self.triangles[slot / 4].v[0][0][slot % 4].is_nan(),
+            GasKind::CustomPrimitives => self.aabbs[slot].is_finite_valid(),
+        }
     }
 
     /// Number of build inputs.
@@ -360,10 +490,92 @@ impl GasData {
                 + bytes(&self.slot_prim)
                 + bytes(&self.sbt_offsets)
                 + bytes(&self.inputs)
-                + bytes(&self.record_flags),
+                + bytes(&self.record_flags)
+                + bytes(&self.shapes),
             node_bytes,
             primitive_bytes,
         }
+    }
+
+    fn shrink_to_fit(&mut self) {
+        self.bvh.nodes.shrink_to_fit();
+        self.triangles.shrink_to_fit();
+        self.aabbs.shrink_to_fit();
+        self.slot_prim.shrink_to_fit();
+        self.sbt_offsets.shrink_to_fit();
+        self.inputs.shrink_to_fit();
+        self.record_flags.shrink_to_fit();
+        self.shapes.shrink_to_fit();
+    }
+
+    /// Grows every table to the size the memory query allows it (the output buffer).
+    fn occupy_output_bound(&mut self) {
+        fn grow<T>(v: &mut Vec<T>, bound: usize) {
+            v.reserve_exact(bound.saturating_sub(v.len()));
+        }
+        let n = self.num_primitives as usize;
+        grow(&mut self.bvh.nodes, n.saturating_sub(1).max(1));
+        match self.kind {
+            GasKind::Triangles => {
+                grow(&mut self.triangles, n);
+                grow(&mut self.slot_prim, 4 * n);
+            }
+            GasKind::CustomPrimitives => {
+                grow(&mut self.aabbs, n);
+                grow(&mut self.slot_prim, n);
+            }
+        }
+    }
+
+    /// The bytes the structure takes once compacted: the emitted property `COMPACTED_SIZE`
+    /// (guide §5.8), known before compacting. `None` unless it was built with
+    /// `ALLOW_COMPACTION`.
+    pub fn compacted_size(&self) -> Option<usize> {
+        if !self.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            return None;
+        }
+        fn bytes<T>(v: &[T]) -> usize {
+            std::mem::size_of_val(v)
+        }
+        Some(
+            bytes(&self.bvh.nodes)
+                + bytes(&self.triangles)
+                + bytes(&self.aabbs)
+                + bytes(&self.slot_prim)
+                + bytes(&self.sbt_offsets)
+                + bytes(&self.inputs)
+                + bytes(&self.record_flags)
+                + bytes(&self.shapes),
+        )
+    }
+
+    /// The compacted structure (`optixAccelCompact`, guide §5.8): a copy in exactly sized
+    /// tables, [`compacted_size`](Self::compacted_size) bytes, with the same tree, primitives
+    /// and hits; it references nothing of the source, which may be dropped. It can be
+    /// traversed, updated (if built with `ALLOW_UPDATE`) and saved like its source, and keeps
+    /// its lineage. Refused with [`BuildError::CompactionNotAllowed`] without
+    /// `ALLOW_COMPACTION`.
+    ///
+    /// ```
+    /// use oxray_bvh::GasData;
+    /// use oxray_core::{BuildFlags, BuildOptions, TriangleInput, VertexBuffer};
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let options = BuildOptions::new(BuildFlags::ALLOW_COMPACTION);
+    /// let gas = GasData::build(&options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let size = gas.compacted_size().unwrap();
+    /// let compact = gas.compact()?;
+    /// assert_eq!(compact.memory().output_bytes, size);
+    /// assert!(size <= gas.memory().output_bytes);
+    /// # Ok::<(), oxray_core::BuildError>(())
+    /// ```
+    pub fn compact(&self) -> Result<GasData, BuildError> {
+        if !self.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            return Err(BuildError::CompactionNotAllowed);
+        }
+        // `Vec::clone` allocates exactly the length.
+        let mut out = self.clone();
+        out.shrink_to_fit();
+        Ok(out)
     }
 
     /// What a backend that keeps the structure elsewhere (in GPU memory, say) reports of it.
@@ -399,6 +611,28 @@ impl GasData {
         let rec = &self.inputs[input];
         let sbt = rec.sbt_base + self.sbt_offsets.get(global as usize).copied().unwrap_or(0);
         (local + rec.primitive_index_offset, sbt, input as u32)
+    }
+}
+
+/// Gives every inactive primitive of an updatable build a box to be placed by (`fallback`'s
+/// box where it is finite and valid, else a point at the centre of the active boxes), so that
+/// it has a leaf slot that an update can fill.
+fn place_inactive(boxes: &mut [Option<Aabb>], fallback: impl Fn(usize) -> Aabb) {
+    let all = boxes.iter().flatten().fold(Aabb::EMPTY, |a, b| a.union(b));
+    let centre = if all.is_finite_valid() {
+        (all.min + all.max) * 0.5
+    } else {
+        Vec3::ZERO
+    };
+    for (i, b) in boxes.iter_mut().enumerate() {
+        if b.is_none() {
+            let f = fallback(i);
+            *b = Some(if f.is_finite_valid() {
+                f
+            } else {
+                Aabb::new(centre, centre)
+            });
+        }
     }
 }
 
@@ -477,7 +711,7 @@ fn pack_triangles(
 }
 
 /// Checks that every index of an indexed triangle input is in range.
-fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<(), BuildError> {
+pub(crate) fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<(), BuildError> {
     let Some(ix) = &t.indices else { return Ok(()) };
     let stride = ix.effective_stride();
     let nv = t.vertices.count;
@@ -498,12 +732,20 @@ fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<(), BuildEr
 
 /// Decodes (and pre-transforms) every triangle of a validated input.
 fn decode_triangles(t: &TriangleInput<'_>) -> Vec<[Vec3; 3]> {
+    let n = t.num_primitives() as usize;
+    (0..n)
+        .into_par_iter()
+        .map(|k| decode_triangle(t, k))
+        .collect()
+}
+
+/// Decodes (and pre-transforms) triangle `k` of a validated input whose indices are in range.
+pub(crate) fn decode_triangle(t: &TriangleInput<'_>, k: usize) -> [Vec3; 3] {
     let v = &t.vertices;
     let vstride = v.effective_stride();
-    let m = t.pre_transform;
     let vertex = |i: u32| {
         let p = v.format.decode(&v.data[i as usize * vstride..]);
-        match &m {
+        match &t.pre_transform {
             None => p,
             Some(m) => Vec3::new(
                 m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],
@@ -512,17 +754,11 @@ fn decode_triangles(t: &TriangleInput<'_>) -> Vec<[Vec3; 3]> {
             ),
         }
     };
-    let n = t.num_primitives() as usize;
-    (0..n)
-        .into_par_iter()
-        .map(|k| {
-            let idx = match &t.indices {
-                Some(ix) => ix.format.decode(&ix.data[k * ix.effective_stride()..]),
-                None => [3 * k as u32, 3 * k as u32 + 1, 3 * k as u32 + 2],
-            };
-            idx.map(vertex)
-        })
-        .collect()
+    let idx = match &t.indices {
+        Some(ix) => ix.format.decode(&ix.data[k * ix.effective_stride()..]),
+        None => [3 * k as u32, 3 * k as u32 + 1, 3 * k as u32 + 2],
+    };
+    idx.map(vertex)
 }
 
 #[cfg(test)]

@@ -6,9 +6,9 @@ use crate::bvh2::Bvh2;
 use crate::bvh4::Bvh4;
 use crate::stats::BvhStats;
 use oxray_core::{
-    Aabb, BuildError, BuildFlags, BuildInput, BuildOperation, BuildOptions, Instance,
-    InstanceFlags, Transform, TraversableHandle, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
-    MAX_SBT_OFFSET, MAX_TRAVERSABLE_GRAPH_DEPTH,
+    Aabb, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOperation, BuildOptions,
+    Instance, InstanceFlags, Transform, TraversableHandle, UpdateRule, MAX_INSTANCES_PER_IAS,
+    MAX_INSTANCE_ID, MAX_SBT_OFFSET, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
 use rayon::prelude::*;
 
@@ -66,9 +66,15 @@ pub struct IasData {
     pub num_instances: u32,
     /// Levels of the traversable graph from this IAS down (an IAS over GASes is 2).
     pub depth: u32,
+    /// The type of the build input (instances or instance pointers), which an update must
+    /// repeat.
+    pub input_kind: BuildInputKind,
+    /// The structure's identity across updates and compaction (see
+    /// [`Traversable::lineage`](oxray_core::Traversable::lineage)).
+    pub lineage: u64,
 }
 
-fn validate_instance(i: u32, inst: &Instance) -> Result<Transform, BuildError> {
+pub(crate) fn validate_instance(i: u32, inst: &Instance) -> Result<Transform, BuildError> {
     if inst.instance_id > MAX_INSTANCE_ID {
         return Err(BuildError::field(i, "instance_id", inst.instance_id, 28));
     }
@@ -101,6 +107,31 @@ fn validate_instance(i: u32, inst: &Instance) -> Result<Transform, BuildError> {
         .ok_or(BuildError::InvalidTransform { instance: Some(i) })
 }
 
+/// The instances of the single instance input of an IAS build or update.
+fn instance_list<'a>(inputs: &'a [BuildInput<'a>]) -> Result<Vec<&'a Instance>, BuildError> {
+    let [input] = inputs else {
+        return Err(BuildError::IasInputCount {
+            count: inputs.len(),
+        });
+    };
+    let list: Vec<&Instance> = match input {
+        BuildInput::Instances(i) => i.iter().collect(),
+        BuildInput::InstancePointers(i) => i.to_vec(),
+        other => {
+            return Err(BuildError::NotInstances {
+                found: other.kind(),
+            })
+        }
+    };
+    if list.len() as u64 > MAX_INSTANCES_PER_IAS {
+        return Err(BuildError::TooManyInstances {
+            count: list.len() as u64,
+            limit: MAX_INSTANCES_PER_IAS,
+        });
+    }
+    Ok(list)
+}
+
 impl IasData {
     /// Builds an IAS from exactly one instance build input (guide §5.4). Instance fields with
     /// bits above their limits, singular transforms and graphs deeper than 31 levels are
@@ -122,28 +153,10 @@ impl IasData {
             return Err(BuildError::ConflictingBuildFlags);
         }
         if options.operation == BuildOperation::Update {
-            return Err(BuildError::Unsupported("BuildOperation::Update"));
+            return Err(BuildError::InvalidUpdate(UpdateRule::NoStructure));
         }
-        let [input] = inputs else {
-            return Err(BuildError::IasInputCount {
-                count: inputs.len(),
-            });
-        };
-        let list: Vec<&Instance> = match input {
-            BuildInput::Instances(i) => i.iter().collect(),
-            BuildInput::InstancePointers(i) => i.to_vec(),
-            other => {
-                return Err(BuildError::NotInstances {
-                    found: other.kind(),
-                })
-            }
-        };
-        if list.len() as u64 > MAX_INSTANCES_PER_IAS {
-            return Err(BuildError::TooManyInstances {
-                count: list.len() as u64,
-                limit: MAX_INSTANCES_PER_IAS,
-            });
-        }
+        let list = instance_list(inputs)?;
+        let keep_inactive = options.flags.contains(BuildFlags::ALLOW_UPDATE);
         let records: Vec<InstanceData> = list
             .par_iter()
             .enumerate()
@@ -176,10 +189,22 @@ impl IasData {
                 b.is_finite_valid().then_some(b)
             })
             .collect();
+        // An updatable IAS keeps a slot for every instance; one that cannot be hit now is
+        // placed at the centre of the others until an update gives it a box.
+        let all = world.iter().flatten().fold(Aabb::EMPTY, |a, b| a.union(b));
+        let centre = if all.is_finite_valid() {
+            (all.min + all.max) * 0.5
+        } else {
+            glam::Vec3::ZERO
+        };
         let (ids, boxes): (Vec<u32>, Vec<Aabb>) = world
             .iter()
             .enumerate()
-            .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
+            .filter_map(|(i, b)| match b {
+                Some(b) => Some((i as u32, *b)),
+                None if keep_inactive => Some((i as u32, Aabb::new(centre, centre))),
+                None => None,
+            })
             .unzip();
         let config = BuildConfig {
             block_size: 1,
@@ -205,7 +230,7 @@ impl IasData {
             .iter()
             .map(|&i| world[i as usize].unwrap_or(Aabb::EMPTY))
             .collect();
-        let data = IasData {
+        let mut data = IasData {
             bvh,
             instances,
             boxes,
@@ -214,10 +239,176 @@ impl IasData {
             build_flags: options.flags,
             num_instances: list.len() as u32,
             depth,
+            input_kind: inputs[0].kind(),
+            lineage: crate::next_lineage(),
         };
+        if keep_inactive {
+            data.refit();
+        }
         // The tree's slots are the structure's: instances are not packed.
         bvh2.prim_order = Vec::new();
         Ok((data, bvh2))
+    }
+
+    /// Refits the node boxes from the instance boxes.
+    fn refit(&mut self) {
+        let boxes = &self.boxes;
+        self.bounds = crate::refit::refit_nodes(&mut self.bvh.nodes, |first, count| {
+            boxes[first as usize..(first + count) as usize]
+                .iter()
+                .fold(Aabb::EMPTY, |a, b| a.union(b))
+        });
+    }
+
+    /// Checks an update against the rules of guide §5.6 without changing anything:
+    /// `operation` is `Update`, the IAS was built with `ALLOW_UPDATE` and the same flags, from
+    /// one input of the same type and number of instances, and every instance's child is the
+    /// structure it was built over or an update of it
+    /// ([`TraversableHandle::same_structure`]). Transforms, ids, SBT offsets, masks and flags
+    /// may change, and are validated as a build validates them.
+    pub fn check_update(
+        &self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        self.prepare_update(options, inputs).map(|_| ())
+    }
+
+    /// The validated new instance records, by input index.
+    fn prepare_update(
+        &self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<Vec<InstanceData>, BuildError> {
+        let rule = |r| Err(BuildError::InvalidUpdate(r));
+        if options.operation != BuildOperation::Update {
+            return rule(UpdateRule::NotAnUpdate);
+        }
+        if !self.build_flags.contains(BuildFlags::ALLOW_UPDATE) {
+            return rule(UpdateRule::NotAllowed);
+        }
+        if options.flags != self.build_flags {
+            return rule(UpdateRule::Flags {
+                built: self.build_flags,
+                given: options.flags,
+            });
+        }
+        if inputs.len() != 1 {
+            return rule(UpdateRule::InputCount {
+                built: 1,
+                given: inputs.len(),
+            });
+        }
+        if inputs[0].kind() != self.input_kind {
+            return rule(UpdateRule::InputKind {
+                input: 0,
+                built: self.input_kind,
+                given: inputs[0].kind(),
+            });
+        }
+        let list = instance_list(inputs)?;
+        if list.len() != self.num_instances as usize {
+            return rule(UpdateRule::Count {
+                input: 0,
+                what: "instances",
+                built: self.num_instances as u64,
+                given: list.len() as u64,
+            });
+        }
+        list.par_iter()
+            .enumerate()
+            .map(|(i, inst)| {
+                let Some(old) = self
+                    .slot_of
+                    .get(i)
+                    .and_then(|&s| self.instances.get(s as usize))
+                else {
+                    return Err(BuildError::InvalidUpdate(UpdateRule::InstanceChild {
+                        instance: i as u32,
+                    }));
+                };
+                if !old.child.same_structure(&inst.child) {
+                    return Err(BuildError::InvalidUpdate(UpdateRule::InstanceChild {
+                        instance: i as u32,
+                    }));
+                }
+                let inverse = validate_instance(i as u32, inst)?;
+                Ok(InstanceData {
+                    object_to_world: inst.transform,
+                    world_to_object: inverse,
+                    instance_id: inst.instance_id,
+                    sbt_offset: inst.sbt_offset,
+                    mask: inst.visibility_mask as u8,
+                    flags: inst.flags,
+                    child: inst.child.clone(),
+                    index: i as u32,
+                })
+            })
+            .collect::<Vec<Result<_, BuildError>>>()
+            .into_iter()
+            .collect()
+    }
+
+    /// Updates (refits) the IAS in place (guide §5.6): new transforms (and ids, SBT offsets,
+    /// masks, flags) for the same instances of the same children — a child may be an update of
+    /// the structure the IAS was built over, whose new bounds are taken. Every rule is checked
+    /// first ([`check_update`](Self::check_update)); on an error nothing has changed. The
+    /// instance boxes are recomputed and the node boxes refit bottom-up.
+    pub fn update(
+        &mut self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        let records = self.prepare_update(options, inputs)?;
+        for (i, r) in records.into_iter().enumerate() {
+            let slot = self.slot_of[i] as usize;
+            let b = r.object_to_world.transform_aabb(&r.child.bounds());
+            self.boxes[slot] = if b.is_finite_valid() { b } else { Aabb::EMPTY };
+            self.instances[slot] = r;
+        }
+        self.depth = 1 + self
+            .instances
+            .iter()
+            .map(|r| r.child.graph_depth())
+            .max()
+            .unwrap_or(0);
+        self.refit();
+        Ok(())
+    }
+
+    /// Bytes the IAS occupies (its own tables; the children are not counted).
+    pub fn memory_bytes(&self) -> usize {
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        bytes(&self.bvh.nodes) + bytes(&self.instances) + bytes(&self.boxes) + bytes(&self.slot_of)
+    }
+
+    /// The bytes of the compacted IAS (emitted property `COMPACTED_SIZE`, guide §5.8); `None`
+    /// unless built with `ALLOW_COMPACTION`.
+    pub fn compacted_size(&self) -> Option<usize> {
+        self.build_flags
+            .contains(BuildFlags::ALLOW_COMPACTION)
+            .then(|| {
+                std::mem::size_of_val(self.bvh.nodes.as_slice())
+                    + std::mem::size_of_val(self.instances.as_slice())
+                    + std::mem::size_of_val(self.boxes.as_slice())
+                    + std::mem::size_of_val(self.slot_of.as_slice())
+            })
+    }
+
+    /// The compacted IAS (guide §5.8): exactly sized tables over the same children, the same
+    /// hits. Refused without `ALLOW_COMPACTION`.
+    pub fn compact(&self) -> Result<IasData, BuildError> {
+        if !self.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            return Err(BuildError::CompactionNotAllowed);
+        }
+        let mut out = self.clone();
+        out.bvh.nodes.shrink_to_fit();
+        out.instances.shrink_to_fit();
+        out.boxes.shrink_to_fit();
+        out.slot_of.shrink_to_fit();
+        Ok(out)
     }
 
     /// Instances in the build input.

@@ -33,6 +33,8 @@ pub mod export;
 pub mod gas;
 pub mod ias;
 pub mod memory;
+mod refit;
+pub mod serialize;
 mod stats;
 pub mod triangle;
 pub mod triangle4;
@@ -41,7 +43,7 @@ pub use build::{build_bvh2, temp_bytes, BuildConfig};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh4::{Bvh4, Bvh4Node};
 pub use export::{ExportedTriangle, GasExport};
-pub use gas::{GasData, GasInfo, GasKind, GasMemory, InputRecord, NO_PRIMITIVE};
+pub use gas::{GasData, GasInfo, GasKind, GasMemory, InputRecord, InputShape, NO_PRIMITIVE};
 pub use ias::{IasData, InstanceData};
 pub use memory::{compute_memory_usage, AccelBufferSizes};
 pub use stats::BvhStats;
@@ -56,3 +58,11 @@ pub const TRAVERSAL_STACK_SIZE: usize = 3 * MAX_BVH2_DEPTH + 4;
 pub(crate) const FORCE_MEDIAN_DEPTH: usize = 34;
 /// The greatest depth a [`Bvh2`] built by oxray can have (root at depth 0).
 pub const MAX_BVH2_DEPTH: usize = FORCE_MEDIAN_DEPTH + 30;
+
+/// A new lineage for a freshly built (or loaded) structure: the identity an update or a
+/// compaction keeps (see [`oxray_core::Traversable::lineage`]).
+pub fn next_lineage() -> u64 {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    NEXT.fetch_add(1, Ordering::Relaxed)
+}

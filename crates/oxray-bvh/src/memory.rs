@@ -36,7 +36,12 @@ pub fn compute_memory_usage(
     inputs: &[BuildInput<'_>],
 ) -> Result<AccelBufferSizes, BuildError> {
     let summary = validate_structure(options, inputs)?;
-    Ok(sizes_for(&summary, inputs.len()))
+    let mut sizes = sizes_for(&summary, inputs.len());
+    if options.flags.contains(oxray_core::BuildFlags::ALLOW_UPDATE) {
+        // A refit works in place: the table of input starts and the thread pool's jobs.
+        sizes.temp_update_size_in_bytes = inputs.len() * 4 + FIXED_TEMP;
+    }
+    Ok(sizes)
 }
 
 /// The sizes for validated inputs of `num_inputs` build inputs.
@@ -70,7 +75,9 @@ fn output_bound(s: &InputSummary, num_inputs: usize) -> usize {
     // Slot-to-primitive map, and per-primitive SBT offsets (kept only when some input has more
     // than one record, but bounded here by counts alone).
     let ids = n * 4 * (slots + 1);
-    let inputs = num_inputs * std::mem::size_of::<InputRecord>() + s.num_sbt_records as usize * 4;
+    let inputs = num_inputs
+        * (std::mem::size_of::<InputRecord>() + std::mem::size_of::<crate::InputShape>())
+        + s.num_sbt_records as usize * 4;
     nodes + n * per_prim + ids + inputs + FIXED_OUTPUT
 }
 

@@ -50,6 +50,33 @@ pub trait AccelBackend: Send + Sync + 'static {
         inputs: &[BuildInput<'_>],
     ) -> Result<Self::Ias, BuildError>;
 
+    /// Updates (refits) a GAS built with `ALLOW_UPDATE` (guide §5.6) with new buffer
+    /// contents: in place where `gas` is the structure's only owner, else on a copy that `gas`
+    /// then refers to (copy-on-write), so that what shares the old structure (an IAS over it,
+    /// a trace in flight) keeps it until it is updated in turn. Backends that cannot update
+    /// refuse with `Unsupported`.
+    fn update_gas(
+        &self,
+        gas: &mut std::sync::Arc<Self::Gas>,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        let _ = (gas, options, inputs);
+        Err(BuildError::Unsupported("updating a GAS on this backend"))
+    }
+
+    /// Updates (refits) an IAS built with `ALLOW_UPDATE` (guide §5.6), as
+    /// [`update_gas`](Self::update_gas) does a GAS.
+    fn update_ias(
+        &self,
+        ias: &mut std::sync::Arc<Self::Ias>,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        let _ = (ias, options, inputs);
+        Err(BuildError::Unsupported("updating an IAS on this backend"))
+    }
+
     /// The closest hit of every ray under `root`, or `None`.
     fn intersect_closest(
         &self,

@@ -240,6 +240,14 @@ pub enum BuildError {
         /// The limit.
         limit: u32,
     },
+    /// An update (`BuildOperation::Update`, guide §5.6) that breaks one of the guide's rules
+    /// on updates: the structure must have been built with `ALLOW_UPDATE`, with the same
+    /// options and the same inputs up to buffer contents.
+    #[error("update refused: {0}")]
+    InvalidUpdate(UpdateRule),
+    /// Compaction (guide §5.8) of a structure built without `ALLOW_COMPACTION`.
+    #[error("compaction needs a structure built with ALLOW_COMPACTION (guide §5.8)")]
+    CompactionNotAllowed,
     /// `primitiveIndexOffset + numPrimitives` must fit in 32 bits.
     #[error("{at}: primitive index offset {offset} + {count} primitives overflows 32 bits")]
     PrimitiveIndexOffsetOverflow {
@@ -267,10 +275,230 @@ impl BuildError {
     pub fn code(&self) -> ErrorCode {
         match self {
             BuildError::Unsupported(_) => ErrorCode::NotSupported,
-            BuildError::NoBuildInputs | BuildError::ConflictingBuildFlags => {
-                ErrorCode::InvalidValue
-            }
+            BuildError::NoBuildInputs
+            | BuildError::ConflictingBuildFlags
+            | BuildError::CompactionNotAllowed
+            | BuildError::InvalidUpdate(
+                UpdateRule::NoStructure | UpdateRule::NotAnUpdate | UpdateRule::NotAllowed,
+            ) => ErrorCode::InvalidValue,
             _ => ErrorCode::InvalidInput,
+        }
+    }
+}
+
+/// The rule of guide §5.6 (and §5.8 for compacted structures) an update breaks: what differs
+/// from the build that made the structure. "Only the device pointers and/or their buffer
+/// content may be changed. You cannot change the number of build inputs, the build input
+/// types, build flags, traversable handles for instances (for an instance-AS), or the number
+/// of vertices, indices, AABBs, instances, SBT records or motion keys."
+#[derive(Clone, Debug, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum UpdateRule {
+    /// A build call with `operation = Update`: an update applies to an existing structure
+    /// (§5.6, Listing 5.9: "call `optixAccelBuild` on the same output data").
+    NoStructure,
+    /// An update call whose options say `operation = Build` (§5.6, Listing 5.9).
+    NotAnUpdate,
+    /// The structure was built without `ALLOW_UPDATE` (§5.6: "To allow for future updates ...
+    /// set `OPTIX_BUILD_FLAG_ALLOW_UPDATE`"; §5.8 for a compacted structure).
+    NotAllowed,
+    /// The build flags differ from the build's (§5.6: "All other options are required to be
+    /// identical to the original build").
+    Flags {
+        /// Flags of the build.
+        built: crate::options::BuildFlags,
+        /// Flags of the update.
+        given: crate::options::BuildFlags,
+    },
+    /// The number of build inputs differs (§5.6).
+    InputCount {
+        /// Inputs of the build.
+        built: usize,
+        /// Inputs of the update.
+        given: usize,
+    },
+    /// A build input's type differs (§5.6).
+    InputKind {
+        /// The input.
+        input: usize,
+        /// Its type at the build.
+        built: BuildInputKind,
+        /// Its type now.
+        given: BuildInputKind,
+    },
+    /// A count differs: vertices, indices, AABBs, instances or SBT records (§5.6).
+    Count {
+        /// The input.
+        input: usize,
+        /// What is counted.
+        what: &'static str,
+        /// The count at the build.
+        built: u64,
+        /// The count now.
+        given: u64,
+    },
+    /// A part of the input's description other than a buffer's contents differs: a vertex or
+    /// index format, an index buffer, pre-transform or SBT index offset buffer present at one
+    /// call and not the other, the SBT index offset size, the primitive index offset, or the
+    /// geometry flags of an SBT record (§5.6: only device pointers and buffer contents may
+    /// change).
+    Description {
+        /// The input.
+        input: usize,
+        /// What differs.
+        what: &'static str,
+    },
+    /// An instance's child is not the structure it was built with, nor an update of it (§5.6:
+    /// "traversable handles for instances" may not change).
+    InstanceChild {
+        /// The instance (index in the build input).
+        instance: u32,
+    },
+}
+
+impl std::fmt::Display for UpdateRule {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            UpdateRule::NoStructure => write!(
+                f,
+                "operation Update needs the structure to update; build with operation Build, or \
+                 call the update function with the structure (guide §5.6)"
+            ),
+            UpdateRule::NotAnUpdate => write!(
+                f,
+                "the options of an update must say operation Update (guide §5.6, Listing 5.9)"
+            ),
+            UpdateRule::NotAllowed => write!(
+                f,
+                "the structure was built without ALLOW_UPDATE (guide §5.6, §5.8)"
+            ),
+            UpdateRule::Flags { built, given } => write!(
+                f,
+                "build flags {given:?} differ from the build's {built:?} (guide §5.6: all other \
+                 options must be identical)"
+            ),
+            UpdateRule::InputCount { built, given } => write!(
+                f,
+                "{given} build inputs but the structure was built from {built} (guide §5.6)"
+            ),
+            UpdateRule::InputKind {
+                input,
+                built,
+                given,
+            } => write!(
+                f,
+                "build input {input} is {given} but was {built} (guide §5.6: input types may \
+                 not change)"
+            ),
+            UpdateRule::Count {
+                input,
+                what,
+                built,
+                given,
+            } => write!(
+                f,
+                "build input {input}: {given} {what} but the build had {built} (guide §5.6: \
+                 counts may not change)"
+            ),
+            UpdateRule::Description { input, what } => write!(
+                f,
+                "build input {input}: {what} differs from the build (guide §5.6: only buffer \
+                 pointers and contents may change)"
+            ),
+            UpdateRule::InstanceChild { instance } => write!(
+                f,
+                "instance {instance}: its child is not the structure the IAS was built over, \
+                 nor an update of it (guide §5.6: instance traversable handles may not change)"
+            ),
+        }
+    }
+}
+
+/// Why bytes could not be loaded as an acceleration structure (serialization, beyond guide
+/// §5.7's relocation). Every check happens before the structure is used, and sizes are checked
+/// against the bytes given before anything is allocated.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum LoadError {
+    /// The bytes do not start with the format's magic number.
+    #[error("not an oxray acceleration structure (bad magic number)")]
+    BadMagic,
+    /// Written by a version of the format this build cannot read.
+    #[error("format version {found} is not supported (this build reads version {supported})")]
+    UnsupportedVersion {
+        /// Version in the bytes.
+        found: u32,
+        /// Version this build reads.
+        supported: u32,
+    },
+    /// A GAS where an IAS was expected, or the other way round.
+    #[error("the bytes hold a {found}, not a {expected}")]
+    WrongKind {
+        /// What the caller asked for.
+        expected: &'static str,
+        /// What the bytes hold.
+        found: &'static str,
+    },
+    /// The bytes end before the data they declare.
+    #[error("truncated: {needed} bytes needed for {what}, {available} available")]
+    Truncated {
+        /// What was being read.
+        what: &'static str,
+        /// Bytes needed.
+        needed: u64,
+        /// Bytes left.
+        available: u64,
+    },
+    /// Bytes after the end of the structure.
+    #[error("{0} unexpected bytes after the structure")]
+    TrailingBytes(u64),
+    /// The checksum over the payload does not match: the bytes were damaged.
+    #[error("checksum mismatch: stored {stored:#018x}, computed {computed:#018x}")]
+    Checksum {
+        /// The stored checksum.
+        stored: u64,
+        /// The checksum of the bytes given.
+        computed: u64,
+    },
+    /// A value is out of range or inconsistent with the rest of the structure.
+    #[error("invalid {what} at {index}")]
+    Invalid {
+        /// What is wrong.
+        what: &'static str,
+        /// Where (an element index, or 0).
+        index: u64,
+    },
+    /// An IAS must be given one child per instance (guide §5.7: one relocated traversable per
+    /// instance).
+    #[error("the IAS has {expected} instances but {given} children were given")]
+    ChildCount {
+        /// Instances in the IAS.
+        expected: u64,
+        /// Children given.
+        given: u64,
+    },
+    /// A child given for an instance cannot be used (another backend, too deep a graph).
+    #[error("instance {instance}: {reason}")]
+    Child {
+        /// The instance.
+        instance: u32,
+        /// Why.
+        reason: String,
+    },
+    /// The device cannot hold this structure (yet).
+    #[error("{0} is not supported by this backend")]
+    Unsupported(&'static str),
+}
+
+impl LoadError {
+    /// The `OptixResult` code closest to this error (`OPTIX_ERROR_INVALID_VALUE` for damaged
+    /// bytes, `OPTIX_ERROR_NOT_SUPPORTED` for a version or a device that cannot take them).
+    pub fn code(&self) -> ErrorCode {
+        match self {
+            LoadError::UnsupportedVersion { .. } | LoadError::Unsupported(_) => {
+                ErrorCode::NotSupported
+            }
+            _ => ErrorCode::InvalidValue,
         }
     }
 }

@@ -58,6 +58,14 @@ pub trait Traversable: Any + Send + Sync {
     fn backend(&self) -> BackendKind;
     /// A one-line description, for `Debug`.
     fn describe(&self) -> String;
+    /// The identity of an acceleration structure across its updates: a build gives a new
+    /// lineage, an update (guide §5.6) or a compaction (§5.8) keeps it. An IAS update accepts
+    /// an instance child of the same lineage as the one it was built over (the CPU backend
+    /// updates a shared structure by copy-on-write, so an updated child is a new object).
+    /// `None` for objects without one (transforms).
+    fn lineage(&self) -> Option<u64> {
+        None
+    }
     /// The backend object a handle should refer to: `self` for a backend object, the wrapped
     /// object for a wrapper.
     fn into_object(self: Arc<Self>) -> Arc<dyn Traversable>
@@ -123,6 +131,17 @@ impl TraversableHandle {
             (Some(a), Some(b)) => std::ptr::addr_eq(Arc::as_ptr(a), Arc::as_ptr(b)),
             _ => false,
         }
+    }
+
+    /// The lineage of the structure behind the handle (see [`Traversable::lineage`]).
+    pub fn lineage(&self) -> Option<u64> {
+        self.0.as_ref().and_then(|t| t.lineage())
+    }
+
+    /// Whether `other` refers to the same structure as `self`, or to an update (or compaction)
+    /// of it: what an IAS update accepts as an unchanged instance child (guide §5.6).
+    pub fn same_structure(&self, other: &TraversableHandle) -> bool {
+        self.same_as(other) || (self.lineage().is_some() && self.lineage() == other.lineage())
     }
 
     /// The backend object, if the handle refers to a `T`.

@@ -41,7 +41,8 @@ pub mod vertex;
 pub use aabb::Aabb;
 pub use backend::{AccelBackend, BatchKind};
 pub use error::{
-    BufferKind, BuildError, ErrorCode, InputLocation, LaunchError, PipelineError, QueryError,
+    BufferKind, BuildError, ErrorCode, InputLocation, LaunchError, LoadError, PipelineError,
+    QueryError, UpdateRule,
 };
 pub use exception::{Exception, ExceptionCode, ExceptionFlags};
 pub use handle::{BackendKind, Traversable, TraversableHandle, TraversableKind};
@@ -54,7 +55,9 @@ pub use instance::{
     Instance, InstanceFlags, StaticTransform, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
     MAX_SBT_OFFSET, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
-pub use options::{BuildFlags, BuildOperation, BuildOptions, GeometryFlags};
+pub use options::{
+    AccelProperty, BuildFlags, BuildOperation, BuildOptions, EmittedProperty, GeometryFlags,
+};
 pub use pipeline::{
     DeviceContext, LaunchReport, LogLevel, PipelineCompileOptions, PipelineLinkOptions,
     PrimitiveTypeFlags, RayFlags, TraversableGraphFlags,

@@ -74,3 +74,23 @@ impl BuildOptions {
         }
     }
 }
+
+/// A property a build emits (`OptixAccelPropertyType`; guide §5.8, and the OptiX headers'
+/// `optixAccelEmitProperty`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum AccelProperty {
+    /// The size in bytes of the compacted structure (`OPTIX_PROPERTY_TYPE_COMPACTED_SIZE`);
+    /// needs `ALLOW_COMPACTION`.
+    CompactedSize,
+    /// The box around the structure, one per motion key (`OPTIX_PROPERTY_TYPE_AABBS`).
+    Aabbs,
+}
+
+/// The value of an emitted [`AccelProperty`].
+#[derive(Clone, Debug, PartialEq)]
+pub enum EmittedProperty {
+    /// Bytes of the compacted structure.
+    CompactedSize(u64),
+    /// One box per motion key (one without motion).
+    Aabbs(Vec<crate::Aabb>),
+}

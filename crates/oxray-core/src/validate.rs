@@ -3,7 +3,7 @@
 
 use crate::error::{BufferKind, BuildError, InputLocation};
 use crate::input::{BuildInput, BuildInputKind, SbtIndexOffsets};
-use crate::options::{BuildFlags, BuildOperation, BuildOptions};
+use crate::options::{BuildFlags, BuildOptions};
 
 /// Maximum primitives per GAS, motion keys included (guide §12).
 pub const MAX_PRIMITIVES_PER_GAS: u64 = 1 << 29;
@@ -34,9 +34,6 @@ pub fn validate_structure(
         .contains(BuildFlags::PREFER_FAST_TRACE | BuildFlags::PREFER_FAST_BUILD)
     {
         return Err(BuildError::ConflictingBuildFlags);
-    }
-    if options.operation == BuildOperation::Update {
-        return Err(BuildError::Unsupported("BuildOperation::Update"));
     }
     if let Some(index) = inputs.iter().position(|i| {
         matches!(

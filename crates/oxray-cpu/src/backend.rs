@@ -8,6 +8,7 @@ use oxray_core::{
     AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, Hit, QueryError,
     Ray, TraversableHandle,
 };
+use std::sync::Arc;
 
 /// The CPU backend: all cores of the current rayon pool.
 ///
@@ -71,6 +72,31 @@ impl AccelBackend for Cpu {
 
     fn describe(&self) -> String {
         format!("CPU ({} threads)", rayon::current_num_threads())
+    }
+
+    fn update_gas(
+        &self,
+        gas: &mut Arc<Gas>,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        if Arc::get_mut(gas).is_none() {
+            // Checked before the copy, so that a refused update copies nothing.
+            gas.check_update(options, inputs)?;
+        }
+        Arc::make_mut(gas).update(options, inputs)
+    }
+
+    fn update_ias(
+        &self,
+        ias: &mut Arc<Ias>,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        if Arc::get_mut(ias).is_none() {
+            ias.check_update(options, inputs)?;
+        }
+        Arc::make_mut(ias).update(options, inputs)
     }
 
     fn build_gas(

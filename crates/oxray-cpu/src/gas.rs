@@ -46,6 +46,17 @@ impl Gas {
     pub fn data(&self) -> &GasData {
         &self.data
     }
+
+    /// Updates (refits) the structure in place (guide §5.6); see [`GasData::update`]. A
+    /// structure shared by handles is updated through [`oxray_core::AccelBackend::update_gas`]
+    /// (copy-on-write) or the facade's `Device::update_gas`.
+    pub fn update(
+        &mut self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        self.data.update(options, inputs)
+    }
 }
 
 impl From<GasData> for Gas {
@@ -81,6 +92,10 @@ impl Traversable for Gas {
 
     fn describe(&self) -> String {
         format!("CPU GAS of {} primitives", self.data.num_primitives)
+    }
+
+    fn lineage(&self) -> Option<u64> {
+        Some(self.data.lineage)
     }
 }
 

@@ -41,25 +41,46 @@ impl Ias {
     /// refused, and so are children on another device. Instances of the null handle, or of
     /// empty structures, are never hit.
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Ias, BuildError> {
-        let data = IasData::build(options, inputs)?;
-        let nodes = data
-            .instances
-            .iter()
-            .map(|inst| {
-                CpuNode::resolve(&inst.child).map_err(|found| BuildError::ForeignTraversable {
-                    instance: inst.index,
-                    device: BackendKind::Cpu,
-                    found,
-                })
-            })
-            .collect::<Result<_, _>>()?;
+        Self::from_data(IasData::build(options, inputs)?)
+    }
+
+    /// Wraps built (or loaded) IAS data, resolving every child to a CPU structure; a child on
+    /// another device is refused.
+    pub fn from_data(data: IasData) -> Result<Ias, BuildError> {
+        let nodes = resolve_children(&data)?;
         Ok(Ias { data, nodes })
+    }
+
+    /// Updates (refits) the IAS in place (guide §5.6); see [`IasData::update`]. The children
+    /// may be updates of the structures it was built over (new objects of the same lineage).
+    pub fn update(
+        &mut self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        self.data.update(options, inputs)?;
+        // The children are the same structures or updates of them: of this backend.
+        self.nodes = resolve_children(&self.data)?;
+        Ok(())
     }
 
     /// The built data.
     pub fn data(&self) -> &IasData {
         &self.data
     }
+}
+
+fn resolve_children(data: &IasData) -> Result<Vec<Option<CpuNode>>, BuildError> {
+    data.instances
+        .iter()
+        .map(|inst| {
+            CpuNode::resolve(&inst.child).map_err(|found| BuildError::ForeignTraversable {
+                instance: inst.index,
+                device: BackendKind::Cpu,
+                found,
+            })
+        })
+        .collect()
 }
 
 impl std::ops::Deref for Ias {
@@ -89,5 +110,9 @@ impl Traversable for Ias {
 
     fn describe(&self) -> String {
         format!("CPU IAS of {} instances", self.data.num_instances)
+    }
+
+    fn lineage(&self) -> Option<u64> {
+        Some(self.data.lineage)
     }
 }

@@ -3,8 +3,9 @@
 use crate::device::Device;
 use oxray_bvh::{BvhStats, GasMemory};
 use oxray_core::{
-    Aabb, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOptions,
-    GeometryFlags, Hit, QueryError, Ray, Traversable, TraversableHandle, TraversableKind,
+    Aabb, AccelProperty, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind,
+    BuildOptions, EmittedProperty, GeometryFlags, Hit, LoadError, QueryError, Ray, Traversable,
+    TraversableHandle, TraversableKind,
 };
 use std::sync::Arc;
 
@@ -55,6 +56,14 @@ macro_rules! on_gas {
 impl Gas {
     pub(crate) fn from_repr(repr: GasRepr) -> Gas {
         Gas(repr)
+    }
+
+    pub(crate) fn repr_mut(&mut self) -> &mut GasRepr {
+        &mut self.0
+    }
+
+    pub(crate) fn repr(&self) -> &GasRepr {
+        &self.0
     }
 
     /// Builds a GAS on the CPU: shorthand for `Device::cpu().build_gas(options, inputs)`.
@@ -138,6 +147,36 @@ impl Gas {
             output_bytes: g.device_bytes(),
             node_bytes: g.num_nodes() * g.layout().node_bytes(),
             primitive_bytes: g.device_bytes() - g.num_nodes() * g.layout().node_bytes(),
+        })
+    }
+
+    /// A property of the built structure (guide §5.8): its compacted size (needs
+    /// `ALLOW_COMPACTION`; [`BuildError::CompactionNotAllowed`] without it) or its box. The
+    /// CUDA backend emits the box and refuses the compacted size with `Unsupported`.
+    pub fn emit_property(&self, property: AccelProperty) -> Result<EmittedProperty, BuildError> {
+        match property {
+            AccelProperty::Aabbs => Ok(EmittedProperty::Aabbs(vec![self.bounds()])),
+            AccelProperty::CompactedSize => on_gas!(
+                self,
+                g => g
+                    .compacted_size()
+                    .map(|s| EmittedProperty::CompactedSize(s as u64))
+                    .ok_or(BuildError::CompactionNotAllowed),
+                {
+                    let _ = g;
+                    Err(BuildError::Unsupported("compaction on the CUDA backend"))
+                }
+            ),
+        }
+    }
+
+    /// Saves the structure as bytes (versioned and checksummed) that
+    /// [`Device::load_gas`] loads back into a structure with bit-identical hits. The CUDA
+    /// backend refuses with `Unsupported`.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LoadError> {
+        on_gas!(self, g => Ok(g.data().to_bytes()), {
+            let _ = g;
+            Err(LoadError::Unsupported("saving a GAS of the CUDA backend"))
         })
     }
 
@@ -264,6 +303,14 @@ impl Ias {
         Ias(repr)
     }
 
+    pub(crate) fn repr_mut(&mut self) -> &mut IasRepr {
+        &mut self.0
+    }
+
+    pub(crate) fn repr(&self) -> &IasRepr {
+        &self.0
+    }
+
     /// Builds an IAS on the CPU: shorthand for `Device::cpu().build_ias(options, inputs)`.
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Ias, BuildError> {
         Device::cpu().build_ias(options, inputs)
@@ -313,6 +360,43 @@ impl Ias {
     /// Statistics of the BVH over the instances.
     pub fn stats(&self) -> BvhStats {
         self.data().stats()
+    }
+
+    /// The flags it was built with.
+    pub fn build_flags(&self) -> BuildFlags {
+        self.data().build_flags
+    }
+
+    /// Saves the IAS without its children; [`Device::load_ias`] loads it back over children
+    /// given by instance index. The CUDA backend refuses with `Unsupported`.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, LoadError> {
+        match &self.0 {
+            IasRepr::Cpu(i) => Ok(i.data().to_bytes()),
+            #[cfg(feature = "cuda")]
+            IasRepr::Cuda(_) => Err(LoadError::Unsupported("saving an IAS of the CUDA backend")),
+        }
+    }
+
+    /// Bytes of the IAS's own tables (its children are not counted).
+    pub fn memory_bytes(&self) -> usize {
+        self.data().memory_bytes()
+    }
+
+    /// A property of the built IAS (guide §5.8): its compacted size (needs
+    /// `ALLOW_COMPACTION`) or its box. The CUDA backend refuses the compacted size with
+    /// `Unsupported`.
+    pub fn emit_property(&self, property: AccelProperty) -> Result<EmittedProperty, BuildError> {
+        match property {
+            AccelProperty::Aabbs => Ok(EmittedProperty::Aabbs(vec![self.bounds()])),
+            AccelProperty::CompactedSize => match self.device_kind() {
+                BackendKind::Cpu => self
+                    .data()
+                    .compacted_size()
+                    .map(|s| EmittedProperty::CompactedSize(s as u64))
+                    .ok_or(BuildError::CompactionNotAllowed),
+                _ => Err(BuildError::Unsupported("compaction on the CUDA backend")),
+            },
+        }
     }
 
     /// Closest hits of a batch on the structure's device.

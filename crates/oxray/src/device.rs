@@ -3,7 +3,7 @@
 use crate::accel::{Gas, GasRepr, Ias, IasRepr};
 use oxray_core::{
     AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, DeviceContext, Hit,
-    QueryError, Ray, TraversableHandle,
+    LoadError, QueryError, Ray, TraversableHandle,
 };
 use std::sync::Arc;
 use thiserror::Error;
@@ -203,6 +203,183 @@ impl Device {
             #[cfg(feature = "cuda")]
             DeviceRepr::Cuda(b) => IasRepr::Cuda(Arc::new(b.build_ias(options, inputs)?)),
         }))
+    }
+
+    /// Updates (refits) a GAS built with `ALLOW_UPDATE` on this device (guide §5.6): the
+    /// options must be the build's with `operation = BuildOperation::Update`, and the inputs
+    /// the build's up to the contents of their buffers (new vertices, boxes, indices, SBT index
+    /// offsets, pre-transform matrix); every rule is checked, with a typed
+    /// [`BuildError::InvalidUpdate`] naming it, before anything changes.
+    ///
+    /// The update is in place when `gas` is the structure's only owner. When something else
+    /// shares it (a clone, a handle, an IAS built over it) it is copy-on-write: `gas` then
+    /// refers to the updated copy and the sharers keep the old structure — as in OptiX, an IAS
+    /// over the GAS must itself be updated ([`update_ias`](Self::update_ias), with instances of
+    /// `gas.handle()`) or rebuilt to see the change. The CUDA backend refuses with
+    /// `Unsupported`.
+    ///
+    /// ```
+    /// use oxray::{BuildFlags, BuildOperation, BuildOptions, Device, Ray, TriangleInput, VertexBuffer};
+    /// use glam::Vec3;
+    /// let device = Device::cpu();
+    /// let mut v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let mut options = BuildOptions::new(BuildFlags::ALLOW_UPDATE);
+    /// let mut gas = device.build_gas(&options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// for p in &mut v {
+    ///     p[2] = -2.0; // the triangle moves away
+    /// }
+    /// options.operation = BuildOperation::Update;
+    /// device.update_gas(&mut gas, &options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let mut hits = [None];
+    /// device.intersect_closest(&gas.handle(), &[Ray::new(Vec3::Z, -Vec3::Z)], &mut hits)?;
+    /// assert_eq!(hits[0].unwrap().t, 3.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn update_gas(
+        &self,
+        gas: &mut Gas,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        match (&self.repr, gas.repr_mut()) {
+            (DeviceRepr::Cpu(b), GasRepr::Cpu(g)) => b.update_gas(g, options, inputs),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(b), GasRepr::Cuda(g)) => b.update_gas(g, options, inputs),
+            #[cfg(feature = "cuda")]
+            _ => Err(BuildError::Unsupported(
+                "updating a structure on another device than the one holding it",
+            )),
+        }
+    }
+
+    /// Updates (refits) an IAS built with `ALLOW_UPDATE` on this device (guide §5.6): new
+    /// instance transforms, ids, SBT offsets, masks and flags for the same number of
+    /// instances over the same children — where a child is an update of the structure the IAS
+    /// was built over (see [`update_gas`](Self::update_gas)), its new bounds are taken. In
+    /// place or copy-on-write as `update_gas`. The CUDA backend refuses with `Unsupported`.
+    pub fn update_ias(
+        &self,
+        ias: &mut Ias,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        match (&self.repr, ias.repr_mut()) {
+            (DeviceRepr::Cpu(b), IasRepr::Cpu(i)) => b.update_ias(i, options, inputs),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(b), IasRepr::Cuda(i)) => b.update_ias(i, options, inputs),
+            #[cfg(feature = "cuda")]
+            _ => Err(BuildError::Unsupported(
+                "updating a structure on another device than the one holding it",
+            )),
+        }
+    }
+
+    /// Compacts a GAS built with `ALLOW_COMPACTION` (`optixAccelCompact`, guide §5.8): a new
+    /// structure of [`AccelProperty::CompactedSize`] bytes with the same hits, independent of
+    /// the source. It can be traced, updated (if built with `ALLOW_UPDATE`) and saved. The CUDA
+    /// backend refuses with `Unsupported`.
+    ///
+    /// ```
+    /// use oxray::{AccelProperty, BuildFlags, BuildOptions, Device, EmittedProperty, TriangleInput, VertexBuffer};
+    /// let device = Device::cpu();
+    /// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let options = BuildOptions::new(BuildFlags::ALLOW_COMPACTION);
+    /// let gas = device.build_gas(&options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let EmittedProperty::CompactedSize(size) = gas.emit_property(AccelProperty::CompactedSize)? else { unreachable!() };
+    /// if (size as usize) < gas.memory().output_bytes {
+    ///     let compact = device.compact_gas(&gas)?;
+    ///     assert_eq!(compact.memory().output_bytes as u64, size);
+    /// }
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn compact_gas(&self, gas: &Gas) -> Result<Gas, BuildError> {
+        match (&self.repr, gas.repr()) {
+            (DeviceRepr::Cpu(_), GasRepr::Cpu(g)) => Ok(Gas::from_repr(GasRepr::Cpu(Arc::new(
+                oxray_cpu::Gas::from(g.data().compact()?),
+            )))),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(_), GasRepr::Cuda(_)) => {
+                Err(BuildError::Unsupported("compaction on the CUDA backend"))
+            }
+            #[cfg(feature = "cuda")]
+            _ => Err(BuildError::Unsupported(
+                "compacting a structure on another device than the one holding it",
+            )),
+        }
+    }
+
+    /// Compacts an IAS built with `ALLOW_COMPACTION` (guide §5.8), over the same children. The
+    /// CUDA backend refuses with `Unsupported`.
+    pub fn compact_ias(&self, ias: &Ias) -> Result<Ias, BuildError> {
+        match (&self.repr, ias.repr()) {
+            (DeviceRepr::Cpu(_), IasRepr::Cpu(i)) => Ok(Ias::from_repr(IasRepr::Cpu(Arc::new(
+                oxray_cpu::Ias::from_data(i.data().compact()?)?,
+            )))),
+            #[cfg(feature = "cuda")]
+            (DeviceRepr::Cuda(_), IasRepr::Cuda(_)) => {
+                Err(BuildError::Unsupported("compaction on the CUDA backend"))
+            }
+            #[cfg(feature = "cuda")]
+            _ => Err(BuildError::Unsupported(
+                "compacting a structure on another device than the one holding it",
+            )),
+        }
+    }
+
+    /// Loads a GAS saved by [`Gas::to_bytes`] into this device's memory. The bytes are checked
+    /// before use (format, version, checksum, every size and index), so that damaged or
+    /// hostile bytes give a typed [`LoadError`]; the structure traces bit-identical hits. The
+    /// CUDA backend refuses with `Unsupported`.
+    ///
+    /// ```
+    /// use oxray::{BuildOptions, Device, Ray, TriangleInput, VertexBuffer};
+    /// use glam::Vec3;
+    /// let device = Device::cpu();
+    /// let v = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let gas = device.build_gas(&BuildOptions::default(), &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// let bytes = gas.to_bytes()?;
+    /// let loaded = device.load_gas(&bytes)?;
+    /// let mut hits = [None];
+    /// device.intersect_closest(&loaded.handle(), &[Ray::new(Vec3::Z, -Vec3::Z)], &mut hits)?;
+    /// assert_eq!(hits[0].unwrap().t, 1.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn load_gas(&self, bytes: &[u8]) -> Result<Gas, LoadError> {
+        match &self.repr {
+            DeviceRepr::Cpu(_) => Ok(Gas::from_repr(GasRepr::Cpu(Arc::new(
+                oxray_cpu::Gas::from(oxray_bvh::GasData::from_bytes(bytes)?),
+            )))),
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda(_) => Err(LoadError::Unsupported("loading a GAS on the CUDA backend")),
+        }
+    }
+
+    /// Loads an IAS saved by [`Ias::to_bytes`] over `children`, one per instance by instance
+    /// index — the structures it was built over or copies of them (loaded, compacted), as
+    /// OptiX's relocation takes one relocated traversable per instance (guide §5.7); the
+    /// saved world boxes are kept. Children must live on this device. The CUDA backend refuses
+    /// with `Unsupported`.
+    pub fn load_ias(&self, bytes: &[u8], children: &[TraversableHandle]) -> Result<Ias, LoadError> {
+        match &self.repr {
+            DeviceRepr::Cpu(_) => {
+                let data = oxray_bvh::IasData::from_bytes(bytes, children)?;
+                let ias = oxray_cpu::Ias::from_data(data).map_err(|e| match e {
+                    BuildError::ForeignTraversable { instance, .. } => LoadError::Child {
+                        instance,
+                        reason: e.to_string(),
+                    },
+                    other => LoadError::Child {
+                        instance: 0,
+                        reason: other.to_string(),
+                    },
+                })?;
+                Ok(Ias::from_repr(IasRepr::Cpu(Arc::new(ias))))
+            }
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda(_) => {
+                Err(LoadError::Unsupported("loading an IAS on the CUDA backend"))
+            }
+        }
     }
 
     /// The closest hit of every ray under `root` (`None` for a miss), in parallel. The hits are

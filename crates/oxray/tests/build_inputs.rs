@@ -157,19 +157,19 @@ fn conflicting_build_flags_are_rejected_5_5() {
     }
 }
 
-/// Guide §5.6: updates are not available in this build: `NOT_SUPPORTED`, not a crash.
+/// Guide §5.6: an update applies to an existing structure (`Device::update_gas`); a build call
+/// with operation Update is refused with a typed error naming the rule, not a crash.
 #[test]
-fn update_operation_is_unsupported_5_6() {
+fn update_operation_in_a_build_call_is_refused_5_6() {
     for input in [valid_tri(), valid_custom()] {
         let options = BuildOptions {
             flags: BuildFlags::ALLOW_UPDATE,
             operation: BuildOperation::Update,
         };
         let e = Gas::build(&options, &[input]).unwrap_err();
-        assert!(matches!(e, BuildError::Unsupported(_)), "{e:?}");
-        assert_eq!(e.code(), ErrorCode::NotSupported);
-        assert_eq!(ErrorCode::NotSupported as u32, 7800);
-        assert!(e.to_string().contains("Update"), "{e}");
+        assert_eq!(e, BuildError::InvalidUpdate(oxray::UpdateRule::NoStructure));
+        assert_eq!(e.code(), ErrorCode::InvalidValue);
+        assert!(e.to_string().contains("§5.6"), "{e}");
     }
 }
 

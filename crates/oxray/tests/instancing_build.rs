@@ -200,7 +200,7 @@ fn g42_ias_build_input_rules() {
     };
     assert!(matches!(
         Ias::build(&update, &[(&inst[..]).into()]),
-        Err(BuildError::Unsupported(_))
+        Err(BuildError::InvalidUpdate(oxray::UpdateRule::NoStructure))
     ));
 }
 
