@@ -398,12 +398,10 @@ impl GasData {
             // Only an update checks the inputs' shapes.
             gas.shapes = Vec::new();
         }
-        if options.flags.contains(BuildFlags::ALLOW_COMPACTION) {
-            // As OptiX's, the structure occupies its output buffer, of the size the memory
-            // query bounds, until it is compacted (guide §5.8).
-            gas.occupy_output_bound();
-        } else {
-            // What the structure keeps is exactly what it reports: compact from the start.
+        if !options.flags.contains(BuildFlags::ALLOW_COMPACTION) {
+            // What the structure keeps is exactly what it reports: compact from the start. A
+            // build that allows compaction skips this copy and keeps the builder's slack until
+            // it is compacted (guide §5.8); it never takes more than the memory query's bound.
             gas.shrink_to_fit();
         }
         Ok((gas, tree))
@@ -509,24 +507,6 @@ impl GasData {
     }
 
     /// Grows every table to the size the memory query allows it (the output buffer).
-    fn occupy_output_bound(&mut self) {
-        fn grow<T>(v: &mut Vec<T>, bound: usize) {
-            v.reserve_exact(bound.saturating_sub(v.len()));
-        }
-        let n = self.num_primitives as usize;
-        grow(&mut self.bvh.nodes, n.saturating_sub(1).max(1));
-        match self.kind {
-            GasKind::Triangles => {
-                grow(&mut self.triangles, n);
-                grow(&mut self.slot_prim, 4 * n);
-            }
-            GasKind::CustomPrimitives => {
-                grow(&mut self.aabbs, n);
-                grow(&mut self.slot_prim, n);
-            }
-        }
-    }
-
     /// The bytes the structure takes once compacted: the emitted property `COMPACTED_SIZE`
     /// (guide §5.8), known before compacting. `None` unless it was built with
     /// `ALLOW_COMPACTION`.

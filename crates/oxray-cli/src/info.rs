@@ -34,7 +34,7 @@ pub fn scene_info(path: &Path) -> Result<String, Box<dyn std::error::Error>> {
             Some(Gas::build(&opts, &inputs)?)
         });
     }
-    // Bytes as built (the memory query's output bound), then compacted.
+    // Bytes as built (with the builder's slack), then compacted.
     let built_bytes: usize = gases
         .iter()
         .flatten()
