@@ -79,7 +79,7 @@ pub struct CudaContext {
 
 /// Runs a call into a library loaded at run time, turning a panic (a missing symbol in an old
 /// library) into an error.
-fn guarded<T>(
+pub(crate) fn guarded<T>(
     during: &'static str,
     f: impl FnOnce() -> Result<T, cudarc::driver::DriverError>,
 ) -> Result<T, CudaError> {
@@ -254,12 +254,30 @@ pub(crate) fn compile_options(cc: (i32, i32)) -> Vec<String> {
 
 /// Compiles the trace kernels to PTX with NVRTC.
 fn compile(cc: (i32, i32)) -> Result<cudarc::nvrtc::Ptx, CudaError> {
+    nvrtc_compile(KERNEL_SOURCE, compile_options(cc), "oxray_trace.cu")
+}
+
+/// Compiles CUDA C++ to PTX with NVRTC, turning a missing library or a compile error into a
+/// [`CudaError`] (with NVRTC's log).
+pub(crate) fn nvrtc_compile(
+    source: &str,
+    options: Vec<String>,
+    name: &str,
+) -> Result<cudarc::nvrtc::Ptx, CudaError> {
+    // SAFETY: only tries to open the library by its usual names (dlopen).
+    if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+        return Err(CudaError::NoNvrtc(
+            "libnvrtc could not be loaded; add the CUDA toolkit's lib directory to \
+             LD_LIBRARY_PATH"
+                .into(),
+        ));
+    }
     let opts = CompileOptions {
-        options: compile_options(cc),
-        name: Some("oxray_trace.cu".into()),
+        options,
+        name: Some(name.into()),
         ..Default::default()
     };
-    let result = catch_unwind(|| cudarc::nvrtc::compile_ptx_with_opts(KERNEL_SOURCE, opts))
+    let result = catch_unwind(|| cudarc::nvrtc::compile_ptx_with_opts(source, opts))
         .map_err(|p| CudaError::NoNvrtc(panic_message(&p)))?;
     result.map_err(|e| match e {
         cudarc::nvrtc::CompileError::CompileError { nvrtc, log, .. } => CudaError::Compile {

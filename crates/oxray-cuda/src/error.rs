@@ -15,8 +15,8 @@ pub enum CudaError {
     /// The NVRTC runtime compiler library (`libnvrtc.so`) could not be loaded.
     #[error("no NVRTC library found ({0})")]
     NoNvrtc(String),
-    /// NVRTC rejected the trace kernels; `log` is the compiler's log.
-    #[error("NVRTC could not compile the trace kernels ({message}):\n{log}")]
+    /// NVRTC rejected the trace kernels or a pipeline; `log` is the compiler's log.
+    #[error("NVRTC could not compile the CUDA C++ ({message}):\n{log}")]
     Compile {
         /// The NVRTC error.
         message: String,
@@ -38,6 +38,18 @@ pub enum CudaError {
     /// The GAS or the batch is too large for the device layout's 32-bit indices.
     #[error("too large for the CUDA backend: {0}")]
     TooLarge(String),
+    /// A pipeline's options or program groups were refused (guide §6, §12).
+    #[error(transparent)]
+    Pipeline(#[from] oxray_core::PipelineError),
+    /// A launch was refused before it ran: its size, or an SBT record (guide §7, §10, §12).
+    #[error(transparent)]
+    InvalidLaunch(#[from] oxray_core::LaunchError),
+    /// The launch parameters do not fit the pipeline's parameter variable.
+    #[error("launch parameters: {0}")]
+    Launch(String),
+    /// Something this slice of the CUDA backend does not do yet.
+    #[error("not supported on the CUDA backend yet: {0}")]
+    Unsupported(&'static str),
     /// A batch's rays and outputs differ in length.
     #[error("{rays} rays but room for {outputs} results")]
     LengthMismatch {

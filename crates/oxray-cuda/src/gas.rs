@@ -4,7 +4,7 @@ use crate::context::CudaContext;
 use crate::error::{driver, CudaError};
 use crate::layout::{DeviceLayout, NodeLayout, SlotInfo};
 use bytemuck::{Pod, Zeroable};
-use cudarc::driver::{CudaSlice, LaunchConfig, PushKernelArg};
+use cudarc::driver::{CudaSlice, DevicePtr, LaunchConfig, PushKernelArg};
 use oxray_bvh::{Bvh2, GasData, GasInfo};
 use oxray_core::{Aabb, BackendKind, Hit, HitKind, Ray, RayRecord, Traversable, TraversableKind};
 use rayon::prelude::*;
@@ -248,6 +248,83 @@ pub struct CudaGas {
     /// Buffers of the one-call queries, kept between calls (grown as batches grow) so that a
     /// call allocates and page-faults nothing once warm.
     scratch: Mutex<Scratch>,
+    /// Geometry flags of each SBT record (by SBT-GAS index).
+    record_flags: Vec<u32>,
+    /// What a pipeline's traversal reads, made on first use ([`CudaGas::optix_handle`]).
+    program_view: Mutex<Option<ProgramView>>,
+}
+
+/// The device tables a pipeline's traversal reads beyond the query kernels' (slot
+/// resolution, geometry flags) and the traversable descriptor that an `OptixTraversableHandle`
+/// points at (64 bytes: see `__oxray_Traversable` in `oxray_device.h`).
+#[derive(Debug)]
+pub(crate) struct ProgramView {
+    _tables: Vec<CudaSlice<u32>>,
+    _descriptor: CudaSlice<u32>,
+    pub(crate) address: u64,
+}
+
+impl ProgramView {
+    /// Uploads `tables` and a descriptor of `kind` over `nodes`, `prims` and the tables'
+    /// addresses.
+    pub(crate) fn upload(
+        ctx: &CudaContext,
+        kind: u32,
+        count: u32,
+        nodes: u64,
+        prims: u64,
+        tables: Vec<Vec<u32>>,
+    ) -> Result<ProgramView, CudaError> {
+        let tables: Vec<CudaSlice<u32>> = tables
+            .into_iter()
+            .map(|t| {
+                let t = if t.is_empty() { vec![0; 4] } else { t };
+                ctx.stream
+                    .clone_htod(&t[..])
+                    .map_err(driver("copying traversal tables to the device"))
+            })
+            .collect::<Result<_, _>>()?;
+        let addr = |i: usize| {
+            tables.get(i).map_or(0, |t| {
+                let (p, _g) = t.device_ptr(&ctx.stream);
+                p
+            })
+        };
+        let words = descriptor_words(kind, count, nodes, prims, addr(0), addr(1));
+        let descriptor = ctx
+            .stream
+            .clone_htod(&words[..])
+            .map_err(driver("copying a traversable descriptor"))?;
+        let address = {
+            let (p, _g) = descriptor.device_ptr(&ctx.stream);
+            p
+        };
+        ctx.synchronize()?;
+        Ok(ProgramView {
+            _tables: tables,
+            _descriptor: descriptor,
+            address,
+        })
+    }
+}
+
+/// The 16 words of a traversable descriptor (`__oxray_Traversable`).
+pub(crate) fn descriptor_words(
+    kind: u32,
+    count: u32,
+    nodes: u64,
+    prims: u64,
+    info: u64,
+    flags: u64,
+) -> [u32; 16] {
+    let mut w = [0u32; 16];
+    w[0] = kind;
+    w[1] = count;
+    for (i, a) in [nodes, prims, info, flags].into_iter().enumerate() {
+        w[2 + 2 * i] = a as u32;
+        w[3 + 2 * i] = (a >> 32) as u32;
+    }
+    w
 }
 
 /// Device and host buffers reused by the one-call queries.
@@ -455,7 +532,43 @@ impl CudaGas {
             slots: host.slots,
             info: gas.info(),
             scratch: Mutex::new(Scratch::default()),
+            record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
+            program_view: Mutex::new(None),
         })
+    }
+
+    /// The `OptixTraversableHandle` of this GAS for programs of a [`CudaPipeline`](crate::CudaPipeline):
+    /// the device address of a descriptor of its tables, made on first use and kept with the
+    /// GAS (which must outlive the launches that trace it). GASes in the BVH4 layout are not
+    /// traced by pipelines yet.
+    pub fn optix_handle(&self) -> Result<u64, CudaError> {
+        if self.layout != NodeLayout::Bvh2 {
+            return Err(CudaError::Unsupported(
+                "pipelines trace GASes in the binary (BVH2) node layout",
+            ));
+        }
+        let mut view = self.program_view.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(v) = view.as_ref() {
+            return Ok(v.address);
+        }
+        let slots: Vec<u32> = self
+            .slots
+            .iter()
+            .flat_map(|s| [s.primitive_index, s.sbt_gas_index])
+            .collect();
+        let (nodes, _g1) = self.nodes.device_ptr(&self.ctx.stream);
+        let (tris, _g2) = self.triangles.device_ptr(&self.ctx.stream);
+        let v = ProgramView::upload(
+            &self.ctx,
+            1,
+            self.record_flags.len() as u32,
+            nodes,
+            tris,
+            vec![slots, self.record_flags.clone()],
+        )?;
+        let address = v.address;
+        *view = Some(v);
+        Ok(address)
     }
 
     /// The node layout.

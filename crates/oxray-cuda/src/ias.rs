@@ -3,7 +3,7 @@
 
 use crate::context::CudaContext;
 use crate::error::{driver, CudaError};
-use crate::gas::{check_batch, grid, CudaGas, HitRecord, Scratch};
+use crate::gas::{check_batch, grid, CudaGas, HitRecord, ProgramView, Scratch};
 use crate::layout::{ChildRef, IasLayout, NodeLayout};
 use cudarc::driver::{CudaSlice, DevicePtr, PushKernelArg};
 use oxray_bvh::{Bvh2, IasData};
@@ -29,6 +29,8 @@ pub struct CudaIas {
     children: Vec<Option<Arc<CudaGas>>>,
     device_bytes: usize,
     scratch: Mutex<Scratch>,
+    /// What a pipeline's traversal reads, made on first use ([`CudaIas::optix_handle`]).
+    program_view: Mutex<Option<ProgramView>>,
 }
 
 impl CudaIas {
@@ -111,7 +113,49 @@ impl CudaIas {
             data,
             children,
             scratch: Mutex::new(Scratch::default()),
+            program_view: Mutex::new(None),
         })
+    }
+
+    /// The `OptixTraversableHandle` of this IAS for programs of a [`CudaPipeline`](crate::CudaPipeline):
+    /// the device address of a descriptor of its top-level tree, its instance table and, for
+    /// each instance, its id, SBT offset, flags, mask, index and child's handle. Made on first
+    /// use and kept with the IAS.
+    pub fn optix_handle(&self) -> Result<u64, CudaError> {
+        let mut view = self.program_view.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(v) = view.as_ref() {
+            return Ok(v.address);
+        }
+        let mut info = Vec::with_capacity(8 * self.data.instances.len());
+        for (slot, inst) in self.data.instances.iter().enumerate() {
+            let child = match self.children.get(slot).and_then(|c| c.as_ref()) {
+                Some(gas) => gas.optix_handle()?,
+                None => 0,
+            };
+            info.extend_from_slice(&[
+                inst.instance_id,
+                inst.sbt_offset,
+                inst.flags.bits(),
+                inst.mask as u32,
+                inst.index,
+                0,
+                child as u32,
+                (child >> 32) as u32,
+            ]);
+        }
+        let (nodes, _g1) = self.nodes.device_ptr(&self.ctx.stream);
+        let (insts, _g2) = self.instances.device_ptr(&self.ctx.stream);
+        let v = ProgramView::upload(
+            &self.ctx,
+            2,
+            self.data.instances.len() as u32,
+            nodes,
+            insts,
+            vec![info],
+        )?;
+        let address = v.address;
+        *view = Some(v);
+        Ok(address)
     }
 
     /// The built data: instances, world boxes, flags, BVH statistics.

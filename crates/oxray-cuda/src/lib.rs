@@ -40,6 +40,7 @@ mod error;
 mod gas;
 mod ias;
 mod layout;
+mod program;
 #[cfg(test)]
 mod reference;
 
@@ -49,6 +50,11 @@ pub use error::CudaError;
 pub use gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, HitRecord};
 pub use ias::CudaIas;
 pub use layout::{NodeLayout, SlotInfo};
+pub use program::{
+    compile_pipeline_ptx, launch_size, pack_sbt, pipeline_compile_options, pipeline_source,
+    CudaBuffer, CudaHitGroupDesc, CudaModule, CudaPipeline, CudaProgramGroup, CudaProgramGroupKind,
+    PackedRegion, PackedSbt, DEVICE_HEADER, PIPELINE_BLOCK,
+};
 
 #[cfg(test)]
 #[path = "../tests/common/mod.rs"]

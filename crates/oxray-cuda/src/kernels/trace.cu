@@ -8,6 +8,8 @@
 // Constants come from the host as -D definitions (bit patterns of f32):
 //   OXRAY_ROBUST_FAR_BITS, OXRAY_TMAX_SLACK_BITS, OXRAY_F32_TINY_BITS, OXRAY_STACK_SIZE.
 
+#define OXRAY_TRACE_CU 1
+
 typedef unsigned int u32;
 
 #define ROBUST_FAR __int_as_float(OXRAY_ROBUST_FAR_BITS)
@@ -538,6 +540,9 @@ __device__ __forceinline__ IasBest trace_ias(const TraceRay& r, const float4* __
     return best;
 }
 
+// A pipeline (oxray_device.h) compiles this file for its traversal, without the query kernels.
+#ifndef OXRAY_NO_QUERY_KERNELS
+
 // ---------------------------------------------------------------------------------------------
 // Entry points. Rays are eight f32 (ox, oy, oz, tmin, dx, dy, dz, tmax); a closest-hit record is
 // (t, slot | back-face bit, u, v) with t = +inf and slot = 0xffffffff for a miss; an occlusion
@@ -638,3 +643,5 @@ extern "C" __global__ void __launch_bounds__(128)
     if (load_ray(rays, i, r)) hit = trace_ias<true>(r, top, insts).inst != MISS_SLOT;
     occluded[i] = hit ? 1 : 0;
 }
+
+#endif  // OXRAY_NO_QUERY_KERNELS

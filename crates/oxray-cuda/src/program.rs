@@ -1,0 +1,1048 @@
+//! Programs in CUDA C++ (guide §6, §7, §10, §13): modules of OptiX-style programs, program
+//! groups, and pipelines compiled by NVRTC into one kernel each.
+//!
+//! A pipeline's translation unit is the traversal code ([`KERNEL_SOURCE`](crate::KERNEL_SOURCE)),
+//! the device header ([`DEVICE_HEADER`]), every module's source, and generated dispatch
+//! functions: program groups are numbered in the order the pipeline is given them, the host
+//! writes that number into word 0 of each SBT record header as it uploads the SBT, and the
+//! device calls a group's programs through a `switch` on it.
+
+use crate::context::{compile_options, guarded, nvrtc_compile, CudaContext};
+use crate::error::{driver, CudaError};
+use bytemuck::{Pod, Zeroable};
+use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig};
+use oxray_core::sbt::{SbtRegion, ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
+use oxray_core::{
+    Exception, ExceptionCode, LaunchError, LaunchReport, PipelineCompileOptions, PipelineError,
+    PipelineLinkOptions, SbtHeader,
+};
+use std::marker::PhantomData;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+/// The device-side API: the guide's device functions over the per-thread state of a pipeline's
+/// kernel. Modules may include it as `<optix.h>` or `<optix_device.h>`.
+pub const DEVICE_HEADER: &str = include_str!("device/oxray_device.h");
+
+/// Threads per block of a pipeline's kernel (the size of its per-thread state array).
+pub const PIPELINE_BLOCK: u32 = 64;
+
+/// Exception records a launch keeps for its report (the count is exact).
+const EXCEPTION_RECORDS: usize = 64;
+
+/// A module of CUDA C++ programs (`OptixModule` made from source): entry points named with the
+/// guide's prefixes (`__raygen__`, `__miss__`, `__closesthit__`, `__anyhit__`, `__exception__`),
+/// declared `extern "C" __global__ void name()`.
+///
+/// The modules of one pipeline are compiled together in one translation unit, so they must
+/// not define the same names twice (helpers of several modules can be `static`).
+#[derive(Clone, Debug)]
+pub struct CudaModule {
+    inner: Arc<ModuleInner>,
+}
+
+#[derive(Debug)]
+struct ModuleInner {
+    source: String,
+}
+
+impl CudaModule {
+    /// A module of the given CUDA C++ source. It is compiled with the pipelines that use it.
+    pub fn from_source(source: impl Into<String>) -> CudaModule {
+        CudaModule {
+            inner: Arc::new(ModuleInner {
+                source: source.into(),
+            }),
+        }
+    }
+
+    /// The source as given.
+    pub fn source(&self) -> &str {
+        &self.inner.source
+    }
+
+    /// Whether the source defines or declares the entry `name` (a word followed by `(`).
+    pub fn has_entry(&self, name: &str) -> bool {
+        let s = &self.inner.source;
+        s.match_indices(name).any(|(i, _)| {
+            let before = s[..i].chars().next_back();
+            let after = s[i + name.len()..].trim_start().chars().next();
+            !before.is_some_and(|c| c.is_alphanumeric() || c == '_') && after == Some('(')
+        })
+    }
+
+    fn entry(
+        &self,
+        name: &str,
+        prefix: &'static str,
+        kind: &'static str,
+    ) -> Result<Entry, PipelineError> {
+        if !name.starts_with(prefix) || !self.has_entry(name) {
+            return Err(PipelineError::UnknownEntry {
+                name: name.to_string(),
+                kind,
+            });
+        }
+        Ok(Entry {
+            module: self.clone(),
+            name: name.to_string(),
+        })
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Entry {
+    module: CudaModule,
+    name: String,
+}
+
+/// The kind of a CUDA program group; the values are those of the record headers' word 1.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CudaProgramGroupKind {
+    /// A ray-generation program.
+    RayGen,
+    /// A miss program, or none.
+    Miss,
+    /// An exception program.
+    Exception,
+    /// Closest-hit and any-hit programs, each optional.
+    HitGroup,
+}
+
+impl CudaProgramGroupKind {
+    fn region(self) -> &'static str {
+        match self {
+            CudaProgramGroupKind::RayGen => "raygen",
+            CudaProgramGroupKind::Miss => "miss",
+            CudaProgramGroupKind::Exception => "exception",
+            CudaProgramGroupKind::HitGroup => "hitgroup",
+        }
+    }
+}
+
+static NEXT_GROUP_ID: AtomicU64 = AtomicU64::new(1);
+const CUDA_HEADER_MAGIC: [u8; 8] = *b"oxrayGPU";
+const CUDA_HEADER_CHECK: u64 = 0xC2B2_AE3D_27D4_EB4F;
+
+#[derive(Debug)]
+struct GroupInner {
+    id: u64,
+    kind: CudaProgramGroupKind,
+    /// Ray generation, miss or exception program; or the closest-hit program.
+    main: Option<Entry>,
+    any_hit: Option<Entry>,
+}
+
+/// A program group of CUDA C++ programs (`OptixProgramGroup`).
+#[derive(Clone, Debug)]
+pub struct CudaProgramGroup {
+    inner: Arc<GroupInner>,
+}
+
+/// The programs of a CUDA hit group: `(module, entry name)` or absent.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CudaHitGroupDesc<'a> {
+    /// Closest-hit program.
+    pub closest_hit: Option<(&'a CudaModule, &'a str)>,
+    /// Any-hit program.
+    pub any_hit: Option<(&'a CudaModule, &'a str)>,
+    /// Intersection program (custom primitives: not yet on the CUDA backend).
+    pub intersection: Option<(&'a CudaModule, &'a str)>,
+}
+
+impl CudaProgramGroup {
+    fn new(kind: CudaProgramGroupKind, main: Option<Entry>, any_hit: Option<Entry>) -> Self {
+        CudaProgramGroup {
+            inner: Arc::new(GroupInner {
+                id: NEXT_GROUP_ID.fetch_add(1, Ordering::Relaxed),
+                kind,
+                main,
+                any_hit,
+            }),
+        }
+    }
+
+    /// A ray-generation group.
+    pub fn raygen(module: &CudaModule, entry: &str) -> Result<Self, PipelineError> {
+        let e = module.entry(entry, "__raygen__", "ray-generation")?;
+        Ok(Self::new(CudaProgramGroupKind::RayGen, Some(e), None))
+    }
+
+    /// A miss group; `None` makes a miss group that does nothing.
+    pub fn miss(entry: Option<(&CudaModule, &str)>) -> Result<Self, PipelineError> {
+        let e = entry
+            .map(|(m, n)| m.entry(n, "__miss__", "miss"))
+            .transpose()?;
+        Ok(Self::new(CudaProgramGroupKind::Miss, e, None))
+    }
+
+    /// An exception group.
+    pub fn exception(module: &CudaModule, entry: &str) -> Result<Self, PipelineError> {
+        let e = module.entry(entry, "__exception__", "exception")?;
+        Ok(Self::new(CudaProgramGroupKind::Exception, Some(e), None))
+    }
+
+    /// A hit group for triangles. An intersection program is refused for now.
+    pub fn hit_group(desc: CudaHitGroupDesc<'_>) -> Result<Self, PipelineError> {
+        if let Some((_, name)) = desc.intersection {
+            return Err(PipelineError::UnknownEntry {
+                name: format!("{name} (intersection programs are not yet compiled for CUDA)"),
+                kind: "intersection",
+            });
+        }
+        let ch = desc
+            .closest_hit
+            .map(|(m, n)| m.entry(n, "__closesthit__", "closest-hit"))
+            .transpose()?;
+        let ah = desc
+            .any_hit
+            .map(|(m, n)| m.entry(n, "__anyhit__", "any-hit"))
+            .transpose()?;
+        Ok(Self::new(CudaProgramGroupKind::HitGroup, ch, ah))
+    }
+
+    /// The group's kind.
+    pub fn kind(&self) -> CudaProgramGroupKind {
+        self.inner.kind
+    }
+
+    /// The record header naming this group (`optixSbtRecordPackHeader`). A pipeline that holds
+    /// the group replaces it, as it uploads the SBT, with the group's program index.
+    pub fn pack_header(&self) -> SbtHeader {
+        let id = self.inner.id;
+        let mut h = [0u8; SBT_RECORD_HEADER_SIZE];
+        h[..8].copy_from_slice(&CUDA_HEADER_MAGIC);
+        h[8..16].copy_from_slice(&id.to_le_bytes());
+        h[16..24].copy_from_slice(&(id ^ CUDA_HEADER_CHECK).to_le_bytes());
+        SbtHeader(h)
+    }
+
+    /// The group id a header packed by [`pack_header`](Self::pack_header) names.
+    pub fn header_group_id(bytes: &[u8]) -> Option<u64> {
+        let h = bytes.get(..SBT_RECORD_HEADER_SIZE)?;
+        if h[..8] != CUDA_HEADER_MAGIC {
+            return None;
+        }
+        let id = u64::from_le_bytes(h[8..16].try_into().ok()?);
+        let check = u64::from_le_bytes(h[16..24].try_into().ok()?);
+        (check == id ^ CUDA_HEADER_CHECK).then_some(id)
+    }
+}
+
+/// Replaces `#include <optix….h>` / `"optix….h"` lines (the header is already in the unit).
+fn strip_optix_includes(source: &str) -> String {
+    let mut out = String::with_capacity(source.len());
+    for line in source.lines() {
+        let t = line.trim_start();
+        let is_optix = t.starts_with('#')
+            && t[1..].trim_start().starts_with("include")
+            && t.split(['<', '"'])
+                .nth(1)
+                .is_some_and(|h| h.trim_start().starts_with("optix"));
+        if is_optix {
+            out.push_str("// (oxray_device.h) ");
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+/// The CUDA C++ translation unit of a pipeline: traversal, device header, modules, dispatch and
+/// the kernel `__oxray_pipeline`. Compiled with [`pipeline_compile_options`].
+pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
+    let mut s = String::new();
+    s.push_str(crate::KERNEL_SOURCE);
+    s.push_str("\n#line 1 \"oxray_device.h\"\n");
+    s.push_str(DEVICE_HEADER);
+    // Modules, each once, in the order the groups name them.
+    let mut modules: Vec<&CudaModule> = Vec::new();
+    for g in groups {
+        for e in [&g.inner.main, &g.inner.any_hit].into_iter().flatten() {
+            if !modules
+                .iter()
+                .any(|m| Arc::ptr_eq(&m.inner, &e.module.inner))
+            {
+                modules.push(&e.module);
+            }
+        }
+    }
+    s.push_str("\n// Entry points of the modules are device functions.\n#undef __global__\n#define __global__ __device__\n");
+    for (i, m) in modules.iter().enumerate() {
+        s.push_str(&format!("#line 1 \"module{i}.cu\"\n"));
+        s.push_str(&strip_optix_includes(m.source()));
+        s.push('\n');
+    }
+    s.push_str("#line 1 \"oxray_pipeline.cu\"\n#undef __global__\n#define __global__ __location__(global)\n");
+    let switch = |name: &str, ret: &str, pick: &dyn Fn(&GroupInner) -> Option<String>| {
+        let mut f = format!("__device__ {ret} {name}(u32 group) {{\n    switch (group) {{\n");
+        for (i, g) in groups.iter().enumerate() {
+            if let Some(body) = pick(&g.inner) {
+                f.push_str(&format!("    case {i}: {body}\n"));
+            }
+        }
+        let default = if ret == "bool" {
+            "return false;"
+        } else {
+            "return;"
+        };
+        f.push_str(&format!("    default: {default}\n    }}\n}}\n"));
+        f
+    };
+    let call = |kind: CudaProgramGroupKind| {
+        move |g: &GroupInner| {
+            (g.kind == kind)
+                .then(|| g.main.as_ref().map(|e| format!("{}(); return;", e.name)))
+                .flatten()
+        }
+    };
+    s.push_str(&switch(
+        "__oxray_call_raygen",
+        "void",
+        &call(CudaProgramGroupKind::RayGen),
+    ));
+    s.push_str(&switch(
+        "__oxray_call_miss",
+        "void",
+        &call(CudaProgramGroupKind::Miss),
+    ));
+    s.push_str(&switch(
+        "__oxray_call_closesthit",
+        "void",
+        &call(CudaProgramGroupKind::HitGroup),
+    ));
+    s.push_str(&switch(
+        "__oxray_call_exception",
+        "void",
+        &call(CudaProgramGroupKind::Exception),
+    ));
+    s.push_str(&switch("__oxray_call_anyhit", "void", &|g: &GroupInner| {
+        g.any_hit.as_ref().map(|e| format!("{}(); return;", e.name))
+    }));
+    s.push_str(&switch("__oxray_has_anyhit", "bool", &|g: &GroupInner| {
+        g.any_hit.as_ref().map(|_| "return true;".to_string())
+    }));
+    s.push_str(
+        r#"
+extern "C" __global__ void __launch_bounds__(OXRAY_PIPELINE_BLOCK) __oxray_pipeline() {
+    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= __oxray_launch.total) return;
+    __oxray_ThreadState& s = __oxray_state();
+    uint3 d = __oxray_launch.dims;
+    s.launch_index = make_uint3(i % d.x, (i / d.x) % d.y, i / (d.x * d.y));
+    s.depth = 0u;
+    s.ah_action = 0u;
+    s.exception_code = 0;
+    s.exception_ndetails = 0u;
+    s.record = reinterpret_cast<const char*>(__oxray_launch.raygen);
+    __oxray_call_raygen(__oxray_group_of(s.record));
+}
+"#,
+    );
+    s
+}
+
+/// The NVRTC options of a pipeline for a device of compute capability `cc`: those of the query
+/// kernels, plus the pipeline's payload count, trace depth and block size.
+pub fn pipeline_compile_options(
+    cc: (i32, i32),
+    compile: &PipelineCompileOptions,
+    link: &PipelineLinkOptions,
+) -> Vec<String> {
+    let mut o = compile_options(cc);
+    o.push("-DOXRAY_NO_QUERY_KERNELS=1".into());
+    o.push(format!(
+        "-DOXRAY_NUM_PAYLOAD_VALUES={}",
+        compile.num_payload_values
+    ));
+    o.push(format!("-DOXRAY_MAX_TRACE_DEPTH={}", link.max_trace_depth));
+    o.push(format!("-DOXRAY_PIPELINE_BLOCK={PIPELINE_BLOCK}"));
+    o.push(format!("-DOXRAY_EXCEPTION_RECORDS={EXCEPTION_RECORDS}"));
+    o
+}
+
+/// Checks a pipeline's options and groups (guide §12), as the CPU pipeline does.
+fn check_pipeline(
+    compile: &PipelineCompileOptions,
+    link: &PipelineLinkOptions,
+    groups: &[CudaProgramGroup],
+) -> Result<(), PipelineError> {
+    if compile.num_payload_values > 32 {
+        return Err(PipelineError::TooManyPayloadValues(
+            compile.num_payload_values,
+        ));
+    }
+    if compile.num_attribute_values > 8 {
+        return Err(PipelineError::TooManyAttributeValues(
+            compile.num_attribute_values,
+        ));
+    }
+    if link.max_trace_depth > 31 {
+        return Err(PipelineError::TraceDepthTooLarge(link.max_trace_depth));
+    }
+    if groups.is_empty() {
+        return Err(PipelineError::NoProgramGroups);
+    }
+    Ok(())
+}
+
+/// Compiles a pipeline's unit to PTX with NVRTC (no device needed): what [`CudaPipeline::new`]
+/// does before loading it. Fails with [`CudaError::Compile`] and NVRTC's log.
+pub fn compile_pipeline_ptx(
+    cc: (i32, i32),
+    compile: &PipelineCompileOptions,
+    link: &PipelineLinkOptions,
+    groups: &[CudaProgramGroup],
+) -> Result<String, CudaError> {
+    check_pipeline(compile, link, groups)?;
+    let ptx = nvrtc_compile(
+        &pipeline_source(groups),
+        pipeline_compile_options(cc, compile, link),
+        "oxray_pipeline.cu",
+    )?;
+    Ok(ptx.to_src())
+}
+
+/// The launch information of the device header (`__oxray_LaunchInfo`), byte for byte.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Pod, Zeroable)]
+pub(crate) struct LaunchInfo {
+    pub dims: [u32; 3],
+    pub total: u32,
+    pub raygen: u64,
+    pub exception: u64,
+    pub miss: u64,
+    pub hitgroup: u64,
+    pub miss_stride: u32,
+    pub miss_count: u32,
+    pub hit_stride: u32,
+    pub hit_count: u32,
+    pub exceptions: u64,
+}
+
+/// Where each region of an SBT lies in its packed bytes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PackedRegion {
+    /// Byte offset of the first record.
+    pub offset: usize,
+    /// Bytes from one record to the next.
+    pub stride: usize,
+    /// Records.
+    pub count: usize,
+}
+
+/// An SBT as a pipeline uploads it: the regions' records one after the other (each region
+/// 16-byte aligned, strides kept), every header replaced by the device's: word 0 the group's
+/// program index in the pipeline, word 1 its kind, the rest zero. Record data is unchanged.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PackedSbt {
+    /// The bytes to upload.
+    pub bytes: Vec<u8>,
+    /// The ray-generation record.
+    pub raygen: PackedRegion,
+    /// The exception record, if any.
+    pub exception: Option<PackedRegion>,
+    /// Miss records.
+    pub miss: PackedRegion,
+    /// Hit-group records.
+    pub hitgroup: PackedRegion,
+}
+
+/// Packs `sbt` for a pipeline of `groups`: each header must name a group of the pipeline of the
+/// region's kind ([`LaunchError::InvalidSbtRecord`] otherwise, as on the CPU backend).
+pub fn pack_sbt(
+    groups: &[CudaProgramGroup],
+    sbt: &ShaderBindingTable,
+) -> Result<PackedSbt, LaunchError> {
+    if sbt.raygen.count() == 0 {
+        return Err(LaunchError::NoRaygenRecord);
+    }
+    let mut bytes = Vec::new();
+    let mut region = |r: &SbtRegion, kind: CudaProgramGroupKind, max: usize| {
+        let count = r.count().min(max);
+        bytes.resize(bytes.len().next_multiple_of(16), 0);
+        let offset = bytes.len();
+        for i in 0..count {
+            let rec = r.record(i).unwrap_or(&[]);
+            let bad = |reason| LaunchError::InvalidSbtRecord {
+                region: kind.region(),
+                index: i,
+                reason,
+            };
+            let id = CudaProgramGroup::header_group_id(rec)
+                .ok_or(bad("the header was not packed from a CUDA program group"))?;
+            let g = groups
+                .iter()
+                .position(|g| g.inner.id == id)
+                .ok_or(bad("the header's program group is not in this pipeline"))?;
+            if groups[g].kind() != kind {
+                return Err(bad("the header's program group is of another kind"));
+            }
+            let mut header = [0u8; SBT_RECORD_HEADER_SIZE];
+            header[..4].copy_from_slice(&(g as u32).to_le_bytes());
+            header[4..8].copy_from_slice(&(kind as u32).to_le_bytes());
+            bytes.extend_from_slice(&header);
+            bytes.extend_from_slice(&rec[SBT_RECORD_HEADER_SIZE..]);
+        }
+        Ok(PackedRegion {
+            offset,
+            stride: r.stride(),
+            count,
+        })
+    };
+    let raygen = region(&sbt.raygen, CudaProgramGroupKind::RayGen, 1)?;
+    let exception = match &sbt.exception {
+        Some(r) if r.count() > 0 => Some(region(r, CudaProgramGroupKind::Exception, 1)?),
+        _ => None,
+    };
+    let miss = region(&sbt.miss, CudaProgramGroupKind::Miss, usize::MAX)?;
+    let hitgroup = region(&sbt.hitgroup, CudaProgramGroupKind::HitGroup, usize::MAX)?;
+    if bytes.is_empty() {
+        bytes.resize(16, 0);
+    }
+    Ok(PackedSbt {
+        bytes,
+        raygen,
+        exception,
+        miss,
+        hitgroup,
+    })
+}
+
+/// Launch indices of a `width x height x depth` launch, checked against guide §12 (at most
+/// 2^30).
+pub fn launch_size(width: u32, height: u32, depth: u32) -> Result<u32, LaunchError> {
+    (width as u64)
+        .checked_mul(height as u64)
+        .and_then(|x| x.checked_mul(depth as u64))
+        .filter(|&t| t <= 1 << 30)
+        .map(|t| t as u32)
+        .ok_or(LaunchError::TooLarge {
+            width,
+            height,
+            depth,
+        })
+}
+
+/// Turns the device's exception records into a report: the count, and the first five by launch
+/// index (of the first records the device kept).
+pub(crate) fn exception_report(words: &[u32]) -> LaunchReport {
+    let count = words.first().copied().unwrap_or(0) as u64;
+    let kept = (count as usize).min(EXCEPTION_RECORDS);
+    let mut first: Vec<([u32; 3], Exception)> = (0..kept)
+        .filter_map(|k| words.get(16 + 16 * k..32 + 16 * k))
+        .map(|r| {
+            let n = (r[12] as usize).min(8);
+            (
+                [r[0], r[1], r[2]],
+                Exception::new(ExceptionCode(r[3] as i32), &r[4..4 + n]),
+            )
+        })
+        .collect();
+    first.sort_by_key(|(i, _)| [i[2], i[1], i[0]]);
+    first.truncate(5);
+    LaunchReport {
+        exceptions: count,
+        first_exceptions: first,
+    }
+}
+
+/// A pipeline of CUDA C++ programs (`OptixPipeline`), compiled into one kernel.
+pub struct CudaPipeline {
+    ctx: CudaContext,
+    module: Arc<cudarc::driver::CudaModule>,
+    function: CudaFunction,
+    groups: Vec<CudaProgramGroup>,
+    params_name: Option<String>,
+    scratch: Mutex<Option<(CudaSlice<u8>, CudaSlice<u32>)>>,
+}
+
+impl std::fmt::Debug for CudaPipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CudaPipeline")
+            .field("groups", &self.groups.len())
+            .field("params", &self.params_name)
+            .finish()
+    }
+}
+
+impl CudaPipeline {
+    /// Compiles and loads a pipeline (`optixPipelineCreate`). `params_variable` is the guide's
+    /// `pipelineLaunchParamsVariableName`: a `__constant__` (or `__device__`) variable of a
+    /// module that each launch fills with the launch parameters.
+    pub fn new(
+        ctx: &CudaContext,
+        compile: &PipelineCompileOptions,
+        link: &PipelineLinkOptions,
+        params_variable: Option<&str>,
+        groups: &[CudaProgramGroup],
+    ) -> Result<CudaPipeline, CudaError> {
+        let cc = ctx.device().compute_capability;
+        let ptx = compile_pipeline_ptx(cc, compile, link, groups)?;
+        let cu = ctx.stream.context();
+        let module = guarded("loading a pipeline", || {
+            cu.load_module(cudarc::nvrtc::Ptx::from_src(ptx))
+        })?;
+        let function = guarded("loading a pipeline kernel", || {
+            module.load_function("__oxray_pipeline")
+        })?;
+        if let Some(name) = params_variable {
+            guarded("finding the launch parameters", || {
+                module.get_global(name, &ctx.stream).map(|_| ())
+            })
+            .map_err(|_| {
+                CudaError::Launch(format!("no variable {name} in the pipeline's modules"))
+            })?;
+        }
+        // Traces that nest (a closest-hit or miss program that traces) recurse on the stack.
+        let stack = 4096 * (link.max_trace_depth.max(1) as usize) + 2048;
+        let current = guarded("reading the stack size", || {
+            cudarc::driver::result::ctx::get_limit(
+                cudarc::driver::sys::CUlimit::CU_LIMIT_STACK_SIZE,
+            )
+        })?;
+        if current < stack {
+            guarded("setting the stack size", || {
+                cu.set_limit(cudarc::driver::sys::CUlimit::CU_LIMIT_STACK_SIZE, stack)
+            })?;
+        }
+        Ok(CudaPipeline {
+            ctx: ctx.clone(),
+            module,
+            function,
+            groups: groups.to_vec(),
+            params_name: params_variable.map(str::to_string),
+            scratch: Mutex::new(None),
+        })
+    }
+
+    /// The program groups, in program-index order.
+    pub fn groups(&self) -> &[CudaProgramGroup] {
+        &self.groups
+    }
+
+    /// Launches `width * height * depth` ray-generation programs (`optixLaunch`) with the launch
+    /// parameters `params` (the bytes of the parameter variable, copied before the launch, guide
+    /// §10), and waits for them. Exceptions are counted in the report, with the first five by
+    /// launch index (among the first 64 the device recorded).
+    pub fn launch(
+        &self,
+        params: &[u8],
+        sbt: &ShaderBindingTable,
+        width: u32,
+        height: u32,
+        depth: u32,
+    ) -> Result<LaunchReport, CudaError> {
+        let total = launch_size(width, height, depth)?;
+        let packed = pack_sbt(&self.groups, sbt)?;
+        let stream = &self.ctx.stream;
+        match &self.params_name {
+            Some(name) => {
+                let mut var = guarded("finding the launch parameters", || {
+                    self.module.get_global(name, stream)
+                })?;
+                if params.len() != var.len() {
+                    return Err(CudaError::Launch(format!(
+                        "{} bytes of launch parameters for {name}, which holds {}",
+                        params.len(),
+                        var.len()
+                    )));
+                }
+                if !params.is_empty() {
+                    stream
+                        .memcpy_htod(params, &mut var)
+                        .map_err(driver("copying the launch parameters"))?;
+                }
+            }
+            None if !params.is_empty() => {
+                return Err(CudaError::Launch(
+                    "launch parameters given, but the pipeline names no parameter variable".into(),
+                ))
+            }
+            None => {}
+        }
+        if total == 0 {
+            return Ok(LaunchReport::default());
+        }
+        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let grow = scratch
+            .as_ref()
+            .is_none_or(|(s, _)| s.len() < packed.bytes.len());
+        if grow {
+            *scratch = None;
+            let s = stream
+                .alloc_zeros::<u8>(packed.bytes.len().next_power_of_two())
+                .map_err(driver("allocating the SBT"))?;
+            let e = stream
+                .alloc_zeros::<u32>(16 + 16 * EXCEPTION_RECORDS)
+                .map_err(driver("allocating exception records"))?;
+            *scratch = Some((s, e));
+        }
+        let Some((d_sbt, d_exc)) = scratch.as_mut() else {
+            return Err(CudaError::Launch("scratch buffers missing".into()));
+        };
+        stream
+            .memcpy_htod(
+                &packed.bytes[..],
+                &mut d_sbt.slice_mut(..packed.bytes.len()),
+            )
+            .map_err(driver("copying the SBT"))?;
+        stream
+            .memset_zeros(d_exc)
+            .map_err(driver("clearing exception records"))?;
+        let (base, _g1) = d_sbt.device_ptr(stream);
+        let (exc, _g2) = d_exc.device_ptr(stream);
+        let at = |r: &PackedRegion| base + r.offset as u64;
+        let info = LaunchInfo {
+            dims: [width, height, depth],
+            total,
+            raygen: at(&packed.raygen),
+            exception: packed.exception.as_ref().map_or(0, at),
+            miss: at(&packed.miss),
+            hitgroup: at(&packed.hitgroup),
+            miss_stride: packed.miss.stride as u32,
+            miss_count: packed.miss.count as u32,
+            hit_stride: packed.hitgroup.stride as u32,
+            hit_count: packed.hitgroup.count as u32,
+            exceptions: exc,
+        };
+        let mut var = guarded("finding the launch information", || {
+            self.module.get_global("__oxray_launch", stream)
+        })?;
+        stream
+            .memcpy_htod(bytemuck::bytes_of(&info), &mut var)
+            .map_err(driver("copying the launch information"))?;
+        let cfg = LaunchConfig {
+            grid_dim: (total.div_ceil(PIPELINE_BLOCK), 1, 1),
+            block_dim: (PIPELINE_BLOCK, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        let mut launch = stream.launch_builder(&self.function);
+        // SAFETY: the kernel takes no parameters; everything it reads is in the launch
+        // information written above (the SBT and exception buffers, alive until the launch is
+        // synchronized below while `scratch` is locked) and in the launch parameters and
+        // traversables the user's programs read, which the user provides as for OptiX.
+        unsafe { launch.launch(cfg) }.map_err(driver("launching a pipeline"))?;
+        let words = stream
+            .clone_dtoh(&d_exc.slice(..))
+            .map_err(driver("copying exception records"))?;
+        self.ctx.synchronize()?;
+        Ok(exception_report(&words))
+    }
+
+    /// [`launch`](Self::launch) with typed launch parameters.
+    pub fn launch_with<P: Pod>(
+        &self,
+        params: &P,
+        sbt: &ShaderBindingTable,
+        width: u32,
+        height: u32,
+        depth: u32,
+    ) -> Result<LaunchReport, CudaError> {
+        self.launch(bytemuck::bytes_of(params), sbt, width, height, depth)
+    }
+}
+
+/// Device memory holding `len` values of `T`, which programs read and write through its
+/// address ([`device_ptr`](Self::device_ptr), put in the launch parameters or SBT data).
+pub struct CudaBuffer<T: Pod> {
+    ctx: CudaContext,
+    bytes: CudaSlice<u8>,
+    len: usize,
+    _t: PhantomData<T>,
+}
+
+impl<T: Pod> std::fmt::Debug for CudaBuffer<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "CudaBuffer({} x {})",
+            self.len,
+            std::any::type_name::<T>()
+        )
+    }
+}
+
+impl<T: Pod> CudaBuffer<T> {
+    /// `len` zeroed values.
+    pub fn zeroed(ctx: &CudaContext, len: usize) -> Result<Self, CudaError> {
+        let n = (len * std::mem::size_of::<T>()).max(16);
+        let bytes = ctx
+            .stream
+            .alloc_zeros::<u8>(n)
+            .map_err(driver("allocating a buffer"))?;
+        Ok(CudaBuffer {
+            ctx: ctx.clone(),
+            bytes,
+            len,
+            _t: PhantomData,
+        })
+    }
+
+    /// A copy of `data`.
+    pub fn from_slice(ctx: &CudaContext, data: &[T]) -> Result<Self, CudaError> {
+        let mut b = Self::zeroed(ctx, data.len())?;
+        b.write(data)?;
+        Ok(b)
+    }
+
+    /// Replaces the contents with `data` (of the same length).
+    pub fn write(&mut self, data: &[T]) -> Result<(), CudaError> {
+        if data.len() != self.len {
+            return Err(CudaError::LengthMismatch {
+                rays: data.len(),
+                outputs: self.len,
+            });
+        }
+        let src: &[u8] = bytemuck::cast_slice(data);
+        if src.is_empty() {
+            return Ok(());
+        }
+        self.ctx
+            .stream
+            .memcpy_htod(src, &mut self.bytes.slice_mut(..src.len()))
+            .map_err(driver("copying a buffer to the device"))
+    }
+
+    /// The values, copied to the host.
+    pub fn download(&self) -> Result<Vec<T>, CudaError> {
+        let mut out = vec![T::zeroed(); self.len];
+        let dst: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+        if !dst.is_empty() {
+            let n = dst.len();
+            self.ctx
+                .stream
+                .memcpy_dtoh(&self.bytes.slice(..n), dst)
+                .map_err(driver("copying a buffer to the host"))?;
+            self.ctx.synchronize()?;
+        }
+        Ok(out)
+    }
+
+    /// The device address of the first value (a `T*` for programs).
+    pub fn device_ptr(&self) -> u64 {
+        let (p, _g) = self.bytes.device_ptr(&self.ctx.stream);
+        p
+    }
+
+    /// Values held.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    /// Whether it holds no values.
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SRC: &str = "#include <optix.h>\n  #  include \"optix_device.h\"\n#include <cuda_fp16.h>\n\
+        extern \"C\" __global__ void __raygen__a() {}\nextern \"C\" __global__ void __miss__m() {}\n\
+        extern \"C\" __global__ void __closesthit__c () {}\nvoid x__raygen__b() {}\n";
+
+    fn groups() -> (CudaModule, Vec<CudaProgramGroup>) {
+        let m = CudaModule::from_source(SRC);
+        let g = vec![
+            CudaProgramGroup::raygen(&m, "__raygen__a").unwrap(),
+            CudaProgramGroup::miss(Some((&m, "__miss__m"))).unwrap(),
+            CudaProgramGroup::hit_group(CudaHitGroupDesc {
+                closest_hit: Some((&m, "__closesthit__c")),
+                ..Default::default()
+            })
+            .unwrap(),
+            CudaProgramGroup::miss(None).unwrap(),
+        ];
+        (m, g)
+    }
+
+    #[test]
+    fn entries_are_found_by_name_and_prefix() {
+        let (m, _) = groups();
+        assert!(m.has_entry("__closesthit__c"));
+        assert!(!m.has_entry("__raygen__b"), "only a suffix of another name");
+        assert!(matches!(
+            CudaProgramGroup::raygen(&m, "__raygen__b"),
+            Err(PipelineError::UnknownEntry { .. })
+        ));
+        assert!(
+            CudaProgramGroup::raygen(&m, "__miss__m").is_err(),
+            "wrong prefix"
+        );
+        assert!(CudaProgramGroup::hit_group(CudaHitGroupDesc {
+            intersection: Some((&m, "__intersection__i")),
+            ..Default::default()
+        })
+        .is_err());
+    }
+
+    #[test]
+    fn optix_includes_are_replaced_by_the_header() {
+        let s = strip_optix_includes(SRC);
+        assert!(s.contains("// (oxray_device.h) #include <optix.h>"));
+        assert!(s.contains("// (oxray_device.h)   #  include \"optix_device.h\""));
+        assert!(s.contains("\n#include <cuda_fp16.h>"));
+    }
+
+    #[test]
+    fn the_unit_dispatches_by_group_index_and_includes_each_module_once() {
+        let (_, g) = groups();
+        let src = pipeline_source(&g);
+        assert_eq!(src.matches("#line 1 \"module").count(), 1);
+        assert!(src.contains("case 0: __raygen__a(); return;"));
+        assert!(src.contains("case 1: __miss__m(); return;"));
+        assert!(src.contains("case 2: __closesthit__c(); return;"));
+        assert!(
+            !src.contains("case 3:"),
+            "a miss group without a program calls nothing"
+        );
+        let o = pipeline_compile_options(
+            (9, 0),
+            &PipelineCompileOptions::default(),
+            &PipelineLinkOptions { max_trace_depth: 3 },
+        );
+        assert!(o.contains(&"-DOXRAY_MAX_TRACE_DEPTH=3".to_string()));
+        assert!(o.contains(&"-DOXRAY_NUM_PAYLOAD_VALUES=8".to_string()));
+        assert!(o.contains(&"--fmad=false".to_string()));
+    }
+
+    #[test]
+    fn the_sbt_is_packed_with_program_indices_and_the_records_data() {
+        let (_, g) = groups();
+        let sbt = ShaderBindingTable {
+            raygen: SbtRegion::from_records(&[(g[0].pack_header(), [7u32; 3])]),
+            miss: SbtRegion::from_records(&[
+                (g[1].pack_header(), 1.5f32),
+                (g[3].pack_header(), 2.5),
+            ]),
+            hitgroup: SbtRegion::from_records(&[(g[2].pack_header(), [9u64; 3]); 3]),
+            ..Default::default()
+        };
+        let p = pack_sbt(&g, &sbt).unwrap();
+        assert_eq!(
+            p.raygen,
+            PackedRegion {
+                offset: 0,
+                stride: 48,
+                count: 1
+            }
+        );
+        assert_eq!(
+            p.miss,
+            PackedRegion {
+                offset: 48,
+                stride: 48,
+                count: 2
+            }
+        );
+        assert_eq!(
+            p.hitgroup,
+            PackedRegion {
+                offset: 144,
+                stride: 64,
+                count: 3
+            }
+        );
+        assert_eq!(p.exception, None);
+        assert_eq!(p.bytes.len(), 144 + 3 * 64);
+        let word = |o: usize| u32::from_le_bytes(p.bytes[o..o + 4].try_into().unwrap());
+        assert_eq!((word(0), word(4), word(8)), (0, 0, 0));
+        assert_eq!(word(32), 7);
+        assert_eq!((word(48), word(52)), (1, 1));
+        assert_eq!((word(96), word(100)), (3, 1));
+        assert_eq!(f32::from_bits(word(96 + 32)), 2.5);
+        for r in 0..3 {
+            assert_eq!((word(144 + 64 * r), word(148 + 64 * r)), (2, 3));
+            assert_eq!(word(144 + 64 * r + 32), 9);
+        }
+    }
+
+    #[test]
+    fn bad_sbt_records_are_refused_as_on_the_cpu() {
+        let (_, g) = groups();
+        let rg = SbtRegion::from_headers(&[g[0].pack_header()]);
+        let bad = |sbt: ShaderBindingTable| match pack_sbt(&g, &sbt) {
+            Err(LaunchError::InvalidSbtRecord { region, reason, .. }) => (region, reason),
+            other => panic!("{other:?}"),
+        };
+        // A CPU header, a group of another pipeline, a group of the wrong kind.
+        let cpu = SbtHeader::for_group(1);
+        let other = CudaProgramGroup::miss(None).unwrap();
+        let (region, reason) = bad(ShaderBindingTable {
+            raygen: rg.clone(),
+            miss: SbtRegion::from_headers(&[cpu]),
+            ..Default::default()
+        });
+        assert_eq!(region, "miss");
+        assert!(reason.contains("CUDA"));
+        let (_, reason) = bad(ShaderBindingTable {
+            raygen: rg.clone(),
+            hitgroup: SbtRegion::from_headers(&[other.pack_header()]),
+            ..Default::default()
+        });
+        assert!(reason.contains("not in this pipeline"));
+        let (_, reason) = bad(ShaderBindingTable {
+            raygen: rg,
+            hitgroup: SbtRegion::from_headers(&[g[1].pack_header()]),
+            ..Default::default()
+        });
+        assert!(reason.contains("another kind"));
+        assert_eq!(
+            pack_sbt(&g, &ShaderBindingTable::default()),
+            Err(LaunchError::NoRaygenRecord)
+        );
+    }
+
+    #[test]
+    fn launch_sizes_follow_the_guide() {
+        assert_eq!(launch_size(4, 3, 2), Ok(24));
+        assert_eq!(launch_size(1 << 15, 1 << 15, 1), Ok(1 << 30));
+        assert!(launch_size(1 << 15, 1 << 15, 2).is_err());
+        assert!(launch_size(u32::MAX, u32::MAX, u32::MAX).is_err());
+        assert_eq!(launch_size(0, 5, 5), Ok(0));
+    }
+
+    #[test]
+    fn launch_information_matches_the_device_struct() {
+        // uint3 + u32, four addresses, four u32, one address: 72 bytes, 8-aligned.
+        assert_eq!(std::mem::size_of::<LaunchInfo>(), 72);
+        assert_eq!(std::mem::offset_of!(LaunchInfo, raygen), 16);
+        assert_eq!(std::mem::offset_of!(LaunchInfo, miss_stride), 48);
+        assert_eq!(std::mem::offset_of!(LaunchInfo, exceptions), 64);
+        assert!(DEVICE_HEADER.contains("struct __oxray_LaunchInfo"));
+    }
+
+    #[test]
+    fn exception_records_become_a_report_sorted_by_launch_index() {
+        let mut w = vec![0u32; 16 + 16 * EXCEPTION_RECORDS];
+        w[0] = 7;
+        for (k, idx) in [
+            [5, 0, 0],
+            [1, 1, 0],
+            [3, 0, 0],
+            [0, 0, 1],
+            [2, 0, 0],
+            [4, 0, 0],
+            [0, 1, 0],
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let r = &mut w[16 + 16 * k..32 + 16 * k];
+            r[..3].copy_from_slice(&idx);
+            r[3] = (-2i32) as u32;
+            r[4] = k as u32;
+            r[12] = 1;
+        }
+        let report = exception_report(&w);
+        assert_eq!(report.exceptions, 7);
+        let idx: Vec<_> = report.first_exceptions.iter().map(|(i, _)| *i).collect();
+        assert_eq!(idx, [[2, 0, 0], [3, 0, 0], [4, 0, 0], [5, 0, 0], [0, 1, 0]]);
+        let e = &report.first_exceptions[0].1;
+        assert_eq!(e.code, ExceptionCode::TRACE_DEPTH_EXCEEDED);
+        assert_eq!(e.details(), &[4]);
+    }
+}
