@@ -64,9 +64,13 @@
 
 mod accel;
 mod device;
+#[cfg(feature = "cuda")]
+mod programs;
 
 pub use accel::{Gas, Ias};
 pub use device::{Device, DeviceError, RayBatch};
+#[cfg(feature = "cuda")]
+pub use programs::{ModuleSource, ProgramError};
 
 /// The CPU backend: per-ray queries, any-hit filters and custom-primitive closures on CPU
 /// structures, and the program model's types.
