@@ -142,7 +142,12 @@ fn the_test_programs_compile_with_nvrtc() {
         ptx.contains(".entry __oxray_pipeline"),
         "no pipeline kernel"
     );
-    assert!(ptx.contains("params"), "no launch parameter variable");
+    // The host finds these by name (cuModuleGetGlobal): they must not be mangled.
+    assert!(ptx.contains(" params["), "no launch parameter variable");
+    assert!(
+        ptx.contains(".const .align 8 .b8 __oxray_launch[72]"),
+        "launch information"
+    );
     let groups: Vec<_> = suite_groups().into_iter().map(|(_, g)| g).collect();
     for depth in [1, 2] {
         for payload in [0, 8, 32] {
