@@ -34,6 +34,9 @@ pub enum DeviceCommandError {
     /// The GAS of a benchmark mesh could not be built.
     #[error(transparent)]
     Build(#[from] oxray::BuildError),
+    /// The benchmark's CUDA C++ pipeline could not be made or launched.
+    #[error("pipeline: {0}")]
+    Pipeline(String),
 }
 
 /// Checks a `--backend` value without opening the device (for the argument parser).
@@ -153,7 +156,138 @@ pub fn raycast(
 }
 
 /// The header of the `oxray bench --backend DEVICE` table (markdown, two lines).
-pub const BENCH_HEADER: &str = "| mesh | tris | rays | query | CPU Mrays/s | device traced Mrays/s | device with transfers Mrays/s | traced / CPU | hit rate | hits identical to CPU |\n|---|---:|---|---|---:|---:|---:|---:|---:|---:|";
+pub const BENCH_HEADER: &str = "| mesh | tris | rays | query | CPU Mrays/s | device traced Mrays/s | device with transfers Mrays/s | traced / CPU | pipeline Mrays/s (/ traced) | hit rate | hits identical to CPU |\n|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|";
+
+/// The CUDA C++ programs of the pipeline benchmark: a ray-generation program traces ray `i` of a
+/// buffer and stores the distance a one-line closest-hit program reports (issue 13's
+/// comparison of the programmable pipeline with the fixed query kernel).
+const RAY_PIPELINE: &str = r#"
+#include <optix.h>
+struct Params {
+    const float4* rays;
+    float* t;
+    OptixTraversableHandle handle;
+    unsigned int flags;
+    unsigned int pad;
+};
+extern "C" __constant__ Params params;
+extern "C" __global__ void __raygen__rays() {
+    const unsigned int i = optixGetLaunchIndex().x;
+    const float4 a = params.rays[2 * i];
+    const float4 b = params.rays[2 * i + 1];
+    unsigned int t = 0x7f800000u;
+    optixTrace(params.handle, make_float3(a.x, a.y, a.z), make_float3(b.x, b.y, b.z), a.w, b.w,
+               0.0f, OptixVisibilityMask(255), params.flags, 0, 1, 0, t);
+    params.t[i] = __uint_as_float(t);
+}
+extern "C" __global__ void __miss__none() {}
+extern "C" __global__ void __closesthit__t() { optixSetPayload_0(__float_as_uint(optixGetRayTmax())); }
+"#;
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct RayParams {
+    rays: u64,
+    t: u64,
+    handle: u64,
+    flags: u32,
+    pad: u32,
+}
+
+/// A pipeline of [`RAY_PIPELINE`] over one GAS of a CUDA device.
+struct RayPipeline {
+    pipeline: oxray::cuda::CudaPipeline,
+    sbt: oxray::ShaderBindingTable,
+    handle: u64,
+}
+
+impl RayPipeline {
+    /// `None` on a device that does not run CUDA C++ programs.
+    fn new(device: &Device, gas: &oxray::Gas) -> Result<Option<RayPipeline>, DeviceCommandError> {
+        use oxray::cuda::{CudaHitGroupDesc, CudaProgramGroup};
+        use oxray::{ModuleSource, SbtRegion};
+        if device.kind() != oxray::BackendKind::Cuda {
+            return Ok(None);
+        }
+        let err = |e: &dyn std::fmt::Display| DeviceCommandError::Pipeline(e.to_string());
+        let module = device
+            .create_module(ModuleSource::CudaCpp(RAY_PIPELINE))
+            .map_err(|e| err(&e))?;
+        let raygen = CudaProgramGroup::raygen(&module, "__raygen__rays").map_err(|e| err(&e))?;
+        let miss = CudaProgramGroup::miss(Some((&module, "__miss__none"))).map_err(|e| err(&e))?;
+        let hit = CudaProgramGroup::hit_group(CudaHitGroupDesc {
+            closest_hit: Some((&module, "__closesthit__t")),
+            ..Default::default()
+        })
+        .map_err(|e| err(&e))?;
+        let compile = oxray::PipelineCompileOptions {
+            num_payload_values: 1,
+            ..Default::default()
+        };
+        let pipeline = device
+            .create_pipeline(
+                &compile,
+                &oxray::PipelineLinkOptions::default(),
+                Some("params"),
+                &[raygen.clone(), miss.clone(), hit.clone()],
+            )
+            .map_err(|e| err(&e))?;
+        let sbt = oxray::ShaderBindingTable {
+            raygen: SbtRegion::from_headers(&[raygen.pack_header()]),
+            miss: SbtRegion::from_headers(&[miss.pack_header()]),
+            hitgroup: SbtRegion::from_headers(&[hit.pack_header()]),
+            ..Default::default()
+        };
+        let handle = gas.optix_handle().map_err(|e| err(&e))?;
+        Ok(Some(RayPipeline {
+            pipeline,
+            sbt,
+            handle,
+        }))
+    }
+
+    /// Median seconds of tracing `rays` (resident on the device) with the pipeline, and the
+    /// distances found (+inf for a miss). `first_hit` ends each ray at its first hit.
+    fn trace(
+        &self,
+        device: &Device,
+        rays: &[Ray],
+        first_hit: bool,
+        runs: usize,
+    ) -> Result<(f64, Vec<f32>), DeviceCommandError> {
+        let err = |e: &dyn std::fmt::Display| DeviceCommandError::Pipeline(e.to_string());
+        let records: Vec<oxray::RayRecord> = rays.iter().map(|&r| r.into()).collect();
+        let mut d_rays = device
+            .create_buffer::<oxray::RayRecord>(records.len())
+            .map_err(|e| err(&e))?;
+        d_rays.write(&records).map_err(|e| err(&e))?;
+        let d_t = device
+            .create_buffer::<f32>(rays.len())
+            .map_err(|e| err(&e))?;
+        let params = RayParams {
+            rays: d_rays.device_ptr(),
+            t: d_t.device_ptr(),
+            handle: self.handle,
+            // OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT
+            flags: if first_hit { 1 << 2 } else { 0 },
+            pad: 0,
+        };
+        let n = u32::try_from(rays.len()).map_err(|e| err(&e))?;
+        let seconds = time(runs, || {
+            let report = self
+                .pipeline
+                .launch_with(&params, &self.sbt, n, 1, 1)
+                .map_err(|e| err(&e))?;
+            match report.exceptions {
+                0 => Ok(()),
+                k => Err(DeviceCommandError::Pipeline(format!(
+                    "{k} launch indices raised exceptions"
+                ))),
+            }
+        })?;
+        Ok((seconds, d_t.download().map_err(|e| err(&e))?))
+    }
+}
 
 /// One row of the device benchmark: one ray set and one query on one mesh.
 #[derive(Clone, Debug)]
@@ -172,8 +306,11 @@ pub struct DeviceBenchRow {
     pub traced: f64,
     /// Mrays/s of the one-call query (rays in, traversal, results out).
     pub with_transfers: f64,
+    /// Mrays/s of a ray-generation program tracing the same rays (resident) through the
+    /// programmable pipeline, where the device runs CUDA C++ programs.
+    pub pipeline: Option<f64>,
     /// Percentage of rays whose device result equals the CPU's: the whole [`Hit`] for closest
-    /// hit, the flag for any hit.
+    /// hit, the flag for any hit (and, with a pipeline, its distance or occlusion too).
     pub identical_pct: f64,
     /// Percentage of rays that hit.
     pub hit_rate_pct: f64,
@@ -183,7 +320,7 @@ impl fmt::Display for DeviceBenchRow {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(
             f,
-            "| {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.1}x | {:.1}% | {:.4}% |",
+            "| {} | {} | {} | {} | {:.2} | {:.1} | {:.1} | {:.1}x | {} | {:.1}% | {:.4}% |",
             self.name,
             self.triangles,
             self.set,
@@ -192,6 +329,10 @@ impl fmt::Display for DeviceBenchRow {
             self.traced,
             self.with_transfers,
             self.traced / self.cpu.max(1e-12),
+            match self.pipeline {
+                Some(p) => format!("{p:.1} ({:.0}%)", 100.0 * p / self.traced.max(1e-12)),
+                None => "-".into(),
+            },
             self.hit_rate_pct,
             self.identical_pct
         )
@@ -211,14 +352,21 @@ pub fn bench_mesh(
 ) -> Result<Vec<DeviceBenchRow>, DeviceCommandError> {
     let cpu = Device::cpu();
     let on_cpu = build_gas_on(&cpu, mesh, BuildFlags::empty())?.handle();
-    let on_device = build_gas_on(device, mesh, BuildFlags::empty())?.handle();
+    let gas = build_gas_on(device, mesh, BuildFlags::empty())?;
+    let on_device = gas.handle();
+    // The pipeline's figures are an extra column: a device that cannot build it still gets
+    // the query table, with the reason on stderr.
+    let pipeline = RayPipeline::new(device, &gas).unwrap_or_else(|e| {
+        eprintln!("warning: no pipeline column: {e}");
+        None
+    });
     let mut rows = Vec::with_capacity(6);
     for (set, rays) in [
         ("coherent", &rays.coherent),
         ("incoherent", &rays.incoherent),
         ("shadow", &rays.shadow),
     ] {
-        let [closest, any] = bench_set(device, &on_cpu, &on_device, rays, runs)?;
+        let [closest, any] = bench_set(device, &on_cpu, &on_device, pipeline.as_ref(), rays, runs)?;
         for (query, r) in [("closest", closest), ("any", any)] {
             rows.push(DeviceBenchRow {
                 name: name.to_string(),
@@ -232,18 +380,25 @@ pub fn bench_mesh(
     Ok(rows)
 }
 
+/// The pipeline's timing and distances, or `None` with the reason on stderr.
+fn traced_or_warn(r: Result<(f64, Vec<f32>), DeviceCommandError>) -> Option<(f64, Vec<f32>)> {
+    r.map_err(|e| eprintln!("warning: no pipeline column: {e}"))
+        .ok()
+}
+
 /// Times one ray set, closest and any hit; the rows' names are filled in by the caller.
 fn bench_set(
     device: &Device,
     on_cpu: &oxray::TraversableHandle,
     on_device: &oxray::TraversableHandle,
+    pipeline: Option<&RayPipeline>,
     rays: &[Ray],
     runs: usize,
 ) -> Result<[DeviceBenchRow; 2], DeviceCommandError> {
     let n = rays.len();
     let cpu = Device::cpu();
     let pct = |k: usize| 100.0 * k as f64 / n.max(1) as f64;
-    let row = |cpu, traced, with_transfers, same, hit| DeviceBenchRow {
+    let row = |cpu, traced, with_transfers, pipeline: Option<f64>, same, hit| DeviceBenchRow {
         name: String::new(),
         triangles: 0,
         set: "",
@@ -251,6 +406,7 @@ fn bench_set(
         cpu: mrays(n, cpu),
         traced: mrays(n, traced),
         with_transfers: mrays(n, with_transfers),
+        pipeline: pipeline.map(|s| mrays(n, s)),
         identical_pct: pct(same),
         hit_rate_pct: pct(hit),
     };
@@ -264,13 +420,20 @@ fn bench_set(
     let with = time(runs, || {
         device.intersect_closest(on_device, rays, &mut dev_hits)
     })?;
-    let same = cpu_hits
-        .iter()
-        .zip(&dev_hits)
-        .filter(|(c, g)| c == g)
+    let programs = pipeline.and_then(|p| traced_or_warn(p.trace(device, rays, false, runs)));
+    // A ray agrees when its query hit equals the CPU's and, with a pipeline, the distance its
+    // closest-hit program reported does too.
+    let t_of = |h: &Option<Hit>| h.map_or(f32::INFINITY, |h| h.t).to_bits();
+    let same = (0..n)
+        .filter(|&i| cpu_hits[i] == dev_hits[i])
+        .filter(|&i| {
+            programs
+                .as_ref()
+                .is_none_or(|(_, t)| t[i].to_bits() == t_of(&cpu_hits[i]))
+        })
         .count();
     let hit = cpu_hits.iter().filter(|h| h.is_some()).count();
-    let closest = row(cpu_s, traced, with, same, hit);
+    let closest = row(cpu_s, traced, with, programs.map(|p| p.0), same, hit);
     drop((cpu_hits, dev_hits));
 
     let mut cpu_occ = vec![false; n];
@@ -280,9 +443,20 @@ fn bench_set(
     drop(batch);
     let mut dev_occ = vec![false; n];
     let with = time(runs, || device.intersect_any(on_device, rays, &mut dev_occ))?;
-    let same = cpu_occ.iter().zip(&dev_occ).filter(|(c, g)| c == g).count();
+    let programs = pipeline.and_then(|p| traced_or_warn(p.trace(device, rays, true, runs)));
+    let same = (0..n)
+        .filter(|&i| cpu_occ[i] == dev_occ[i])
+        .filter(|&i| {
+            programs
+                .as_ref()
+                .is_none_or(|(_, t)| (t[i] != f32::INFINITY) == cpu_occ[i])
+        })
+        .count();
     let hit = cpu_occ.iter().filter(|&&o| o).count();
-    Ok([closest, row(cpu_s, traced, with, same, hit)])
+    Ok([
+        closest,
+        row(cpu_s, traced, with, programs.map(|p| p.0), same, hit),
+    ])
 }
 
 #[cfg(test)]
@@ -358,6 +532,7 @@ mod tests {
             cpu: 10.0,
             traced: 500.0,
             with_transfers: 100.0,
+            pipeline: Some(450.0),
             identical_pct: 100.0,
             hit_rate_pct: 50.0,
         };
@@ -366,6 +541,9 @@ mod tests {
         let header = BENCH_HEADER.lines().next().unwrap_or_default();
         assert_eq!(columns(&line), columns(header), "{line}");
         assert!(line.contains("| 50.0x |"), "{line}");
-        assert!(line.contains("| 50.0% | 100.0000% |"), "{line}");
+        assert!(
+            line.contains("| 450.0 (90%) | 50.0% | 100.0000% |"),
+            "{line}"
+        );
     }
 }
