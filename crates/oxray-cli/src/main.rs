@@ -116,8 +116,8 @@ enum Command {
         /// Also write each mesh and its rays here, for scripts/bench_embree.py.
         #[arg(long)]
         export: Option<PathBuf>,
-        /// Also build an IAS of this many instances of the first mesh and trace through it
-        /// (CPU backend only).
+        /// Also build an IAS of this many instances of the first mesh and trace through it, on
+        /// the device of --backend.
         #[arg(long)]
         instances: Option<usize>,
         /// cpu: the CPU table. cuda, cuda:N, auto: the same ray sets on that device next to

@@ -31,9 +31,9 @@ pub enum CudaError {
         /// The driver's error.
         message: String,
     },
-    /// The GAS holds custom primitives, whose intersection is a host closure; the CUDA backend
-    /// traces triangle GASes only.
-    #[error("the CUDA backend traces triangle GASes only; this GAS holds custom primitives")]
+    /// The GAS holds custom primitives, whose intersection programs run on the CPU backend; the
+    /// CUDA backend traces triangles (and instances of triangle GASes).
+    #[error("the CUDA backend traces triangles; this GAS holds custom primitives, whose intersection programs run on the CPU backend")]
     CustomPrimitives,
     /// The GAS or the batch is too large for the device layout's 32-bit indices.
     #[error("too large for the CUDA backend: {0}")]
