@@ -523,6 +523,37 @@ mod tests {
     }
 
     #[test]
+    fn the_benchmark_pipeline_compiles_with_nvrtc_where_it_is_present() {
+        use oxray::cuda::{compile_pipeline_ptx, CudaHitGroupDesc, CudaModule, CudaProgramGroup};
+        let module = CudaModule::from_source(RAY_PIPELINE);
+        let groups = [
+            CudaProgramGroup::raygen(&module, "__raygen__rays").unwrap(),
+            CudaProgramGroup::miss(Some((&module, "__miss__none"))).unwrap(),
+            CudaProgramGroup::hit_group(CudaHitGroupDesc {
+                closest_hit: Some((&module, "__closesthit__t")),
+                ..Default::default()
+            })
+            .unwrap(),
+        ];
+        let compile = oxray::PipelineCompileOptions {
+            num_payload_values: 1,
+            ..Default::default()
+        };
+        let link = oxray::PipelineLinkOptions::default();
+        match compile_pipeline_ptx((9, 0), &compile, &link, &groups) {
+            Ok(ptx) => assert!(ptx.contains("params"), "the params variable keeps its name"),
+            Err(oxray::cuda::CudaError::NoNvrtc(why)) => {
+                assert!(
+                    std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
+                    "OXRAY_REQUIRE_NVRTC is set but NVRTC is missing: {why}"
+                );
+                println!("skipping: {why}");
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    #[test]
     fn bench_rows_print_as_markdown_rows_of_the_header() {
         let r = DeviceBenchRow {
             name: "m".into(),

@@ -797,21 +797,34 @@ impl CudaGas {
             return None;
         }
         let s = self.slots.get(r.slot_index() as usize)?;
-        Some(Hit {
-            t: r.t,
-            u: r.u,
-            v: r.v,
-            primitive_index: s.primitive_index,
-            sbt_gas_index: s.sbt_gas_index,
-            build_input: s.build_input,
-            hit_kind: if r.is_front_face() {
-                HitKind::TRIANGLE_FRONT_FACE
-            } else {
-                HitKind::TRIANGLE_BACK_FACE
-            },
-            instance_id: !0,
-            instance_index: 0,
-        })
+        Some(hit_of(r, s, false, !0, 0))
+    }
+}
+
+/// The [`Hit`] a hit record on a slot reports: facing swapped by `flip`
+/// (`FLIP_TRIANGLE_FACING`, guide §5.4), with the nearest instance's id and index (`!0` and 0
+/// without one, §13.7).
+pub(crate) fn hit_of(
+    r: &HitRecord,
+    s: &SlotInfo,
+    flip: bool,
+    instance_id: u32,
+    instance_index: u32,
+) -> Hit {
+    Hit {
+        t: r.t,
+        u: r.u,
+        v: r.v,
+        primitive_index: s.primitive_index,
+        sbt_gas_index: s.sbt_gas_index,
+        build_input: s.build_input,
+        hit_kind: if r.is_front_face() != flip {
+            HitKind::TRIANGLE_FRONT_FACE
+        } else {
+            HitKind::TRIANGLE_BACK_FACE
+        },
+        instance_id,
+        instance_index,
     }
 }
 

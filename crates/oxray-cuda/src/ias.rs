@@ -3,12 +3,12 @@
 
 use crate::context::CudaContext;
 use crate::error::{driver, CudaError};
-use crate::gas::{check_batch, grid, CudaGas, HitRecord, ProgramView, Scratch};
+use crate::gas::{check_batch, grid, hit_of, CudaGas, HitRecord, ProgramView, Scratch};
 use crate::layout::{ChildRef, IasLayout, NodeLayout};
 use cudarc::driver::{CudaSlice, DevicePtr, PushKernelArg};
 use oxray_bvh::{Bvh2, IasData};
 use oxray_core::{
-    Aabb, BackendKind, BuildError, Hit, HitKind, InstanceFlags, Ray, Traversable, TraversableKind,
+    Aabb, BackendKind, BuildError, Hit, InstanceFlags, Ray, Traversable, TraversableKind,
 };
 use rayon::prelude::*;
 use std::sync::{Arc, Mutex};
@@ -320,23 +320,8 @@ impl CudaIas {
         let inst = self.data.instances.get(slot as usize)?;
         let gas = self.children.get(slot as usize)?.as_ref()?;
         let s = gas.slot_info(r.slot_index())?;
-        // FLIP_TRIANGLE_FACING of the instance swaps the faces (guide §5.4).
         let flip = inst.flags.contains(InstanceFlags::FLIP_TRIANGLE_FACING);
-        Some(Hit {
-            t: r.t,
-            u: r.u,
-            v: r.v,
-            primitive_index: s.primitive_index,
-            sbt_gas_index: s.sbt_gas_index,
-            build_input: s.build_input,
-            hit_kind: if r.is_front_face() != flip {
-                HitKind::TRIANGLE_FRONT_FACE
-            } else {
-                HitKind::TRIANGLE_BACK_FACE
-            },
-            instance_id: inst.instance_id,
-            instance_index: inst.index,
-        })
+        Some(hit_of(r, s, flip, inst.instance_id, inst.index))
     }
 }
 

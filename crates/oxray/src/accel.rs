@@ -192,7 +192,7 @@ impl Gas {
             g => g.intersect_batch(rays, hits),
             {
                 let handle = TraversableHandle::from(g.clone());
-                oxray_core::AccelBackend::intersect_closest(&cuda_of(g), &handle, rays, hits)
+                oxray_core::AccelBackend::intersect_closest(&cuda_of(g.context()), &handle, rays, hits)
             }
         )
     }
@@ -204,16 +204,16 @@ impl Gas {
             g => g.occluded_batch(rays, occluded),
             {
                 let handle = TraversableHandle::from(g.clone());
-                oxray_core::AccelBackend::intersect_any(&cuda_of(g), &handle, rays, occluded)
+                oxray_core::AccelBackend::intersect_any(&cuda_of(g.context()), &handle, rays, occluded)
             }
         )
     }
 }
 
-/// The backend of the context a CUDA GAS lives in.
+/// The CUDA backend of the context a structure lives in.
 #[cfg(feature = "cuda")]
-fn cuda_of(g: &oxray_cuda::CudaGas) -> oxray_cuda::Cuda {
-    oxray_cuda::Cuda::from_context(g.context().clone())
+fn cuda_of(ctx: &oxray_cuda::CudaContext) -> oxray_cuda::Cuda {
+    oxray_cuda::Cuda::from_context(ctx.clone())
 }
 
 impl From<oxray_cpu::Gas> for Gas {
@@ -410,8 +410,7 @@ impl Ias {
             i => i.intersect_batch(rays, hits),
             {
                 let handle = TraversableHandle::from(i.clone());
-                let cuda = oxray_cuda::Cuda::from_context(i.context().clone());
-                oxray_core::AccelBackend::intersect_closest(&cuda, &handle, rays, hits)
+                oxray_core::AccelBackend::intersect_closest(&cuda_of(i.context()), &handle, rays, hits)
             }
         )
     }
@@ -423,8 +422,7 @@ impl Ias {
             i => i.occluded_batch(rays, occluded),
             {
                 let handle = TraversableHandle::from(i.clone());
-                let cuda = oxray_cuda::Cuda::from_context(i.context().clone());
-                oxray_core::AccelBackend::intersect_any(&cuda, &handle, rays, occluded)
+                oxray_core::AccelBackend::intersect_any(&cuda_of(i.context()), &handle, rays, occluded)
             }
         )
     }
