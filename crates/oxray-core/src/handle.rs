@@ -157,6 +157,42 @@ impl TraversableHandle {
     }
 }
 
+impl TraversableHandle {
+    /// A weak reference to the structure, which does not keep it alive.
+    pub fn downgrade(&self) -> WeakTraversableHandle {
+        WeakTraversableHandle(self.0.as_ref().map(Arc::downgrade))
+    }
+
+    /// A number that identifies the structure while it is alive (its address; 0 for the null
+    /// handle). A structure dropped and another made later may be given the same number.
+    pub fn address(&self) -> u64 {
+        self.0
+            .as_ref()
+            .map_or(0, |t| Arc::as_ptr(t) as *const () as usize as u64)
+    }
+}
+
+/// A weak [`TraversableHandle`]: it refers to a structure without keeping it alive.
+///
+/// ```
+/// # use oxray_core::TraversableHandle;
+/// let weak = TraversableHandle::NULL.downgrade();
+/// assert!(weak.upgrade().is_none(), "the null handle upgrades to nothing");
+/// ```
+#[derive(Clone, Default, Debug)]
+pub struct WeakTraversableHandle(Option<std::sync::Weak<dyn Traversable>>);
+
+impl WeakTraversableHandle {
+    /// The handle, if the structure is still alive (`None` for a dropped structure and for the
+    /// null handle).
+    pub fn upgrade(&self) -> Option<TraversableHandle> {
+        self.0
+            .as_ref()
+            .and_then(|w| w.upgrade())
+            .map(|a| TraversableHandle(Some(a)))
+    }
+}
+
 impl<T: Traversable> From<T> for TraversableHandle {
     fn from(t: T) -> Self {
         TraversableHandle::new(Arc::new(t))

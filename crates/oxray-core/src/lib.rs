@@ -34,6 +34,7 @@ pub mod options;
 pub mod pipeline;
 pub mod ray;
 pub mod sbt;
+pub mod source;
 pub mod transform;
 pub mod validate;
 pub mod vertex;
@@ -45,7 +46,7 @@ pub use error::{
     QueryError, UpdateRule,
 };
 pub use exception::{Exception, ExceptionCode, ExceptionFlags};
-pub use handle::{BackendKind, Traversable, TraversableHandle, TraversableKind};
+pub use handle::{BackendKind, Traversable, TraversableHandle, TraversableKind, WeakTraversableHandle};
 pub use hit::{CandidateAction, CustomHit, CustomPrimitive, Hit, HitKind};
 pub use input::{
     AabbBuffer, BuildInput, BuildInputKind, CustomPrimitiveInput, IndexBuffer, SbtIndexOffsets,

@@ -31,6 +31,8 @@
 #![allow(clippy::needless_range_loop)]
 
 mod backend;
+#[cfg(unix)]
+pub mod cxx;
 mod gas;
 mod ias;
 mod interrupt;

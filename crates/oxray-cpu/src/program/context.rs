@@ -125,7 +125,7 @@ impl<'a, P> Frame<'a, P> {
         Some(bytemuck::pod_read_unaligned(d))
     }
 
-    fn throw(&self, code: i32, details: &[u32]) -> ProgramResult {
+    pub(crate) fn throw(&self, code: i32, details: &[u32]) -> ProgramResult {
         // Only user codes may be thrown; anything else is clamped into the user range's
         // complement so it cannot impersonate a built-in exception.
         let code = if (0..=ExceptionCode::MAX_USER).contains(&code) {

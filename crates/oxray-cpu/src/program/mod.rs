@@ -4,10 +4,10 @@
 //! Each program kind gets its own context type exposing exactly the device functions the guide's
 //! §13 table allows it, so calling, say, `trace` from an any-hit program does not compile.
 
-mod context;
+pub(crate) mod context;
 mod group;
-mod module;
-mod trace;
+pub(crate) mod module;
+pub(crate) mod trace;
 
 pub use context::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx,
