@@ -196,7 +196,7 @@ struct RayParams {
 
 /// A pipeline of [`RAY_PIPELINE`] over one GAS of a CUDA device.
 struct RayPipeline {
-    pipeline: oxray::cuda::CudaPipeline,
+    pipeline: oxray::programs::Pipeline,
     sbt: oxray::ShaderBindingTable,
     handle: u64,
 }
@@ -204,7 +204,7 @@ struct RayPipeline {
 impl RayPipeline {
     /// `None` on a device that does not run CUDA C++ programs.
     fn new(device: &Device, gas: &oxray::Gas) -> Result<Option<RayPipeline>, DeviceCommandError> {
-        use oxray::cuda::{CudaHitGroupDesc, CudaProgramGroup};
+        use oxray::programs::{HitGroupDesc, ProgramGroup};
         use oxray::{ModuleSource, SbtRegion};
         if device.kind() != oxray::BackendKind::Cuda {
             return Ok(None);
@@ -213,9 +213,9 @@ impl RayPipeline {
         let module = device
             .create_module(ModuleSource::CudaCpp(RAY_PIPELINE))
             .map_err(|e| err(&e))?;
-        let raygen = CudaProgramGroup::raygen(&module, "__raygen__rays").map_err(|e| err(&e))?;
-        let miss = CudaProgramGroup::miss(Some((&module, "__miss__none"))).map_err(|e| err(&e))?;
-        let hit = CudaProgramGroup::hit_group(CudaHitGroupDesc {
+        let raygen = ProgramGroup::raygen(&module, "__raygen__rays").map_err(|e| err(&e))?;
+        let miss = ProgramGroup::miss(&module, "__miss__none").map_err(|e| err(&e))?;
+        let hit = ProgramGroup::hit_group(HitGroupDesc {
             closest_hit: Some((&module, "__closesthit__t")),
             ..Default::default()
         })

@@ -31,7 +31,6 @@
 #![allow(clippy::needless_range_loop)]
 
 mod backend;
-#[cfg(unix)]
 pub mod cxx;
 mod gas;
 mod ias;

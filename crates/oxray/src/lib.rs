@@ -64,8 +64,7 @@
 
 mod accel;
 mod device;
-#[cfg(feature = "cuda")]
-mod programs;
+pub mod programs;
 
 pub use accel::{Gas, Ias};
 pub use device::{Device, DeviceError, RayBatch};
