@@ -46,7 +46,9 @@ pub use error::{
     QueryError, UpdateRule,
 };
 pub use exception::{Exception, ExceptionCode, ExceptionFlags};
-pub use handle::{BackendKind, Traversable, TraversableHandle, TraversableKind, WeakTraversableHandle};
+pub use handle::{
+    BackendKind, Traversable, TraversableHandle, TraversableKind, WeakTraversableHandle,
+};
 pub use hit::{CandidateAction, CustomHit, CustomPrimitive, Hit, HitKind};
 pub use input::{
     AabbBuffer, BuildInput, BuildInputKind, CustomPrimitiveInput, IndexBuffer, SbtIndexOffsets,

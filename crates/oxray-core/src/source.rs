@@ -31,7 +31,9 @@ fn code_only(source: &str) -> String {
                 i += 1;
             }
         } else if b[i] == b'/' && b.get(i + 1) == Some(&b'*') {
-            let end = source[i + 2..].find("*/").map_or(b.len(), |e| i + 2 + e + 2);
+            let end = source[i + 2..]
+                .find("*/")
+                .map_or(b.len(), |e| i + 2 + e + 2);
             while i < end {
                 blank(&mut out, b[i]);
                 i += 1;

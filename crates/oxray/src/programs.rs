@@ -236,8 +236,7 @@ impl ProgramGroup {
         Ok(ProgramGroup(match side(&entries)? {
             Side::None => {
                 return Err(ProgramError::Unsupported(
-                    "a hit group without programs does not say its device: give one program"
-                        .into(),
+                    "a hit group without programs does not say its device: give one program".into(),
                 ))
             }
             Side::Cpu(e) => GroupRepr::Cpu(CxxProgramGroup::hit_group(CxxHitGroupDesc {
@@ -293,7 +292,7 @@ pub struct Pipeline(PipelineRepr);
 enum PipelineRepr {
     Cpu(CxxPipeline),
     #[cfg(feature = "cuda")]
-    Cuda(CudaPipeline),
+    Cuda(Box<CudaPipeline>),
 }
 
 impl Pipeline {
@@ -468,13 +467,13 @@ impl Device {
                         _ => Err(mixed()),
                     })
                     .collect::<Result<Vec<_>, _>>()?;
-                PipelineRepr::Cuda(CudaPipeline::new(
+                PipelineRepr::Cuda(Box::new(CudaPipeline::new(
                     c.context(),
                     compile,
                     link,
                     params_variable,
                     &g,
-                )?)
+                )?))
             }
         }))
     }

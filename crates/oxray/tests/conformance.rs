@@ -9,6 +9,7 @@
 //! can be loaded (`OXRAY_REQUIRE_NVRTC=1` makes its absence a failure), so a CUDA program that
 //! does not compile fails here too.
 
+use glam::Vec3;
 use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
     Aabb, BackendKind, BuildOptions, CustomPrimitiveInput, Device, ExceptionCode, IndexBuffer,
@@ -16,7 +17,6 @@ use oxray::{
     PipelineLinkOptions, RayFlags, SbtRegion, ShaderBindingTable, StaticTransform, Transform,
     TraversableHandle, TriangleInput, VertexBuffer,
 };
-use glam::Vec3;
 
 const SUITE: &str = include_str!("../../oxray-cuda/tests/programs/suite.cu");
 const EXTENDED: &str = include_str!("conformance/extended.cu");
@@ -49,7 +49,11 @@ fn name(d: &Device) -> &'static str {
 enum G {
     Rg(&'static str),
     Ms(Option<&'static str>),
-    Hit(Option<&'static str>, Option<&'static str>, Option<&'static str>),
+    Hit(
+        Option<&'static str>,
+        Option<&'static str>,
+        Option<&'static str>,
+    ),
     Ex(&'static str),
     Call(Option<&'static str>, Option<&'static str>),
 }
@@ -69,9 +73,7 @@ impl Suite {
         depth: u32,
         spec: &[(&'static str, G)],
     ) -> Suite {
-        let m: Module = device
-            .create_module(ModuleSource::CudaCpp(source))
-            .unwrap();
+        let m: Module = device.create_module(ModuleSource::CudaCpp(source)).unwrap();
         let e = |n: Option<&'static str>| n.map(|n| (&m, n));
         let groups: Vec<(&'static str, ProgramGroup)> = spec
             .iter()
@@ -192,7 +194,10 @@ const SUITE_GROUPS: [(&str, G); 11] = [
     ("ms_payload", G::Ms(Some("__miss__payload"))),
     ("ms_none", G::Ms(None)),
     ("hg_ids", G::Hit(Some("__closesthit__ids"), None, None)),
-    ("hg_payload", G::Hit(Some("__closesthit__payload"), None, None)),
+    (
+        "hg_payload",
+        G::Hit(Some("__closesthit__payload"), None, None),
+    ),
     (
         "hg_skip_odd",
         G::Hit(Some("__closesthit__ids"), Some("__anyhit__skip_odd"), None),
@@ -269,9 +274,17 @@ fn hits_misses_and_the_hit_group_formula_7_3() {
             let x = i as u32 % dims[0];
             assert_eq!(o[0], 1, "launch index {i} hits");
             assert_eq!(o[1] >= 2, x >= dims[0] / 2, "primitive {} at x {x}", o[1]);
-            assert_eq!((o[2], o[3]), (u32::MAX, 0), "GAS root: id ~0, index 0 (§13.7)");
+            assert_eq!(
+                (o[2], o[3]),
+                (u32::MAX, 0),
+                "GAS root: id ~0, index 0 (§13.7)"
+            );
             assert_eq!(o[4] >> 16, (x >= dims[0] / 2) as u32, "SBT-GAS index");
-            assert_eq!(o[4] & 0xFFFF, 0xFE | 0x100 | 0x200, "front-face triangle hit");
+            assert_eq!(
+                o[4] & 0xFFFF,
+                0xFE | 0x100 | 0x200,
+                "front-face triangle hit"
+            );
             assert_eq!(f32::from_bits(o[5]), 1.0, "t");
         }
         // Too few hit records: SBT-GAS index 1 raises INVALID_HIT_SBT.
@@ -280,7 +293,10 @@ fn hits_misses_and_the_hit_group_formula_7_3() {
             grid(o, handle, dims, RayFlags::empty(), 0xFF)
         });
         assert_eq!(bad.exceptions, (dims[0] * dims[1] / 2) as u64);
-        assert_eq!(bad.first_exceptions[0].1.code, ExceptionCode::INVALID_HIT_SBT);
+        assert_eq!(
+            bad.first_exceptions[0].1.code,
+            ExceptionCode::INVALID_HIT_SBT
+        );
         // Culling front faces: everything misses; the miss program sees the trace's values.
         let flags = RayFlags::CULL_FRONT_FACING_TRIANGLES;
         let (culled, _) = s.run(&sbt, dims, |o| grid(o, handle, dims, flags, 0x0F));
@@ -312,9 +328,13 @@ fn payload_is_copied_in_and_out_14() {
         let (hit, _) = s.run(&sbt, dims, |o| {
             grid(o, handle, dims, RayFlags::empty(), 0xFF)
         });
-        assert!(hit.iter().all(|o| *o == [0xAAAA0011, 1, 2, 31, 4, 5, 6, 7 ^ 6]));
+        assert!(hit
+            .iter()
+            .all(|o| *o == [0xAAAA0011, 1, 2, 31, 4, 5, 6, 7 ^ 6]));
         let (miss, _) = s.run(&sbt, dims, |o| grid(o, 0, dims, RayFlags::empty(), 0xFF));
-        assert!(miss.iter().all(|o| *o == [0xAAAA0022, 1, 102, 3, 4, 5, 6, 7]));
+        assert!(miss
+            .iter()
+            .all(|o| *o == [0xAAAA0022, 1, 102, 3, 4, 5, 6, 7]));
         (hit, miss)
     });
 }
@@ -434,9 +454,7 @@ fn launch_indices_in_one_two_and_three_dimensions_13_1() {
         let sbt = s.sbt("rg_index", &["ms_none"], &[], None);
         let mut all = Vec::new();
         for dims in [[37, 1, 1], [13, 7, 1], [5, 4, 3]] {
-            let (out, report) = s.run(&sbt, dims, |o| {
-                grid(o, 0, dims, RayFlags::empty(), 0xFF)
-            });
+            let (out, report) = s.run(&sbt, dims, |o| grid(o, 0, dims, RayFlags::empty(), 0xFF));
             assert_eq!(report.exceptions, 0);
             for z in 0..dims[2] {
                 for y in 0..dims[1] {
@@ -458,9 +476,7 @@ fn user_exceptions_end_the_launch_index_and_run_the_exception_program_13_14() {
         let s = suite(device, 1);
         let dims = [8, 3, 1];
         let sbt = s.sbt("rg_throw", &["ms_none"], &[], Some("ex"));
-        let (out, report) = s.run(&sbt, dims, |o| {
-            grid(o, 0, dims, RayFlags::empty(), 0xFF)
-        });
+        let (out, report) = s.run(&sbt, dims, |o| grid(o, 0, dims, RayFlags::empty(), 0xFF));
         assert_eq!(report.exceptions, 3);
         assert_eq!(report.first_exceptions[0].0, [3, 0, 0]);
         assert_eq!(report.first_exceptions[1].1.code, ExceptionCode(7));
@@ -489,7 +505,11 @@ const EXT_GROUPS: [(&str, G); 13] = [
     ("ms", G::Ms(Some("__miss__ext"))),
     (
         "hg_sphere",
-        G::Hit(Some("__closesthit__custom"), None, Some("__intersection__sphere")),
+        G::Hit(
+            Some("__closesthit__custom"),
+            None,
+            Some("__intersection__sphere"),
+        ),
     ),
     (
         "hg_sphere_filtered",
@@ -500,11 +520,23 @@ const EXT_GROUPS: [(&str, G); 13] = [
         ),
     ),
     ("hg_xform", G::Hit(Some("__closesthit__xform"), None, None)),
-    ("hg_vertices", G::Hit(Some("__closesthit__vertices"), None, None)),
-    ("hg_recurse", G::Hit(Some("__closesthit__recurse"), None, None)),
+    (
+        "hg_vertices",
+        G::Hit(Some("__closesthit__vertices"), None, None),
+    ),
+    (
+        "hg_recurse",
+        G::Hit(Some("__closesthit__recurse"), None, None),
+    ),
     ("call_mix", G::Call(Some("__direct_callable__mix"), None)),
-    ("call_probe", G::Call(None, Some("__continuation_callable__probe"))),
-    ("call_scale", G::Call(Some("__direct_callable__scale"), None)),
+    (
+        "call_probe",
+        G::Call(None, Some("__continuation_callable__probe")),
+    ),
+    (
+        "call_scale",
+        G::Call(Some("__direct_callable__scale"), None),
+    ),
     ("ex", G::Ex("__exception__ext")),
 ];
 
@@ -536,8 +568,7 @@ fn spheres_gas(device: &Device) -> oxray::Gas {
             Aabb::new(c - Vec3::splat(s[3]), c + Vec3::splat(s[3]))
         })
         .collect();
-    let input =
-        CustomPrimitiveInput::new(oxray::AabbBuffer::new(&boxes)).primitive_index_offset(4);
+    let input = CustomPrimitiveInput::new(oxray::AabbBuffer::new(&boxes)).primitive_index_offset(4);
     device
         .build_gas(&BuildOptions::default(), &[input.into()])
         .unwrap()
@@ -622,7 +653,6 @@ fn direct_and_continuation_callables_15() {
                 salt("call_scale", 0),
             ]),
             exception: Some(SbtRegion::from_headers(&[s.header("ex")])),
-            ..Default::default()
         };
         let dims = [6, 1, 1];
         let (out, report) = s.run(&sbt, dims, |o| ext(o, handle, dims, 0, 0));
@@ -633,7 +663,11 @@ fn direct_and_continuation_callables_15() {
             assert_eq!(o[1], x * 31 + 7 + 1000, "the callable reads its own record");
             assert_eq!(o[2], (x + 1) * 31 + 100 + 2000);
             assert_eq!(f32::from_bits(o[3]), 1.5 * x as f32);
-            assert!(o[4] == 1 || o[4] == 2, "the continuation traced a hit: {}", o[4]);
+            assert!(
+                o[4] == 1 || o[4] == 2,
+                "the continuation traced a hit: {}",
+                o[4]
+            );
             assert_eq!(o[5], 0, "and a miss");
             assert_eq!(o[6], 0x600D);
         }
@@ -646,7 +680,9 @@ fn direct_and_continuation_callables_15() {
             let (o, report) = s.run(&sbt, dims, |o| ext(o, handle, dims, 0, mode));
             assert_eq!(report.exceptions, dims[0] as u64, "mode {mode}");
             assert_eq!(report.first_exceptions[0].1.code, code, "mode {mode}");
-            assert!(o.iter().all(|w| w[0] == 0xCA11 && w[3] == 0xE0E0 && w[6] == 0));
+            assert!(o
+                .iter()
+                .all(|w| w[0] == 0xCA11 && w[3] == 0xE0E0 && w[6] == 0));
             assert!(o.iter().all(|w| w[2] == code.0 as u32));
             faults.push(o);
         }
@@ -748,7 +784,9 @@ fn built_in_exceptions_invalid_miss_and_trace_depth_13_14() {
             report.first_exceptions[0].1.code,
             ExceptionCode::INVALID_MISS_SBT
         );
-        assert!(miss.iter().all(|o| o[0] == 0xFA17 && o[1] == 0 && o[3] == 0xE0E0));
+        assert!(miss
+            .iter()
+            .all(|o| o[0] == 0xFA17 && o[1] == 0 && o[3] == 0xE0E0));
         let (deep, report) = s.run(&sbt, dims, |o| ext(o, handle, dims, 0, 0));
         assert_eq!(report.exceptions, 4);
         assert_eq!(
@@ -813,8 +851,13 @@ fn the_suite_compiles_with_nvrtc() {
             num_attribute_values: 3,
             ..Default::default()
         };
-        oxray::cuda::compile_pipeline_ptx((9, 0), &compile, &PipelineLinkOptions::default(), &groups)
-            .unwrap_or_else(|e| panic!("the suite does not compile for the GPU: {e}"));
+        oxray::cuda::compile_pipeline_ptx(
+            (9, 0),
+            &compile,
+            &PipelineLinkOptions::default(),
+            &groups,
+        )
+        .unwrap_or_else(|e| panic!("the suite does not compile for the GPU: {e}"));
         if !refused.is_empty() {
             println!("groups the CUDA backend does not make yet: {refused:?}");
         }

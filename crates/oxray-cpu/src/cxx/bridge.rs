@@ -131,8 +131,8 @@ pub(crate) struct CApi {
         u32,
     ) -> u32,
     report: unsafe extern "C" fn(*mut CFrame, f32, u32, *const u32, u32, *mut u32) -> u32,
-    call: unsafe extern "C" fn(*mut CFrame, u32, u32, *mut c_void, *mut c_void, *const c_char)
-        -> u32,
+    call:
+        unsafe extern "C" fn(*mut CFrame, u32, u32, *mut c_void, *mut c_void, *const c_char) -> u32,
     transform: unsafe extern "C" fn(*mut CFrame, u32, *mut f32),
     transform_list:
         unsafe extern "C" fn(*mut CFrame, u32, *mut u32, *mut u32, *mut f32, *mut f32) -> u32,
@@ -289,35 +289,50 @@ pub(crate) fn program(kind: ProgramKind, module: u64, index: usize) -> Program<C
         ProgramKind::RayGen => Program::RayGen(Arc::new(move |ctx: &mut RayGenCtx<'_, _>| {
             run!(ctx, KIND_RG, |_: &mut CFrame, _: &mut RayGenCtx<'_, _>| {})
         })),
-        ProgramKind::ClosestHit => Program::ClosestHit(Arc::new(
-            move |ctx: &mut ClosestHitCtx<'_, CxxLaunch>| {
-                run!(ctx, KIND_CH, |f: &mut CFrame,
-                                    c: &mut ClosestHitCtx<'_, CxxLaunch>| {
-                    f.ray(&c.ray);
-                    f.hit(&c.hit, c.place);
-                    f.payload(c.payload);
-                })
-            },
-        )),
-        ProgramKind::AnyHit => Program::AnyHit(Arc::new(
-            move |ctx: &mut AnyHitCtx<'_, CxxLaunch>| {
-                run!(ctx, KIND_AH, |f: &mut CFrame, c: &mut AnyHitCtx<'_, CxxLaunch>| {
-                    f.ray(&c.ray);
-                    f.hit(&c.hit, c.place);
-                    f.payload(c.payload);
-                })
-            },
-        )),
+        ProgramKind::ClosestHit => {
+            Program::ClosestHit(Arc::new(move |ctx: &mut ClosestHitCtx<'_, CxxLaunch>| {
+                run!(
+                    ctx,
+                    KIND_CH,
+                    |f: &mut CFrame, c: &mut ClosestHitCtx<'_, CxxLaunch>| {
+                        f.ray(&c.ray);
+                        f.hit(&c.hit, c.place);
+                        f.payload(c.payload);
+                    }
+                )
+            }))
+        }
+        ProgramKind::AnyHit => {
+            Program::AnyHit(Arc::new(move |ctx: &mut AnyHitCtx<'_, CxxLaunch>| {
+                run!(
+                    ctx,
+                    KIND_AH,
+                    |f: &mut CFrame, c: &mut AnyHitCtx<'_, CxxLaunch>| {
+                        f.ray(&c.ray);
+                        f.hit(&c.hit, c.place);
+                        f.payload(c.payload);
+                    }
+                )
+            }))
+        }
         ProgramKind::Miss => Program::Miss(Arc::new(move |ctx: &mut MissCtx<'_, CxxLaunch>| {
-            run!(ctx, KIND_MS, |f: &mut CFrame, c: &mut MissCtx<'_, CxxLaunch>| {
-                f.ray(&c.ray);
-                f.payload(c.payload);
-            })
+            run!(
+                ctx,
+                KIND_MS,
+                |f: &mut CFrame, c: &mut MissCtx<'_, CxxLaunch>| {
+                    f.ray(&c.ray);
+                    f.payload(c.payload);
+                }
+            )
         })),
         ProgramKind::Intersection => Program::Intersection(Arc::new(
             move |ctx: &mut IntersectionCtx<'_, '_, CxxLaunch>| {
                 run!(ctx, KIND_IS, |f: &mut CFrame,
-                                    c: &mut IntersectionCtx<'_, '_, CxxLaunch>| {
+                                    c: &mut IntersectionCtx<
+                    '_,
+                    '_,
+                    CxxLaunch,
+                >| {
                     f.ray(&c.ray);
                     f.hit(&c.prim, c.place);
                     f.tmax = c.tmax;
@@ -326,8 +341,8 @@ pub(crate) fn program(kind: ProgramKind, module: u64, index: usize) -> Program<C
                 })
             },
         )),
-        ProgramKind::Exception => Program::Exception(Arc::new(
-            move |ctx: &mut ExceptionCtx<'_, CxxLaunch>| {
+        ProgramKind::Exception => {
+            Program::Exception(Arc::new(move |ctx: &mut ExceptionCtx<'_, CxxLaunch>| {
                 let Some(EntryFn::Program(entry)) = ctx.frame.launch.params.entry(module, index)
                 else {
                     return;
@@ -341,8 +356,8 @@ pub(crate) fn program(kind: ProgramKind, module: u64, index: usize) -> Program<C
                 // SAFETY: as for the other kinds; an exception program calls no runtime
                 // function that uses its context, and how it ends changes nothing.
                 let _ = unsafe { entry(&mut f) };
-            },
-        )),
+            }))
+        }
         ProgramKind::DirectCallable => Program::DirectCallable(Arc::new(
             move |ctx: &mut DirectCallableCtx<'_, CxxLaunch>, slot: &mut dyn Any| {
                 callable(ctx, KIND_DC, module, index, slot)
@@ -432,7 +447,7 @@ fn callable<C: CallableCtx>(
 /// # Safety
 /// `f.ctx` must point at a live context of type `T` (the one whose kind is `f.kind`), used by
 /// nothing else during the borrow.
-unsafe fn ctx_of<'f, T>(f: &'f mut CFrame) -> &'f mut T {
+unsafe fn ctx_of<T>(f: &mut CFrame) -> &mut T {
     // SAFETY: the caller's contract.
     unsafe { &mut *(f.ctx as *mut T) }
 }

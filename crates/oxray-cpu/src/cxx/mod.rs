@@ -15,7 +15,7 @@
 //! of the unit, the compiler and its flags, and loaded; a later pipeline of the same unit loads
 //! the cached library without compiling. `$CXX` names the compiler (default `c++`).
 //!
-//! ```no_run
+//! ```
 //! use oxray_cpu::cxx::{CxxModule, CxxPipeline, CxxProgramGroup, HostBuffer};
 //! use oxray_core::{DeviceContext, PipelineCompileOptions, PipelineLinkOptions, ShaderBindingTable, SbtRegion};
 //!
@@ -340,10 +340,7 @@ impl CxxProgramGroup {
             check_kind(n, ProgramKind::ContinuationCallable)?;
         }
         Ok(CxxProgramGroup {
-            group: ProgramGroup::callables(
-                cpu_entry(direct),
-                cpu_entry(continuation),
-            )?,
+            group: ProgramGroup::callables(cpu_entry(direct), cpu_entry(continuation))?,
             modules: modules_of([direct, continuation]),
         })
     }

@@ -148,7 +148,11 @@ fn key(parts: &[&str]) -> u64 {
 /// Where compiled units are kept: `$OXRAY_CACHE_DIR`, else `$XDG_CACHE_HOME/oxray`, else
 /// `~/.cache/oxray`, else the temporary directory.
 pub fn cache_dir() -> PathBuf {
-    let env = |k: &str| std::env::var_os(k).filter(|v| !v.is_empty()).map(PathBuf::from);
+    let env = |k: &str| {
+        std::env::var_os(k)
+            .filter(|v| !v.is_empty())
+            .map(PathBuf::from)
+    };
     env("OXRAY_CACHE_DIR")
         .or_else(|| env("XDG_CACHE_HOME").map(|d| d.join("oxray")))
         .or_else(|| env("HOME").map(|d| d.join(".cache").join("oxray")))
@@ -256,12 +260,16 @@ impl Loaded {
 pub(crate) fn load(modules: &[CxxModule], params: Option<&str>) -> Result<Arc<Loaded>, CxxError> {
     let source = unit_source(modules, params);
     let path = compile(&source)?;
-    static LOADED: OnceLock<Mutex<HashMap<(PathBuf, Vec<u64>), Weak<Loaded>>>> = OnceLock::new();
+    type Units = HashMap<(PathBuf, Vec<u64>), Weak<Loaded>>;
+    static LOADED: OnceLock<Mutex<Units>> = OnceLock::new();
     let uids: Vec<u64> = modules.iter().map(|m| m.uid()).collect();
     let map = LOADED.get_or_init(Default::default);
     let mut map = map.lock().unwrap_or_else(|e| e.into_inner());
     map.retain(|_, w| w.strong_count() > 0);
-    if let Some(l) = map.get(&(path.clone(), uids.clone())).and_then(Weak::upgrade) {
+    if let Some(l) = map
+        .get(&(path.clone(), uids.clone()))
+        .and_then(Weak::upgrade)
+    {
         return Ok(l);
     }
     // SAFETY: the library is the one just compiled from this unit; loading it runs the static
