@@ -14,6 +14,8 @@ mod hello;
 mod instancing;
 #[path = "../examples/triangle.rs"]
 mod triangle;
+#[path = "../examples/triangle_cpp.rs"]
+mod triangle_cpp;
 
 use std::path::PathBuf;
 
@@ -225,5 +227,27 @@ fn instancing_shows_every_instance_in_its_own_record_colour() {
     }
     for (i, &c) in counts.iter().enumerate() {
         assert!(c > 50, "instance {i} shows in only {c} pixels: {counts:?}");
+    }
+}
+
+#[test]
+fn triangle_in_cuda_cpp_renders_the_rust_triangle_pixel_for_pixel() {
+    // The CUDA C++ programs on the CPU device (compiled by the host's C++ compiler).
+    let cpp = run("triangle_cpp", triangle_cpp::render);
+    let rust = triangle::render(W, H).unwrap();
+    assert_eq!(
+        cpp, rust,
+        "the CUDA C++ and Rust programs give different images"
+    );
+    // And on a GPU, where there is one: the same pixels.
+    match oxray::Device::cuda(0) {
+        Ok(gpu) => assert_eq!(triangle_cpp::render_on(&gpu, W, H).unwrap(), rust),
+        Err(e) => {
+            assert!(
+                std::env::var_os("OXRAY_REQUIRE_GPU").is_none(),
+                "OXRAY_REQUIRE_GPU is set: {e}"
+            );
+            println!("the GPU half skips: {e}");
+        }
     }
 }
