@@ -8,7 +8,7 @@ use crate::gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays};
 use crate::ias::CudaIas;
 use crate::layout::NodeLayout;
 use cudarc::driver::CudaSlice;
-use oxray_bvh::{GasData, GasKind, IasData};
+use oxray_bvh::{GasData, IasData};
 use oxray_core::{
     AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, Hit, QueryError,
     Ray, TraversableHandle,
@@ -78,6 +78,10 @@ enum Root<'h> {
 fn query_error(e: CudaError) -> QueryError {
     match e {
         CudaError::LengthMismatch { rays, outputs } => QueryError::LengthMismatch { rays, outputs },
+        CudaError::CustomPrimitives => QueryError::Unsupported(
+            "batched queries over custom primitives on the CUDA backend (their intersection programs run in pipelines)",
+        ),
+        CudaError::Unsupported(what) => QueryError::Unsupported(what),
         other => QueryError::Device(other.to_string()),
     }
 }
@@ -132,12 +136,9 @@ impl AccelBackend for Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaGas, BuildError> {
+        // A GAS of custom primitives is uploaded for pipelines, which run its intersection
+        // programs; the batched queries refuse it.
         let (data, tree) = GasData::build_with_tree(options, inputs)?;
-        if data.kind == GasKind::CustomPrimitives {
-            return Err(BuildError::Unsupported(
-                "custom primitives on the CUDA backend (their intersection programs run on the CPU backend)",
-            ));
-        }
         CudaGas::upload_with_layout(&self.ctx, &data, &tree, self.layout).map_err(build_error)
     }
 

@@ -31,9 +31,9 @@ pub enum CudaError {
         /// The driver's error.
         message: String,
     },
-    /// The GAS holds custom primitives, whose intersection programs run on the CPU backend; the
-    /// CUDA backend traces triangles (and instances of triangle GASes).
-    #[error("the CUDA backend traces triangles; this GAS holds custom primitives, whose intersection programs run on the CPU backend")]
+    /// The GAS (or a GAS under the IAS) holds custom primitives: the batched query kernels
+    /// trace triangles; intersection programs run in pipelines ([`CudaPipeline`](crate::CudaPipeline)).
+    #[error("the CUDA backend's batched queries trace triangles; custom primitives need their intersection programs, which run in pipelines (CudaPipeline)")]
     CustomPrimitives,
     /// The GAS or the batch is too large for the device layout's 32-bit indices.
     #[error("too large for the CUDA backend: {0}")]

@@ -2,10 +2,10 @@
 
 use crate::context::CudaContext;
 use crate::error::{driver, CudaError};
-use crate::layout::{DeviceLayout, NodeLayout, SlotInfo};
+use crate::layout::{bvh2_words, DeviceLayout, NodeLayout, SlotInfo, MAX_SLOTS};
 use bytemuck::{Pod, Zeroable};
 use cudarc::driver::{CudaSlice, DevicePtr, LaunchConfig, PushKernelArg};
-use oxray_bvh::{Bvh2, GasData, GasInfo};
+use oxray_bvh::{Bvh2, GasData, GasInfo, GasKind};
 use oxray_core::{Aabb, BackendKind, Hit, HitKind, Ray, RayRecord, Traversable, TraversableKind};
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -235,9 +235,14 @@ pub(crate) fn check_batch(len: usize) -> Result<(), CudaError> {
 /// assert!(gpu.occluded_batch(&rays)?.iter().all(|&o| o));
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
+///
+/// A GAS of custom primitives is uploaded too (its boxes in leaf-slot order, in the binary
+/// layout): pipelines trace it, running the hit groups' intersection programs; the batched
+/// queries refuse it ([`CudaError::CustomPrimitives`]).
 #[derive(Debug)]
 pub struct CudaGas {
     ctx: CudaContext,
+    kind: GasKind,
     layout: NodeLayout,
     nodes: CudaSlice<u32>,
     triangles: CudaSlice<u32>,
@@ -270,6 +275,7 @@ impl ProgramView {
     pub(crate) fn upload(
         ctx: &CudaContext,
         kind: u32,
+        depth: u32,
         count: u32,
         nodes: u64,
         prims: u64,
@@ -290,7 +296,7 @@ impl ProgramView {
                 p
             })
         };
-        let words = descriptor_words(kind, count, nodes, prims, addr(0), addr(1));
+        let words = descriptor_words(kind, depth, count, nodes, prims, addr(0), addr(1));
         let descriptor = ctx
             .stream
             .clone_htod(&words[..])
@@ -308,9 +314,18 @@ impl ProgramView {
     }
 }
 
-/// The 16 words of a traversable descriptor (`__oxray_Traversable`).
+/// Descriptor kinds (`__OXRAY_GAS`… in `oxray_device.h`).
+pub(crate) const DESCRIPTOR_GAS: u32 = 1;
+pub(crate) const DESCRIPTOR_IAS: u32 = 2;
+pub(crate) const DESCRIPTOR_STATIC: u32 = 3;
+pub(crate) const DESCRIPTOR_INSTANCE: u32 = 4;
+pub(crate) const DESCRIPTOR_CUSTOM_GAS: u32 = 5;
+
+/// The 16 words of a traversable descriptor (`__oxray_Traversable`): kind, count, four
+/// addresses, the graph depth.
 pub(crate) fn descriptor_words(
     kind: u32,
+    depth: u32,
     count: u32,
     nodes: u64,
     prims: u64,
@@ -324,7 +339,41 @@ pub(crate) fn descriptor_words(
         w[2 + 2 * i] = a as u32;
         w[3 + 2 * i] = (a >> 32) as u32;
     }
+    w[10] = depth;
     w
+}
+
+/// The boxes of a custom-primitive GAS as uploaded (8 words per leaf slot: lower corner, 0,
+/// upper corner, 0) and what a hit on each slot reports. Inactive slots keep their empty box,
+/// which no ray enters.
+pub(crate) fn custom_words(gas: &GasData) -> (Vec<u32>, Vec<SlotInfo>) {
+    let mut words = Vec::with_capacity(8 * gas.aabbs.len().max(1));
+    let mut slots = Vec::with_capacity(gas.aabbs.len());
+    for (s, b) in gas.aabbs.iter().enumerate() {
+        for f in [
+            b.min.x, b.min.y, b.min.z, 0.0, b.max.x, b.max.y, b.max.z, 0.0,
+        ] {
+            words.push(f.to_bits());
+        }
+        slots.push(if gas.slot_is_active(s) {
+            let (primitive_index, sbt_gas_index, build_input) = gas.resolve(s as u32);
+            SlotInfo {
+                primitive_index,
+                sbt_gas_index,
+                build_input,
+            }
+        } else {
+            SlotInfo {
+                primitive_index: u32::MAX,
+                sbt_gas_index: 0,
+                build_input: 0,
+            }
+        });
+    }
+    if words.is_empty() {
+        words.resize(8, 0);
+    }
+    (words, slots)
 }
 
 /// Device and host buffers reused by the one-call queries.
@@ -498,14 +547,17 @@ impl CudaGas {
         CudaGas::upload_with_layout(ctx, gas, tree, NodeLayout::default())
     }
 
-    /// Uploads a triangle GAS in the given node layout. A GAS of custom primitives is refused
-    /// ([`CudaError::CustomPrimitives`]).
+    /// Uploads a GAS in the given node layout. A GAS of custom primitives is uploaded in the
+    /// binary layout whatever `layout` says (only pipelines trace it).
     pub fn upload_with_layout(
         ctx: &CudaContext,
         gas: &GasData,
         tree: &Bvh2,
         layout: NodeLayout,
     ) -> Result<CudaGas, CudaError> {
+        if gas.kind == GasKind::CustomPrimitives {
+            return Self::upload_custom(ctx, gas, tree);
+        }
         let export = gas.export_triangles().ok_or(CudaError::CustomPrimitives)?;
         let host = DeviceLayout::new(&export, tree, layout).map_err(CudaError::TooLarge)?;
         let nodes = ctx
@@ -524,6 +576,7 @@ impl CudaGas {
         ctx.synchronize()?;
         Ok(CudaGas {
             ctx: ctx.clone(),
+            kind: GasKind::Triangles,
             layout: host.layout,
             num_nodes: host.nodes.len() / (layout.node_bytes() / 4),
             device_bytes: host.device_bytes(),
@@ -535,6 +588,50 @@ impl CudaGas {
             record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
             program_view: Mutex::new(None),
         })
+    }
+
+    /// A GAS of custom primitives: the binary nodes and, per leaf slot, its box as two `float4`
+    /// (lower and upper corners; `w` unused).
+    fn upload_custom(ctx: &CudaContext, gas: &GasData, tree: &Bvh2) -> Result<CudaGas, CudaError> {
+        if gas.aabbs.len() > MAX_SLOTS {
+            return Err(CudaError::TooLarge(format!(
+                "{} leaf slots; at most {MAX_SLOTS}",
+                gas.aabbs.len()
+            )));
+        }
+        let (words, slots) = custom_words(gas);
+        let nodes_host = bvh2_words(tree).map_err(CudaError::TooLarge)?;
+        let nodes = ctx
+            .stream
+            .clone_htod(&nodes_host[..])
+            .map_err(driver("copying BVH nodes to the device"))?;
+        let boxes = ctx
+            .stream
+            .clone_htod(&words[..])
+            .map_err(driver("copying boxes to the device"))?;
+        ctx.synchronize()?;
+        Ok(CudaGas {
+            ctx: ctx.clone(),
+            kind: GasKind::CustomPrimitives,
+            layout: NodeLayout::Bvh2,
+            num_nodes: nodes_host.len() / 16,
+            device_bytes: 4 * (nodes_host.len() + words.len()),
+            nodes,
+            triangles: boxes,
+            slots,
+            info: gas.info(),
+            scratch: Mutex::new(Scratch::default()),
+            record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
+            program_view: Mutex::new(None),
+        })
+    }
+
+    /// Refuses the batched queries on a GAS of custom primitives.
+    fn check_triangles(&self) -> Result<(), CudaError> {
+        match self.kind {
+            GasKind::Triangles => Ok(()),
+            GasKind::CustomPrimitives => Err(CudaError::CustomPrimitives),
+        }
     }
 
     /// The `OptixTraversableHandle` of this GAS for programs of a [`CudaPipeline`](crate::CudaPipeline):
@@ -558,8 +655,13 @@ impl CudaGas {
             .collect();
         let (nodes, _g1) = self.nodes.device_ptr(&self.ctx.stream);
         let (tris, _g2) = self.triangles.device_ptr(&self.ctx.stream);
+        let kind = match self.kind {
+            GasKind::Triangles => DESCRIPTOR_GAS,
+            GasKind::CustomPrimitives => DESCRIPTOR_CUSTOM_GAS,
+        };
         let v = ProgramView::upload(
             &self.ctx,
+            kind,
             1,
             self.record_flags.len() as u32,
             nodes,
@@ -574,6 +676,11 @@ impl CudaGas {
     /// The node layout.
     pub fn layout(&self) -> NodeLayout {
         self.layout
+    }
+
+    /// The kind of primitives.
+    pub fn kind(&self) -> GasKind {
+        self.kind
     }
 
     /// Nodes of the device BVH.
@@ -626,6 +733,7 @@ impl CudaGas {
                 outputs: hits.len(),
             });
         }
+        self.check_triangles()?;
         self.with_records(rays, |records| self.resolve_into(records, hits))
     }
 
@@ -639,6 +747,7 @@ impl CudaGas {
 
     /// Traces a batch with the reused buffers and hands the records to `f`.
     fn with_records(&self, rays: &[Ray], f: impl FnOnce(&[HitRecord])) -> Result<(), CudaError> {
+        self.check_triangles()?;
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         guard.closest(&self.ctx, rays, false, &|r, h, _, n| {
             self.launch_closest(r, h, n)
@@ -660,6 +769,7 @@ impl CudaGas {
         rays: &[Ray],
         occluded: &mut [bool],
     ) -> Result<(), CudaError> {
+        self.check_triangles()?;
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         guard.any(&self.ctx, rays, occluded, &|r, o, n| {
             self.launch_occluded(r, o, n)
@@ -672,6 +782,7 @@ impl CudaGas {
         rays: &DeviceRays,
         hits: &mut DeviceHits,
     ) -> Result<(), CudaError> {
+        self.check_triangles()?;
         if rays.len() != hits.len() {
             return Err(CudaError::LengthMismatch {
                 rays: rays.len(),
@@ -692,6 +803,7 @@ impl CudaGas {
         rays: &DeviceRays,
         out: &mut DeviceOcclusion,
     ) -> Result<(), CudaError> {
+        self.check_triangles()?;
         if rays.len() != out.len() {
             return Err(CudaError::LengthMismatch {
                 rays: rays.len(),
@@ -847,8 +959,13 @@ impl Traversable for CudaGas {
 
     fn describe(&self) -> String {
         format!(
-            "CUDA GAS of {} primitives ({:?} layout)",
-            self.info.num_primitives, self.layout
+            "CUDA GAS of {} {} ({:?} layout)",
+            self.info.num_primitives,
+            match self.kind {
+                GasKind::Triangles => "triangles",
+                GasKind::CustomPrimitives => "custom primitives",
+            },
+            self.layout
         )
     }
 }

@@ -1,17 +1,20 @@
-//! An instance acceleration structure on the device: one level of instances over triangle
-//! GASes of the same device (the graph of OptiX's `ALLOW_SINGLE_LEVEL_INSTANCING`).
+//! An instance acceleration structure on the device. The batched query kernels trace one level
+//! of instances over triangle GASes (the graph of OptiX's `ALLOW_SINGLE_LEVEL_INSTANCING`);
+//! pipelines trace any graph: instances of IASes, static transforms and custom-primitive GASes.
 
 use crate::context::CudaContext;
 use crate::error::{driver, CudaError};
-use crate::gas::{check_batch, grid, hit_of, CudaGas, HitRecord, ProgramView, Scratch};
-use crate::layout::{ChildRef, IasLayout, NodeLayout};
+use crate::gas::{check_batch, grid, hit_of, HitRecord, ProgramView, Scratch};
+use crate::gas::{DESCRIPTOR_IAS, DESCRIPTOR_INSTANCE};
+use crate::layout::{ChildRef, IasLayout};
+use crate::transform::{resolve_child, CudaChild};
 use cudarc::driver::{CudaSlice, DevicePtr, PushKernelArg};
 use oxray_bvh::{Bvh2, IasData};
 use oxray_core::{
     Aabb, BackendKind, BuildError, Hit, InstanceFlags, Ray, Traversable, TraversableKind,
 };
 use rayon::prelude::*;
-use std::sync::{Arc, Mutex};
+use std::sync::Mutex;
 
 /// An IAS in device memory: its top-level binary tree and an instance table holding the
 /// world-to-object transform, world box and device addresses of each child GAS. Queries give
@@ -25,8 +28,10 @@ pub struct CudaIas {
     instances: CudaSlice<u32>,
     /// The instances, boxes and flags, in slot order (it keeps the children alive too).
     data: IasData,
-    /// The child GAS of every slot, for resolving hits.
-    children: Vec<Option<Arc<CudaGas>>>,
+    /// The child of every slot (`None`: null), for resolving hits and making handles.
+    children: Vec<Option<CudaChild>>,
+    /// Whether every child is a triangle GAS (or null): what the batched query kernels trace.
+    queryable: bool,
     device_bytes: usize,
     scratch: Mutex<Scratch>,
     /// What a pipeline's traversal reads, made on first use ([`CudaIas::optix_handle`]).
@@ -34,64 +39,41 @@ pub struct CudaIas {
 }
 
 impl CudaIas {
-    /// Uploads a built IAS whose children are GASes of `ctx` in the binary layout, or null.
-    /// Instances of IASes or transforms are refused (`Unsupported`), and so are children of
-    /// another device. An instance with a zero visibility mask is uploaded as null: a batched
-    /// query's ray mask is `0xFF`, so it is never traversed.
+    /// Uploads a built IAS whose children are structures of `ctx`: GASes in the binary layout
+    /// (triangles or custom primitives), IASes, static transforms (core [`StaticTransform`]s are
+    /// uploaded here, as [`CudaStaticTransform`](crate::CudaStaticTransform)s), or null.
+    /// Children of another device are refused. The batched queries trace only IASes whose
+    /// children are triangle GASes; pipelines trace them all. An instance with a zero
+    /// visibility mask is uploaded as null: no ray mask shares a bit with it.
+    ///
+    /// [`StaticTransform`]: oxray_core::StaticTransform
     pub fn upload(ctx: &CudaContext, data: IasData, tree: &Bvh2) -> Result<CudaIas, BuildError> {
         let mut children = Vec::with_capacity(data.instances.len());
         let mut refs = Vec::with_capacity(data.instances.len());
         let mut addresses: std::collections::HashMap<usize, (u64, u64)> = Default::default();
+        let mut queryable = true;
         for (slot, inst) in data.instances.iter().enumerate() {
-            let child = &inst.child;
-            let Some(backend) = child.backend() else {
-                children.push(None);
-                refs.push(None);
-                continue;
-            };
-            let Some(gas) = child.downcast_arc::<CudaGas>() else {
-                return Err(match backend {
-                    BackendKind::Cuda | BackendKind::Any => BuildError::Unsupported(
-                        "instances of IASes or transforms on the CUDA backend (one level of instances over GASes is traced)",
-                    ),
-                    found => BuildError::ForeignTraversable {
-                        instance: inst.index,
-                        device: BackendKind::Cuda,
-                        found,
-                    },
+            let child = resolve_child(ctx, &inst.child, Some(inst.index))?;
+            let child = child.filter(|_| inst.mask != 0);
+            let gas = child.as_ref().and_then(CudaChild::triangle_gas);
+            queryable &= child.is_none() || gas.is_some();
+            refs.push(gas.map(|gas| {
+                // Many instances share a child: its addresses are looked up once (each lookup
+                // records a stream event).
+                let key = std::sync::Arc::as_ptr(gas) as usize;
+                let addrs = *addresses.entry(key).or_insert_with(|| {
+                    let (n, t) = gas.device_arrays();
+                    let (nodes_addr, _n) = n.device_ptr(&ctx.stream);
+                    let (triangles_addr, _t) = t.device_ptr(&ctx.stream);
+                    (nodes_addr, triangles_addr)
                 });
-            };
-            if !gas.context().same_context(ctx) {
-                return Err(BuildError::Device(format!(
-                    "instance {}: its GAS lives in another CUDA context",
-                    inst.index
-                )));
-            }
-            if gas.layout() != NodeLayout::Bvh2 {
-                return Err(BuildError::Unsupported(
-                    "instances of GASes in the BVH4 node layout on the CUDA backend",
-                ));
-            }
-            if inst.mask == 0 {
-                children.push(None);
-                refs.push(None);
-                continue;
-            }
-            // Many instances share a child: its addresses are looked up once (each lookup
-            // records a stream event).
-            let key = Arc::as_ptr(&gas) as usize;
-            let addrs = *addresses.entry(key).or_insert_with(|| {
-                let (n, t) = gas.device_arrays();
-                let (nodes_addr, _n) = n.device_ptr(&ctx.stream);
-                let (triangles_addr, _t) = t.device_ptr(&ctx.stream);
-                (nodes_addr, triangles_addr)
-            });
-            refs.push(Some(ChildRef {
-                index: slot as u32,
-                nodes_addr: addrs.0,
-                triangles_addr: addrs.1,
+                ChildRef {
+                    index: slot as u32,
+                    nodes_addr: addrs.0,
+                    triangles_addr: addrs.1,
+                }
             }));
-            children.push(Some(gas));
+            children.push(child);
         }
         let host = IasLayout::new(&data, tree, &refs).map_err(BuildError::Device)?;
         let upload = |words: &[u32], what: &'static str| {
@@ -112,6 +94,7 @@ impl CudaIas {
             device_bytes: host.device_bytes(),
             data,
             children,
+            queryable,
             scratch: Mutex::new(Scratch::default()),
             program_view: Mutex::new(None),
         })
@@ -126,28 +109,20 @@ impl CudaIas {
         if let Some(v) = view.as_ref() {
             return Ok(v.address);
         }
-        let mut info = Vec::with_capacity(8 * self.data.instances.len());
+        let mut info = Vec::with_capacity(INSTANCE_RECORD_WORDS * self.data.instances.len());
         for (slot, inst) in self.data.instances.iter().enumerate() {
             let child = match self.children.get(slot).and_then(|c| c.as_ref()) {
-                Some(gas) => gas.optix_handle()?,
+                Some(c) => c.optix_handle()?,
                 None => 0,
             };
-            info.extend_from_slice(&[
-                inst.instance_id,
-                inst.sbt_offset,
-                inst.flags.bits(),
-                inst.mask as u32,
-                inst.index,
-                0,
-                child as u32,
-                (child >> 32) as u32,
-            ]);
+            info.extend_from_slice(&instance_record(inst, child));
         }
         let (nodes, _g1) = self.nodes.device_ptr(&self.ctx.stream);
         let (insts, _g2) = self.instances.device_ptr(&self.ctx.stream);
         let v = ProgramView::upload(
             &self.ctx,
-            2,
+            DESCRIPTOR_IAS,
+            self.data.depth,
             self.data.instances.len() as u32,
             nodes,
             insts,
@@ -156,6 +131,22 @@ impl CudaIas {
         let address = v.address;
         *view = Some(v);
         Ok(address)
+    }
+
+    /// Whether the batched queries trace this IAS: every child is a triangle GAS (or null).
+    pub fn is_queryable(&self) -> bool {
+        self.queryable
+    }
+
+    /// Refuses the batched queries on a graph the query kernels do not trace.
+    fn check_queryable(&self) -> Result<(), CudaError> {
+        if self.queryable {
+            Ok(())
+        } else {
+            Err(CudaError::Unsupported(
+                "batched queries over instances of IASes, static transforms or custom primitives (CudaPipeline traces them)",
+            ))
+        }
     }
 
     /// The built data: instances, world boxes, flags, BVH statistics.
@@ -186,6 +177,7 @@ impl CudaIas {
                 outputs: hits.len(),
             });
         }
+        self.check_queryable()?;
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         guard.closest(&self.ctx, rays, true, &|r, h, i, n| {
             self.launch_closest(r, h, i, n)
@@ -200,6 +192,7 @@ impl CudaIas {
         rays: &[Ray],
         occluded: &mut [bool],
     ) -> Result<(), CudaError> {
+        self.check_queryable()?;
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         guard.any(&self.ctx, rays, occluded, &|r, o, n| {
             self.launch_occluded(r, o, n)
@@ -215,6 +208,7 @@ impl CudaIas {
         insts: &mut CudaSlice<u32>,
         n: usize,
     ) -> Result<(), CudaError> {
+        self.check_queryable()?;
         check_batch(n)?;
         if n == 0 {
             return Ok(());
@@ -230,6 +224,7 @@ impl CudaIas {
         out: &mut CudaSlice<u8>,
         n: usize,
     ) -> Result<(), CudaError> {
+        self.check_queryable()?;
         check_batch(n)?;
         if n == 0 {
             return Ok(());
@@ -318,11 +313,40 @@ impl CudaIas {
             return None;
         }
         let inst = self.data.instances.get(slot as usize)?;
-        let gas = self.children.get(slot as usize)?.as_ref()?;
+        let gas = self.children.get(slot as usize)?.as_ref()?.triangle_gas()?;
         let s = gas.slot_info(r.slot_index())?;
         let flip = inst.flags.contains(InstanceFlags::FLIP_TRIANGLE_FACING);
         Some(hit_of(r, s, flip, inst.instance_id, inst.index))
     }
+}
+
+/// Words of an instance record as pipelines read it (`__oxray_Instance`: 128 bytes).
+pub(crate) const INSTANCE_RECORD_WORDS: usize = 32;
+
+/// The record of one instance: kind, id, SBT offset, flags, mask, index, the child's handle,
+/// then the object-to-world and world-to-object rows.
+pub(crate) fn instance_record(
+    inst: &oxray_bvh::InstanceData,
+    child: u64,
+) -> [u32; INSTANCE_RECORD_WORDS] {
+    let mut w = [0u32; INSTANCE_RECORD_WORDS];
+    w[..8].copy_from_slice(&[
+        DESCRIPTOR_INSTANCE,
+        inst.instance_id,
+        inst.sbt_offset,
+        inst.flags.bits(),
+        inst.mask as u32,
+        inst.index,
+        child as u32,
+        (child >> 32) as u32,
+    ]);
+    for (k, f) in inst.object_to_world.0.iter().enumerate() {
+        w[8 + k] = f.to_bits();
+    }
+    for (k, f) in inst.world_to_object.0.iter().enumerate() {
+        w[20 + k] = f.to_bits();
+    }
+    w
 }
 
 impl Traversable for CudaIas {

@@ -143,7 +143,7 @@ const UNUSED: Bvh2Child = Bvh2Child {
 /// The canonical binary tree as device nodes: one node per inner node of the tree, holding its
 /// two children (a leaf child is its slot range); node 0 is the root. A tree whose root is a
 /// leaf becomes one node with one child; an empty tree one node with none.
-fn bvh2_words(tree: &Bvh2) -> Result<Vec<u32>, String> {
+pub(crate) fn bvh2_words(tree: &Bvh2) -> Result<Vec<u32>, String> {
     let mut out: Vec<[Bvh2Child; 2]> = vec![[UNUSED; 2]];
     if let Some(root) = tree.nodes.first() {
         if root.is_leaf() {

@@ -43,6 +43,7 @@ mod layout;
 mod program;
 #[cfg(test)]
 mod reference;
+mod transform;
 
 pub use backend::{Cuda, CudaBatch};
 pub use context::{CudaContext, DeviceInfo, KernelInfo, KERNEL_SOURCE};
@@ -53,8 +54,9 @@ pub use layout::{NodeLayout, SlotInfo};
 pub use program::{
     compile_pipeline_ptx, launch_size, pack_sbt, pipeline_compile_options, pipeline_source,
     CudaBuffer, CudaHitGroupDesc, CudaModule, CudaPipeline, CudaProgramGroup, CudaProgramGroupKind,
-    PackedRegion, PackedSbt, DEVICE_HEADER, PIPELINE_BLOCK,
+    PackedRegion, PackedSbt, DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH, DEVICE_HEADER, PIPELINE_BLOCK,
 };
+pub use transform::CudaStaticTransform;
 
 #[cfg(test)]
 #[path = "../tests/common/mod.rs"]

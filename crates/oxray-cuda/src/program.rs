@@ -31,8 +31,10 @@ pub const PIPELINE_BLOCK: u32 = 64;
 const EXCEPTION_RECORDS: usize = 64;
 
 /// A module of CUDA C++ programs (`OptixModule` made from source): entry points named with the
-/// guide's prefixes (`__raygen__`, `__miss__`, `__closesthit__`, `__anyhit__`, `__exception__`),
-/// declared `extern "C" __global__ void name()`.
+/// guide's prefixes (`__raygen__`, `__miss__`, `__closesthit__`, `__anyhit__`,
+/// `__intersection__`, `__exception__`), declared `extern "C" __global__ void name()`, and
+/// callables (`__direct_callable__`, `__continuation_callable__`), declared
+/// `extern "C" __device__ ReturnT name(ArgTypes...)`.
 ///
 /// The modules of one pipeline are compiled together in one translation unit, so they must
 /// not define the same names twice (helpers of several modules can be `static`).
@@ -105,8 +107,10 @@ pub enum CudaProgramGroupKind {
     Miss,
     /// An exception program.
     Exception,
-    /// Closest-hit and any-hit programs, each optional.
+    /// Closest-hit, any-hit and intersection programs, each optional.
     HitGroup,
+    /// A direct callable, a continuation callable, or both.
+    Callables,
 }
 
 impl CudaProgramGroupKind {
@@ -116,6 +120,7 @@ impl CudaProgramGroupKind {
             CudaProgramGroupKind::Miss => "miss",
             CudaProgramGroupKind::Exception => "exception",
             CudaProgramGroupKind::HitGroup => "hitgroup",
+            CudaProgramGroupKind::Callables => "callables",
         }
     }
 }
@@ -128,9 +133,25 @@ const CUDA_HEADER_CHECK: u64 = 0xC2B2_AE3D_27D4_EB4F;
 struct GroupInner {
     id: u64,
     kind: CudaProgramGroupKind,
-    /// Ray generation, miss or exception program; or the closest-hit program.
+    /// Ray generation, miss or exception program; the closest-hit program; the direct callable.
     main: Option<Entry>,
     any_hit: Option<Entry>,
+    intersection: Option<Entry>,
+    /// The continuation callable.
+    continuation: Option<Entry>,
+}
+
+impl GroupInner {
+    fn entries(&self) -> impl Iterator<Item = &Entry> {
+        [
+            &self.main,
+            &self.any_hit,
+            &self.intersection,
+            &self.continuation,
+        ]
+        .into_iter()
+        .flatten()
+    }
 }
 
 /// A program group of CUDA C++ programs (`OptixProgramGroup`).
@@ -146,19 +167,25 @@ pub struct CudaHitGroupDesc<'a> {
     pub closest_hit: Option<(&'a CudaModule, &'a str)>,
     /// Any-hit program.
     pub any_hit: Option<(&'a CudaModule, &'a str)>,
-    /// Intersection program (custom primitives: not yet on the CUDA backend).
+    /// Intersection program, run for the custom primitives whose boxes a ray enters.
     pub intersection: Option<(&'a CudaModule, &'a str)>,
 }
 
 impl CudaProgramGroup {
     fn new(kind: CudaProgramGroupKind, main: Option<Entry>, any_hit: Option<Entry>) -> Self {
+        Self::with(GroupInner {
+            id: NEXT_GROUP_ID.fetch_add(1, Ordering::Relaxed),
+            kind,
+            main,
+            any_hit,
+            intersection: None,
+            continuation: None,
+        })
+    }
+
+    fn with(inner: GroupInner) -> Self {
         CudaProgramGroup {
-            inner: Arc::new(GroupInner {
-                id: NEXT_GROUP_ID.fetch_add(1, Ordering::Relaxed),
-                kind,
-                main,
-                any_hit,
-            }),
+            inner: Arc::new(inner),
         }
     }
 
@@ -182,14 +209,12 @@ impl CudaProgramGroup {
         Ok(Self::new(CudaProgramGroupKind::Exception, Some(e), None))
     }
 
-    /// A hit group for triangles. An intersection program is refused for now.
+    /// A hit group: for triangles, and with an intersection program for custom primitives.
     pub fn hit_group(desc: CudaHitGroupDesc<'_>) -> Result<Self, PipelineError> {
-        if let Some((_, name)) = desc.intersection {
-            return Err(PipelineError::UnknownEntry {
-                name: format!("{name} (intersection programs are not yet compiled for CUDA)"),
-                kind: "intersection",
-            });
-        }
+        let is = desc
+            .intersection
+            .map(|(m, n)| m.entry(n, "__intersection__", "intersection"))
+            .transpose()?;
         let ch = desc
             .closest_hit
             .map(|(m, n)| m.entry(n, "__closesthit__", "closest-hit"))
@@ -198,7 +223,42 @@ impl CudaProgramGroup {
             .any_hit
             .map(|(m, n)| m.entry(n, "__anyhit__", "any-hit"))
             .transpose()?;
-        Ok(Self::new(CudaProgramGroupKind::HitGroup, ch, ah))
+        let inner = GroupInner {
+            id: NEXT_GROUP_ID.fetch_add(1, Ordering::Relaxed),
+            kind: CudaProgramGroupKind::HitGroup,
+            main: ch,
+            any_hit: ah,
+            intersection: is,
+            continuation: None,
+        };
+        Ok(Self::with(inner))
+    }
+
+    /// A callables group (guide §15): a direct callable, a continuation callable, or both, in
+    /// one SBT record of the callables region. Each is a device function of any signature;
+    /// `optixDirectCall<ReturnT>(index, args...)` and `optixContinuationCall` call it with the
+    /// caller's `ReturnT(ArgTypes...)`, which must be its own.
+    pub fn callables(
+        direct: Option<(&CudaModule, &str)>,
+        continuation: Option<(&CudaModule, &str)>,
+    ) -> Result<Self, PipelineError> {
+        if direct.is_none() && continuation.is_none() {
+            return Err(PipelineError::EmptyCallables);
+        }
+        let dc = direct
+            .map(|(m, n)| m.entry(n, "__direct_callable__", "direct-callable"))
+            .transpose()?;
+        let cc = continuation
+            .map(|(m, n)| m.entry(n, "__continuation_callable__", "continuation-callable"))
+            .transpose()?;
+        Ok(Self::with(GroupInner {
+            id: NEXT_GROUP_ID.fetch_add(1, Ordering::Relaxed),
+            kind: CudaProgramGroupKind::Callables,
+            main: dc,
+            any_hit: None,
+            intersection: None,
+            continuation: cc,
+        }))
     }
 
     /// The group's kind.
@@ -258,7 +318,7 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     // Modules, each once, in the order the groups name them.
     let mut modules: Vec<&CudaModule> = Vec::new();
     for g in groups {
-        for e in [&g.inner.main, &g.inner.any_hit].into_iter().flatten() {
+        for e in g.inner.entries() {
             if !modules
                 .iter()
                 .any(|m| Arc::ptr_eq(&m.inner, &e.module.inner))
@@ -281,10 +341,10 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
                 f.push_str(&format!("    case {i}: {body}\n"));
             }
         }
-        let default = if ret == "bool" {
-            "return false;"
-        } else {
-            "return;"
+        let default = match ret {
+            "bool" => "return false;",
+            "void*" => "return nullptr;",
+            _ => "return;",
         };
         f.push_str(&format!("    default: {default}\n    }}\n}}\n"));
         f
@@ -322,6 +382,31 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     s.push_str(&switch("__oxray_has_anyhit", "bool", &|g: &GroupInner| {
         g.any_hit.as_ref().map(|_| "return true;".to_string())
     }));
+    s.push_str(&switch(
+        "__oxray_call_intersection",
+        "void",
+        &|g: &GroupInner| {
+            g.intersection
+                .as_ref()
+                .map(|e| format!("{}(); return;", e.name))
+        },
+    ));
+    s.push_str(&switch(
+        "__oxray_has_intersection",
+        "bool",
+        &|g: &GroupInner| g.intersection.as_ref().map(|_| "return true;".to_string()),
+    ));
+    // Callables have signatures of their own: the group gives the function's address, which
+    // optixDirectCall / optixContinuationCall call through a pointer of the caller's type.
+    let address = |e: &Entry| format!("return reinterpret_cast<void*>(&{});", e.name);
+    s.push_str(&switch("__oxray_dc_of", "void*", &|g: &GroupInner| {
+        (g.kind == CudaProgramGroupKind::Callables)
+            .then(|| g.main.as_ref().map(address))
+            .flatten()
+    }));
+    s.push_str(&switch("__oxray_cc_of", "void*", &|g: &GroupInner| {
+        g.continuation.as_ref().map(address)
+    }));
     s.push_str(
         r#"
 extern "C" __global__ void __launch_bounds__(OXRAY_PIPELINE_BLOCK) __oxray_pipeline() {
@@ -332,6 +417,9 @@ extern "C" __global__ void __launch_bounds__(OXRAY_PIPELINE_BLOCK) __oxray_pipel
     s.launch_index = make_uint3(i % d.x, (i / d.x) % d.y, i / (d.x * d.y));
     s.depth = 0u;
     s.ah_action = 0u;
+    s.calls = 0u;
+    s.report = nullptr;
+    s.ray.path = nullptr;
     s.exception_code = 0;
     s.exception_ndetails = 0u;
     s.record = reinterpret_cast<const char*>(__oxray_launch.raygen);
@@ -358,7 +446,39 @@ pub fn pipeline_compile_options(
     o.push(format!("-DOXRAY_MAX_TRACE_DEPTH={}", link.max_trace_depth));
     o.push(format!("-DOXRAY_PIPELINE_BLOCK={PIPELINE_BLOCK}"));
     o.push(format!("-DOXRAY_EXCEPTION_RECORDS={EXCEPTION_RECORDS}"));
+    o.push(format!(
+        "-DOXRAY_NUM_ATTRIBUTE_VALUES={}",
+        compile.num_attribute_values.clamp(2, 8)
+    ));
+    o.push(format!(
+        "-DOXRAY_GRAPH_FLAGS={}u",
+        compile.traversable_graph_flags.bits()
+    ));
+    o.push(format!(
+        "-DOXRAY_PRIMITIVE_TYPE_FLAGS={}u",
+        compile.uses_primitive_type_flags.bits()
+    ));
+    // A binary walk pushes at most one entry per level of its tree.
+    o.push(format!("-DOXRAY_BVH2_STACK={}", BVH2_STACK));
     o
+}
+
+/// Entries of one binary walk's stack in a pipeline's traversal: the deepest binary tree the
+/// builder makes, plus slack. Walks of nested structures each have their own.
+const BVH2_STACK: usize = oxray_bvh::MAX_BVH2_DEPTH + 2;
+
+/// The traversable graph depth a CUDA pipeline allows until
+/// [`CudaPipeline::set_max_traversable_graph_depth`] says otherwise: OptiX's default of 2 (an
+/// IAS over GASes, or a static transform over one). Each further level costs every thread
+/// stack, which is reserved for every thread the device can hold.
+pub const DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH: u32 = 2;
+
+/// The per-thread stack a pipeline needs (bytes): per trace level, the trace's frame and a
+/// walk frame per graph level, plus the programs' own.
+fn stack_bytes(max_trace_depth: u32, max_graph_depth: u32) -> usize {
+    let walk = 4 * BVH2_STACK * 3 + 512;
+    let trace = 4096 + max_graph_depth.max(1) as usize * walk;
+    trace * max_trace_depth.max(1) as usize + 2048
 }
 
 /// Checks a pipeline's options and groups (guide §12), as the CPU pipeline does.
@@ -418,6 +538,11 @@ pub(crate) struct LaunchInfo {
     pub hit_stride: u32,
     pub hit_count: u32,
     pub exceptions: u64,
+    pub callables: u64,
+    pub callable_stride: u32,
+    pub callable_count: u32,
+    pub max_graph_depth: u32,
+    pub reserved: u32,
 }
 
 /// Where each region of an SBT lies in its packed bytes.
@@ -446,6 +571,8 @@ pub struct PackedSbt {
     pub miss: PackedRegion,
     /// Hit-group records.
     pub hitgroup: PackedRegion,
+    /// Callables records.
+    pub callables: PackedRegion,
 }
 
 /// Packs `sbt` for a pipeline of `groups`: each header must name a group of the pipeline of the
@@ -497,6 +624,7 @@ pub fn pack_sbt(
     };
     let miss = region(&sbt.miss, CudaProgramGroupKind::Miss, usize::MAX)?;
     let hitgroup = region(&sbt.hitgroup, CudaProgramGroupKind::HitGroup, usize::MAX)?;
+    let callables = region(&sbt.callables, CudaProgramGroupKind::Callables, usize::MAX)?;
     if bytes.is_empty() {
         bytes.resize(16, 0);
     }
@@ -506,6 +634,7 @@ pub fn pack_sbt(
         exception,
         miss,
         hitgroup,
+        callables,
     })
 }
 
@@ -554,6 +683,8 @@ pub struct CudaPipeline {
     function: CudaFunction,
     groups: Vec<CudaProgramGroup>,
     params_name: Option<String>,
+    max_trace_depth: u32,
+    max_graph_depth: u32,
     scratch: Mutex<Option<(CudaSlice<u8>, CudaSlice<u32>)>>,
 }
 
@@ -594,26 +725,54 @@ impl CudaPipeline {
                 CudaError::Launch(format!("no variable {name} in the pipeline's modules"))
             })?;
         }
-        // Traces that nest (a closest-hit or miss program that traces) recurse on the stack.
-        let stack = 4096 * (link.max_trace_depth.max(1) as usize) + 2048;
+        let pipeline = CudaPipeline {
+            ctx: ctx.clone(),
+            module,
+            function,
+            groups: groups.to_vec(),
+            params_name: params_variable.map(str::to_string),
+            max_trace_depth: link.max_trace_depth,
+            max_graph_depth: DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH,
+            scratch: Mutex::new(None),
+        };
+        pipeline.reserve_stack()?;
+        Ok(pipeline)
+    }
+
+    /// Traces that nest (a closest-hit, miss or continuation callable that traces) and walks of
+    /// nested structures recurse on the stack: raises the context's stack limit to what this
+    /// pipeline needs (never lowers it).
+    fn reserve_stack(&self) -> Result<(), CudaError> {
+        let stack = stack_bytes(self.max_trace_depth, self.max_graph_depth);
         let current = guarded("reading the stack size", || {
             cudarc::driver::result::ctx::get_limit(
                 cudarc::driver::sys::CUlimit::CU_LIMIT_STACK_SIZE,
             )
         })?;
         if current < stack {
+            let cu = self.ctx.stream.context();
             guarded("setting the stack size", || {
                 cu.set_limit(cudarc::driver::sys::CUlimit::CU_LIMIT_STACK_SIZE, stack)
             })?;
         }
-        Ok(CudaPipeline {
-            ctx: ctx.clone(),
-            module,
-            function,
-            groups: groups.to_vec(),
-            params_name: params_variable.map(str::to_string),
-            scratch: Mutex::new(None),
-        })
+        Ok(())
+    }
+
+    /// Sets the deepest traversable graph a trace may enter (the last argument of
+    /// `optixPipelineSetStackSize`, guide §6.8): 1 to 31, by default
+    /// [`DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH`]. A trace of a deeper graph raises
+    /// `TRAVERSAL_DEPTH_EXCEEDED`. The context's stack grows to match.
+    pub fn set_max_traversable_graph_depth(&mut self, depth: u32) -> Result<(), CudaError> {
+        if depth == 0 || depth > oxray_core::MAX_TRAVERSABLE_GRAPH_DEPTH {
+            return Err(PipelineError::InvalidGraphDepth(depth).into());
+        }
+        self.max_graph_depth = depth;
+        self.reserve_stack()
+    }
+
+    /// The deepest traversable graph a trace may enter.
+    pub fn max_traversable_graph_depth(&self) -> u32 {
+        self.max_graph_depth
     }
 
     /// The program groups, in program-index order.
@@ -705,6 +864,11 @@ impl CudaPipeline {
             hit_stride: packed.hitgroup.stride as u32,
             hit_count: packed.hitgroup.count as u32,
             exceptions: exc,
+            callables: at(&packed.callables),
+            callable_stride: packed.callables.stride as u32,
+            callable_count: packed.callables.count as u32,
+            max_graph_depth: self.max_graph_depth,
+            reserved: 0,
         };
         let mut var = guarded("finding the launch information", || {
             self.module.get_global("__oxray_launch", stream)
@@ -961,6 +1125,119 @@ mod tests {
     }
 
     #[test]
+    fn callables_and_intersection_programs_are_dispatched_by_group() {
+        let m = CudaModule::from_source(
+            "extern \"C\" __global__ void __raygen__a() {}\n\
+             extern \"C\" __global__ void __intersection__i() {}\n\
+             extern \"C\" __device__ float __direct_callable__d(float x) { return x; }\n\
+             extern \"C\" __device__ void __continuation_callable__c() {}\n",
+        );
+        let g = vec![
+            CudaProgramGroup::raygen(&m, "__raygen__a").unwrap(),
+            CudaProgramGroup::hit_group(CudaHitGroupDesc {
+                intersection: Some((&m, "__intersection__i")),
+                ..Default::default()
+            })
+            .unwrap(),
+            CudaProgramGroup::callables(Some((&m, "__direct_callable__d")), None).unwrap(),
+            CudaProgramGroup::callables(None, Some((&m, "__continuation_callable__c"))).unwrap(),
+            CudaProgramGroup::callables(
+                Some((&m, "__direct_callable__d")),
+                Some((&m, "__continuation_callable__c")),
+            )
+            .unwrap(),
+        ];
+        assert_eq!(g[2].kind(), CudaProgramGroupKind::Callables);
+        let src = pipeline_source(&g);
+        assert_eq!(src.matches("#line 1 \"module").count(), 1);
+        let body = |name: &str| {
+            let at = src.find(&format!(" {name}(u32 group) {{")).unwrap();
+            src[at..at + src[at..].find("\n}\n").unwrap()].to_string()
+        };
+        assert!(body("__oxray_call_intersection").contains("case 1: __intersection__i(); return;"));
+        assert!(body("__oxray_has_intersection").contains("case 1: return true;"));
+        let dc = body("__oxray_dc_of");
+        assert!(dc.contains("case 2: return reinterpret_cast<void*>(&__direct_callable__d);"));
+        assert!(dc.contains("case 4:") && !dc.contains("case 3:"));
+        assert!(dc.contains("default: return nullptr;"));
+        let cc = body("__oxray_cc_of");
+        assert!(cc.contains("case 3: return reinterpret_cast<void*>(&__continuation_callable__c);"));
+        assert!(cc.contains("case 4:") && !cc.contains("case 2:"));
+        // A direct callable is no closest-hit program.
+        assert!(!body("__oxray_call_closesthit").contains("__direct_callable__d"));
+        let o = pipeline_compile_options(
+            (9, 0),
+            &PipelineCompileOptions {
+                num_attribute_values: 0,
+                traversable_graph_flags: oxray_core::TraversableGraphFlags::ALLOW_SINGLE_GAS,
+                ..Default::default()
+            },
+            &PipelineLinkOptions::default(),
+        );
+        assert!(o.contains(&"-DOXRAY_NUM_ATTRIBUTE_VALUES=2".to_string()));
+        assert!(o.contains(&"-DOXRAY_GRAPH_FLAGS=1u".to_string()));
+        assert!(o.contains(&format!(
+            "-DOXRAY_BVH2_STACK={}",
+            oxray_bvh::MAX_BVH2_DEPTH + 2
+        )));
+    }
+
+    #[test]
+    fn the_callables_region_is_packed_like_the_others() {
+        let m = CudaModule::from_source(
+            "extern \"C\" __global__ void __raygen__a() {}\n\
+             extern \"C\" __device__ float __direct_callable__d(float x) { return x; }\n",
+        );
+        let rg = CudaProgramGroup::raygen(&m, "__raygen__a").unwrap();
+        let cl = CudaProgramGroup::callables(Some((&m, "__direct_callable__d")), None).unwrap();
+        let g = vec![rg.clone(), cl.clone()];
+        let sbt = ShaderBindingTable {
+            raygen: SbtRegion::from_headers(&[rg.pack_header()]),
+            callables: SbtRegion::from_records(&[
+                (cl.pack_header(), [1.0f32, 2.0]),
+                (cl.pack_header(), [3.0, 4.0]),
+            ]),
+            ..Default::default()
+        };
+        let p = pack_sbt(&g, &sbt).unwrap();
+        assert_eq!(
+            p.callables,
+            PackedRegion {
+                offset: 32,
+                stride: 48,
+                count: 2
+            }
+        );
+        let word = |o: usize| u32::from_le_bytes(p.bytes[o..o + 4].try_into().unwrap());
+        assert_eq!(
+            (word(32), word(36)),
+            (1, CudaProgramGroupKind::Callables as u32)
+        );
+        assert_eq!(f32::from_bits(word(32 + 32)), 1.0);
+        assert_eq!(f32::from_bits(word(32 + 48 + 36)), 4.0);
+        // A group of another kind in the region is refused.
+        let bad = ShaderBindingTable {
+            callables: SbtRegion::from_headers(&[rg.pack_header()]),
+            ..sbt
+        };
+        assert!(matches!(
+            pack_sbt(&g, &bad),
+            Err(LaunchError::InvalidSbtRecord {
+                region: "callables",
+                ..
+            })
+        ));
+        // An empty region packs to no records.
+        let none = ShaderBindingTable {
+            raygen: SbtRegion::from_headers(&[rg.pack_header()]),
+            ..Default::default()
+        };
+        assert_eq!(pack_sbt(&g, &none).unwrap().callables.count, 0);
+        assert!(stack_bytes(2, 31) > stack_bytes(2, 2));
+        assert!(stack_bytes(1, 2) >= 4096 + 2 * (BVH2_STACK * 12));
+    }
+
+    #[test]
     fn bad_sbt_records_are_refused_as_on_the_cpu() {
         let (_, g) = groups();
         let rg = SbtRegion::from_headers(&[g[0].pack_header()]);
@@ -1007,11 +1284,14 @@ mod tests {
 
     #[test]
     fn launch_information_matches_the_device_struct() {
-        // uint3 + u32, four addresses, four u32, one address: 72 bytes, 8-aligned.
-        assert_eq!(std::mem::size_of::<LaunchInfo>(), 72);
+        // uint3 + u32, four addresses, four u32, two addresses, four u32: 96 bytes, 8-aligned.
+        assert_eq!(std::mem::size_of::<LaunchInfo>(), 96);
         assert_eq!(std::mem::offset_of!(LaunchInfo, raygen), 16);
         assert_eq!(std::mem::offset_of!(LaunchInfo, miss_stride), 48);
         assert_eq!(std::mem::offset_of!(LaunchInfo, exceptions), 64);
+        assert_eq!(std::mem::offset_of!(LaunchInfo, callables), 72);
+        assert_eq!(std::mem::offset_of!(LaunchInfo, callable_stride), 80);
+        assert_eq!(std::mem::offset_of!(LaunchInfo, max_graph_depth), 88);
         assert!(DEVICE_HEADER.contains("struct __oxray_LaunchInfo"));
     }
 

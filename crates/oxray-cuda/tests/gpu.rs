@@ -214,14 +214,20 @@ fn device_buffers_and_errors() {
         Err(CudaError::LengthMismatch { .. })
     ));
 
-    // A custom-primitive GAS is refused.
+    // A custom-primitive GAS is uploaded (for pipelines); the batched queries refuse it.
     let boxes = [oxray_core::Aabb::new(glam::Vec3::ZERO, glam::Vec3::ONE)];
     let input = oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(&boxes));
     let (custom, custom_tree) =
         oxray_bvh::GasData::build_with_tree(&oxray_core::BuildOptions::default(), &[input.into()])
             .unwrap();
+    let custom = CudaGas::upload(&ctx, &custom, &custom_tree).unwrap();
     assert_eq!(
-        CudaGas::upload(&ctx, &custom, &custom_tree).unwrap_err(),
+        custom.intersect_batch(&rays).unwrap_err(),
         CudaError::CustomPrimitives
     );
+    assert_eq!(
+        custom.occluded_batch(&rays).unwrap_err(),
+        CudaError::CustomPrimitives
+    );
+    assert!(custom.optix_handle().is_ok());
 }

@@ -145,7 +145,7 @@ fn the_test_programs_compile_with_nvrtc() {
     // The host finds these by name (cuModuleGetGlobal): they must not be mangled.
     assert!(ptx.contains(" params["), "no launch parameter variable");
     assert!(
-        ptx.contains(".const .align 8 .b8 __oxray_launch[72]"),
+        ptx.contains(".const .align 8 .b8 __oxray_launch[96]"),
         "launch information"
     );
     let groups: Vec<_> = suite_groups().into_iter().map(|(_, g)| g).collect();
@@ -783,4 +783,696 @@ fn user_exceptions_end_the_launch_index_and_run_the_exception_program() {
             }
         }
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Custom primitives, callables, the transform list (programs/suite2.cu)
+// ---------------------------------------------------------------------------------------------
+
+const SUITE2: &str = include_str!("programs/suite2.cu");
+
+/// Output words per launch index of the second suite.
+const WORDS: usize = 48;
+
+fn suite2_groups() -> Vec<(&'static str, CudaProgramGroup)> {
+    let m = CudaModule::from_source(SUITE2);
+    let hit = |is: Option<&'static str>, ch: &'static str, ah: Option<&'static str>| {
+        CudaProgramGroup::hit_group(CudaHitGroupDesc {
+            closest_hit: Some((&m, ch)),
+            any_hit: ah.map(|n| (&m, n)),
+            intersection: is.map(|n| (&m, n)),
+        })
+        .unwrap()
+    };
+    vec![
+        (
+            "rg_grid",
+            CudaProgramGroup::raygen(&m, "__raygen__grid").unwrap(),
+        ),
+        (
+            "rg_callables",
+            CudaProgramGroup::raygen(&m, "__raygen__callables").unwrap(),
+        ),
+        (
+            "ms_none",
+            CudaProgramGroup::miss(Some((&m, "__miss__none"))).unwrap(),
+        ),
+        (
+            "hg_sphere",
+            hit(
+                Some("__intersection__sphere"),
+                "__closesthit__custom",
+                Some("__anyhit__custom"),
+            ),
+        ),
+        ("hg_tri", hit(None, "__closesthit__custom", None)),
+        ("hg_xform", hit(None, "__closesthit__xform", None)),
+        (
+            "cl_scale",
+            CudaProgramGroup::callables(Some((&m, "__direct_callable__scale")), None).unwrap(),
+        ),
+        (
+            "cl_shoot",
+            CudaProgramGroup::callables(None, Some((&m, "__continuation_callable__shoot")))
+                .unwrap(),
+        ),
+        (
+            "cl_both",
+            CudaProgramGroup::callables(
+                Some((&m, "__direct_callable__nested")),
+                Some((&m, "__continuation_callable__shoot")),
+            )
+            .unwrap(),
+        ),
+    ]
+}
+
+fn suite2_options() -> PipelineCompileOptions {
+    PipelineCompileOptions {
+        num_payload_values: 16,
+        num_attribute_values: 8,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn custom_primitives_callables_and_transforms_compile_with_nvrtc() {
+    if !nvrtc() {
+        return;
+    }
+    let groups: Vec<_> = suite2_groups().into_iter().map(|(_, g)| g).collect();
+    for depth in [1, 2] {
+        let link = PipelineLinkOptions {
+            max_trace_depth: depth,
+        };
+        let ptx = compile_pipeline_ptx((9, 0), &suite2_options(), &link, &groups)
+            .unwrap_or_else(|e| panic!("depth {depth}: {e}"));
+        assert!(ptx.contains(".entry __oxray_pipeline"));
+    }
+    // Two attribute words (the default) drop the rest; the unit still compiles.
+    let options = PipelineCompileOptions {
+        num_attribute_values: 2,
+        ..suite2_options()
+    };
+    compile_pipeline_ptx((8, 0), &options, &PipelineLinkOptions::default(), &groups)
+        .unwrap_or_else(|e| panic!("{e}"));
+}
+
+/// A module calling the device functions the second suite does not.
+const API2: &str = r#"
+#include <optix.h>
+extern "C" __constant__ unsigned long long params[2];
+extern "C" __device__ void __direct_callable__nothing() {}
+extern "C" __device__ float3 __continuation_callable__three(float a, float3 b, unsigned int c) {
+    return make_float3(a + b.x, b.y, b.z + (float)c);
+}
+extern "C" __global__ void __raygen__all() {
+    optixDirectCall<void>(0);
+    float3 v = optixContinuationCall<float3, float, float3, unsigned int>(1, 1.0f, make_float3(1.0f, 2.0f, 3.0f), 4u);
+    unsigned int u = optixUndefinedValue();
+    u += (unsigned int)optixGetPrimitiveType(0xFEu) + optixIsFrontFaceHit(3u) + optixIsBackFaceHit(0xFFu);
+    OptixTraversableHandle h = params[0];
+    u += (unsigned int)optixGetTransformTypeFromHandle(h) + optixGetInstanceIdFromHandle(h);
+    u += (unsigned int)optixGetInstanceChildFromHandle(h);
+    const float4* m = optixGetInstanceTransformFromHandle(h);
+    const float4* mi = optixGetInstanceInverseTransformFromHandle(h);
+    const OptixStaticTransform* st = optixGetStaticTransformFromHandle(h);
+    if (m && mi && st) u += __float_as_uint(m[0].x + mi[2].w + st->invTransform[11]) + (unsigned int)st->child;
+    *reinterpret_cast<unsigned int*>(params[1]) = u + __float_as_uint(v.x);
+}
+extern "C" __global__ void __intersection__all() {
+    optixSetPayloadTypes(OPTIX_PAYLOAD_TYPE_DEFAULT);
+    float3 o = optixGetObjectRayOrigin();
+    float3 d = optixGetObjectRayDirection();
+    unsigned int k = optixGetPrimitiveIndex() + optixGetSbtGASIndex() + optixGetInstanceId()
+        + optixGetInstanceIndex() + optixGetTransformListSize();
+    float m[12];
+    optixGetWorldToObjectTransformMatrix(m);
+    if (optixReportIntersection(optixGetRayTmax() * 0.5f + o.x + d.y + m[3], k)) return;
+    if (optixReportIntersection(1.0f, 1u, 1u)) return;
+    optixReportIntersection(2.0f, 2u, 1u, 2u, 3u, 4u, 5u, 6u, 7u, 8u);
+    (void)optixGetGASTraversableHandle();
+    (void)optixGetTransformListHandle(0);
+    (void)optixTransformPointFromWorldToObjectSpace(o);
+    (void)optixTransformVectorFromWorldToObjectSpace(o);
+    (void)optixTransformNormalFromWorldToObjectSpace(o);
+}
+extern "C" __global__ void __anyhit__all() {
+    float3 v[3];
+    optixGetTriangleVertexData(v);
+    float m[12];
+    optixGetObjectToWorldTransformMatrix(m);
+    if (v[0].x + m[0] + __uint_as_float(optixGetAttribute_7()) > 1.0f) optixIgnoreIntersection();
+}
+extern "C" __global__ void __closesthit__all() {
+    optixSetPayload_0(optixGetAttribute_2() + optixGetAttribute_3() + optixGetAttribute_4()
+        + optixGetAttribute_5() + optixGetAttribute_6() + (unsigned int)optixGetPrimitiveType());
+}
+extern "C" __global__ void __exception__all() {
+    const char* line = optixGetExceptionLineInfo();
+    optixSetPayload_0(line == nullptr ? 1u : 0u);
+}
+"#;
+
+#[test]
+fn every_new_device_function_compiles_with_nvrtc() {
+    if !nvrtc() {
+        return;
+    }
+    let m = CudaModule::from_source(API2);
+    let groups = [
+        CudaProgramGroup::raygen(&m, "__raygen__all").unwrap(),
+        CudaProgramGroup::hit_group(CudaHitGroupDesc {
+            closest_hit: Some((&m, "__closesthit__all")),
+            any_hit: Some((&m, "__anyhit__all")),
+            intersection: Some((&m, "__intersection__all")),
+        })
+        .unwrap(),
+        CudaProgramGroup::callables(
+            Some((&m, "__direct_callable__nothing")),
+            Some((&m, "__continuation_callable__three")),
+        )
+        .unwrap(),
+        CudaProgramGroup::exception(&m, "__exception__all").unwrap(),
+    ];
+    for cc in [(8, 0), (9, 0)] {
+        compile_pipeline_ptx(
+            cc,
+            &suite2_options(),
+            &PipelineLinkOptions::default(),
+            &groups,
+        )
+        .unwrap_or_else(|e| panic!("compute_{}{}: {e}", cc.0, cc.1));
+    }
+    // Entry names keep their prefixes.
+    assert!(CudaProgramGroup::callables(None, None).is_err());
+    assert!(
+        CudaProgramGroup::callables(Some((&m, "__continuation_callable__three")), None).is_err()
+    );
+    assert!(CudaProgramGroup::hit_group(CudaHitGroupDesc {
+        intersection: Some((&m, "__anyhit__all")),
+        ..Default::default()
+    })
+    .is_err());
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Pod, Zeroable)]
+struct Suite2Params {
+    out: u64,
+    handle: u64,
+    width: u32,
+    height: u32,
+    ray_flags: u32,
+    ray_mask: u32,
+    z: f32,
+    mode: u32,
+    dc_index: u32,
+    cc_index: u32,
+}
+
+struct Suite2 {
+    ctx: CudaContext,
+    pipeline: CudaPipeline,
+    groups: Vec<(&'static str, CudaProgramGroup)>,
+}
+
+impl Suite2 {
+    fn new(ctx: &CudaContext, depth: u32) -> Suite2 {
+        let groups = suite2_groups();
+        let list: Vec<_> = groups.iter().map(|(_, g)| g.clone()).collect();
+        let pipeline = CudaPipeline::new(
+            ctx,
+            &suite2_options(),
+            &PipelineLinkOptions {
+                max_trace_depth: depth,
+            },
+            Some("params"),
+            &list,
+        )
+        .unwrap();
+        Suite2 {
+            ctx: ctx.clone(),
+            pipeline,
+            groups,
+        }
+    }
+
+    fn header(&self, name: &str) -> oxray_core::SbtHeader {
+        self.groups
+            .iter()
+            .find(|(n, _)| *n == name)
+            .unwrap()
+            .1
+            .pack_header()
+    }
+
+    /// Runs a launch of `dims[0] x dims[1]`; the 48 words of every launch index and the report.
+    fn run(
+        &self,
+        handle: u64,
+        sbt: &ShaderBindingTable,
+        dims: [u32; 2],
+        mode: u32,
+        calls: [u32; 2],
+    ) -> (Vec<Vec<u32>>, oxray_core::LaunchReport) {
+        let n = (dims[0] * dims[1]) as usize;
+        let out = CudaBuffer::<u32>::zeroed(&self.ctx, n * WORDS).unwrap();
+        let params = Suite2Params {
+            out: out.device_ptr(),
+            handle,
+            width: dims[0],
+            height: dims[1],
+            ray_flags: 0,
+            ray_mask: 0xFF,
+            z: 1.0,
+            mode,
+            dc_index: calls[0],
+            cc_index: calls[1],
+        };
+        let report = self
+            .pipeline
+            .launch_with(&params, sbt, dims[0], dims[1], 1)
+            .unwrap();
+        let words = out.download().unwrap();
+        (words.chunks(WORDS).map(<[u32]>::to_vec).collect(), report)
+    }
+}
+
+/// A sphere record's data (`SphereData` in suite2.cu).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, Pod, Zeroable)]
+struct SphereData {
+    spheres: u64,
+    prim_offset: u32,
+    kind: u32,
+}
+
+/// Eight spheres of radius 0.2 at z = 0: a row at y = -0.5 (build input 0, primitives 0..3) and
+/// one at y = 0.5 (input 1, primitive index offset 10).
+fn spheres() -> Vec<[f32; 4]> {
+    (0..8)
+        .map(|k| {
+            let (i, j) = (k % 4, k / 4);
+            [-0.75 + 0.5 * i as f32, -0.5 + j as f32, 0.0, 0.2]
+        })
+        .collect()
+}
+
+fn sphere_gas(cuda: &Cuda) -> oxray_cuda::CudaGas {
+    let boxes: Vec<oxray_core::Aabb> = spheres()
+        .iter()
+        .map(|s| {
+            let c = Vec3::new(s[0], s[1], s[2]);
+            oxray_core::Aabb::new(c - Vec3::splat(s[3]), c + Vec3::splat(s[3]))
+        })
+        .collect();
+    let a = oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(&boxes[..4]));
+    let b = oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(&boxes[4..]))
+        .primitive_index_offset(10);
+    let gas = cuda
+        .build_gas(&BuildOptions::default(), &[a.into(), b.into()])
+        .unwrap();
+    assert_eq!(gas.kind(), oxray_bvh::GasKind::CustomPrimitives);
+    gas
+}
+
+/// The sphere hit a ray from `o` down -z reports, as the intersection program computes it:
+/// (sphere, t, normal).
+fn expected_sphere(o: [f32; 3]) -> Option<(usize, f32, [f32; 3])> {
+    let dir = [0.0f32, 0.0, -1.0];
+    spheres().iter().enumerate().find_map(|(k, s)| {
+        let (ox, oy, oz) = (o[0] - s[0], o[1] - s[1], o[2] - s[2]);
+        let a = dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2];
+        let b = ox * dir[0] + oy * dir[1] + oz * dir[2];
+        let c = ox * ox + oy * oy + oz * oz - s[3] * s[3];
+        let disc = b * b - a * c;
+        if disc < 0.0 {
+            return None;
+        }
+        let t = (-b - disc.sqrt()) / a;
+        let n = [
+            (ox + t * dir[0]) / s[3],
+            (oy + t * dir[1]) / s[3],
+            (oz + t * dir[2]) / s[3],
+        ];
+        Some((k, t, n))
+    })
+}
+
+fn grid_origin(i: usize, dims: [u32; 2], z: f32) -> [f32; 3] {
+    let (x, y) = (i as u32 % dims[0], i as u32 / dims[0]);
+    [
+        2.0 * (x as f32 + 0.5) / dims[0] as f32 - 1.0,
+        2.0 * (y as f32 + 0.5) / dims[1] as f32 - 1.0,
+        z,
+    ]
+}
+
+fn close(a: f32, b: f32) -> bool {
+    (a - b).abs() <= 1e-5 * (1.0 + b.abs())
+}
+
+#[test]
+fn custom_primitives_run_their_intersection_and_any_hit_programs() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let cuda = Cuda::from_context(ctx.clone());
+    let gas = sphere_gas(&cuda);
+    let centres = CudaBuffer::<[f32; 4]>::from_slice(&ctx, &spheres()).unwrap();
+    let s = Suite2::new(&ctx, 1);
+    let data = |input: u64| SphereData {
+        spheres: centres.device_ptr() + 64 * input,
+        prim_offset: 10 * input as u32,
+        kind: 5 + input as u32,
+    };
+    let sbt = ShaderBindingTable {
+        raygen: SbtRegion::from_headers(&[s.header("rg_grid")]),
+        miss: SbtRegion::from_headers(&[s.header("ms_none")]),
+        hitgroup: SbtRegion::from_records(&[
+            (s.header("hg_sphere"), data(0)),
+            (s.header("hg_sphere"), data(1)),
+        ]),
+        ..Default::default()
+    };
+    let dims = [32, 16];
+    let handle = gas.optix_handle().unwrap();
+    for mode in [0, 1, 2, 3] {
+        let (out, report) = s.run(handle, &sbt, dims, mode, [0, 0]);
+        assert_eq!(report.exceptions, 0, "mode {mode}: {report:?}");
+        let mut hits = 0;
+        for (i, o) in out.iter().enumerate() {
+            let origin = grid_origin(i, dims, 1.0);
+            let expected = expected_sphere(origin);
+            let visible = expected.filter(|&(k, _, _)| mode != 1 || k % 2 == 0);
+            let Some((k, t, n)) = visible else {
+                assert_eq!(o[0], 0, "mode {mode}, launch index {i}: {o:?}");
+                if let Some((k, ..)) = expected {
+                    assert_eq!(o[15], 2, "two reports of sphere {k} ignored");
+                }
+                continue;
+            };
+            hits += 1;
+            let input = (k / 4) as u32;
+            let prim = (k % 4) as u32 + 10 * input;
+            assert_eq!(o[0], 1, "mode {mode}, launch index {i} hits sphere {k}");
+            assert_eq!((o[1], o[2], o[3]), (prim, input, 5 + input), "index {i}");
+            let t_got = f32::from_bits(o[4]);
+            assert!(close(t_got, t), "t {t_got} vs {t}");
+            for a in 0..3 {
+                assert!(close(f32::from_bits(o[5 + a]), n[a]), "normal {a} of {o:?}");
+            }
+            assert_eq!((o[8], o[9], o[10]), (0, prim, 0xA5 | 6 << 8 | 7 << 16));
+            assert_eq!(
+                (o[11], o[12]),
+                (u32::MAX, 0x100),
+                "GAS root, custom, no facing"
+            );
+            assert_eq!(o[13], o[4], "any-hit saw the candidate's t as tmax");
+            assert_eq!(o[15], 1, "one any-hit call");
+            match mode {
+                2 => assert_eq!(o[14], 0x200, "a report after terminate does nothing"),
+                3 => assert_eq!(o[14], 0x100, "reports outside the interval are false"),
+                _ => assert_eq!(o[14], 0),
+            }
+        }
+        assert!(hits > 20, "mode {mode}: {hits} hits");
+    }
+    // With two attribute words, the others read 0.
+    let mut options = suite2_options();
+    options.num_attribute_values = 2;
+    let list: Vec<_> = s.groups.iter().map(|(_, g)| g.clone()).collect();
+    let p2 = CudaPipeline::new(
+        &ctx,
+        &options,
+        &PipelineLinkOptions::default(),
+        Some("params"),
+        &list,
+    )
+    .unwrap();
+    let out = CudaBuffer::<u32>::zeroed(&ctx, 32 * 16 * WORDS).unwrap();
+    let params = Suite2Params {
+        out: out.device_ptr(),
+        handle,
+        width: 32,
+        height: 16,
+        ray_flags: 0,
+        ray_mask: 0xFF,
+        z: 1.0,
+        mode: 0,
+        dc_index: 0,
+        cc_index: 0,
+    };
+    let report = p2.launch_with(&params, &sbt, 32, 16, 1).unwrap();
+    assert_eq!(report.exceptions, 0);
+    let words = out.download().unwrap();
+    let hit = words.chunks(WORDS).find(|o| o[0] == 1).unwrap();
+    assert_eq!((hit[7], hit[8], hit[9], hit[10]), (0, 0, 0, 0));
+}
+
+#[test]
+fn an_ias_mixes_triangle_and_custom_gases() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let cuda = Cuda::from_context(ctx.clone());
+    let tris = TraversableHandle::from(quads(&cuda));
+    let balls = TraversableHandle::from(sphere_gas(&cuda));
+    use oxray_core::Transform;
+    let instances = [
+        Instance::new(tris)
+            .transform(Transform::from_translation(Vec3::new(0.0, 0.0, -2.0)))
+            .instance_id(3),
+        Instance::new(balls)
+            .transform(Transform::from_translation(Vec3::new(0.0, 0.0, 0.5)))
+            .instance_id(4)
+            .sbt_offset(2),
+    ];
+    let ias = cuda
+        .build_ias(&BuildOptions::default(), &[(&instances[..]).into()])
+        .unwrap();
+    // The query kernels do not trace custom primitives.
+    let rays = vec![oxray_core::Ray::new(Vec3::Z, -Vec3::Z); 4];
+    let mut hits = vec![None; 4];
+    assert!(ias.intersect_batch_into(&rays, &mut hits).is_err());
+    let centres = CudaBuffer::<[f32; 4]>::from_slice(&ctx, &spheres()).unwrap();
+    let s = Suite2::new(&ctx, 1);
+    let data = |input: u64| SphereData {
+        spheres: centres.device_ptr() + 64 * input,
+        prim_offset: 10 * input as u32,
+        kind: 5 + input as u32,
+    };
+    let sbt = ShaderBindingTable {
+        raygen: SbtRegion::from_headers(&[s.header("rg_grid")]),
+        miss: SbtRegion::from_headers(&[s.header("ms_none")]),
+        hitgroup: SbtRegion::from_records(&[
+            (s.header("hg_tri"), SphereData::default()),
+            (s.header("hg_tri"), SphereData::default()),
+            (s.header("hg_sphere"), data(0)),
+            (s.header("hg_sphere"), data(1)),
+        ]),
+        ..Default::default()
+    };
+    let dims = [32, 16];
+    let (out, report) = s.run(ias.optix_handle().unwrap(), &sbt, dims, 0, [0, 0]);
+    assert_eq!(report.exceptions, 0, "{report:?}");
+    let (mut balls, mut triangles) = (0, 0);
+    for (i, o) in out.iter().enumerate() {
+        let [x, y, _] = grid_origin(i, dims, 1.0);
+        assert_eq!(o[0], 1, "launch index {i}");
+        // The spheres' object space is the world shifted down by 0.5.
+        match expected_sphere([x, y, 0.5]) {
+            Some((k, t, _)) => {
+                balls += 1;
+                let input = (k / 4) as u32;
+                assert_eq!(
+                    (o[1], o[2], o[3]),
+                    ((k % 4) as u32 + 10 * input, input, 5 + input)
+                );
+                assert!(close(f32::from_bits(o[4]), t));
+                assert_eq!((o[11], o[12]), (4, 1 | 0x100));
+            }
+            None => {
+                triangles += 1;
+                assert_eq!(o[3], 0xFE, "a front-facing triangle");
+                assert_eq!(f32::from_bits(o[4]), 3.0);
+                assert_eq!(o[11], 3);
+                assert_eq!(o[12], 0x200 | 0x800 | 0x1000, "instance 0, triangle, front");
+                assert_eq!(o[2], (x >= 0.0) as u32);
+            }
+        }
+    }
+    assert!(
+        balls > 20 && triangles > 20,
+        "{balls} spheres, {triangles} triangles"
+    );
+}
+
+#[test]
+fn direct_and_continuation_callables() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let cuda = Cuda::from_context(ctx.clone());
+    let gas = quads(&cuda);
+    let s = Suite2::new(&ctx, 1);
+    let sbt = ShaderBindingTable {
+        raygen: SbtRegion::from_records(&[(s.header("rg_callables"), 0xCAFEu32)]),
+        miss: SbtRegion::from_headers(&[s.header("ms_none")]),
+        hitgroup: SbtRegion::from_headers(&[s.header("hg_tri"), s.header("hg_tri")]),
+        callables: SbtRegion::from_records(&[
+            (s.header("cl_scale"), 10.0f32),
+            (s.header("cl_shoot"), 20.0),
+            (s.header("cl_both"), 30.0),
+        ]),
+        ..Default::default()
+    };
+    let dims = [8, 2];
+    let handle = gas.optix_handle().unwrap();
+    for (calls, base) in [([0, 1], (0.0f32, 20)), ([2, 2], (30.0, 30))] {
+        let (out, report) = s.run(handle, &sbt, dims, 0, calls);
+        assert_eq!(report.exceptions, 0, "{calls:?}: {report:?}");
+        for (i, o) in out.iter().enumerate() {
+            let k = (i as u32) % dims[0];
+            // x * k + 10, plus 30 through the nested call.
+            let dc = 1.5f32 * k as f32 + 10.0 + base.0;
+            assert_eq!(f32::from_bits(o[0]), dc, "{calls:?}, index {i}");
+            assert_eq!(
+                o[1],
+                1 + 100 * k + base.1,
+                "{calls:?}: the continuation traced a hit"
+            );
+            assert_eq!(
+                (o[2], o[3]),
+                (0xCAFE, 0x600D),
+                "the caller's record is back"
+            );
+        }
+    }
+    // Bad indices and records without the callable asked for.
+    let n = (dims[0] * dims[1]) as u64;
+    for (calls, code, detail) in [
+        ([5, 1], ExceptionCode::CALLABLE_INVALID_SBT, 5),
+        ([1, 1], ExceptionCode::CALLABLE_NO_DC_SBT_RECORD, 1),
+        ([0, 0], ExceptionCode::CALLABLE_NO_CC_SBT_RECORD, 0),
+        ([0, 3], ExceptionCode::CALLABLE_INVALID_SBT, 3),
+    ] {
+        let (out, report) = s.run(handle, &sbt, dims, 0, calls);
+        assert_eq!(report.exceptions, n, "{calls:?}");
+        let e = &report.first_exceptions[0].1;
+        assert_eq!((e.code, e.details()), (code, &[detail][..]), "{calls:?}");
+        assert!(out.iter().all(|o| o[3] == 0), "the launch indices ended");
+    }
+    // Without a callables region every index is invalid.
+    let empty = ShaderBindingTable {
+        callables: SbtRegion::default(),
+        ..sbt.clone()
+    };
+    let (_, report) = s.run(handle, &empty, dims, 0, [0, 0]);
+    assert_eq!(
+        report.first_exceptions[0].1.code,
+        ExceptionCode::CALLABLE_INVALID_SBT
+    );
+}
+
+#[test]
+fn nested_instances_and_static_transforms_give_the_transform_list() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let cuda = Cuda::from_context(ctx.clone());
+    use oxray_core::{StaticTransform, Transform};
+    let gas = TraversableHandle::from(quads(&cuda));
+    // GAS <- instance A (id 7, SBT offset 1, z - 1) in the inner IAS at index 1 <- static
+    // transform S (scale 2 in x and y) <- instance B (id 9, SBT offset 2, a quarter turn about
+    // z, x - 0.5, z - 1) in the outer IAS at index 1. Depth 4.
+    let a = Transform::from_translation(Vec3::new(0.0, 0.0, -1.0));
+    let st = Transform([2.0, 0.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+    let b = Transform([
+        0.0, -1.0, 0.0, -0.5, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, -1.0,
+    ]);
+    let inner = [
+        Instance::new(TraversableHandle::NULL),
+        Instance::new(gas.clone())
+            .transform(a)
+            .instance_id(7)
+            .sbt_offset(1),
+    ];
+    let inner = cuda
+        .build_ias(&BuildOptions::default(), &[(&inner[..]).into()])
+        .unwrap();
+    let s_node = StaticTransform::new(TraversableHandle::from(inner), st).unwrap();
+    let outer = [
+        Instance::new(TraversableHandle::NULL),
+        Instance::new(TraversableHandle::from(s_node))
+            .transform(b)
+            .instance_id(9)
+            .sbt_offset(2),
+    ];
+    let outer = cuda
+        .build_ias(&BuildOptions::default(), &[(&outer[..]).into()])
+        .unwrap();
+    assert_eq!(oxray_core::Traversable::graph_depth(&outer), 4);
+    assert!(!outer.is_queryable());
+    let handle = outer.optix_handle().unwrap();
+    let mut s = Suite2::new(&ctx, 1);
+    let records: Vec<_> = (0..6u32).map(|k| (s.header("hg_xform"), k)).collect();
+    let sbt = ShaderBindingTable {
+        raygen: SbtRegion::from_headers(&[s.header("rg_grid")]),
+        miss: SbtRegion::from_headers(&[s.header("ms_none")]),
+        hitgroup: SbtRegion::from_records(&records),
+        ..Default::default()
+    };
+    let dims = [16, 8];
+    // Deeper than the default graph depth (2): every trace raises.
+    let (_, report) = s.run(handle, &sbt, dims, 0, [0, 0]);
+    assert_eq!(report.exceptions, 128);
+    assert_eq!(
+        report.first_exceptions[0].1.code,
+        ExceptionCode::TRAVERSAL_DEPTH_EXCEEDED
+    );
+    s.pipeline.set_max_traversable_graph_depth(4).unwrap();
+    assert!(s.pipeline.set_max_traversable_graph_depth(32).is_err());
+    let (out, report) = s.run(handle, &sbt, dims, 0, [0, 0]);
+    assert_eq!(report.exceptions, 0, "{report:?}");
+    let o2w = b.then_after(&st).then_after(&a);
+    let [ai, si, bi] = [a, st, b].map(|t| t.inverse().unwrap());
+    let w2o = ai.then_after(&si).then_after(&bi);
+    let normal = Transform::transform_normal_with_inverse(&w2o, Vec3::X);
+    let left = [
+        [-1.0f32, -1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [-1.0, 1.0, 0.0],
+    ];
+    let idx = [[0usize, 1, 2], [0, 2, 3]];
+    for (i, o) in out.iter().enumerate() {
+        let [x, y, _] = grid_origin(i, dims, 1.0);
+        assert_eq!(o[0], 3, "hit, and every round trip exact: index {i}");
+        let object = w2o.transform_point(Vec3::new(x, y, -2.0));
+        let input = (object.x >= 0.0) as u32;
+        assert_eq!(o[1], input, "SBT-GAS index at {object:?}");
+        let prim = o[2];
+        assert!(prim / 2 == input, "primitive {prim} of input {input}");
+        assert_eq!(
+            [o[3], o[4], o[5]].map(f32::from_bits),
+            normal.to_array(),
+            "normal"
+        );
+        // The triangle's vertices in object space, in the input's order.
+        for (v, &k) in idx[(prim % 2) as usize].iter().enumerate() {
+            let mut p = left[k];
+            p[0] += input as f32;
+            let got = [o[6 + 3 * v], o[7 + 3 * v], o[8 + 3 * v]].map(f32::from_bits);
+            assert_eq!(got, p, "vertex {v} of primitive {prim}");
+        }
+        assert_eq!(f32::from_bits(o[15]), 3.0, "t");
+        let x = &o[16..];
+        assert_eq!((x[0], x[1], x[2]), (7, 1, 3), "nearest instance, list size");
+        assert_eq!(x[3], 4 | 1 << 4 | 4 << 8, "instance, static, instance");
+        assert_eq!((x[4], x[5]), (9, 31), "root instance's id; handle queries");
+        assert_eq!(f32::from_bits(x[6]), 2.0, "the static transform's matrix");
+        assert_eq!(x[7], 3 + input, "SBT offsets summed: 1 + 2");
+        for k in 0..12 {
+            assert_eq!(f32::from_bits(x[8 + k]), o2w.0[k], "object to world [{k}]");
+            assert_eq!(f32::from_bits(x[20 + k]), w2o.0[k], "world to object [{k}]");
+        }
+    }
+    // One level below the limit still raises.
+    s.pipeline.set_max_traversable_graph_depth(3).unwrap();
+    let (_, report) = s.run(handle, &sbt, dims, 0, [0, 0]);
+    assert_eq!(report.exceptions, 128);
 }

@@ -45,6 +45,25 @@
 #ifndef OXRAY_EXCEPTION_RECORDS
 #define OXRAY_EXCEPTION_RECORDS 64
 #endif
+// Attribute words a report keeps (the pipeline's numAttributeValues, clamped to 2..8).
+#ifndef OXRAY_NUM_ATTRIBUTE_VALUES
+#define OXRAY_NUM_ATTRIBUTE_VALUES 2
+#endif
+// The pipeline's traversable graph flags and primitive type flags (0: anything).
+#ifndef OXRAY_GRAPH_FLAGS
+#define OXRAY_GRAPH_FLAGS 0u
+#endif
+#ifndef OXRAY_PRIMITIVE_TYPE_FLAGS
+#define OXRAY_PRIMITIVE_TYPE_FLAGS 0u
+#endif
+// Entries of one binary walk's stack: one per level of the deepest tree the builder makes.
+#ifndef OXRAY_BVH2_STACK
+#define OXRAY_BVH2_STACK OXRAY_STACK_SIZE
+#endif
+// Transforms a path from the root to a GAS holds at most (a graph is at most 31 deep).
+#define __OXRAY_MAX_LEVELS 31
+// Nesting of callables before STACK_OVERFLOW is raised, as on the CPU backend.
+#define __OXRAY_MAX_CALL_DEPTH 64u
 
 // ---------------------------------------------------------------------------------------------
 // Types and constants of the guide
@@ -109,20 +128,75 @@ enum OptixPayloadTypeID {
 // What the host uploads: traversables, SBT, launch information
 // ---------------------------------------------------------------------------------------------
 
-// What an OptixTraversableHandle points at (64 bytes, made by the host for a GAS or an IAS).
+// What an OptixTraversableHandle of a GAS, an IAS or a static transform points at (64 bytes,
+// made by the host; the handle is its device address). The kind word comes first in every
+// record a handle can point at (instances too), so that a handle is decoded by reading it.
 struct __oxray_Traversable {
-    u32 kind;   // 1: triangle GAS (binary node layout); 2: one level of instances
-    u32 count;  // GAS: SBT records (geometry flags); IAS: instance slots
-    unsigned long long nodes;      // binary nodes
-    unsigned long long prims;      // GAS: 3 float4 per leaf slot; IAS: 6 float4 per slot
+    u32 kind;   // __OXRAY_GAS, __OXRAY_CUSTOM_GAS, __OXRAY_IAS or __OXRAY_STATIC
+    u32 count;  // GAS: SBT records (geometry flags); IAS: instance slots; static transform: 1
+    unsigned long long nodes;      // GAS, IAS: binary nodes; static transform: its
+                                   // OptixStaticTransform, which follows this descriptor
+    unsigned long long prims;      // triangle GAS: 3 float4 per leaf slot; custom GAS: 2 float4
+                                   // per leaf slot (the box's corners); IAS: 6 float4 per slot
+                                   // (the query kernels' table: the world box is rows 3, 4)
     unsigned long long info;       // GAS: uint2 per slot (primitive index, SBT-GAS index);
-                                   // IAS: 2 uint4 per slot (id, sbt offset, flags, mask),
-                                   //      (index, 0, child descriptor lo, hi)
+                                   // IAS: one __oxray_Instance per slot
     unsigned long long geom_flags; // GAS: one u32 per SBT-GAS index
-    unsigned long long pad[2];
+    u32 depth;                     // traversable graph depth (a GAS is 1)
+    u32 reserved;
+    unsigned long long pad;
 };
 #define __OXRAY_GAS 1u
 #define __OXRAY_IAS 2u
+#define __OXRAY_STATIC 3u
+#define __OXRAY_INSTANCE 4u
+#define __OXRAY_CUSTOM_GAS 5u
+
+// One instance of an IAS as pipelines read it (128 bytes). Its address is the instance's
+// handle in the transform list (optixGetTransformListHandle).
+struct __oxray_Instance {
+    u32 kind;  // __OXRAY_INSTANCE
+    u32 id, sbt_offset, flags;
+    u32 mask, index;
+    unsigned long long child;  // the child's handle; 0 for none
+    float4 object_to_world[3];
+    float4 world_to_object[3];
+};
+
+// The guide's static transform (§13.11): the child's handle, padding, the object-to-world
+// transform and its inverse, 3x4 row-major. A static transform's handle points at a
+// descriptor of kind __OXRAY_STATIC, which this follows.
+struct OptixStaticTransform {
+    OptixTraversableHandle child;
+    unsigned int pad[2];
+    float transform[12];
+    float invTransform[12];
+};
+
+enum OptixTransformType {
+    OPTIX_TRANSFORM_TYPE_NONE = 0,
+    OPTIX_TRANSFORM_TYPE_STATIC_TRANSFORM = 1,
+    OPTIX_TRANSFORM_TYPE_MATRIX_MOTION_TRANSFORM = 2,
+    OPTIX_TRANSFORM_TYPE_SRT_MOTION_TRANSFORM = 3,
+    OPTIX_TRANSFORM_TYPE_INSTANCE = 4,
+};
+
+enum OptixPrimitiveType {
+    OPTIX_PRIMITIVE_TYPE_CUSTOM = 0x2500,
+    OPTIX_PRIMITIVE_TYPE_ROUND_QUADRATIC_BSPLINE = 0x2501,
+    OPTIX_PRIMITIVE_TYPE_ROUND_CUBIC_BSPLINE = 0x2502,
+    OPTIX_PRIMITIVE_TYPE_ROUND_LINEAR = 0x2503,
+    OPTIX_PRIMITIVE_TYPE_ROUND_CATMULLROM = 0x2504,
+    OPTIX_PRIMITIVE_TYPE_FLAT_QUADRATIC_BSPLINE = 0x2505,
+    OPTIX_PRIMITIVE_TYPE_SPHERE = 0x2506,
+    OPTIX_PRIMITIVE_TYPE_ROUND_CUBIC_BEZIER = 0x2507,
+    OPTIX_PRIMITIVE_TYPE_ROUND_QUADRATIC_BSPLINE_ROCAPS = 0x2508,
+    OPTIX_PRIMITIVE_TYPE_ROUND_CUBIC_BSPLINE_ROCAPS = 0x2509,
+    OPTIX_PRIMITIVE_TYPE_ROUND_CATMULLROM_ROCAPS = 0x250A,
+    OPTIX_PRIMITIVE_TYPE_ROUND_CUBIC_BEZIER_ROCAPS = 0x250B,
+    OPTIX_PRIMITIVE_TYPE_TRIANGLE = 0x2531,
+    OPTIX_PRIMITIVE_TYPE_DISPLACED_MICROMESH_TRIANGLE = 0x2532,
+};
 
 // The launch, in constant memory, written by the host before each launch.
 struct __oxray_LaunchInfo {
@@ -135,6 +209,10 @@ struct __oxray_LaunchInfo {
     u32 miss_stride, miss_count;
     u32 hit_stride, hit_count;
     unsigned long long exceptions;  // u32 count, then records of 16 words
+    unsigned long long callables;
+    u32 callable_stride, callable_count;
+    u32 max_graph_depth;  // the pipeline's maximum traversable graph depth
+    u32 reserved;
 };
 __constant__ __oxray_LaunchInfo __oxray_launch;
 
@@ -150,13 +228,31 @@ __constant__ __oxray_LaunchInfo __oxray_launch;
 // Per-thread state
 // ---------------------------------------------------------------------------------------------
 
+// Where the geometry being traversed sits: the transform list from the root (instances and
+// static transforms, index 0 nearest the root), what the instances on it add up to, and the
+// ray in the GAS's object space. It lives in the trace's frame (local memory); the state
+// points at the one the running program sees.
+struct __oxray_Path {
+    u32 len;             // transforms on the path
+    u32 sbt_offset;      // SBT offsets of the instances, summed (§7.3.1)
+    u32 instance_id;     // the nearest instance's (~0u without one, §13.7)
+    u32 instance_index;  // the nearest instance's (0 without one)
+    u32 iflags;          // the nearest instance's flags (§5.4)
+    const __oxray_Traversable* gas;  // the GAS entered last
+    float3 org, dir;     // the ray in that GAS's object space
+    unsigned long long levels[__OXRAY_MAX_LEVELS];
+};
+
 struct __oxray_RayState {
     float3 org, dir;
     float tmin, tmax, time;
     u32 flags, mask;
-    // The current hit: candidate in any-hit, closest in closest-hit.
-    float u, v;
-    u32 prim, sbt_gas_index, hit_kind, instance_id, instance_index;
+    // The current hit: candidate in any-hit, closest in closest-hit; the primitive in
+    // intersection programs.
+    u32 prim, sbt_gas_index, hit_kind;
+    u32 slot;  // leaf slot of a triangle hit (vertex data), ~0u for a custom primitive
+    u32 attr[8];
+    const __oxray_Path* path;
     u32 payload[OXRAY_NUM_PAYLOAD_VALUES > 0 ? OXRAY_NUM_PAYLOAD_VALUES : 1];
 };
 
@@ -164,7 +260,9 @@ struct __oxray_ThreadState {
     uint3 launch_index;
     u32 depth;       // traces in progress
     u32 ah_action;   // set by any-hit: 0 accept, 1 ignore, 2 terminate
+    u32 calls;       // callables in progress
     const char* record;  // the running program's SBT record
+    void* report;    // an intersection program's report context (__oxray_Report)
     __oxray_RayState ray;
     int exception_code;
     u32 exception_ndetails;
@@ -185,6 +283,11 @@ __device__ void __oxray_call_closesthit(u32 group);
 __device__ bool __oxray_has_anyhit(u32 group);
 __device__ void __oxray_call_anyhit(u32 group);
 __device__ void __oxray_call_exception(u32 group);
+__device__ bool __oxray_has_intersection(u32 group);
+__device__ void __oxray_call_intersection(u32 group);
+// The address of a callables group's direct or continuation callable (null for none).
+__device__ void* __oxray_dc_of(u32 group);
+__device__ void* __oxray_cc_of(u32 group);
 
 static __forceinline__ __device__ u32 __oxray_group_of(const char* record) {
     return *reinterpret_cast<const u32*>(record);
@@ -253,22 +356,24 @@ static __forceinline__ __device__ unsigned int optixGetSbtGASIndex() {
     return __oxray_state().ray.sbt_gas_index;
 }
 static __forceinline__ __device__ unsigned int optixGetInstanceId() {
-    return __oxray_state().ray.instance_id;
+    return __oxray_state().ray.path->instance_id;
 }
 static __forceinline__ __device__ unsigned int optixGetInstanceIndex() {
-    return __oxray_state().ray.instance_index;
+    return __oxray_state().ray.path->instance_index;
 }
 static __forceinline__ __device__ unsigned int optixGetHitKind() {
     return __oxray_state().ray.hit_kind;
 }
+// Facing is defined for built-in primitives only (hit kinds 128..255); a custom primitive's
+// hit kind (0..127) is neither front nor back.
 static __forceinline__ __device__ bool optixIsFrontFaceHit(unsigned int hitKind) {
-    return (hitKind & 1u) == 0u;
+    return hitKind >= 0x80u && (hitKind & 1u) == 0u;
 }
 static __forceinline__ __device__ bool optixIsFrontFaceHit() {
     return optixIsFrontFaceHit(optixGetHitKind());
 }
 static __forceinline__ __device__ bool optixIsBackFaceHit(unsigned int hitKind) {
-    return (hitKind & 1u) == 1u;
+    return hitKind >= 0x80u && (hitKind & 1u) == 1u;
 }
 static __forceinline__ __device__ bool optixIsBackFaceHit() {
     return optixIsBackFaceHit(optixGetHitKind());
@@ -282,15 +387,209 @@ static __forceinline__ __device__ bool optixIsTriangleBackFaceHit() {
 static __forceinline__ __device__ bool optixIsTriangleHit() {
     return optixIsTriangleFrontFaceHit() || optixIsTriangleBackFaceHit();
 }
+// Triangles are the only built-in primitive oxray has; every other hit kind is a custom one.
+static __forceinline__ __device__ OptixPrimitiveType optixGetPrimitiveType(unsigned int hitKind) {
+    return (hitKind == OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE ||
+            hitKind == OPTIX_HIT_KIND_TRIANGLE_BACK_FACE)
+               ? OPTIX_PRIMITIVE_TYPE_TRIANGLE
+               : OPTIX_PRIMITIVE_TYPE_CUSTOM;
+}
+static __forceinline__ __device__ OptixPrimitiveType optixGetPrimitiveType() {
+    return optixGetPrimitiveType(optixGetHitKind());
+}
 static __forceinline__ __device__ float2 optixGetTriangleBarycentrics() {
     __oxray_ThreadState& s = __oxray_state();
-    return make_float2(s.ray.u, s.ray.v);
+    return make_float2(__uint_as_float(s.ray.attr[0]), __uint_as_float(s.ray.attr[1]));
 }
-static __forceinline__ __device__ unsigned int optixGetAttribute_0() {
-    return __float_as_uint(__oxray_state().ray.u);
+// Attributes: a triangle's are its barycentrics (0, 1); a custom primitive's are the words its
+// intersection program reported (0 past those).
+#define __OXRAY_ATTRIBUTE(N)                                                                \
+    static __forceinline__ __device__ unsigned int optixGetAttribute_##N() {                \
+        return __oxray_state().ray.attr[N];                                                 \
+    }
+__OXRAY_ATTRIBUTE(0) __OXRAY_ATTRIBUTE(1) __OXRAY_ATTRIBUTE(2) __OXRAY_ATTRIBUTE(3)
+__OXRAY_ATTRIBUTE(4) __OXRAY_ATTRIBUTE(5) __OXRAY_ATTRIBUTE(6) __OXRAY_ATTRIBUTE(7)
+#undef __OXRAY_ATTRIBUTE
+
+// Any value will do (§13.6): the payload word it is written to is left to the compiler.
+static __forceinline__ __device__ unsigned int optixUndefinedValue() { return 0u; }
+
+// One payload type for now: every program supports it, so there is nothing to declare.
+static __forceinline__ __device__ void optixSetPayloadTypes(unsigned int typeMask) {
+    (void)typeMask;
 }
-static __forceinline__ __device__ unsigned int optixGetAttribute_1() {
-    return __float_as_uint(__oxray_state().ray.v);
+
+// ---------------------------------------------------------------------------------------------
+// Object space, transforms and the transform list (guide §13.5, §13.9, §13.11)
+// ---------------------------------------------------------------------------------------------
+
+static __forceinline__ __device__ float3 optixGetObjectRayOrigin() {
+    return __oxray_state().ray.path->org;
+}
+static __forceinline__ __device__ float3 optixGetObjectRayDirection() {
+    return __oxray_state().ray.path->dir;
+}
+static __forceinline__ __device__ OptixTraversableHandle optixGetGASTraversableHandle() {
+    return reinterpret_cast<OptixTraversableHandle>(__oxray_state().ray.path->gas);
+}
+static __forceinline__ __device__ unsigned int optixGetTransformListSize() {
+    return __oxray_state().ray.path->len;
+}
+static __forceinline__ __device__ OptixTraversableHandle optixGetTransformListHandle(unsigned int index) {
+    const __oxray_Path* p = __oxray_state().ray.path;
+    return index < p->len ? p->levels[index] : 0ull;
+}
+
+static __forceinline__ __device__ u32 __oxray_kind_of(OptixTraversableHandle handle) {
+    return handle == 0ull ? 0u : *reinterpret_cast<const u32*>(handle);
+}
+static __forceinline__ __device__ OptixTransformType
+optixGetTransformTypeFromHandle(OptixTraversableHandle handle) {
+    u32 k = __oxray_kind_of(handle);
+    return k == __OXRAY_INSTANCE ? OPTIX_TRANSFORM_TYPE_INSTANCE
+           : k == __OXRAY_STATIC ? OPTIX_TRANSFORM_TYPE_STATIC_TRANSFORM
+                                 : OPTIX_TRANSFORM_TYPE_NONE;
+}
+static __forceinline__ __device__ const __oxray_Instance* __oxray_instance_of(
+    OptixTraversableHandle handle) {
+    return __oxray_kind_of(handle) == __OXRAY_INSTANCE
+               ? reinterpret_cast<const __oxray_Instance*>(handle)
+               : nullptr;
+}
+static __forceinline__ __device__ unsigned int optixGetInstanceIdFromHandle(OptixTraversableHandle handle) {
+    const __oxray_Instance* i = __oxray_instance_of(handle);
+    return i ? i->id : 0u;
+}
+static __forceinline__ __device__ OptixTraversableHandle
+optixGetInstanceChildFromHandle(OptixTraversableHandle handle) {
+    const __oxray_Instance* i = __oxray_instance_of(handle);
+    return i ? i->child : 0ull;
+}
+static __forceinline__ __device__ const float4* optixGetInstanceTransformFromHandle(
+    OptixTraversableHandle handle) {
+    const __oxray_Instance* i = __oxray_instance_of(handle);
+    return i ? i->object_to_world : nullptr;
+}
+static __forceinline__ __device__ const float4* optixGetInstanceInverseTransformFromHandle(
+    OptixTraversableHandle handle) {
+    const __oxray_Instance* i = __oxray_instance_of(handle);
+    return i ? i->world_to_object : nullptr;
+}
+static __forceinline__ __device__ const OptixStaticTransform* optixGetStaticTransformFromHandle(
+    OptixTraversableHandle handle) {
+    if (__oxray_kind_of(handle) != __OXRAY_STATIC) return nullptr;
+    return reinterpret_cast<const OptixStaticTransform*>(
+        reinterpret_cast<const __oxray_Traversable*>(handle)->nodes);
+}
+
+// The object-to-world (`inverse` false) or world-to-object matrix of a transform-list entry,
+// 12 floats row-major.
+static __forceinline__ __device__ const float* __oxray_level_matrix(unsigned long long handle,
+                                                                   bool inverse) {
+    if (__oxray_kind_of(handle) == __OXRAY_INSTANCE) {
+        const __oxray_Instance* i = reinterpret_cast<const __oxray_Instance*>(handle);
+        return reinterpret_cast<const float*>(inverse ? i->world_to_object : i->object_to_world);
+    }
+    const OptixStaticTransform* t = optixGetStaticTransformFromHandle(handle);
+    return inverse ? t->invTransform : t->transform;
+}
+
+// c = a * b for 3x4 affine matrices (b applied first), the row-by-column sums left to right.
+static __forceinline__ __device__ void __oxray_mul(const float* a, const float* b, float* c) {
+    float r[12];
+    for (int i = 0; i < 3; ++i) {
+        for (int j = 0; j < 4; ++j) {
+            float x = a[4 * i] * b[j] + a[4 * i + 1] * b[4 + j] + a[4 * i + 2] * b[8 + j];
+            r[4 * i + j] = j == 3 ? x + a[4 * i + 3] : x;
+        }
+    }
+    for (int k = 0; k < 12; ++k) c[k] = r[k];
+}
+
+// The transform list composed: object-to-world = T0 * T1 * ... (index 0 nearest the root),
+// world-to-object = ... * inv(T1) * inv(T0), as the CPU backend composes them; one level is
+// its matrices unchanged, none the identity.
+static __forceinline__ __device__ void __oxray_composed(bool inverse, float m[12]) {
+    const __oxray_Path* p = __oxray_state().ray.path;
+    for (int k = 0; k < 12; ++k) m[k] = (k % 5 == 0) ? 1.0f : 0.0f;
+    for (u32 l = 0; l < p->len; ++l) {
+        const float* t = __oxray_level_matrix(p->levels[l], inverse);
+        if (l == 0) {
+            for (int k = 0; k < 12; ++k) m[k] = t[k];
+        } else if (inverse) {
+            __oxray_mul(t, m, m);
+        } else {
+            __oxray_mul(m, t, m);
+        }
+    }
+}
+static __forceinline__ __device__ void optixGetObjectToWorldTransformMatrix(float m[12]) {
+    __oxray_composed(false, m);
+}
+static __forceinline__ __device__ void optixGetWorldToObjectTransformMatrix(float m[12]) {
+    __oxray_composed(true, m);
+}
+static __forceinline__ __device__ float3 __oxray_point(const float* m, float3 p) {
+    return make_float3(m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],
+                       m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+                       m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]);
+}
+static __forceinline__ __device__ float3 __oxray_vector(const float* m, float3 v) {
+    return make_float3(m[0] * v.x + m[1] * v.y + m[2] * v.z,
+                       m[4] * v.x + m[5] * v.y + m[6] * v.z,
+                       m[8] * v.x + m[9] * v.y + m[10] * v.z);
+}
+// A normal goes by the inverse transpose: `inv` is the inverse of the transform applied.
+static __forceinline__ __device__ float3 __oxray_normal(const float* inv, float3 n) {
+    return make_float3(inv[0] * n.x + inv[4] * n.y + inv[8] * n.z,
+                       inv[1] * n.x + inv[5] * n.y + inv[9] * n.z,
+                       inv[2] * n.x + inv[6] * n.y + inv[10] * n.z);
+}
+static __forceinline__ __device__ float3 optixTransformPointFromWorldToObjectSpace(float3 point) {
+    float m[12];
+    __oxray_composed(true, m);
+    return __oxray_point(m, point);
+}
+static __forceinline__ __device__ float3 optixTransformVectorFromWorldToObjectSpace(float3 vec) {
+    float m[12];
+    __oxray_composed(true, m);
+    return __oxray_vector(m, vec);
+}
+static __forceinline__ __device__ float3 optixTransformNormalFromWorldToObjectSpace(float3 normal) {
+    float m[12];
+    __oxray_composed(false, m);
+    return __oxray_normal(m, normal);
+}
+static __forceinline__ __device__ float3 optixTransformPointFromObjectToWorldSpace(float3 point) {
+    float m[12];
+    __oxray_composed(false, m);
+    return __oxray_point(m, point);
+}
+static __forceinline__ __device__ float3 optixTransformVectorFromObjectToWorldSpace(float3 vec) {
+    float m[12];
+    __oxray_composed(false, m);
+    return __oxray_vector(m, vec);
+}
+static __forceinline__ __device__ float3 optixTransformNormalFromObjectToWorldSpace(float3 normal) {
+    float m[12];
+    __oxray_composed(true, m);
+    return __oxray_normal(m, normal);
+}
+
+// The object-space vertices of the hit triangle, as uploaded (pre-transform applied); zeros for
+// a custom primitive.
+static __forceinline__ __device__ void optixGetTriangleVertexData(float3 data[3]) {
+    __oxray_ThreadState& s = __oxray_state();
+    const __oxray_Traversable* g = s.ray.path->gas;
+    if (g == nullptr || g->kind != __OXRAY_GAS || s.ray.slot == 0xffffffffu) {
+        for (int k = 0; k < 3; ++k) data[k] = make_float3(0.0f, 0.0f, 0.0f);
+        return;
+    }
+    const float4* tris = reinterpret_cast<const float4*>(g->prims) + 3 * (size_t)s.ray.slot;
+    for (int k = 0; k < 3; ++k) {
+        float4 q = tris[k];
+        data[k] = make_float3(q.x, q.y, q.z);
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -344,6 +643,8 @@ static __forceinline__ __device__ void optixThrowException(int exceptionCode, D.
     u32 d[8] = {static_cast<u32>(details)...};
     __oxray_throw(__oxray_user_code(exceptionCode), sizeof...(D), d);
 }
+// oxray keeps no line information: null, as OptiX gives without it (§13.14).
+static __forceinline__ __device__ char* optixGetExceptionLineInfo() { return nullptr; }
 static __forceinline__ __device__ int optixGetExceptionCode() {
     return __oxray_state().exception_code;
 }
@@ -359,21 +660,30 @@ __OXRAY_DETAIL(4) __OXRAY_DETAIL(5) __OXRAY_DETAIL(6) __OXRAY_DETAIL(7)
 // optixTrace: traversal with the rules of guide §13.2 and the §7.3 hit-group index
 // ---------------------------------------------------------------------------------------------
 
-// Where the GAS being traversed sits.
-struct __oxray_Placement {
-    u32 sbt_offset, flags, instance_id, instance_index;
-};
-
-// The closest accepted hit.
+// The closest accepted hit, with where its geometry sits.
 struct __oxray_Best {
     bool found;
-    float t, u, v;
-    u32 prim, sbt_gas_index, hit_kind, instance_id, instance_index;
+    float t;
+    u32 prim, sbt_gas_index, hit_kind, slot;
+    u32 attr[8];
     const char* record;
+    __oxray_Path path;
 };
 
 struct __oxray_TraceArgs {
     u32 flags, sbt_offset, sbt_stride;
+};
+
+// What optixReportIntersection works with while an intersection program runs: the primitive,
+// its record, and the traversal's closest hit and interval.
+struct __oxray_Report {
+    const __oxray_TraceArgs* a;
+    const __oxray_Path* path;
+    __oxray_Best* best;
+    const char* record;
+    u32 prim, sbt_gas_index, gflags;
+    float tmax;  // the interval's end: the closest accepted hit, or the trace's tmax
+    bool stop;   // an any-hit program terminated (or TERMINATE_ON_FIRST_HIT): traversal ends
 };
 
 // Whether any-hit is on for geometry with flags `gflags` under instance flags `iflags`: the
@@ -393,21 +703,104 @@ static __forceinline__ __device__ bool __oxray_anyhit_on(u32 rflags, u32 iflags,
     return on;
 }
 
+// CULL_DISABLED_ANYHIT / CULL_ENFORCED_ANYHIT: the primitive is no candidate at all.
+static __forceinline__ __device__ bool __oxray_culled_by_anyhit(u32 rflags, bool ah_on) {
+    return ((rflags & OPTIX_RAY_FLAG_CULL_DISABLED_ANYHIT) && !ah_on) ||
+           ((rflags & OPTIX_RAY_FLAG_CULL_ENFORCED_ANYHIT) && ah_on);
+}
+
+// The hit-group record of SBT-GAS index `sbt_gas_index` under `path` (§7.3); raises
+// INVALID_HIT_SBT beyond the region.
+static __forceinline__ __device__ const char* __oxray_hit_record(const __oxray_TraceArgs& a,
+                                                                const __oxray_Path& path,
+                                                                u32 sbt_gas_index) {
+    unsigned long long rec = (unsigned long long)path.sbt_offset +
+                             (unsigned long long)sbt_gas_index * (a.sbt_stride & 0xFu) +
+                             (a.sbt_offset & 0xFu);
+    if (rec >= __oxray_launch.hit_count) {
+        u32 d[2] = {rec > 0xffffffffull ? 0xffffffffu : (u32)rec, sbt_gas_index};
+        __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_HIT_SBT, 2, d);
+    }
+    return reinterpret_cast<const char*>(__oxray_launch.hitgroup) + rec * __oxray_launch.hit_stride;
+}
+
+static __forceinline__ __device__ void __oxray_copy_path(__oxray_Path& to, const __oxray_Path& from) {
+    to.len = from.len;
+    to.sbt_offset = from.sbt_offset;
+    to.instance_id = from.instance_id;
+    to.instance_index = from.instance_index;
+    to.iflags = from.iflags;
+    to.gas = from.gas;
+    to.org = from.org;
+    to.dir = from.dir;
+    for (u32 l = 0; l < from.len; ++l) to.levels[l] = from.levels[l];
+}
+
+// A candidate in the interval (culling done): the any-hit program runs if it is on (§13.2),
+// and an accepted candidate becomes the closest hit. 0: ignored; 1: accepted; 2: accepted,
+// and traversal ends (terminate, or TERMINATE_ON_FIRST_HIT).
+static __forceinline__ __device__ u32 __oxray_candidate(const __oxray_TraceArgs& a,
+                                                        const __oxray_Path& path, u32 gflags,
+                                                        const char* record, float t, u32 prim,
+                                                        u32 sbt_gas_index, u32 kind, u32 slot,
+                                                        const u32* attr, __oxray_Best& best) {
+    bool terminate = (a.flags & OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT) != 0u;
+    u32 group = __oxray_group_of(record);
+    if (__oxray_anyhit_on(a.flags, path.iflags, gflags) && __oxray_has_anyhit(group)) {
+        __oxray_ThreadState& st = __oxray_state();
+        const char* saved = st.record;
+        float saved_tmax = st.ray.tmax;
+        st.record = record;
+        st.ray.tmax = t;
+        st.ray.prim = prim;
+        st.ray.sbt_gas_index = sbt_gas_index;
+        st.ray.hit_kind = kind;
+        st.ray.slot = slot;
+        for (int k = 0; k < 8; ++k) st.ray.attr[k] = attr[k];
+        st.ray.path = &path;
+        st.ah_action = 0u;
+        __oxray_call_anyhit(group);
+        st.record = saved;
+        st.ray.tmax = saved_tmax;
+        u32 action = st.ah_action;
+        st.ah_action = 0u;
+        if (action == 1u) return 0u;
+        if (action == 2u) terminate = true;
+    }
+    best.found = true;
+    best.t = t;
+    best.prim = prim;
+    best.sbt_gas_index = sbt_gas_index;
+    best.hit_kind = kind;
+    best.slot = slot;
+    for (int k = 0; k < 8; ++k) best.attr[k] = attr[k];
+    best.record = record;
+    __oxray_copy_path(best.path, path);
+    return terminate ? 2u : 1u;
+}
+
+// The pipeline's primitive types (§6.3), wherever in the graph a GAS sits.
+static __forceinline__ __device__ void __oxray_check_primitive_type(u32 kind) {
+    if (OXRAY_PRIMITIVE_TYPE_FLAGS == 0u) return;
+    u32 needed = kind == __OXRAY_GAS ? (1u << 31) : 1u;
+    if ((OXRAY_PRIMITIVE_TYPE_FLAGS & needed) == 0u) {
+        __oxray_throw(OPTIX_EXCEPTION_CODE_UNSUPPORTED_PRIMITIVE_TYPE, 0, nullptr);
+    }
+}
+
 // Traverses a triangle GAS with the object-space ray `r`, offering every triangle in the
-// interval to the any-hit rules; `tmax` shrinks to accepted hits. True when traversal ends
-// (terminated).
-static __forceinline__ __device__ bool __oxray_walk_gas(const TraceRay& r,
-                                                        const __oxray_Traversable* g,
-                                                        const __oxray_TraceArgs& a,
-                                                        const __oxray_Placement& place,
-                                                        float tmin, float& tmax,
-                                                        __oxray_Best& best) {
+// interval to the any-hit rules; `tmax` shrinks to accepted hits. True when traversal ends.
+static __noinline__ __device__ bool __oxray_walk_triangles(const TraceRay& r,
+                                                           const __oxray_Traversable* g,
+                                                           const __oxray_TraceArgs& a,
+                                                           const __oxray_Path& path, float tmin,
+                                                           float& tmax, __oxray_Best& best) {
     const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
     const float4* tris = reinterpret_cast<const float4*>(g->prims);
     const uint2* slots = reinterpret_cast<const uint2*>(g->info);
     const u32* gflags_of = reinterpret_cast<const u32*>(g->geom_flags);
     bool ended = false;
-    walk_bvh2(r, nodes, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
+    walk_bvh2<OXRAY_BVH2_STACK>(r, nodes, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
         for (u32 s = start; s < start + count; ++s) {
             float4 q0 = tris[3 * s];
             float4 q1 = tris[3 * s + 1];
@@ -420,113 +813,271 @@ static __forceinline__ __device__ bool __oxray_walk_gas(const TraceRay& r,
             }
             uint2 info = slots[s];
             u32 gflags = gflags_of[info.y];
-            bool front = h.front != ((place.flags & __OXRAY_INSTANCE_FLIP_FACING) != 0u);
+            bool front = h.front != ((path.iflags & __OXRAY_INSTANCE_FLIP_FACING) != 0u);
             bool no_culling = (gflags & __OXRAY_GEOMETRY_DISABLE_CULLING) ||
-                              (place.flags & __OXRAY_INSTANCE_DISABLE_CULLING);
+                              (path.iflags & __OXRAY_INSTANCE_DISABLE_CULLING);
             if (!no_culling) {
                 if (((a.flags & OPTIX_RAY_FLAG_CULL_BACK_FACING_TRIANGLES) && !front) ||
                     ((a.flags & OPTIX_RAY_FLAG_CULL_FRONT_FACING_TRIANGLES) && front)) {
                     continue;
                 }
             }
-            unsigned long long rec = (unsigned long long)place.sbt_offset +
-                                     (unsigned long long)info.y * (a.sbt_stride & 0xFu) +
-                                     (a.sbt_offset & 0xFu);
-            if (rec >= __oxray_launch.hit_count) {
-                u32 d[2] = {rec > 0xffffffffull ? 0xffffffffu : (u32)rec, info.y};
-                __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_HIT_SBT, 2, d);
-            }
-            const char* record = reinterpret_cast<const char*>(__oxray_launch.hitgroup) +
-                                 rec * __oxray_launch.hit_stride;
-            bool ah_on = __oxray_anyhit_on(a.flags, place.flags, gflags);
-            if (((a.flags & OPTIX_RAY_FLAG_CULL_DISABLED_ANYHIT) && !ah_on) ||
-                ((a.flags & OPTIX_RAY_FLAG_CULL_ENFORCED_ANYHIT) && ah_on)) {
+            const char* record = __oxray_hit_record(a, path, info.y);
+            if (__oxray_culled_by_anyhit(a.flags, __oxray_anyhit_on(a.flags, path.iflags, gflags))) {
                 continue;
             }
-            bool terminate = (a.flags & OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT) != 0u;
             u32 kind = front ? OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE : OPTIX_HIT_KIND_TRIANGLE_BACK_FACE;
-            u32 group = __oxray_group_of(record);
-            if (ah_on && __oxray_has_anyhit(group)) {
-                __oxray_ThreadState& st = __oxray_state();
-                const char* saved = st.record;
-                st.record = record;
-                st.ray.tmax = h.t;
-                st.ray.u = h.u;
-                st.ray.v = h.v;
-                st.ray.prim = info.x;
-                st.ray.sbt_gas_index = info.y;
-                st.ray.hit_kind = kind;
-                st.ray.instance_id = place.instance_id;
-                st.ray.instance_index = place.instance_index;
-                st.ah_action = 0u;
-                __oxray_call_anyhit(group);
-                st.record = saved;
-                u32 action = st.ah_action;
-                if (action == 1u) continue;
-                if (action == 2u) terminate = true;
-            }
-            best.found = true;
-            best.t = h.t;
-            best.u = h.u;
-            best.v = h.v;
-            best.prim = info.x;
-            best.sbt_gas_index = info.y;
-            best.hit_kind = kind;
-            best.instance_id = place.instance_id;
-            best.instance_index = place.instance_index;
-            best.record = record;
+            u32 attr[8] = {__float_as_uint(h.u), __float_as_uint(h.v), 0u, 0u, 0u, 0u, 0u, 0u};
+            u32 d = __oxray_candidate(a, path, gflags, record, h.t, info.x, info.y, kind, s, attr,
+                                      best);
+            if (d == 0u) continue;
             tmax_ = h.t;
-            if (terminate) {
+            tmax = h.t;
+            if (d == 2u) {
                 ended = true;
                 return true;
             }
         }
         return false;
     });
-    tmax = best.found ? best.t : tmax;
     return ended;
 }
 
-// One level of instances: the top-level binary tree, each instance's mask and box tested, the
-// ray carried into its space, its GAS traversed with its flags and SBT offset.
-static __forceinline__ __device__ void __oxray_walk_ias(const TraceRay& r,
-                                                       const __oxray_Traversable* t,
-                                                       const __oxray_TraceArgs& a, u32 ray_mask,
-                                                       __oxray_Best& best) {
-    const float4* top = reinterpret_cast<const float4*>(t->nodes);
-    const float4* insts = reinterpret_cast<const float4*>(t->prims);
-    const uint4* info = reinterpret_cast<const uint4*>(t->info);
-    const float tmin = r.tmin;
-    walk_bvh2(r, top, tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
+// Traverses a GAS of custom primitives: the intersection program of every primitive whose box
+// the ray enters in the interval runs, and reports through optixReportIntersection.
+static __noinline__ __device__ bool __oxray_walk_custom(const TraceRay& r,
+                                                        const __oxray_Traversable* g,
+                                                        const __oxray_TraceArgs& a,
+                                                        const __oxray_Path& path, float tmin,
+                                                        float& tmax, __oxray_Best& best) {
+    const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
+    const float4* boxes = reinterpret_cast<const float4*>(g->prims);
+    const uint2* slots = reinterpret_cast<const uint2*>(g->info);
+    const u32* gflags_of = reinterpret_cast<const u32*>(g->geom_flags);
+    bool ended = false;
+    walk_bvh2<OXRAY_BVH2_STACK>(r, nodes, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
         for (u32 s = start; s < start + count; ++s) {
-            uint4 i0 = info[2 * s];
-            uint4 i1 = info[2 * s + 1];
-            if ((i0.w & ray_mask & 0xFFu) == 0u) continue;
-            const float4* inst = insts + 6 * (size_t)s;
-            if (!hits_box(r, inst[3], inst[4], tmin, tmax)) continue;
-            const __oxray_Traversable* child = reinterpret_cast<const __oxray_Traversable*>(
-                ((unsigned long long)i1.w << 32) | (unsigned long long)i1.z);
-            if (child == nullptr) continue;
-            float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
-            TraceRay o;
-            o.org = make_float3(m0.x * r.org.x + m0.y * r.org.y + m0.z * r.org.z + m0.w,
-                                m1.x * r.org.x + m1.y * r.org.y + m1.z * r.org.z + m1.w,
-                                m2.x * r.org.x + m2.y * r.org.y + m2.z * r.org.z + m2.w);
-            o.dir = make_float3(m0.x * r.dir.x + m0.y * r.dir.y + m0.z * r.dir.z,
-                                m1.x * r.dir.x + m1.y * r.dir.y + m1.z * r.dir.z,
-                                m2.x * r.dir.x + m2.y * r.dir.y + m2.z * r.dir.z);
-            o.tmin = tmin;
-            o.tmax = tmax;
-            if (!prepare_ray(o)) continue;
-            __oxray_Placement place;
-            place.instance_id = i0.x;
-            place.sbt_offset = i0.y;
-            place.flags = i0.z;
-            place.instance_index = i1.x;
-            if (__oxray_walk_gas(o, child, a, place, tmin, tmax, best)) return true;
+            if (!hits_box(r, boxes[2 * s], boxes[2 * s + 1], tmin, tmax_)) continue;
+            uint2 info = slots[s];
+            u32 gflags = gflags_of[info.y];
+            const char* record = __oxray_hit_record(a, path, info.y);
+            u32 group = __oxray_group_of(record);
+            if (!__oxray_has_intersection(group)) continue;
+            // A primitive culled by its any-hit state never reaches its intersection program.
+            if (__oxray_culled_by_anyhit(a.flags, __oxray_anyhit_on(a.flags, path.iflags, gflags))) {
+                continue;
+            }
+            __oxray_Report rep;
+            rep.a = &a;
+            rep.path = &path;
+            rep.best = &best;
+            rep.record = record;
+            rep.prim = info.x;
+            rep.sbt_gas_index = info.y;
+            rep.gflags = gflags;
+            rep.tmax = tmax_;
+            rep.stop = false;
+            __oxray_ThreadState& st = __oxray_state();
+            const char* saved = st.record;
+            st.record = record;
+            st.report = &rep;
+            st.ray.tmax = tmax_;
+            st.ray.prim = info.x;
+            st.ray.sbt_gas_index = info.y;
+            st.ray.hit_kind = 0u;
+            st.ray.slot = 0xffffffffu;
+            st.ray.path = &path;
+            __oxray_call_intersection(group);
+            st.report = nullptr;
+            st.record = saved;
+            if (rep.tmax < tmax_) {
+                tmax_ = rep.tmax;
+                tmax = rep.tmax;
+            }
+            if (rep.stop) {
+                ended = true;
+                return true;
+            }
         }
         return false;
     });
+    return ended;
+}
+
+// The guide's optixReportIntersection: a hit at hitT of the primitive whose intersection
+// program runs, with hit kind `hitKind` (its low 7 bits) and up to eight attribute words (those
+// past the pipeline's numAttributeValues are dropped). Outside [tmin, current tmax] it is
+// ignored (false); otherwise the any-hit rules run: false if the any-hit program ignored it,
+// true if it was accepted (the interval then ends at hitT). When the any-hit program
+// terminates the ray, OptiX does not return: here the report returns true, traversal ends when
+// the intersection program returns, and later reports do nothing (return right after it).
+template <typename... A>
+static __forceinline__ __device__ bool optixReportIntersection(float hitT, unsigned int hitKind,
+                                                               A... attributes) {
+    static_assert(sizeof...(A) <= 8, "optixReportIntersection takes at most 8 attributes");
+    __oxray_ThreadState& st = __oxray_state();
+    __oxray_Report* rep = static_cast<__oxray_Report*>(st.report);
+    if (rep == nullptr || rep->stop) return false;
+    if (!(hitT >= st.ray.tmin && hitT <= rep->tmax)) return false;
+    u32 given[8] = {static_cast<u32>(attributes)...};
+    u32 attr[8];
+    for (u32 k = 0; k < 8; ++k) {
+        attr[k] = (k < sizeof...(A) && k < OXRAY_NUM_ATTRIBUTE_VALUES) ? given[k] : 0u;
+    }
+    u32 d = __oxray_candidate(*rep->a, *rep->path, rep->gflags, rep->record, hitT, rep->prim,
+                              rep->sbt_gas_index, hitKind & 0x7Fu, 0xffffffffu, attr, *rep->best);
+    // The intersection program sees its own primitive again.
+    st.ray.prim = rep->prim;
+    st.ray.sbt_gas_index = rep->sbt_gas_index;
+    st.ray.path = rep->path;
+    if (d == 0u) return false;
+    rep->tmax = hitT;
+    st.ray.tmax = hitT;
+    if (d == 2u) rep->stop = true;
+    return true;
+}
+
+static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t,
+                                                 const TraceRay& r, const __oxray_TraceArgs& a,
+                                                 __oxray_Path& path, float tmin, float& tmax,
+                                                 __oxray_Best& best);
+
+// The ray in a child's space: `m` is the world-to-object matrix (12 floats, row-major),
+// applied as Transform::transform_point and transform_vector on the CPU, in the same order.
+static __forceinline__ __device__ bool __oxray_child_ray(const float* m, const TraceRay& r,
+                                                        float tmin, float tmax, TraceRay& o) {
+    o.org = __oxray_point(m, r.org);
+    o.dir = __oxray_vector(m, r.dir);
+    o.tmin = tmin;
+    o.tmax = tmax;
+    return prepare_ray(o);
+}
+
+// Enters `child` one level down the path (an instance or a static transform `level`); the path
+// is as it was when this returns.
+static __forceinline__ __device__ bool __oxray_descend(const __oxray_Traversable* child,
+                                                      unsigned long long level,
+                                                      const __oxray_Instance* inst,
+                                                      const TraceRay& o,
+                                                      const __oxray_TraceArgs& a,
+                                                      __oxray_Path& path, float tmin, float& tmax,
+                                                      __oxray_Best& best) {
+    if (path.len >= __OXRAY_MAX_LEVELS) {
+        __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_DEPTH_EXCEEDED, 0, nullptr);
+    }
+    u32 len = path.len, sbt = path.sbt_offset, id = path.instance_id;
+    u32 index = path.instance_index, iflags = path.iflags;
+    path.levels[path.len++] = level;
+    if (inst != nullptr) {
+        // Nested instances add their SBT offsets; the nearest one's id, index and flags count.
+        path.sbt_offset += inst->sbt_offset;
+        path.instance_id = inst->id;
+        path.instance_index = inst->index;
+        path.iflags = inst->flags;
+    }
+    bool stop = __oxray_walk(child, o, a, path, tmin, tmax, best);
+    path.len = len;
+    path.sbt_offset = sbt;
+    path.instance_id = id;
+    path.instance_index = index;
+    path.iflags = iflags;
+    return stop;
+}
+
+// An IAS: the top-level binary tree; each instance's mask and world box tested (§5.4, §13.2),
+// the ray carried into its space with the interval as it has shrunk, its child traversed.
+static __noinline__ __device__ bool __oxray_walk_ias(const TraceRay& r,
+                                                     const __oxray_Traversable* t,
+                                                     const __oxray_TraceArgs& a,
+                                                     __oxray_Path& path, float tmin, float& tmax,
+                                                     __oxray_Best& best) {
+    const float4* top = reinterpret_cast<const float4*>(t->nodes);
+    const float4* table = reinterpret_cast<const float4*>(t->prims);
+    const __oxray_Instance* insts = reinterpret_cast<const __oxray_Instance*>(t->info);
+    const u32 ray_mask = __oxray_state().ray.mask;
+    bool ended = false;
+    walk_bvh2<OXRAY_BVH2_STACK>(r, top, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
+        for (u32 s = start; s < start + count; ++s) {
+            const __oxray_Instance* in = insts + s;
+            if ((in->mask & ray_mask & 0xFFu) == 0u) continue;
+            const float4* q = table + 6 * (size_t)s;
+            if (!hits_box(r, q[3], q[4], tmin, tmax_)) continue;
+            if (in->child == 0ull) continue;
+            TraceRay o;
+            if (!__oxray_child_ray(reinterpret_cast<const float*>(in->world_to_object), r, tmin,
+                                   tmax_, o)) {
+                continue;
+            }
+            float tm = tmax_;
+            bool stop = __oxray_descend(reinterpret_cast<const __oxray_Traversable*>(in->child),
+                                        reinterpret_cast<unsigned long long>(in), in, o, a, path,
+                                        tmin, tm, best);
+            if (tm < tmax_) {
+                tmax_ = tm;
+                tmax = tm;
+            }
+            if (stop) {
+                ended = true;
+                return true;
+            }
+        }
+        return false;
+    });
+    return ended;
+}
+
+// Traverses the graph under `t` with the ray `r` (prepared, in `t`'s space). True when
+// traversal ends.
+static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, const TraceRay& r,
+                                                 const __oxray_TraceArgs& a, __oxray_Path& path,
+                                                 float tmin, float& tmax, __oxray_Best& best) {
+    switch (t->kind) {
+    case __OXRAY_GAS:
+    case __OXRAY_CUSTOM_GAS:
+        __oxray_check_primitive_type(t->kind);
+        path.gas = t;
+        path.org = r.org;
+        path.dir = r.dir;
+        return t->kind == __OXRAY_GAS ? __oxray_walk_triangles(r, t, a, path, tmin, tmax, best)
+                                      : __oxray_walk_custom(r, t, a, path, tmin, tmax, best);
+    case __OXRAY_IAS:
+        return __oxray_walk_ias(r, t, a, path, tmin, tmax, best);
+    case __OXRAY_STATIC: {
+        const OptixStaticTransform* st = reinterpret_cast<const OptixStaticTransform*>(t->nodes);
+        if (st->child == 0ull) return false;
+        TraceRay o;
+        if (!__oxray_child_ray(st->invTransform, r, tmin, tmax, o)) return false;
+        return __oxray_descend(reinterpret_cast<const __oxray_Traversable*>(st->child),
+                               reinterpret_cast<unsigned long long>(t), nullptr, o, a, path,
+                               tmin, tmax, best);
+    }
+    default:
+        __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE, 0, nullptr);
+        return true;
+    }
+}
+
+// The root of a trace against the pipeline's graph flags (§5.9.1) and traversable graph depth,
+// as the CPU backend checks them.
+static __forceinline__ __device__ void __oxray_check_root(const __oxray_Traversable* t) {
+    u32 k = t->kind;
+    if (k != __OXRAY_GAS && k != __OXRAY_CUSTOM_GAS && k != __OXRAY_IAS && k != __OXRAY_STATIC) {
+        __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE, 0, nullptr);
+    }
+    if (OXRAY_GRAPH_FLAGS != 0u) {
+        bool gas = k == __OXRAY_GAS || k == __OXRAY_CUSTOM_GAS;
+        // One level of instances over GASes: an IAS of depth 2 at most.
+        bool allowed = gas ? (OXRAY_GRAPH_FLAGS & 1u) != 0u
+                           : (k == __OXRAY_IAS && (OXRAY_GRAPH_FLAGS & 2u) != 0u && t->depth <= 2u);
+        if (!allowed) {
+            __oxray_throw(gas ? OPTIX_EXCEPTION_CODE_UNSUPPORTED_SINGLE_LEVEL_GAS
+                              : OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE,
+                          0, nullptr);
+        }
+    }
+    if (t->depth > __oxray_launch.max_graph_depth) {
+        __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_DEPTH_EXCEEDED, 0, nullptr);
+    }
 }
 
 static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle, float3 org,
@@ -556,6 +1107,16 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
     st.ray.flags = flags;
     st.ray.mask = mask & 0xFFu;
 
+    // The path of the root: no transforms, the world ray.
+    __oxray_Path root;
+    root.len = 0u;
+    root.sbt_offset = 0u;
+    root.instance_id = 0xffffffffu;
+    root.instance_index = 0u;
+    root.iflags = 0u;
+    root.gas = nullptr;
+    root.org = org;
+    root.dir = dir;
     __oxray_Best best;
     best.found = false;
     __oxray_TraceArgs a;
@@ -569,30 +1130,21 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
     r.tmax = tmax;
     if (handle != 0ull && prepare_ray(r)) {
         const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
-        if (t->kind == __OXRAY_GAS) {
-            __oxray_Placement place;
-            place.sbt_offset = 0u;
-            place.flags = 0u;
-            place.instance_id = 0xffffffffu;
-            place.instance_index = 0u;
-            float tm = tmax;
-            __oxray_walk_gas(r, t, a, place, tmin, tm, best);
-        } else if (t->kind == __OXRAY_IAS) {
-            __oxray_walk_ias(r, t, a, st.ray.mask, best);
-        } else {
-            __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE, 0, nullptr);
-        }
+        __oxray_check_root(t);
+        __oxray_Path path;
+        __oxray_copy_path(path, root);
+        float tm = tmax;
+        __oxray_walk(t, r, a, path, tmin, tm, best);
     }
     if (best.found) {
         if ((flags & OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT) == 0u) {
             st.ray.tmax = best.t;
-            st.ray.u = best.u;
-            st.ray.v = best.v;
             st.ray.prim = best.prim;
             st.ray.sbt_gas_index = best.sbt_gas_index;
             st.ray.hit_kind = best.hit_kind;
-            st.ray.instance_id = best.instance_id;
-            st.ray.instance_index = best.instance_index;
+            st.ray.slot = best.slot;
+            for (int k = 0; k < 8; ++k) st.ray.attr[k] = best.attr[k];
+            st.ray.path = &best.path;
             st.record = best.record;
             __oxray_call_closesthit(__oxray_group_of(best.record));
         }
@@ -602,6 +1154,7 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
             __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_MISS_SBT, 1, d);
         }
         st.ray.tmax = tmax;
+        st.ray.path = &root;
         st.record = reinterpret_cast<const char*>(__oxray_launch.miss) +
                     (unsigned long long)miss_index * __oxray_launch.miss_stride;
         __oxray_call_miss(__oxray_group_of(st.record));
@@ -646,6 +1199,87 @@ static __forceinline__ __device__ void optixTrace(OptixPayloadTypeID type,
     (void)type;
     optixTrace(handle, rayOrigin, rayDirection, tmin, tmax, rayTime, visibilityMask, rayFlags,
                SBToffset, SBTstride, missSBTIndex, payload...);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Callables (guide §15): the record's group gives the program's address, called through a
+// pointer of the caller's signature
+// ---------------------------------------------------------------------------------------------
+
+template <typename T>
+struct __oxray_is_void {
+    static constexpr bool value = false;
+};
+template <>
+struct __oxray_is_void<void> {
+    static constexpr bool value = true;
+};
+
+// The callables record `sbtIndex` (raises CALLABLE_INVALID_SBT beyond the region), after the
+// nesting check (STACK_OVERFLOW), in the CPU backend's order.
+static __forceinline__ __device__ const char* __oxray_callable_record(unsigned int sbtIndex) {
+    if (__oxray_state().calls >= __OXRAY_MAX_CALL_DEPTH) {
+        __oxray_throw(OPTIX_EXCEPTION_CODE_STACK_OVERFLOW, 0, nullptr);
+    }
+    if (sbtIndex >= __oxray_launch.callable_count) {
+        u32 d[1] = {sbtIndex};
+        __oxray_throw(OPTIX_EXCEPTION_CODE_CALLABLE_INVALID_SBT, 1, d);
+    }
+    return reinterpret_cast<const char*>(__oxray_launch.callables) +
+           (unsigned long long)sbtIndex * __oxray_launch.callable_stride;
+}
+
+// Calls `f` (a callable of the record `record`) as ReturnT(ArgTypes...): the callable's
+// optixGetSbtDataPointer is its record's data; the caller's record comes back after.
+template <typename ReturnT, typename... ArgTypes>
+static __forceinline__ __device__ ReturnT __oxray_call_callable(void* f, const char* record,
+                                                               ArgTypes... args) {
+    typedef ReturnT (*Fn)(ArgTypes...);
+    Fn fn = reinterpret_cast<Fn>(f);
+    __oxray_ThreadState& st = __oxray_state();
+    const char* saved = st.record;
+    st.record = record;
+    st.calls += 1u;
+    if constexpr (__oxray_is_void<ReturnT>::value) {
+        fn(args...);
+        __oxray_ThreadState& s2 = __oxray_state();
+        s2.calls -= 1u;
+        s2.record = saved;
+    } else {
+        ReturnT r = fn(args...);
+        __oxray_ThreadState& s2 = __oxray_state();
+        s2.calls -= 1u;
+        s2.record = saved;
+        return r;
+    }
+}
+
+// The guide's optixDirectCall: the direct callable of callables record `sbtIndex`; a record
+// whose group has none raises CALLABLE_NO_DC_SBT_RECORD.
+template <typename ReturnT, typename... ArgTypes>
+static __forceinline__ __device__ ReturnT optixDirectCall(unsigned int sbtIndex, ArgTypes... args) {
+    const char* record = __oxray_callable_record(sbtIndex);
+    void* f = __oxray_dc_of(__oxray_group_of(record));
+    if (f == nullptr) {
+        u32 d[1] = {sbtIndex};
+        __oxray_throw(OPTIX_EXCEPTION_CODE_CALLABLE_NO_DC_SBT_RECORD, 1, d);
+    }
+    return __oxray_call_callable<ReturnT, ArgTypes...>(f, record, args...);
+}
+
+// The guide's optixContinuationCall. On this backend a continuation callable is called like a
+// direct one (no scheduler); it may trace. A record whose group has none raises
+// CALLABLE_NO_CC_SBT_RECORD.
+template <typename ReturnT, typename... ArgTypes>
+static __forceinline__ __device__ ReturnT optixContinuationCall(unsigned int sbtIndex,
+                                                                ArgTypes... args) {
+    const char* record = __oxray_callable_record(sbtIndex);
+    void* f = __oxray_cc_of(__oxray_group_of(record));
+    if (f == nullptr) {
+        u32 d[1] = {sbtIndex};
+        __oxray_throw(OPTIX_EXCEPTION_CODE_CALLABLE_NO_CC_SBT_RECORD, 1, d);
+    }
+    return __oxray_call_callable<ReturnT, ArgTypes...>(f, record, args...);
 }
 
 #endif  // OXRAY_DEVICE_H

@@ -387,12 +387,14 @@ __device__ __forceinline__ Best trace_bvh4(const TraceRay& r, const float4* __re
 //
 // Walked nearest child first; the slot range of every leaf the ray enters goes to
 // `leaf(start, count, tmax)`, which may shrink `tmax` and returns true to end the walk. Both the
-// triangles of a GAS and the instances of an IAS are leaves of this one walk.
-template <typename Leaf>
+// triangles of a GAS and the instances of an IAS are leaves of this one walk. The stack holds at
+// most one entry per level of the tree; pipelines, whose walks nest, size it to the deepest
+// binary tree the builder makes (`STACK`), the query kernels keep the BVH4 bound.
+template <int STACK = OXRAY_STACK_SIZE, typename Leaf>
 __device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __restrict__ nodes,
                                           float tmin, float tmax, Leaf&& leaf) {
     float box_tmax = tmax * TMAX_SLACK;
-    Entry stack[OXRAY_STACK_SIZE];
+    Entry stack[STACK];
     int sp = 0;
     Entry cur;
     cur.child = 0;
