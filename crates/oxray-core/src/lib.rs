@@ -24,6 +24,7 @@
 
 pub mod aabb;
 pub mod backend;
+pub mod cache;
 pub mod error;
 pub mod exception;
 pub mod handle;

@@ -154,7 +154,7 @@ struct MisuseParams {
 fn misbehaving_programs_end_their_launch_index_with_an_exception() {
     let m = CxxModule::from_source(MISUSE);
     let rg = CxxProgramGroup::raygen(&m, "__raygen__main").unwrap();
-    let p = pipeline_of(&[rg.clone()], Some("params")).unwrap();
+    let p = pipeline_of(std::slice::from_ref(&rg), Some("params")).unwrap();
     let sbt = ShaderBindingTable {
         raygen: SbtRegion::from_headers(&[rg.pack_header()]),
         ..Default::default()
@@ -205,14 +205,14 @@ fn misbehaving_programs_end_their_launch_index_with_an_exception() {
 fn pipelines_of_one_unit_share_the_cached_library_and_launch_one_at_a_time() {
     let m = CxxModule::from_source(MISUSE);
     let rg = CxxProgramGroup::raygen(&m, "__raygen__main").unwrap();
-    let a = pipeline_of(&[rg.clone()], Some("params")).unwrap();
+    let a = pipeline_of(std::slice::from_ref(&rg), Some("params")).unwrap();
     let dir = oxray_cpu::cxx::cache_dir();
     let count = || std::fs::read_dir(&dir).unwrap().count();
     let before = count();
     // Another module object of the same source: the same unit, found in the cache.
     let m2 = CxxModule::from_source(MISUSE);
     let rg2 = CxxProgramGroup::raygen(&m2, "__raygen__main").unwrap();
-    let b = pipeline_of(&[rg2.clone()], Some("params")).unwrap();
+    let b = pipeline_of(std::slice::from_ref(&rg2), Some("params")).unwrap();
     assert_eq!(count(), before, "no new library");
     let sbt_a = ShaderBindingTable {
         raygen: SbtRegion::from_headers(&[rg.pack_header()]),

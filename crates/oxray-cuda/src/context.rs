@@ -259,6 +259,22 @@ fn compile(cc: (i32, i32)) -> Result<cudarc::nvrtc::Ptx, CudaError> {
 
 /// Compiles CUDA C++ to PTX with NVRTC, turning a missing library or a compile error into a
 /// [`CudaError`] (with NVRTC's log).
+/// NVRTC's version, `major.minor`, if the library can be loaded.
+pub(crate) fn nvrtc_version() -> Option<String> {
+    // SAFETY: only tries to open the library by its usual names (dlopen).
+    if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+        return None;
+    }
+    let (r, major, minor) = catch_unwind(|| {
+        let (mut major, mut minor) = (0, 0);
+        // SAFETY: the library is present; the function writes two integers.
+        let r = unsafe { cudarc::nvrtc::sys::nvrtcVersion(&mut major, &mut minor) };
+        (r, major, minor)
+    })
+    .ok()?;
+    (r == cudarc::nvrtc::sys::nvrtcResult::NVRTC_SUCCESS).then(|| format!("{major}.{minor}"))
+}
+
 pub(crate) fn nvrtc_compile(
     source: &str,
     options: Vec<String>,

@@ -7,7 +7,7 @@
 //! writes that number into word 0 of each SBT record header as it uploads the SBT, and the
 //! device calls a group's programs through a `switch` on it.
 
-use crate::context::{compile_options, guarded, nvrtc_compile, CudaContext};
+use crate::context::{compile_options, guarded, nvrtc_compile, nvrtc_version, CudaContext};
 use crate::error::{driver, CudaError};
 use bytemuck::{Pod, Zeroable};
 use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig};
@@ -515,12 +515,53 @@ pub fn compile_pipeline_ptx(
     groups: &[CudaProgramGroup],
 ) -> Result<String, CudaError> {
     check_pipeline(compile, link, groups)?;
-    let ptx = nvrtc_compile(
+    let source = pipeline_source(groups);
+    let options = pipeline_compile_options(cc, compile, link);
+    let entry = cache_entry(&options, &source);
+    if let Some(ptx) = entry
+        .as_ref()
+        .and_then(|p| std::fs::read_to_string(p).ok())
+        .filter(|ptx| ptx.contains(".entry __oxray_pipeline"))
+    {
+        return Ok(ptx);
+    }
+    let ptx = nvrtc_compile(&source, options, "oxray_pipeline.cu")?.to_src();
+    if let Some(path) = &entry {
+        // A cache that cannot be written costs only the next compile's time.
+        let _ = oxray_core::cache::write_entry(path, ptx.as_bytes());
+    }
+    Ok(ptx)
+}
+
+/// Where [`compile_pipeline_ptx`] keeps the PTX of a pipeline (`None` without NVRTC): the disk
+/// cache (the counterpart of OptiX's, guide §4.2), keyed by everything that determines the PTX
+/// (NVRTC's version, the options, which name the architecture, and the whole unit).
+pub fn pipeline_cache_entry(
+    cc: (i32, i32),
+    compile: &PipelineCompileOptions,
+    link: &PipelineLinkOptions,
+    groups: &[CudaProgramGroup],
+) -> Option<std::path::PathBuf> {
+    cache_entry(
+        &pipeline_compile_options(cc, compile, link),
         &pipeline_source(groups),
-        pipeline_compile_options(cc, compile, link),
-        "oxray_pipeline.cu",
-    )?;
-    Ok(ptx.to_src())
+    )
+}
+
+fn cache_entry(options: &[String], source: &str) -> Option<std::path::PathBuf> {
+    let version = nvrtc_version()?;
+    let key = oxray_core::cache::content_key(&[
+        "oxray pipeline ptx",
+        &version,
+        &options.join(" "),
+        source,
+    ]);
+    Some(oxray_core::cache::entry_path(
+        &oxray_core::cache::cache_dir(),
+        "ptx",
+        key,
+        "ptx",
+    ))
 }
 
 /// The launch information of the device header (`__oxray_LaunchInfo`), byte for byte.

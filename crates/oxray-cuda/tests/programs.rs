@@ -8,9 +8,9 @@
 use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use oxray_core::{
-    AccelBackend, BuildOptions, ExceptionCode, IndexBuffer, Instance, InstanceFlags,
-    PipelineCompileOptions, PipelineLinkOptions, RayFlags, SbtRegion, ShaderBindingTable,
-    TraversableHandle, TriangleInput, VertexBuffer,
+    AccelBackend, BuildOptions, ExceptionCode, IndexBuffer, Instance, PipelineCompileOptions,
+    PipelineLinkOptions, SbtRegion, ShaderBindingTable, TraversableHandle, TriangleInput,
+    VertexBuffer,
 };
 use oxray_cuda::{
     compile_pipeline_ptx, Cuda, CudaBuffer, CudaContext, CudaError, CudaHitGroupDesc, CudaModule,
@@ -210,6 +210,41 @@ extern "C" __global__ void __exception__all() {
     (void)x;
 }
 "#;
+
+#[test]
+fn compiled_pipelines_are_kept_in_the_disk_cache() {
+    if !nvrtc() {
+        return;
+    }
+    let g = triangle_groups();
+    let groups = [g.raygen, g.miss, g.hit];
+    let compile = compile_options(3);
+    let link = PipelineLinkOptions::default();
+    let entry = oxray_cuda::pipeline_cache_entry((9, 0), &compile, &link, &groups).unwrap();
+    let first = compile_pipeline_ptx((9, 0), &compile, &link, &groups).unwrap();
+    assert_eq!(
+        std::fs::read_to_string(&entry).unwrap(),
+        first,
+        "written to the cache"
+    );
+    // Served from the cache: a marked copy comes back as it is.
+    let marked = format!("{first}\n// from the cache\n");
+    std::fs::write(&entry, &marked).unwrap();
+    assert_eq!(
+        compile_pipeline_ptx((9, 0), &compile, &link, &groups).unwrap(),
+        marked
+    );
+    // A damaged entry is compiled again and replaced.
+    std::fs::write(&entry, "garbage").unwrap();
+    assert_eq!(
+        compile_pipeline_ptx((9, 0), &compile, &link, &groups).unwrap(),
+        first
+    );
+    assert_eq!(std::fs::read_to_string(&entry).unwrap(), first);
+    // Other options, another entry.
+    let other = oxray_cuda::pipeline_cache_entry((8, 0), &compile, &link, &groups).unwrap();
+    assert_ne!(other, entry);
+}
 
 #[test]
 fn every_device_function_compiles_with_nvrtc() {
@@ -430,101 +465,8 @@ fn the_triangle_renders_as_on_the_cpu_pixel_for_pixel() {
     );
 }
 
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct SuiteParams {
-    out: u64,
-    handle: u64,
-    width: u32,
-    height: u32,
-    ray_flags: u32,
-    ray_mask: u32,
-    z: f32,
-    pad: u32,
-}
-
-/// A suite pipeline over the named groups; the SBT's raygen, miss and hit records name the
-/// given groups.
-struct Suite {
-    ctx: CudaContext,
-    pipeline: CudaPipeline,
-    groups: Vec<(&'static str, CudaProgramGroup)>,
-}
-
-impl Suite {
-    fn new(ctx: &CudaContext, depth: u32) -> Suite {
-        let groups = suite_groups();
-        let list: Vec<_> = groups.iter().map(|(_, g)| g.clone()).collect();
-        let pipeline = CudaPipeline::new(
-            ctx,
-            &compile_options(8),
-            &PipelineLinkOptions {
-                max_trace_depth: depth,
-            },
-            Some("params"),
-            &list,
-        )
-        .unwrap();
-        Suite {
-            ctx: ctx.clone(),
-            pipeline,
-            groups,
-        }
-    }
-
-    fn group(&self, name: &str) -> &CudaProgramGroup {
-        &self.groups.iter().find(|(n, _)| *n == name).unwrap().1
-    }
-
-    fn sbt(
-        &self,
-        raygen: &str,
-        miss: &str,
-        hits: &[&str],
-        exception: Option<&str>,
-    ) -> ShaderBindingTable {
-        ShaderBindingTable {
-            raygen: SbtRegion::from_headers(&[self.group(raygen).pack_header()]),
-            miss: SbtRegion::from_headers(&[self.group(miss).pack_header()]),
-            hitgroup: SbtRegion::from_headers(
-                &hits
-                    .iter()
-                    .map(|h| self.group(h).pack_header())
-                    .collect::<Vec<_>>(),
-            ),
-            exception: exception.map(|e| SbtRegion::from_headers(&[self.group(e).pack_header()])),
-            ..Default::default()
-        }
-    }
-
-    /// Runs a launch; returns the 8 words of every launch index and the report.
-    fn run(
-        &self,
-        handle: u64,
-        sbt: &ShaderBindingTable,
-        dims: [u32; 3],
-        flags: RayFlags,
-        mask: u32,
-    ) -> (Vec<[u32; 8]>, oxray_core::LaunchReport) {
-        let n = (dims[0] * dims[1] * dims[2]) as usize;
-        let out = CudaBuffer::<[u32; 8]>::zeroed(&self.ctx, n).unwrap();
-        let params = SuiteParams {
-            out: out.device_ptr(),
-            handle,
-            width: dims[0],
-            height: dims[1],
-            ray_flags: flags.bits(),
-            ray_mask: mask,
-            z: 1.0,
-            pad: 0,
-        };
-        let report = self
-            .pipeline
-            .launch_with(&params, sbt, dims[0], dims[1], dims[2])
-            .unwrap();
-        (out.download().unwrap(), report)
-    }
-}
+// The scenarios of suite.cu run on both backends in the facade's conformance suite
+// (oxray/tests/conformance.rs), which compares the GPU with the CPU bit for bit.
 
 /// Two quads at z = 0 (primitives 0, 1: x < 0; 2, 3: x > 0) in two build inputs, so that the
 /// SBT-GAS index is 0 on the left and 1 on the right.
@@ -544,250 +486,6 @@ fn quads(cuda: &Cuda) -> oxray_cuda::CudaGas {
     cuda.build_gas(&BuildOptions::default(), &[a.into(), b.into()])
         .unwrap()
 }
-
-#[test]
-fn hits_misses_and_the_hit_group_formula() {
-    let Some((ctx, _lock)) = gpu() else { return };
-    let cuda = Cuda::from_context(ctx.clone());
-    let gas = quads(&cuda);
-    let s = Suite::new(&ctx, 1);
-    let dims = [16, 8, 1];
-    // One record per SBT-GAS index: both run the ids closest-hit.
-    let sbt = s.sbt("rg_grid", "ms_ids", &["hg_ids", "hg_ids"], None);
-    let (out, report) = s.run(
-        gas.optix_handle().unwrap(),
-        &sbt,
-        dims,
-        RayFlags::empty(),
-        0xFF,
-    );
-    assert_eq!(report.exceptions, 0, "{report:?}");
-    for (i, o) in out.iter().enumerate() {
-        let x = i as u32 % dims[0];
-        assert_eq!(o[0], 1, "launch index {i} hits");
-        assert_eq!(o[1] >= 2, x >= dims[0] / 2, "primitive {} at x {x}", o[1]);
-        assert_eq!(
-            (o[2], o[3]),
-            (u32::MAX, 0),
-            "GAS root: instance id ~0, index 0"
-        );
-        let sbt_gas_index = o[4] >> 16;
-        assert_eq!(sbt_gas_index, (x >= dims[0] / 2) as u32);
-        // Rays go down -z onto counter-clockwise quads seen from +z: front faces.
-        assert_eq!(o[4] & 0xFFFF, 0xFE | 0x100 | 0x200);
-        assert_eq!(f32::from_bits(o[5]), 1.0, "t");
-    }
-    // Too few hit records: SBT-GAS index 1 raises INVALID_HIT_SBT.
-    let sbt = s.sbt("rg_grid", "ms_ids", &["hg_ids"], None);
-    let (_, report) = s.run(
-        gas.optix_handle().unwrap(),
-        &sbt,
-        dims,
-        RayFlags::empty(),
-        0xFF,
-    );
-    assert_eq!(report.exceptions, (dims[0] * dims[1] / 2) as u64);
-    assert_eq!(
-        report.first_exceptions[0].1.code,
-        ExceptionCode::INVALID_HIT_SBT
-    );
-    // Culling front faces: everything misses; the miss program sees the trace's flags.
-    let sbt = s.sbt("rg_grid", "ms_ids", &["hg_ids", "hg_ids"], None);
-    let flags = RayFlags::CULL_FRONT_FACING_TRIANGLES;
-    let (out, _) = s.run(gas.optix_handle().unwrap(), &sbt, dims, flags, 0x0F);
-    for o in &out {
-        assert_eq!(o[0], 0);
-        assert_eq!(f32::from_bits(o[5]), 1e16);
-        assert_eq!((o[6], o[7]), (flags.bits(), 0x0F));
-    }
-    // A null handle misses.
-    let (out, _) = s.run(0, &sbt, dims, RayFlags::empty(), 0xFF);
-    assert!(out.iter().all(|o| o[0] == 0));
-}
-
-#[test]
-fn payload_is_copied_in_and_out() {
-    let Some((ctx, _lock)) = gpu() else { return };
-    let cuda = Cuda::from_context(ctx.clone());
-    let gas = quads(&cuda);
-    let s = Suite::new(&ctx, 1);
-    let sbt = s.sbt("rg_grid", "ms_payload", &["hg_payload", "hg_payload"], None);
-    let (out, report) = s.run(
-        gas.optix_handle().unwrap(),
-        &sbt,
-        [8, 4, 1],
-        RayFlags::empty(),
-        0xFF,
-    );
-    assert_eq!(report.exceptions, 0);
-    for o in &out {
-        assert_eq!(*o, [0xAAAA0011, 1, 2, 31, 4, 5, 6, 7 ^ 6]);
-    }
-    let (out, _) = s.run(0, &sbt, [8, 4, 1], RayFlags::empty(), 0xFF);
-    for o in &out {
-        assert_eq!(*o, [0xAAAA0022, 1, 102, 3, 4, 5, 6, 7]);
-    }
-}
-
-#[test]
-fn any_hit_ignores_and_terminates_and_ray_flags_override_it() {
-    let Some((ctx, _lock)) = gpu() else { return };
-    let cuda = Cuda::from_context(ctx.clone());
-    // Four stacked quads along z: primitive k at z = -k (two triangles each: 2k, 2k + 1).
-    let mut v = Vec::new();
-    let mut t = Vec::new();
-    for k in 0..4u32 {
-        let z = -(k as f32);
-        let b = v.len() as u32;
-        v.extend([
-            [-1.0f32, -1.0, z],
-            [1.0, -1.0, z],
-            [1.0, 1.0, z],
-            [-1.0, 1.0, z],
-        ]);
-        t.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
-    }
-    let input = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u32x3(&t));
-    let gas = cuda
-        .build_gas(&BuildOptions::default(), &[input.into()])
-        .unwrap();
-    let handle = gas.optix_handle().unwrap();
-    let s = Suite::new(&ctx, 1);
-    let dims = [16, 16, 1];
-    // No any-hit: the nearest layer (t = 1) is hit.
-    let sbt = s.sbt("rg_grid", "ms_ids", &["hg_ids"], None);
-    let (out, _) = s.run(handle, &sbt, dims, RayFlags::empty(), 0xFF);
-    assert!(out.iter().all(|o| f32::from_bits(o[5]) == 1.0 && o[1] < 2));
-    // Odd primitives ignored: the layers are the same quad, so a ray through an odd triangle
-    // crosses only odd ones and misses; the others hit the even triangle of layer 0.
-    let sbt = s.sbt("rg_grid", "ms_ids", &["hg_skip_odd"], None);
-    let (out, _) = s.run(handle, &sbt, dims, RayFlags::empty(), 0xFF);
-    assert!(
-        out.iter()
-            .all(|o| o[0] == 0 || (o[1] == 0 && f32::from_bits(o[5]) == 1.0)),
-        "{out:?}"
-    );
-    assert!(out.iter().any(|o| o[0] == 0) && out.iter().any(|o| o[0] == 1));
-    // DISABLE_ANYHIT makes it opaque again.
-    let (out, _) = s.run(handle, &sbt, dims, RayFlags::DISABLE_ANYHIT, 0xFF);
-    assert!(out.iter().all(|o| f32::from_bits(o[5]) == 1.0));
-    // CULL_ENFORCED_ANYHIT removes every primitive whose any-hit is on.
-    let (out, _) = s.run(handle, &sbt, dims, RayFlags::CULL_ENFORCED_ANYHIT, 0xFF);
-    assert!(out.iter().all(|o| o[0] == 0));
-    // An any-hit that terminates: the candidate becomes the closest hit, whichever layer it is.
-    let sbt = s.sbt("rg_grid", "ms_ids", &["hg_terminate"], None);
-    let (out, _) = s.run(handle, &sbt, dims, RayFlags::empty(), 0xFF);
-    assert!(out.iter().all(|o| o[0] == 1));
-    // DISABLE_CLOSESTHIT: a hit runs nothing; the payload comes back as sent.
-    let sbt = s.sbt("rg_grid", "ms_ids", &["hg_ids"], None);
-    let (out, _) = s.run(handle, &sbt, dims, RayFlags::DISABLE_CLOSESTHIT, 0xFF);
-    assert!(out.iter().all(|o| o[0] == 0xAAAA0000 && o[1] == 1));
-}
-
-#[test]
-fn one_level_of_instances() {
-    let Some((ctx, _lock)) = gpu() else { return };
-    let cuda = Cuda::from_context(ctx.clone());
-    let gas = quads(&cuda);
-    let h = TraversableHandle::from(gas);
-    use oxray_core::Transform;
-    // Instance 0 (id 40): the quads shifted to z = -1; instance 1 (id 41): at z = -3, flipped
-    // facing, SBT offset 2; instance 2: mask 0x02 at z = -0.5.
-    let instances = [
-        Instance::new(h.clone())
-            .transform(Transform::from_translation(Vec3::new(0.0, 0.0, -1.0)))
-            .instance_id(40),
-        Instance::new(h.clone())
-            .transform(Transform::from_translation(Vec3::new(0.0, 0.0, -3.0)))
-            .instance_id(41)
-            .sbt_offset(2)
-            .flags(InstanceFlags::FLIP_TRIANGLE_FACING),
-        Instance::new(h)
-            .transform(Transform::from_translation(Vec3::new(0.0, 0.0, -0.5)))
-            .instance_id(42)
-            .visibility_mask(0x02),
-    ];
-    let ias = cuda
-        .build_ias(&BuildOptions::default(), &[(&instances[..]).into()])
-        .unwrap();
-    let handle = ias.optix_handle().unwrap();
-    let s = Suite::new(&ctx, 1);
-    let dims = [16, 8, 1];
-    let sbt = s.sbt("rg_grid", "ms_ids", &["hg_ids"; 4], None);
-    // Mask 0x01: instance 2 is invisible; instance 0 is nearest (t = 2).
-    let (out, report) = s.run(handle, &sbt, dims, RayFlags::empty(), 0x01);
-    assert_eq!(report.exceptions, 0, "{report:?}");
-    for o in &out {
-        assert_eq!((o[0], o[2], o[3]), (1, 40, 0));
-        assert_eq!(f32::from_bits(o[5]), 2.0);
-    }
-    // Mask 0xFF: instance 2 (t = 1.5).
-    let (out, _) = s.run(handle, &sbt, dims, RayFlags::empty(), 0xFF);
-    assert!(out
-        .iter()
-        .all(|o| (o[2], o[3], f32::from_bits(o[5])) == (42, 2, 1.5)));
-    // Culling front faces: instances 0 and 2 are culled; instance 1 is flipped, so its
-    // faces are back faces, hit through hit-group records 2 + SBT-GAS index.
-    let (out, report) = s.run(
-        handle,
-        &sbt,
-        dims,
-        RayFlags::CULL_FRONT_FACING_TRIANGLES,
-        0xFF,
-    );
-    assert_eq!(report.exceptions, 0);
-    for o in &out {
-        assert_eq!((o[0], o[2], o[3]), (1, 41, 1));
-        assert_eq!(o[4] & 0xFFFF, 0xFF | 0x100, "a back-face triangle hit");
-        assert_eq!(f32::from_bits(o[5]), 4.0);
-    }
-}
-
-#[test]
-fn launch_indices_in_one_two_and_three_dimensions() {
-    let Some((ctx, _lock)) = gpu() else { return };
-    let s = Suite::new(&ctx, 1);
-    let sbt = s.sbt("rg_index", "ms_none", &[], None);
-    for dims in [[37, 1, 1], [13, 7, 1], [5, 4, 3]] {
-        let (out, report) = s.run(0, &sbt, dims, RayFlags::empty(), 0xFF);
-        assert_eq!(report.exceptions, 0);
-        for z in 0..dims[2] {
-            for y in 0..dims[1] {
-                for x in 0..dims[0] {
-                    let o = out[((z * dims[1] + y) * dims[0] + x) as usize];
-                    assert_eq!(o, [x, y, z, dims[0], dims[1], dims[2], 0x600D, 0]);
-                }
-            }
-        }
-    }
-}
-
-#[test]
-fn user_exceptions_end_the_launch_index_and_run_the_exception_program() {
-    let Some((ctx, _lock)) = gpu() else { return };
-    let s = Suite::new(&ctx, 1);
-    let dims = [8, 3, 1];
-    let sbt = s.sbt("rg_throw", "ms_none", &[], Some("ex"));
-    let (out, report) = s.run(0, &sbt, dims, RayFlags::empty(), 0xFF);
-    assert_eq!(report.exceptions, 3);
-    assert_eq!(report.first_exceptions.len(), 3);
-    assert_eq!(report.first_exceptions[0].0, [3, 0, 0]);
-    assert_eq!(report.first_exceptions[1].1.code, ExceptionCode(7));
-    for y in 0..3 {
-        for x in 0..8u32 {
-            let o = out[(y * 8 + x) as usize];
-            if x == 3 {
-                assert_eq!(o[..5], [1, 0, 7, 3, y]);
-            } else {
-                assert_eq!(o[..2], [1, 2]);
-            }
-        }
-    }
-}
-
-// ---------------------------------------------------------------------------------------------
-// Custom primitives, callables, the transform list (programs/suite2.cu)
-// ---------------------------------------------------------------------------------------------
 
 const SUITE2: &str = include_str!("programs/suite2.cu");
 

@@ -266,11 +266,7 @@ impl ProgramGroup {
             }
             Side::Cpu(e) => GroupRepr::Cpu(CxxProgramGroup::callables(e[0], e[1])?),
             #[cfg(feature = "cuda")]
-            Side::Cuda(_) => {
-                return Err(ProgramError::Unsupported(
-                    "callables are not yet compiled for the CUDA device".into(),
-                ))
-            }
+            Side::Cuda(e) => GroupRepr::Cuda(CudaProgramGroup::callables(e[0], e[1])?),
         }))
     }
 
@@ -311,6 +307,20 @@ impl Pipeline {
             #[cfg(feature = "cuda")]
             PipelineRepr::Cuda(p) => p.launch(params, sbt, width, height, depth)?,
         })
+    }
+
+    /// Sets the deepest traversable graph a trace may enter (the last argument of
+    /// `optixPipelineSetStackSize`; 1 to 31). A trace into a deeper graph raises
+    /// `TRAVERSAL_DEPTH_EXCEEDED`. The defaults differ: 31 on the CPU, where depth costs
+    /// nothing, and 2 on CUDA (one level of instances over geometry, OptiX's default), where the
+    /// stack reserved for every resident thread grows with it.
+    pub fn set_max_traversable_graph_depth(&mut self, depth: u32) -> Result<(), ProgramError> {
+        match &mut self.0 {
+            PipelineRepr::Cpu(p) => p.set_max_traversable_graph_depth(depth)?,
+            #[cfg(feature = "cuda")]
+            PipelineRepr::Cuda(p) => p.set_max_traversable_graph_depth(depth)?,
+        }
+        Ok(())
     }
 
     /// [`launch`](Self::launch) with typed launch parameters.

@@ -132,32 +132,7 @@ fn compiler_identity(cxx: &str) -> Result<String, CxxError> {
     Ok(id)
 }
 
-/// FNV-1a over the parts, 64 bits, with a separator between parts: stable across builds and
-/// platforms, which is all a cache key needs.
-fn key(parts: &[&str]) -> u64 {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for p in parts {
-        for b in p.bytes().chain([0xff]) {
-            h ^= b as u64;
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    }
-    h
-}
-
-/// Where compiled units are kept: `$OXRAY_CACHE_DIR`, else `$XDG_CACHE_HOME/oxray`, else
-/// `~/.cache/oxray`, else the temporary directory.
-pub fn cache_dir() -> PathBuf {
-    let env = |k: &str| {
-        std::env::var_os(k)
-            .filter(|v| !v.is_empty())
-            .map(PathBuf::from)
-    };
-    env("OXRAY_CACHE_DIR")
-        .or_else(|| env("XDG_CACHE_HOME").map(|d| d.join("oxray")))
-        .or_else(|| env("HOME").map(|d| d.join(".cache").join("oxray")))
-        .unwrap_or_else(|| std::env::temp_dir().join("oxray-cache"))
-}
+pub use oxray_core::cache::cache_dir;
 
 /// Compiles `source` into a shared library in the cache (or finds it there) and returns its
 /// path. A library is written under a temporary name and renamed into place, so a reader never
@@ -165,9 +140,9 @@ pub fn cache_dir() -> PathBuf {
 pub(crate) fn compile(source: &str) -> Result<PathBuf, CxxError> {
     let cxx = compiler();
     let id = compiler_identity(&cxx)?;
-    let k = key(&[&cxx, &id, &FLAGS.join(" "), source]);
+    let k = oxray_core::cache::content_key(&[&cxx, &id, &FLAGS.join(" "), source]);
     let dir = cache_dir();
-    let lib = dir.join(format!("cpu-{k:016x}.so"));
+    let lib = oxray_core::cache::entry_path(&dir, "cpu", k, "so");
     if lib.is_file() {
         return Ok(lib);
     }
@@ -363,13 +338,6 @@ pub(crate) fn load(modules: &[CxxModule], params: Option<&str>) -> Result<Arc<Lo
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn the_cache_key_depends_on_every_part() {
-        assert_ne!(key(&["a", "bc"]), key(&["ab", "c"]));
-        assert_ne!(key(&["x"]), key(&["y"]));
-        assert_eq!(key(&["same"]), key(&["same"]));
-    }
 
     #[test]
     fn gpu_only_intrinsics_are_named_from_the_log() {
