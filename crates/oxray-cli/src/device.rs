@@ -360,6 +360,24 @@ pub fn bench_mesh(
         eprintln!("warning: no pipeline column: {e}");
         None
     });
+    if let Some(Ok((k, block))) = pipeline
+        .as_ref()
+        .and_then(|p| p.pipeline.as_cuda())
+        .map(|p| p.kernel_info())
+    {
+        eprintln!(
+            "pipeline kernel: {} registers, {} bytes of local memory per thread, {block} threads per block",
+            k.registers, k.local_bytes
+        );
+        if let Some(Ok(kernels)) = device.as_cuda().map(|c| c.context().kernel_info()) {
+            for q in kernels.iter().filter(|q| q.name.ends_with("bvh2")) {
+                eprintln!(
+                    "query kernel {}: {} registers, {} bytes of local memory per thread",
+                    q.name, q.registers, q.local_bytes
+                );
+            }
+        }
+    }
     let mut rows = Vec::with_capacity(6);
     for (set, rays) in [
         ("coherent", &rays.coherent),

@@ -52,10 +52,10 @@ pub use gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, HitRecord};
 pub use ias::CudaIas;
 pub use layout::{NodeLayout, SlotInfo};
 pub use program::{
-    compile_pipeline_ptx, launch_size, pack_sbt, pipeline_cache_entry, pipeline_compile_options,
-    pipeline_source, CudaBuffer, CudaHitGroupDesc, CudaModule, CudaPipeline, CudaProgramGroup,
-    CudaProgramGroupKind, PackedRegion, PackedSbt, DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH,
-    DEVICE_HEADER, PIPELINE_BLOCK,
+    compile_pipeline_ptx, launch_size, pack_sbt, pipeline_block, pipeline_cache_entry,
+    pipeline_compile_options, pipeline_source, CudaBuffer, CudaHitGroupDesc, CudaModule,
+    CudaPipeline, CudaProgramGroup, CudaProgramGroupKind, PackedRegion, PackedSbt,
+    DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH, DEVICE_HEADER, PIPELINE_BLOCK,
 };
 pub use transform::CudaStaticTransform;
 

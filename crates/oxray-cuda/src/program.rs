@@ -24,8 +24,21 @@ use std::sync::{Arc, Mutex};
 /// kernel. Modules may include it as `<optix.h>` or `<optix_device.h>`.
 pub const DEVICE_HEADER: &str = include_str!("device/oxray_device.h");
 
-/// Threads per block of a pipeline's kernel (the size of its per-thread state array).
-pub const PIPELINE_BLOCK: u32 = 64;
+/// Threads per block of a pipeline's kernel, unless `OXRAY_PIPELINE_BLOCK` sets another
+/// multiple of 32 up to 1024 (a tuning knob).
+pub const PIPELINE_BLOCK: u32 = 128;
+
+/// Resident threads per SM that a pipeline's kernel is compiled for (its launch bounds).
+const PIPELINE_THREADS_PER_SM: u32 = 1280;
+
+/// The block size pipelines are compiled and launched with.
+pub fn pipeline_block() -> u32 {
+    std::env::var("OXRAY_PIPELINE_BLOCK")
+        .ok()
+        .and_then(|v| v.trim().parse::<u32>().ok())
+        .filter(|b| *b >= 32 && *b <= 1024 && b % 32 == 0)
+        .unwrap_or(PIPELINE_BLOCK)
+}
 
 /// Exception records a launch keeps for its report (the count is exact).
 const EXCEPTION_RECORDS: usize = 64;
@@ -312,6 +325,13 @@ fn strip_optix_includes(source: &str) -> String {
 /// the kernel `__oxray_pipeline`. Compiled with [`pipeline_compile_options`].
 pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     let mut s = String::new();
+    // Without any-hit programs, a trace into a triangle GAS that culls nothing takes the query
+    // kernels' own loop (the device header's fast path).
+    let any_hit = groups.iter().any(|g| g.inner.any_hit.is_some());
+    s.push_str(&format!(
+        "#define OXRAY_PIPELINE_HAS_ANYHIT {}\n",
+        any_hit as u32
+    ));
     s.push_str(crate::KERNEL_SOURCE);
     s.push_str("\n#line 1 \"oxray_device.h\"\n");
     s.push_str(DEVICE_HEADER);
@@ -409,9 +429,15 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     }));
     s.push_str(
         r#"
-extern "C" __global__ void __launch_bounds__(OXRAY_PIPELINE_BLOCK) __oxray_pipeline() {
+#ifndef OXRAY_PIPELINE_MIN_BLOCKS
+#define OXRAY_PIPELINE_MIN_BLOCKS 1
+#endif
+extern "C" __global__ void __launch_bounds__(OXRAY_PIPELINE_BLOCK, OXRAY_PIPELINE_MIN_BLOCKS)
+__oxray_pipeline() {
     u32 i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= __oxray_launch.total) return;
+    __oxray_ThreadState state;
+    __oxray_states[threadIdx.x] = &state;
     __oxray_ThreadState& s = __oxray_state();
     uint3 d = __oxray_launch.dims;
     s.launch_index = make_uint3(i % d.x, (i / d.x) % d.y, i / (d.x * d.y));
@@ -444,7 +470,7 @@ pub fn pipeline_compile_options(
         compile.num_payload_values
     ));
     o.push(format!("-DOXRAY_MAX_TRACE_DEPTH={}", link.max_trace_depth));
-    o.push(format!("-DOXRAY_PIPELINE_BLOCK={PIPELINE_BLOCK}"));
+    o.push(format!("-DOXRAY_PIPELINE_BLOCK={}", pipeline_block()));
     o.push(format!("-DOXRAY_EXCEPTION_RECORDS={EXCEPTION_RECORDS}"));
     o.push(format!(
         "-DOXRAY_NUM_ATTRIBUTE_VALUES={}",
@@ -460,6 +486,18 @@ pub fn pipeline_compile_options(
     ));
     // A binary walk pushes at most one entry per level of its tree.
     o.push(format!("-DOXRAY_BVH2_STACK={}", BVH2_STACK));
+    // Tuning: `OXRAY_NVRTC_OPTIONS` adds NVRTC options (e.g. `-DOXRAY_PIPELINE_MIN_BLOCKS=8`).
+    let extra = std::env::var("OXRAY_NVRTC_OPTIONS").unwrap_or_default();
+    if !extra.contains("OXRAY_PIPELINE_MIN_BLOCKS") {
+        // 1280 resident threads per SM: at most 48 registers each on a 64K-register SM. The
+        // traversal is latency-bound, so occupancy pays more than registers (measured on the
+        // H200: docs/BENCHMARKS.md); the general paths spill a little instead.
+        o.push(format!(
+            "-DOXRAY_PIPELINE_MIN_BLOCKS={}",
+            (PIPELINE_THREADS_PER_SM / pipeline_block()).max(1)
+        ));
+    }
+    o.extend(extra.split_whitespace().map(str::to_string));
     o
 }
 
@@ -726,6 +764,7 @@ pub struct CudaPipeline {
     params_name: Option<String>,
     max_trace_depth: u32,
     max_graph_depth: u32,
+    block: u32,
     scratch: Mutex<Option<(CudaSlice<u8>, CudaSlice<u32>)>>,
 }
 
@@ -774,10 +813,26 @@ impl CudaPipeline {
             params_name: params_variable.map(str::to_string),
             max_trace_depth: link.max_trace_depth,
             max_graph_depth: DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH,
+            block: pipeline_block(),
             scratch: Mutex::new(None),
         };
         pipeline.reserve_stack()?;
         Ok(pipeline)
+    }
+
+    /// The compiled kernel's registers and local memory per thread, and its block size.
+    pub fn kernel_info(&self) -> Result<(crate::KernelInfo, u32), CudaError> {
+        let f = &self.function;
+        Ok((
+            crate::KernelInfo {
+                name: "__oxray_pipeline",
+                registers: f.num_regs().map_err(driver("reading kernel attributes"))?,
+                local_bytes: f
+                    .local_size_bytes()
+                    .map_err(driver("reading kernel attributes"))?,
+            },
+            self.block,
+        ))
     }
 
     /// Traces that nest (a closest-hit, miss or continuation callable that traces) and walks of
@@ -918,8 +973,8 @@ impl CudaPipeline {
             .memcpy_htod(bytemuck::bytes_of(&info), &mut var)
             .map_err(driver("copying the launch information"))?;
         let cfg = LaunchConfig {
-            grid_dim: (total.div_ceil(PIPELINE_BLOCK), 1, 1),
-            block_dim: (PIPELINE_BLOCK, 1, 1),
+            grid_dim: (total.div_ceil(self.block), 1, 1),
+            block_dim: (self.block, 1, 1),
             shared_mem_bytes: 0,
         };
         let mut launch = stream.launch_builder(&self.function);

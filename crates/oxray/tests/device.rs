@@ -147,12 +147,18 @@ fn every_device_traces_one_level_of_instances_alike() {
             (ias.device_kind(), ias.num_instances()),
             (device.kind(), 40)
         );
-        // Two levels: every graph on the CPU; one level of instances over GASes on CUDA.
+        // Two levels build on every device (CUDA pipelines trace any graph); the batched
+        // queries of the CUDA backend trace one level of instances and refuse deeper graphs.
         let top = [Instance::new(ias.handle())];
-        let two = device.build_ias(&BuildOptions::default(), &[(&top[..]).into()]);
+        let two = device
+            .build_ias(&BuildOptions::default(), &[(&top[..]).into()])
+            .unwrap();
+        assert_eq!(two.graph_depth(), 3);
+        let mut deep = vec![None; 4];
+        let r = device.intersect_closest(&two.handle(), &rays[..4], &mut deep);
         match device.kind() {
-            BackendKind::Cpu => assert_eq!(two.unwrap().graph_depth(), 3),
-            _ => assert!(matches!(two, Err(BuildError::Unsupported(_)))),
+            BackendKind::Cpu => assert!(r.is_ok()),
+            _ => assert!(matches!(r, Err(QueryError::Unsupported(_))), "{r:?}"),
         }
         let mut hits = vec![None; rays.len()];
         device
@@ -422,15 +428,20 @@ fn the_facade_gas_reports_what_the_backend_built() {
     assert!(from_arc.same_as(&gas.handle()));
     assert!(from_wrapper.downcast_ref::<oxray::cpu::Gas>().is_some());
     assert_eq!(from_wrapper.kind(), Some(TraversableKind::Gas));
-    // Custom primitives on every device that can build them; the CUDA backend refuses them
-    // with a typed error.
+    // Custom primitives build on every device (their intersection programs run in pipelines);
+    // the CUDA backend's batched queries, which run no programs, refuse them with a typed error.
     let boxes = [Aabb::new(Vec3::ZERO, Vec3::ONE)];
     let input = oxray::CustomPrimitiveInput::new(oxray::AabbBuffer::new(&boxes));
     for device in devices() {
-        let r = device.build_gas(&BuildOptions::default(), &[input.into()]);
-        match device.kind() {
-            BackendKind::Cpu => assert_eq!(r.unwrap().num_primitives(), 1),
-            _ => assert!(matches!(r, Err(BuildError::Unsupported(_)))),
+        let gas = device
+            .build_gas(&BuildOptions::default(), &[input.into()])
+            .unwrap();
+        assert_eq!(gas.num_primitives(), 1);
+        if device.kind() != BackendKind::Cpu {
+            let mut hits = vec![None; 1];
+            let rays = [Ray::new(Vec3::new(0.5, 0.5, 2.0), -Vec3::Z)];
+            let r = device.intersect_closest(&gas.handle(), &rays, &mut hits);
+            assert!(matches!(r, Err(QueryError::Unsupported(_))), "{r:?}");
         }
     }
 }

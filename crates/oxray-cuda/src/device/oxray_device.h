@@ -14,11 +14,18 @@
 // that the kernel and `optixTrace` call.
 //
 // Per-thread state. Device functions take no arguments, so they read and write a per-thread
-// record of the current launch index, ray, hit, payload and SBT record. It lives in a
-// `__shared__` array of the kernel's block, one element per thread (`__oxray_states`), which
-// only the functions below touch; every name the runtime defines starts with `__oxray_`
-// (reserved identifiers), so no user name can clash with it. Traces nest: `optixTrace` saves
-// the caller's state in its own frame and restores it on return.
+// record of the current launch index, ray, hit, payload and SBT record. It is a local variable
+// of the kernel (per-thread local memory); a `__shared__` array of the block holds a pointer to
+// it for each thread (`__oxray_states`); keeping the records themselves out of shared memory
+// leaves the L1 cache, which shares its storage, to the traversal. Only the functions below
+// touch them; every name the runtime defines starts with `__oxray_` (reserved identifiers), so
+// no user name can clash with them. Traces nest: `optixTrace` saves the caller's state in its
+// own frame and restores it on return.
+//
+// Fast path. In a pipeline without any-hit programs, a trace of a triangle GAS with no culling
+// flags accepts every candidate, so `optixTrace` runs the query kernels' own loop at its call
+// site and passes the closest hit to `__oxray_trace`, which runs the closest-hit or miss
+// program (see `__oxray_fast_root`); everything else takes the general traversal.
 //
 // Programs that never return in OptiX (`optixIgnoreIntersection`, `optixTerminateRay`) record
 // their effect and return; the traversal honours it when the any-hit program returns (as the
@@ -269,10 +276,14 @@ struct __oxray_ThreadState {
     u32 exception_details[8];
 };
 
-__shared__ __oxray_ThreadState __oxray_states[OXRAY_PIPELINE_BLOCK];
+// The state itself is a local variable of the kernel (per-thread local memory, cached in L1);
+// the block's shared memory holds only a pointer to it per thread. Keeping the state out of
+// shared memory keeps the L1 cache, which shares its storage with shared memory, for the
+// traversal's node fetches and stack.
+__shared__ __oxray_ThreadState* __oxray_states[OXRAY_PIPELINE_BLOCK];
 
 static __forceinline__ __device__ __oxray_ThreadState& __oxray_state() {
-    return __oxray_states[threadIdx.x];
+    return *__oxray_states[threadIdx.x];
 }
 
 // Generated with the pipeline: calls the program of the given kind of the group whose index the
@@ -1080,12 +1091,88 @@ static __forceinline__ __device__ void __oxray_check_root(const __oxray_Traversa
     }
 }
 
+#ifndef OXRAY_PIPELINE_HAS_ANYHIT
+#define OXRAY_PIPELINE_HAS_ANYHIT 1
+#endif
+#ifndef OXRAY_NO_FAST_PATH
+#define OXRAY_NO_FAST_PATH 0
+#endif
+
+// The ray flags that make candidates depend on more than their distance.
+#define __OXRAY_CULL_FLAGS                                                                  \
+    (OPTIX_RAY_FLAG_CULL_BACK_FACING_TRIANGLES | OPTIX_RAY_FLAG_CULL_FRONT_FACING_TRIANGLES |  \
+     OPTIX_RAY_FLAG_CULL_DISABLED_ANYHIT | OPTIX_RAY_FLAG_CULL_ENFORCED_ANYHIT)
+
+// A triangle GAS at the root, in a pipeline without any-hit programs, traced with no culling:
+// every candidate in the interval is accepted, so the closest one is what the query kernels
+// find, with their own loop (no per-candidate records, flags or paths). The hit's record is
+// looked up once, for the closest hit. With TERMINATE_ON_FIRST_HIT the first candidate ends it.
+// Whether a trace can take the fast path: a triangle GAS at the root, in a pipeline without
+// any-hit programs, traced with no culling flags. Every candidate in the interval is then
+// accepted, so the closest one is what the query kernels find, with their own loop (no
+// per-candidate records, flags or paths). `optixTrace` runs that loop at its call site, where
+// few other values are live, and hands the result to `__oxray_trace`, which looks the hit's
+// record up once and runs the closest-hit or miss program.
+static __forceinline__ __device__ bool __oxray_fast_root(OptixTraversableHandle handle,
+                                                        unsigned int flags) {
+    if (OXRAY_NO_FAST_PATH || OXRAY_PIPELINE_HAS_ANYHIT || handle == 0ull ||
+        (flags & __OXRAY_CULL_FLAGS) != 0u) {
+        return false;
+    }
+    if (OXRAY_GRAPH_FLAGS != 0u && (OXRAY_GRAPH_FLAGS & 1u) == 0u) return false;
+    if (OXRAY_PRIMITIVE_TYPE_FLAGS != 0u && (OXRAY_PRIMITIVE_TYPE_FLAGS & (1u << 31)) == 0u) {
+        return false;
+    }
+    return reinterpret_cast<const __oxray_Traversable*>(handle)->kind == __OXRAY_GAS;
+}
+
+// The query kernels' closest-hit loop over a triangle GAS (first hit with FIRST).
+template <bool FIRST>
+static __forceinline__ __device__ Best __oxray_fast_walk(const TraceRay& r,
+                                                        const __oxray_Traversable* g) {
+    const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
+    const float4* tris = reinterpret_cast<const float4*>(g->prims);
+    Best best;
+    best.t = F32_INF;
+    best.u = 0.0f;
+    best.v = 0.0f;
+    best.slot = MISS_SLOT;
+    walk_bvh2<OXRAY_BVH2_STACK>(r, nodes, r.tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
+        float box_tmax;  // the walk keeps its own
+        return leaf<FIRST>(r, tris, start, count, r.tmin, tmax, box_tmax, best);
+    });
+    return best;
+}
+
+// A fast walk's result as the closest hit of a trace.
+static __forceinline__ __device__ void __oxray_fast_resolve(const Best& fast,
+                                                           const __oxray_Traversable* g,
+                                                           const __oxray_TraceArgs& a,
+                                                           const __oxray_Path& root,
+                                                           __oxray_Best& out) {
+    if (fast.slot == MISS_SLOT) return;
+    const u32 s = fast.slot & ~BACK_FACE_BIT;
+    const uint2 info = reinterpret_cast<const uint2*>(g->info)[s];
+    out.found = true;
+    out.t = fast.t;
+    out.prim = info.x;
+    out.sbt_gas_index = info.y;
+    out.hit_kind = (fast.slot & BACK_FACE_BIT) ? OPTIX_HIT_KIND_TRIANGLE_BACK_FACE
+                                                : OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE;
+    out.slot = s;
+    out.attr[0] = __float_as_uint(fast.u);
+    out.attr[1] = __float_as_uint(fast.v);
+    for (int k = 2; k < 8; ++k) out.attr[k] = 0u;
+    out.record = __oxray_hit_record(a, root, info.y);
+    // The path is the root's, with the GAS set by the caller: no copy.
+}
+
 static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle, float3 org,
                                                   float3 dir, float tmin, float tmax, float time,
                                                   OptixVisibilityMask mask, unsigned int flags,
                                                   unsigned int sbt_offset, unsigned int sbt_stride,
                                                   unsigned int miss_index, unsigned int n,
-                                                  unsigned int* payload) {
+                                                  unsigned int* payload, const Best* fast) {
     __oxray_ThreadState& st = __oxray_state();
     if (n > OXRAY_NUM_PAYLOAD_VALUES) {
         u32 d[2] = {n, (u32)OXRAY_NUM_PAYLOAD_VALUES};
@@ -1131,10 +1218,15 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
     if (handle != 0ull && prepare_ray(r)) {
         const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
         __oxray_check_root(t);
-        __oxray_Path path;
-        __oxray_copy_path(path, root);
-        float tm = tmax;
-        __oxray_walk(t, r, a, path, tmin, tm, best);
+        if (fast != nullptr) {
+            __oxray_fast_resolve(*fast, t, a, root, best);
+            if (best.found) root.gas = t;
+        } else {
+            __oxray_Path path;
+            __oxray_copy_path(path, root);
+            float tm = tmax;
+            __oxray_walk(t, r, a, path, tmin, tm, best);
+        }
     }
     if (best.found) {
         if ((flags & OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT) == 0u) {
@@ -1144,7 +1236,7 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
             st.ray.hit_kind = best.hit_kind;
             st.ray.slot = best.slot;
             for (int k = 0; k < 8; ++k) st.ray.attr[k] = best.attr[k];
-            st.ray.path = &best.path;
+            st.ray.path = fast != nullptr ? &root : &best.path;
             st.record = best.record;
             __oxray_call_closesthit(__oxray_group_of(best.record));
         }
@@ -1178,8 +1270,23 @@ static __forceinline__ __device__ void optixTrace(OptixTraversableHandle handle,
     static_assert(sizeof...(Payload) <= 32, "optixTrace takes at most 32 payload values");
     constexpr unsigned int n = sizeof...(Payload);
     unsigned int p[n > 0 ? n : 1] = {static_cast<unsigned int>(payload)...};
+    Best fast;
+    bool use_fast = false;
+    if (__oxray_fast_root(handle, rayFlags)) {
+        TraceRay r;
+        r.org = rayOrigin;
+        r.dir = rayDirection;
+        r.tmin = tmin;
+        r.tmax = tmax;
+        if (prepare_ray(r)) {
+            const __oxray_Traversable* g = reinterpret_cast<const __oxray_Traversable*>(handle);
+            fast = (rayFlags & OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT) ? __oxray_fast_walk<true>(r, g)
+                                                                      : __oxray_fast_walk<false>(r, g);
+            use_fast = true;
+        }
+    }
     __oxray_trace(handle, rayOrigin, rayDirection, tmin, tmax, rayTime, visibilityMask, rayFlags,
-                  SBToffset, SBTstride, missSBTIndex, n, p);
+                  SBToffset, SBTstride, missSBTIndex, n, p, use_fast ? &fast : nullptr);
     unsigned int i = 0;
     ((payload = p[i++]), ...);
     (void)i;
