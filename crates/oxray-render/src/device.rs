@@ -343,6 +343,21 @@ pub fn render_on(
     scene: &SceneDesc,
     env: &Environment,
     opts: &RenderOptions,
+    progress: impl FnMut(u32),
+) -> Result<Image, RenderError> {
+    render_with_source(device, SOURCE, scene, env, opts, progress)
+}
+
+/// [`render_on`] with other programs in place of [`SOURCE`] (same entry points and layouts):
+/// for the tests that check that the comparison of the two renderers catches a changed
+/// algorithm.
+#[doc(hidden)]
+pub fn render_with_source(
+    device: &Device,
+    source: &str,
+    scene: &SceneDesc,
+    env: &Environment,
+    opts: &RenderOptions,
     mut progress: impl FnMut(u32),
 ) -> Result<Image, RenderError> {
     let prep = prepare(scene, env, opts)?;
@@ -354,7 +369,7 @@ pub fn render_on(
     };
 
     // The programs and their groups.
-    let module = device.create_module(ModuleSource::CudaCpp(SOURCE))?;
+    let module = device.create_module(ModuleSource::CudaCpp(source))?;
     let hit = |ch: &'static str, ah: bool| {
         ProgramGroup::hit_group(HitGroupDesc {
             closest_hit: Some((&module, ch)),
