@@ -14,8 +14,9 @@
 //! 0.2 % of the region's mean radiance for floating-point differences between backends.
 //!
 //! The test of the test: the C++ programs with another seed salt (independent noise, same
-//! algorithm) must pass; with the MIS weight of emission found by BSDF sampling dropped, or
-//! the Lambert lobe's 1/pi doubled, they must fail.
+//! algorithm) must pass on both scenes; with the MIS weight of emission or of the environment
+//! found by BSDF sampling dropped, the Lambert lobe's 1/pi doubled, or Schlick's Fresnel
+//! without its angular term, they must fail.
 //!
 //! On CUDA (device 0, when present; `OXRAY_REQUIRE_GPU=1` makes its absence a failure) the same
 //! comparisons run. Without a GPU the programs are still compiled to PTX by NVRTC where
@@ -415,43 +416,63 @@ fn materials_textures_alpha_and_the_sky_agree_with_the_rust_programs() {
 #[test]
 fn the_comparison_tells_noise_from_a_changed_algorithm() {
     let device = Device::cpu();
-    let scene = cornell_box();
     let o = opts(64, 32, 6);
-    let reference = render(&scene, &dark(), &o, |_| {}).unwrap();
-    let variant = |what: &str, from: &str, to: &str| {
+    let cornell = (cornell_box(), dark());
+    let sky = (feature_scene(), Environment::sky(1.0));
+    let reference =
+        |(scene, env): &(SceneDesc, Environment)| render(scene, env, &o, |_| {}).unwrap();
+    let references = [reference(&cornell), reference(&sky)];
+    let variant = |what: &str, from: &str, to: &str, which: usize| {
         assert!(
             SOURCE.contains(from),
             "the programs no longer contain {from:?}"
         );
         let source = SOURCE.replace(from, to);
-        let img = render_with_source(&device, &source, &scene, &dark(), &o, |_| {})
+        let (scene, env) = [&cornell, &sky][which];
+        let img = render_with_source(&device, &source, scene, env, &o, |_| {})
             .unwrap_or_else(|e| panic!("{what}: {e}"));
-        compare(&reference, &img)
+        compare(&references[which], &img)
     };
-    let reseeded = variant(
-        "another seed",
+    let seed = (
         "rng_new(pixel, params.sample, 0x5eedu)",
         "rng_new(pixel, params.sample, 0x5eeeu)",
     );
-    assert!(
-        reseeded.is_ok(),
-        "independent noise must pass: {}",
-        reseeded.unwrap_err()
-    );
-    println!("another seed passes: {}", reseeded.unwrap());
-    for (what, from, to) in [
+    for which in [0, 1] {
+        let reseeded = variant("another seed", seed.0, seed.1, which);
+        assert!(
+            reseeded.is_ok(),
+            "independent noise must pass: {}",
+            reseeded.unwrap_err()
+        );
+        println!("another seed passes: {}", reseeded.unwrap());
+    }
+    for (what, from, to, which) in [
         (
             "no MIS weight on emission found by BSDF sampling",
             "w = power_heuristic(s.pdf, light_pdf);",
             "w = 1.0f;",
+            0,
         ),
         (
             "twice the Lambert lobe",
             "(PT_FRAC_1_PI * cos_i)",
             "(2.0f * PT_FRAC_1_PI * cos_i)",
+            0,
+        ),
+        (
+            "no MIS weight on the environment found by BSDF sampling",
+            "power_heuristic(s.pdf, params.p_env * env_pdf(d))",
+            "1.0f",
+            1,
+        ),
+        (
+            "Schlick's Fresnel without its (1 - cos)^5",
+            "pow5(1.0f - clampf(c, 0.0f, 1.0f))",
+            "0.0f",
+            1,
         ),
     ] {
-        match variant(what, from, to) {
+        match variant(what, from, to, which) {
             Ok(s) => panic!("{what}: the comparison did not notice ({s})"),
             Err(e) => println!("{what}: caught ({e})"),
         }
