@@ -1,7 +1,7 @@
 //! `oxray render --backend`: the Rust programs (`cpu`, the default), the CUDA C++ programs on
 //! the CPU (`cpu-cxx`) and on a GPU (`cuda`, an error without one).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 fn oxray(args: &[&str]) -> Output {
@@ -18,7 +18,7 @@ fn tmp(name: &str) -> PathBuf {
 }
 
 /// Mean linear RGB of an EXR image.
-fn mean_rgb(path: &PathBuf) -> [f64; 3] {
+fn mean_rgb(path: &Path) -> [f64; 3] {
     use exr::prelude::*;
     let img = read_first_rgba_layer_from_file(
         path,
@@ -39,7 +39,7 @@ fn mean_rgb(path: &PathBuf) -> [f64; 3] {
     m
 }
 
-fn render(backend: &str, out: &PathBuf) -> Output {
+fn render(backend: &str, out: &Path) -> Output {
     oxray(&[
         "render",
         "--size",

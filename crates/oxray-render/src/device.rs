@@ -279,8 +279,9 @@ impl Uploads<'_> {
         if data.is_empty() {
             return Ok(0);
         }
-        // Values of whole 4-byte words are stored as f32 words; the rest (texels) as bytes.
-        if std::mem::size_of::<T>() % 4 == 0 && std::mem::align_of::<T>() >= 4 {
+        // Values of 4-byte aligned types (whole words) are stored as f32 words; the rest
+        // (texels) as bytes.
+        if std::mem::align_of::<T>() >= 4 {
             let words: &[f32] = bytemuck::cast_slice(data);
             let b = self.device.buffer_from_slice(words)?;
             let p = b.device_ptr();
