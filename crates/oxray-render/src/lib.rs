@@ -13,6 +13,14 @@
 //! The result is linear radiance; [`Image::save`] writes it as OpenEXR (linear) or PNG
 //! (tone-mapped sRGB).
 //!
+//! The same path tracer exists as CUDA C++ programs ([`device::render_on`], `device_programs.cu`)
+//! that run on any [`oxray::Device`]: the CPU (compiled by the host's C++ compiler) or a CUDA
+//! GPU (compiled by NVRTC). Both versions share the scene preparation (camera, emissive
+//! triangles, environment tables) and follow the same random sequence; one test
+//! (`tests/device_programs.rs`) compares their images statistically. A change to the algorithm
+//! is made in both: `programs.rs` (with `bsdf.rs`, `lights.rs`, `texture.rs`) and
+//! `device_programs.cu`.
+//!
 //! ```
 //! use glam::Vec3;
 //! use oxray_render::lights::Environment;
