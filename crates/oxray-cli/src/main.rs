@@ -10,6 +10,8 @@ use oxray_scene::mesh::Mesh;
 use oxray_scene::SceneDesc;
 use std::path::{Path, PathBuf};
 
+mod render_device;
+
 #[derive(Parser)]
 #[command(
     name = "oxray",
@@ -66,6 +68,12 @@ enum Command {
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
+        /// cpu: the path tracer's Rust programs on the CPU. cpu-cxx: its CUDA C++ programs on
+        /// the CPU (compiled by the host's C++ compiler). cuda, cuda:N: the CUDA C++ programs on
+        /// that GPU (asking for one this machine lacks is an error). auto: a GPU where there is
+        /// one, else cpu.
+        #[arg(long, default_value = "cpu", value_parser = render_device::parse)]
+        backend: String,
     },
     /// Cast a file of rays (little-endian `f32[8]`: ox, oy, oz, tmin, dx, dy, dz, tmax) at a
     /// mesh; write hits (f32 t, u32 primitive, f32 u, f32 v; t = +inf and primitive 0xFFFFFFFF
@@ -207,6 +215,7 @@ fn run(cli: Cli) -> Result<()> {
             exposure,
             ground,
             quiet,
+            backend,
         } => {
             let (w, h) = size
                 .split_once('x')
@@ -249,6 +258,7 @@ fn run(cli: Cli) -> Result<()> {
                     output.display()
                 );
             }
+            let renderer = render_device::open(&backend)?;
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
                 .build()
@@ -307,7 +317,7 @@ fn run(cli: Cli) -> Result<()> {
                 .progress_chars("=> "),
             );
             let image = pool.install(|| {
-                oxray_render::render(&desc, &environment, &opts, |done| {
+                renderer.render(&desc, &environment, &opts, |done| {
                     bar.set_position(done as u64)
                 })
             })?;
@@ -322,8 +332,11 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
             image.save(&output).map_err(anyhow::Error::msg)?;
+            let on = renderer
+                .describe()
+                .map_or(String::new(), |d| format!(" with {d}"));
             say(format_args!(
-                "wrote {} ({w}x{h}, {spp} spp, {} triangles, {} instances): loaded in {loaded:.1} s, total {:.1} s",
+                "wrote {} ({w}x{h}, {spp} spp, {} triangles, {} instances{on}): loaded in {loaded:.1} s, total {:.1} s",
                 output.display(),
                 desc.triangle_count(),
                 desc.instances.len(),

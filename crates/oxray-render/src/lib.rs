@@ -13,6 +13,14 @@
 //! The result is linear radiance; [`Image::save`] writes it as OpenEXR (linear) or PNG
 //! (tone-mapped sRGB).
 //!
+//! The same path tracer exists as CUDA C++ programs ([`device::render_on`], `device_programs.cu`)
+//! that run on any [`oxray::Device`]: the CPU (compiled by the host's C++ compiler) or a CUDA
+//! GPU (compiled by NVRTC). Both versions share the scene preparation (camera, emissive
+//! triangles, environment tables) and follow the same random sequence; one test
+//! (`tests/device_programs.rs`) compares their images statistically. A change to the algorithm
+//! is made in both: `programs.rs` (with `bsdf.rs`, `lights.rs`, `texture.rs`) and
+//! `device_programs.cu`.
+//!
 //! ```
 //! use glam::Vec3;
 //! use oxray_render::lights::Environment;
@@ -42,6 +50,7 @@
 #![warn(missing_docs)]
 
 pub mod bsdf;
+pub mod device;
 pub mod lights;
 pub mod output;
 pub mod programs;
@@ -92,6 +101,21 @@ pub enum RenderError {
     /// A program could not be registered.
     #[error(transparent)]
     Pipeline(#[from] oxray::PipelineError),
+    /// Building acceleration structures on the device failed.
+    #[error(transparent)]
+    Accel(#[from] oxray::BuildError),
+    /// The CUDA C++ programs could not be compiled, or a device buffer or launch failed.
+    #[error(transparent)]
+    Program(#[from] oxray::ProgramError),
+    /// The scene uses something this renderer cannot render yet (it renders nothing rather
+    /// than something different).
+    #[error("{renderer} cannot render {feature} yet")]
+    Unsupported {
+        /// The renderer (`the CUDA C++ path tracer on the CPU`, say).
+        renderer: String,
+        /// The feature.
+        feature: String,
+    },
     /// A sample pass raised exceptions in the renderer's programs (a defect of the renderer or
     /// a scene it cannot handle); the image would be wrong, so none is returned.
     #[error("sample pass {pass}: {count} pixels raised exceptions, the first {first}")]
@@ -156,6 +180,104 @@ fn framing_camera(scene: &SceneDesc) -> Result<Camera, RenderError> {
     ))
 }
 
+/// What both renderers ([`render`] and [`device::render_on`]) derive from a scene before
+/// tracing: the camera, the emissive triangles, the light-selection probability, the ray
+/// offset and the placements to trace.
+pub(crate) struct Prepared {
+    pub camera: CameraFrame,
+    pub lights: TriangleLights,
+    /// Probability that next-event estimation samples the environment.
+    pub p_env: f32,
+    /// Distance by which new rays leave a surface.
+    pub eps: f32,
+    pub max_depth: u32,
+    /// The instances to trace: placeable, of meshes with triangles.
+    pub placements: Vec<Placement>,
+    /// Whether the scene is one untransformed placement, traced as its GAS: the instance level
+    /// would only add a transform per ray.
+    pub single: bool,
+}
+
+/// One instance to trace.
+pub(crate) struct Placement {
+    pub mesh: usize,
+    /// The instance id (the scene's instance index, in 28 bits).
+    pub id: u32,
+    pub transform: Transform,
+}
+
+/// Whether a primitive is traced (it has triangles).
+pub(crate) fn traced(p: &Primitive) -> bool {
+    !p.triangles.is_empty()
+}
+
+pub(crate) fn prepare(
+    scene: &SceneDesc,
+    env: &Environment,
+    opts: &RenderOptions,
+) -> Result<Prepared, RenderError> {
+    scene.validate().map_err(RenderError::Scene)?;
+    let camera = camera_frame(scene, opts)?;
+    let lights = TriangleLights::new(scene);
+    let p_env = match (lights.is_empty(), env.is_black()) {
+        (_, true) => 0.0,
+        (true, false) => 1.0,
+        (false, false) => 0.5,
+    };
+    let eps = scene
+        .content_bounds()
+        .map_or(1e-4, |(lo, hi)| (hi - lo).max_element() * 1e-5)
+        .max(1e-7);
+    let mut placements = Vec::new();
+    for (i, inst) in scene.instances.iter().enumerate() {
+        let Some(mesh) = scene.meshes.get(inst.mesh as usize) else {
+            continue;
+        };
+        if !mesh.primitives.iter().any(traced) {
+            continue;
+        }
+        let Some(transform) = inst.placement() else {
+            continue;
+        };
+        placements.push(Placement {
+            mesh: inst.mesh as usize,
+            id: i as u32 & 0x0FFF_FFFF,
+            transform,
+        });
+    }
+    if placements.is_empty() {
+        return Err(RenderError::Scene(
+            "the scene has no visible instance".into(),
+        ));
+    }
+    let single = placements.len() == 1 && placements[0].transform == Transform::IDENTITY;
+    Ok(Prepared {
+        camera,
+        lights,
+        p_env,
+        eps,
+        max_depth: opts.max_depth.max(1),
+        placements,
+        single,
+    })
+}
+
+/// The image from per-pixel sums whose fourth value counts the samples.
+pub(crate) fn image_from_sums(width: u32, height: u32, sums: &[[f32; 4]]) -> Image {
+    let pixels = sums
+        .iter()
+        .map(|&[r, g, b, n]| {
+            let k = 1.0 / n.max(1.0);
+            [r * k, g * k, b * k, 1.0]
+        })
+        .collect();
+    Image {
+        width,
+        height,
+        pixels,
+    }
+}
+
 /// Renders `scene` with the environment `env`; `progress` is called after each pass with the
 /// number of samples done. Returns the mean radiance per pixel, linear RGB.
 pub fn render(
@@ -164,15 +286,14 @@ pub fn render(
     opts: &RenderOptions,
     mut progress: impl FnMut(u32),
 ) -> Result<Image, RenderError> {
-    scene.validate().map_err(RenderError::Scene)?;
-    let camera = camera_frame(scene, opts)?;
+    let prep = prepare(scene, env, opts)?;
     // Everything the launch parameters borrow outlives the scene that holds the programs.
     let prims: Vec<&Primitive> = scene
         .meshes
         .iter()
-        .flat_map(|m| m.primitives.iter().filter(|p| !p.triangles.is_empty()))
+        .flat_map(|m| m.primitives.iter().filter(|p| traced(p)))
         .collect();
-    let lights = TriangleLights::new(scene);
+    let lights = &prep.lights;
     let accum = OutputBuffer::new(opts.width as usize * opts.height as usize);
     let module = programs::module()?;
     let radiance_opaque = ProgramGroup::hit_group(HitGroupDesc {
@@ -209,7 +330,7 @@ pub fn render(
     let mut gas_of_mesh = Vec::with_capacity(scene.meshes.len());
     for mesh in &scene.meshes {
         let mut children = Vec::new();
-        for prim in mesh.primitives.iter().filter(|p| !p.triangles.is_empty()) {
+        for prim in mesh.primitives.iter().filter(|p| traced(p)) {
             let m = prim.material as usize;
             let flags = if scene.materials[m].alpha_mode == AlphaMode::Opaque {
                 GeometryFlags::DISABLE_ANYHIT
@@ -234,28 +355,18 @@ pub fn render(
         );
     }
     let mut instances = Vec::new();
-    for (i, inst) in scene.instances.iter().enumerate() {
-        let Some(gas) = gas_of_mesh[inst.mesh as usize] else {
-            continue;
-        };
-        let Some(transform) = inst.placement() else {
+    for p in &prep.placements {
+        let Some(gas) = gas_of_mesh[p.mesh] else {
             continue;
         };
         let mut u = UtilInstance::new(gas, 0);
-        u.transform = transform;
-        u.instance_id = i as u32 & 0x0FFF_FFFF;
+        u.transform = p.transform;
+        u.instance_id = p.id;
         instances.push(u);
     }
-    if instances.is_empty() {
-        return Err(RenderError::Scene(
-            "the scene has no visible instance".into(),
-        ));
-    }
-    // One untransformed instance (an OBJ or PLY file, the Cornell box) is traced as its GAS:
-    // the instance level would only add a transform per ray. Its SBT offset is 0 either way,
-    // as the scene's only chunk starts the hit-group table.
-    let single = (instances.len() == 1 && instances[0].transform == Transform::IDENTITY)
-        .then(|| instances[0].gas);
+    // A single untransformed instance's SBT offset is 0 either way, as the scene's only chunk
+    // starts the hit-group table.
+    let single = prep.single.then(|| instances[0].gas);
     let ias = util.add_ias(instances, BuildFlags::PREFER_FAST_TRACE);
     util.rebuild_dirty()?;
     let handle = match single {
@@ -264,15 +375,6 @@ pub fn render(
     }
     .ok_or_else(|| RenderError::Scene("the scene could not be built".into()))?;
 
-    let p_env = match (lights.is_empty(), env.is_black()) {
-        (_, true) => 0.0,
-        (true, false) => 1.0,
-        (false, false) => 0.5,
-    };
-    let eps = scene
-        .content_bounds()
-        .map_or(1e-4, |(lo, hi)| (hi - lo).max_element() * 1e-5)
-        .max(1e-7);
     let pipeline = ScenePipeline::new(
         &DeviceContext::new(),
         PipelineCompileOptions {
@@ -286,20 +388,19 @@ pub fn render(
             ProgramGroup::miss(Some((&module, "__miss__shadow")))?,
         ],
     );
-    let max_depth = opts.max_depth.max(1);
     for sample in 0..opts.spp {
         let params = Params {
             accum: &accum,
             handle: handle.clone(),
             scene,
             prims: &prims,
-            lights: &lights,
+            lights,
             env,
-            p_env,
-            camera,
+            p_env: prep.p_env,
+            camera: prep.camera,
             sample,
-            max_depth,
-            eps,
+            max_depth: prep.max_depth,
+            eps: prep.eps,
         };
         let report = pipeline.launch(&mut util, &params, opts.width, opts.height, 1)?;
         if let Some((index, e)) = report.first_exceptions.first() {
@@ -311,17 +412,5 @@ pub fn render(
         }
         progress(sample + 1);
     }
-    let pixels = accum
-        .to_vec()
-        .into_iter()
-        .map(|[r, g, b, n]| {
-            let k = 1.0 / n.max(1.0);
-            [r * k, g * k, b * k, 1.0]
-        })
-        .collect();
-    Ok(Image {
-        width: opts.width,
-        height: opts.height,
-        pixels,
-    })
+    Ok(image_from_sums(opts.width, opts.height, &accum.to_vec()))
 }

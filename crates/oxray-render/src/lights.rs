@@ -161,6 +161,12 @@ impl TriangleLights {
         Some((tri, p, [b1, b2], self.area_pdf(tri.material)))
     }
 
+    /// The cumulative distribution over [`TriangleLights::triangles`] that
+    /// [`TriangleLights::sample`] searches (normalised: the last entry is 1).
+    pub fn cdf(&self) -> &[f32] {
+        &self.cdf
+    }
+
     /// The pdf per unit area with which [`TriangleLights::sample`] picks a point on a triangle
     /// of material `material`.
     pub fn area_pdf(&self, material: u32) -> f32 {
@@ -327,6 +333,20 @@ impl Environment {
         y * self.width + x
     }
 
+    /// The map and its sampling tables, as [`Environment::sample`] and [`Environment::pdf`]
+    /// read them (for renderers that evaluate the environment elsewhere, such as the device
+    /// programs).
+    pub fn tables(&self) -> EnvironmentTables<'_> {
+        EnvironmentTables {
+            width: self.width,
+            height: self.height,
+            texels: &self.texels,
+            conditional: &self.conditional,
+            marginal: &self.marginal,
+            total: self.total,
+        }
+    }
+
     /// Radiance arriving from direction `d` (unit).
     pub fn radiance(&self, d: Vec3) -> Vec3 {
         if !d.is_finite() {
@@ -386,6 +406,24 @@ impl Environment {
         let pdf = self.pdf(d);
         (pdf > 0.0).then(|| (d, self.radiance(d), pdf))
     }
+}
+
+/// An environment's map and sampling tables ([`Environment::tables`]).
+#[derive(Clone, Copy, Debug)]
+pub struct EnvironmentTables<'a> {
+    /// Map width in texels.
+    pub width: usize,
+    /// Map height in texels.
+    pub height: usize,
+    /// Radiance per texel, row-major from the top (+Y) row; u = 0.5 looks down -Z.
+    pub texels: &'a [Vec3],
+    /// Per row, the cumulative distribution over its columns (`width * height`).
+    pub conditional: &'a [f32],
+    /// The cumulative distribution over rows (`height`).
+    pub marginal: &'a [f32],
+    /// Sum of the sampling weights (luminance times the sine of the row's polar angle); 0 for
+    /// a black environment.
+    pub total: f32,
 }
 
 fn direction_at(u: f32, v: f32) -> Vec3 {

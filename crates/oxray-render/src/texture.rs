@@ -4,8 +4,8 @@ use glam::{Vec2, Vec4};
 use oxray_scene::{Texture, Wrap};
 use std::sync::OnceLock;
 
-/// sRGB-encoded byte to linear value.
-fn srgb_table() -> &'static [f32; 256] {
+/// sRGB-encoded byte to linear value: the table [`sample`] decodes colour channels with.
+pub fn srgb_table() -> &'static [f32; 256] {
     static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
     TABLE.get_or_init(|| {
         std::array::from_fn(|i| {

@@ -1,0 +1,85 @@
+//! `oxray render --backend`: which version of the path tracer renders, on which device.
+//!
+//! - `cpu` (the default): the Rust programs on the CPU pipeline ([`oxray_render::render`]).
+//! - `cpu-cxx`: the path tracer's CUDA C++ programs on the CPU, compiled by the host's C++
+//!   compiler ([`oxray_render::device::render_on`] with the CPU device).
+//! - `cuda`, `cuda:N`: the CUDA C++ programs on that GPU; asking for one this machine lacks is
+//!   an error, never a silent fall-back.
+//! - `auto`: the CUDA C++ programs on GPU 0 where there is one, else the Rust programs on the
+//!   CPU.
+
+use oxray::{BackendKind, Device};
+use oxray_cli::device::DeviceCommandError;
+use oxray_render::lights::Environment;
+use oxray_render::{Image, RenderError, RenderOptions};
+use oxray_scene::SceneDesc;
+
+/// A renderer chosen by `--backend`.
+pub enum RenderBackend {
+    /// The Rust programs on the CPU pipeline.
+    Rust,
+    /// The CUDA C++ programs on the CPU device (made on the render's thread pool).
+    CxxOnCpu,
+    /// The CUDA C++ programs on a CUDA device.
+    Device(Device),
+}
+
+/// Checks a `--backend` value of `render` without opening anything (for the argument parser).
+pub fn parse(name: &str) -> Result<String, String> {
+    let n = name.trim().to_ascii_lowercase();
+    if n == "cpu-cxx" {
+        return Ok(n);
+    }
+    oxray_cli::device::parse_backend(&n)
+        .map_err(|_| "expected cpu, cpu-cxx, cuda, cuda:N or auto".to_string())
+}
+
+/// Opens what `--backend` names (a CUDA device is opened here, before any loading).
+pub fn open(name: &str) -> Result<RenderBackend, DeviceCommandError> {
+    Ok(match name {
+        "cpu" => RenderBackend::Rust,
+        "cpu-cxx" => RenderBackend::CxxOnCpu,
+        "auto" => match Device::cuda(0) {
+            Ok(d) => RenderBackend::Device(d),
+            Err(_) => RenderBackend::Rust,
+        },
+        other => {
+            let d = oxray_cli::device::open(other)?;
+            if d.kind() == BackendKind::Cuda {
+                RenderBackend::Device(d)
+            } else {
+                RenderBackend::CxxOnCpu
+            }
+        }
+    })
+}
+
+impl RenderBackend {
+    /// Renders with this backend (call it on the render's thread pool).
+    pub fn render(
+        &self,
+        scene: &SceneDesc,
+        env: &Environment,
+        opts: &RenderOptions,
+        progress: impl FnMut(u32),
+    ) -> Result<Image, RenderError> {
+        match self {
+            RenderBackend::Rust => oxray_render::render(scene, env, opts, progress),
+            RenderBackend::CxxOnCpu => {
+                oxray_render::device::render_on(&Device::cpu(), scene, env, opts, progress)
+            }
+            RenderBackend::Device(d) => {
+                oxray_render::device::render_on(d, scene, env, opts, progress)
+            }
+        }
+    }
+
+    /// What renders, for the summary line (`None` for the default).
+    pub fn describe(&self) -> Option<String> {
+        match self {
+            RenderBackend::Rust => None,
+            RenderBackend::CxxOnCpu => Some("the CUDA C++ programs on the CPU".into()),
+            RenderBackend::Device(d) => Some(format!("the CUDA C++ programs on {}", d.describe())),
+        }
+    }
+}

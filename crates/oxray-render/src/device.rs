@@ -1,0 +1,623 @@
+//! The path tracer as CUDA C++ programs ([`SOURCE`], `device_programs.cu`), on any
+//! [`Device`]: the same algorithm as the Rust programs of [`render`](crate::render), written once
+//! against the guide's device functions, compiled by the host's C++ compiler on the CPU and by
+//! NVRTC on a GPU.
+//!
+//! [`render_on`] prepares the scene as [`render`](crate::render) does (camera, emissive
+//! triangles, the environment's sampling tables), builds it on the device (one GAS per mesh
+//! with one build input per primitive, one IAS instance per placement, or the GAS alone for a
+//! single untransformed placement), uploads what the programs read (vertex attributes,
+//! materials, textures, lights, the environment, per-instance matrices) and launches one pass
+//! per sample. The hit-group SBT holds, per primitive and ray type (radiance, shadow), the
+//! device addresses of its vertex attributes and its material.
+//!
+//! The two versions are kept under one test (`tests/device_programs.rs`) that compares their
+//! images statistically.
+
+use crate::lights::Environment;
+use crate::{image_from_sums, prepare, traced, Image, RenderError, RenderOptions};
+use bytemuck::{Pod, Zeroable};
+use oxray::programs::{Buffer, HitGroupDesc, ProgramGroup};
+use oxray::{
+    BackendKind, BuildFlags, BuildInput, BuildOptions, Device, GeometryFlags, IndexBuffer,
+    Instance, ModuleSource, PipelineCompileOptions, PipelineLinkOptions, SbtRegion,
+    ShaderBindingTable, Transform, TriangleInput, VertexBuffer,
+};
+use oxray_scene::{AlphaMode, LightKind, MaterialDesc, SceneDesc, TextureRef, Wrap};
+
+/// The CUDA C++ source of the path tracer's programs.
+pub const SOURCE: &str = include_str!("device_programs.cu");
+
+/// The ray-generation program.
+pub const RAYGEN: &str = "__raygen__camera";
+/// The miss programs, by miss index: radiance rays, shadow rays.
+pub const MISS: [&str; 2] = ["__miss__environment", "__miss__shadow"];
+/// The closest-hit program of radiance rays.
+pub const CLOSEST_HIT: &str = "__closesthit__radiance";
+/// The closest-hit program of shadow rays (never called: shadow rays disable it).
+pub const CLOSEST_HIT_SHADOW: &str = "__closesthit__shadow";
+/// The any-hit program of alpha-tested materials (both ray types).
+pub const ANY_HIT: &str = "__anyhit__alpha";
+
+/// Payload words of a radiance ray.
+const WORDS: u32 = 16;
+
+/// The pipeline compile options the programs need (16 payload words).
+pub fn compile_options() -> PipelineCompileOptions {
+    PipelineCompileOptions {
+        num_payload_values: WORDS,
+        num_attribute_values: 2,
+        ..Default::default()
+    }
+}
+
+/// The pipeline link options the programs need (closest-hit programs trace shadow rays).
+pub fn link_options() -> PipelineLinkOptions {
+    PipelineLinkOptions { max_trace_depth: 2 }
+}
+
+/// Compiles the programs for a GPU of compute capability `cc` to PTX with NVRTC (no GPU
+/// needed: only libnvrtc), so that a program that does not compile for the GPU is caught
+/// anywhere. Returns the PTX.
+///
+/// ```no_run
+/// let ptx = oxray_render::device::compile_for_gpu((9, 0))?;
+/// assert!(ptx.contains(".entry"));
+/// # Ok::<(), oxray::ProgramError>(())
+/// ```
+pub fn compile_for_gpu(cc: (i32, i32)) -> Result<String, oxray::ProgramError> {
+    use oxray::cuda::{CudaHitGroupDesc, CudaModule, CudaProgramGroup};
+    let m = CudaModule::from_source(SOURCE);
+    let hit = |ch: &'static str, ah: bool| {
+        CudaProgramGroup::hit_group(CudaHitGroupDesc {
+            closest_hit: Some((&m, ch)),
+            any_hit: ah.then_some((&m, ANY_HIT)),
+            intersection: None,
+        })
+    };
+    let groups = vec![
+        CudaProgramGroup::raygen(&m, RAYGEN)?,
+        CudaProgramGroup::miss(Some((&m, MISS[0])))?,
+        CudaProgramGroup::miss(Some((&m, MISS[1])))?,
+        hit(CLOSEST_HIT, false)?,
+        hit(CLOSEST_HIT, true)?,
+        hit(CLOSEST_HIT_SHADOW, false)?,
+        hit(CLOSEST_HIT_SHADOW, true)?,
+    ];
+    Ok(oxray::cuda::compile_pipeline_ptx(
+        cc,
+        &compile_options(),
+        &link_options(),
+        &groups,
+    )?)
+}
+
+// The layouts of device_programs.cu, field for field.
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct TexRefGpu {
+    texture: i32,
+    tex_coord: u32,
+    m: [f32; 6],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct MaterialGpu {
+    base_color: [f32; 4],
+    emissive: [f32; 3],
+    metallic: f32,
+    roughness: f32,
+    normal_scale: f32,
+    transmission: f32,
+    ior: f32,
+    alpha_mode: u32,
+    alpha_cutoff: f32,
+    double_sided: u32,
+    pad: u32,
+    base_color_tex: TexRefGpu,
+    metallic_roughness_tex: TexRefGpu,
+    emissive_tex: TexRefGpu,
+    normal_tex: TexRefGpu,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct TextureGpu {
+    offset: u32,
+    width: u32,
+    height: u32,
+    wrap_u: u32,
+    wrap_v: u32,
+    pad: [u32; 3],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct LightTriGpu {
+    p0: [f32; 3],
+    e1: [f32; 3],
+    e2: [f32; 3],
+    normal: [f32; 3],
+    uv: [f32; 6],
+    material: u32,
+    two_sided: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct PunctualGpu {
+    kind: u32,
+    position: [f32; 3],
+    direction: [f32; 3],
+    intensity: [f32; 3],
+    range: f32,
+    cos_inner: f32,
+    cos_outer: f32,
+    pad: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct InstanceXformGpu {
+    o2w: [f32; 12],
+    w2o: [f32; 12],
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct HitDataGpu {
+    positions: u64,
+    normals: u64,
+    uvs0: u64,
+    uvs1: u64,
+    colors: u64,
+    triangles: u64,
+    material: u32,
+    num_triangles: u32,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Pod, Zeroable)]
+struct ParamsGpu {
+    accum: u64,
+    handle: u64,
+    materials: u64,
+    textures: u64,
+    texels: u64,
+    srgb: u64,
+    instances: u64,
+    lights: u64,
+    light_cdf: u64,
+    light_area_pdf: u64,
+    punctual: u64,
+    env_texels: u64,
+    env_conditional: u64,
+    env_marginal: u64,
+    num_materials: u32,
+    num_textures: u32,
+    num_lights: u32,
+    num_punctual: u32,
+    num_instances: u32,
+    env_width: u32,
+    env_height: u32,
+    env_total: f32,
+    p_env: f32,
+    cam_origin: [f32; 3],
+    cam_forward: [f32; 3],
+    cam_right: [f32; 3],
+    cam_up: [f32; 3],
+    sample: u32,
+    max_depth: u32,
+    eps: f32,
+    pad: [u32; 2],
+}
+
+const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
+const _: () = assert!(std::mem::size_of::<HitDataGpu>() == 56);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 216);
+
+fn tex_ref(r: Option<TextureRef>) -> TexRefGpu {
+    match r {
+        Some(r) => TexRefGpu {
+            texture: i32::try_from(r.texture).unwrap_or(-1),
+            tex_coord: r.tex_coord,
+            m: r.uv_transform,
+        },
+        None => TexRefGpu {
+            texture: -1,
+            tex_coord: 0,
+            m: TextureRef::IDENTITY,
+        },
+    }
+}
+
+fn material(m: &MaterialDesc) -> MaterialGpu {
+    let (alpha_mode, alpha_cutoff) = match m.alpha_mode {
+        AlphaMode::Opaque => (0, 0.0),
+        AlphaMode::Mask { cutoff } => (1, cutoff),
+        AlphaMode::Blend => (2, 0.0),
+    };
+    MaterialGpu {
+        base_color: m.base_color,
+        emissive: m.emissive,
+        metallic: m.metallic,
+        roughness: m.roughness,
+        normal_scale: m.normal_scale,
+        transmission: m.transmission,
+        ior: m.ior,
+        alpha_mode,
+        alpha_cutoff,
+        double_sided: m.double_sided as u32,
+        pad: 0,
+        base_color_tex: tex_ref(m.base_color_texture),
+        metallic_roughness_tex: tex_ref(m.metallic_roughness_texture),
+        emissive_tex: tex_ref(m.emissive_texture),
+        normal_tex: tex_ref(m.normal_texture),
+    }
+}
+
+fn wrap(w: Wrap) -> u32 {
+    match w {
+        Wrap::Repeat => 0,
+        Wrap::MirroredRepeat => 1,
+        Wrap::ClampToEdge => 2,
+    }
+}
+
+/// Device memory for `data` (nothing for an empty slice: its address is 0).
+struct Uploads<'d> {
+    device: &'d Device,
+    // Kept alive for the programs that read them through their addresses.
+    f32s: Vec<Buffer<f32>>,
+    bytes: Vec<Buffer<u8>>,
+}
+
+impl Uploads<'_> {
+    fn put<T: Pod>(&mut self, data: &[T]) -> Result<u64, RenderError> {
+        if data.is_empty() {
+            return Ok(0);
+        }
+        // Values of 4-byte aligned types (whole words) are stored as f32 words; the rest
+        // (texels) as bytes.
+        if std::mem::align_of::<T>() >= 4 {
+            let words: &[f32] = bytemuck::cast_slice(data);
+            let b = self.device.buffer_from_slice(words)?;
+            let p = b.device_ptr();
+            self.f32s.push(b);
+            Ok(p)
+        } else {
+            let b = self
+                .device
+                .buffer_from_slice(bytemuck::cast_slice::<T, u8>(data))?;
+            let p = b.device_ptr();
+            self.bytes.push(b);
+            Ok(p)
+        }
+    }
+}
+
+/// The name of the renderer on `device`, for errors.
+fn renderer(device: &Device) -> String {
+    match device.kind() {
+        BackendKind::Cuda => "the CUDA C++ path tracer on CUDA".into(),
+        _ => "the CUDA C++ path tracer on the CPU".into(),
+    }
+}
+
+/// Refuses what the device programs cannot render yet, naming it (today: texture data beyond
+/// 32-bit texel offsets).
+fn check_supported(device: &Device, scene: &SceneDesc) -> Result<(), RenderError> {
+    let texels: u64 = scene.textures.iter().map(|t| t.texels.len() as u64).sum();
+    if texels > u32::MAX as u64 {
+        return Err(RenderError::Unsupported {
+            renderer: renderer(device),
+            feature: format!("textures of {texels} texels in all (at most 2^32)"),
+        });
+    }
+    Ok(())
+}
+
+/// Renders `scene` with the environment `env` on `device` with the path tracer's CUDA C++
+/// programs ([`SOURCE`]): the same algorithm, options and result as
+/// [`render`](crate::render), one launch per sample (`progress` is called after each with the
+/// number of samples done). On the CPU device the programs are compiled by the host's C++
+/// compiler (cached on disk), on a CUDA device by NVRTC.
+///
+/// ```
+/// use glam::Vec3;
+/// use oxray_render::device::render_on;
+/// use oxray_render::lights::Environment;
+/// use oxray_render::RenderOptions;
+///
+/// let device = oxray::Device::cpu(); // or Device::cuda(0)?
+/// let scene = oxray_scene::cornell_box();
+/// let opts = RenderOptions { width: 8, height: 8, spp: 2, max_depth: 4, camera: None };
+/// let image = render_on(&device, &scene, &Environment::uniform(Vec3::ZERO), &opts, |_| {})?;
+/// assert_eq!(image.pixels.len(), 64);
+/// assert!(image.pixels.iter().any(|p| p[0] + p[1] + p[2] > 0.0));
+/// # Ok::<(), oxray_render::RenderError>(())
+/// ```
+pub fn render_on(
+    device: &Device,
+    scene: &SceneDesc,
+    env: &Environment,
+    opts: &RenderOptions,
+    progress: impl FnMut(u32),
+) -> Result<Image, RenderError> {
+    render_with_source(device, SOURCE, scene, env, opts, progress)
+}
+
+/// [`render_on`] with other programs in place of [`SOURCE`] (same entry points and layouts):
+/// for the tests that check that the comparison of the two renderers catches a changed
+/// algorithm.
+#[doc(hidden)]
+pub fn render_with_source(
+    device: &Device,
+    source: &str,
+    scene: &SceneDesc,
+    env: &Environment,
+    opts: &RenderOptions,
+    mut progress: impl FnMut(u32),
+) -> Result<Image, RenderError> {
+    let prep = prepare(scene, env, opts)?;
+    check_supported(device, scene)?;
+    let mut up = Uploads {
+        device,
+        f32s: Vec::new(),
+        bytes: Vec::new(),
+    };
+
+    // The programs and their groups.
+    let module = device.create_module(ModuleSource::CudaCpp(source))?;
+    let hit = |ch: &'static str, ah: bool| {
+        ProgramGroup::hit_group(HitGroupDesc {
+            closest_hit: Some((&module, ch)),
+            any_hit: ah.then_some((&module, ANY_HIT)),
+            intersection: None,
+        })
+    };
+    let raygen = ProgramGroup::raygen(&module, RAYGEN)?;
+    let miss_env = ProgramGroup::miss(&module, MISS[0])?;
+    let miss_shadow = ProgramGroup::miss(&module, MISS[1])?;
+    let radiance_opaque = hit(CLOSEST_HIT, false)?;
+    let radiance_alpha = hit(CLOSEST_HIT, true)?;
+    let shadow_opaque = hit(CLOSEST_HIT_SHADOW, false)?;
+    let shadow_alpha = hit(CLOSEST_HIT_SHADOW, true)?;
+    let pipeline = device.create_pipeline(
+        &compile_options(),
+        &link_options(),
+        Some("params"),
+        &[
+            raygen.clone(),
+            miss_env.clone(),
+            miss_shadow.clone(),
+            radiance_opaque.clone(),
+            radiance_alpha.clone(),
+            shadow_opaque.clone(),
+            shadow_alpha.clone(),
+        ],
+    )?;
+
+    // Geometry: one GAS per mesh, one build input (and two SBT records) per primitive.
+    let mut records = Vec::new();
+    let mut gas_of_mesh = Vec::with_capacity(scene.meshes.len());
+    for mesh in &scene.meshes {
+        let prims: Vec<_> = mesh.primitives.iter().filter(|p| traced(p)).collect();
+        if prims.is_empty() {
+            gas_of_mesh.push(None);
+            continue;
+        }
+        let sbt_offset = records.len() as u32;
+        let flags: Vec<[GeometryFlags; 1]> = prims
+            .iter()
+            .map(|p| {
+                let opaque = scene.materials[p.material as usize].alpha_mode == AlphaMode::Opaque;
+                [if opaque {
+                    GeometryFlags::DISABLE_ANYHIT
+                } else {
+                    GeometryFlags::REQUIRE_SINGLE_ANYHIT_CALL
+                }]
+            })
+            .collect();
+        let inputs: Vec<BuildInput> = prims
+            .iter()
+            .zip(&flags)
+            .map(|(p, f)| {
+                TriangleInput::new(VertexBuffer::f32x3(&p.positions))
+                    .indices(IndexBuffer::u32x3(&p.triangles))
+                    .flags(f)
+                    .into()
+            })
+            .collect();
+        let gas = device.build_gas(&BuildOptions::new(BuildFlags::PREFER_FAST_TRACE), &inputs)?;
+        for p in prims {
+            let data = HitDataGpu {
+                positions: up.put(&p.positions)?,
+                normals: up.put(&p.normals)?,
+                uvs0: up.put(&p.uvs)?,
+                uvs1: up.put(&p.uvs1)?,
+                colors: up.put(&p.colors)?,
+                triangles: up.put(&p.triangles)?,
+                material: p.material,
+                num_triangles: p.triangles.len() as u32,
+            };
+            let (radiance, shadow) =
+                if scene.materials[p.material as usize].alpha_mode == AlphaMode::Opaque {
+                    (&radiance_opaque, &shadow_opaque)
+                } else {
+                    (&radiance_alpha, &shadow_alpha)
+                };
+            records.push((radiance.pack_header(), data));
+            records.push((shadow.pack_header(), data));
+        }
+        gas_of_mesh.push(Some((gas, sbt_offset)));
+    }
+
+    // The root: the GAS of a single untransformed placement, else one level of instances.
+    let mut xforms = Vec::new();
+    let mut ias = None;
+    let handle = if prep.single {
+        xforms.push(InstanceXformGpu {
+            o2w: Transform::IDENTITY.0,
+            w2o: Transform::IDENTITY.0,
+        });
+        let (gas, _) = gas_of_mesh[prep.placements[0].mesh]
+            .as_ref()
+            .ok_or_else(|| RenderError::Scene("the scene could not be built".into()))?;
+        gas.optix_handle()?
+    } else {
+        let mut instances = Vec::with_capacity(prep.placements.len());
+        for p in &prep.placements {
+            let Some((gas, sbt_offset)) = &gas_of_mesh[p.mesh] else {
+                continue;
+            };
+            let inverse = p.transform.inverse().ok_or_else(|| {
+                RenderError::Scene(format!(
+                    "instance {} has a transform that cannot be inverted",
+                    p.id
+                ))
+            })?;
+            xforms.push(InstanceXformGpu {
+                o2w: p.transform.0,
+                w2o: inverse.0,
+            });
+            instances.push(
+                Instance::new(gas.handle())
+                    .transform(p.transform)
+                    .instance_id(p.id)
+                    .sbt_offset(*sbt_offset),
+            );
+        }
+        let built = device.build_ias(
+            &BuildOptions::new(BuildFlags::PREFER_FAST_TRACE),
+            &[(&instances[..]).into()],
+        )?;
+        let h = built.optix_handle()?;
+        ias = Some(built);
+        h
+    };
+
+    // Materials and textures.
+    let materials: Vec<MaterialGpu> = scene.materials.iter().map(material).collect();
+    let mut texels: Vec<[u8; 4]> = Vec::new();
+    let mut textures = Vec::with_capacity(scene.textures.len());
+    for t in &scene.textures {
+        textures.push(TextureGpu {
+            offset: texels.len() as u32,
+            width: t.width,
+            height: t.height,
+            wrap_u: wrap(t.wrap_u),
+            wrap_v: wrap(t.wrap_v),
+            pad: [0; 3],
+        });
+        texels.extend_from_slice(&t.texels);
+    }
+
+    // Lights: emissive triangles (with their selection table), punctual lights, environment.
+    let lights = &prep.lights;
+    let light_tris: Vec<LightTriGpu> = lights
+        .triangles
+        .iter()
+        .map(|t| LightTriGpu {
+            p0: t.p0.to_array(),
+            e1: t.e1.to_array(),
+            e2: t.e2.to_array(),
+            normal: t.normal.to_array(),
+            uv: [
+                t.uv[0].x, t.uv[0].y, t.uv[1].x, t.uv[1].y, t.uv[2].x, t.uv[2].y,
+            ],
+            material: t.material,
+            two_sided: t.two_sided as u32,
+        })
+        .collect();
+    let area_pdf: Vec<f32> = (0..scene.materials.len() as u32)
+        .map(|m| lights.area_pdf(m))
+        .collect();
+    let punctual: Vec<PunctualGpu> = scene
+        .lights
+        .iter()
+        .map(|l| {
+            let (kind, cos_inner, cos_outer) = match l.kind {
+                LightKind::Directional => (0, 1.0, 1.0),
+                LightKind::Point => (1, 1.0, 1.0),
+                LightKind::Spot {
+                    inner_cone,
+                    outer_cone,
+                } => (2, inner_cone.cos(), outer_cone.cos()),
+            };
+            PunctualGpu {
+                kind,
+                position: l.position.to_array(),
+                direction: l.direction.to_array(),
+                intensity: l.intensity.to_array(),
+                range: l.range.unwrap_or(f32::INFINITY),
+                cos_inner,
+                cos_outer,
+                pad: 0,
+            }
+        })
+        .collect();
+    let env_tables = env.tables();
+    let env_texels: Vec<[f32; 3]> = env_tables.texels.iter().map(|t| t.to_array()).collect();
+
+    let accum = device.create_buffer::<[f32; 4]>(opts.width as usize * opts.height as usize)?;
+    let c = &prep.camera;
+    let mut params = ParamsGpu {
+        accum: accum.device_ptr(),
+        handle,
+        materials: up.put(&materials)?,
+        textures: up.put(&textures)?,
+        texels: up.put(&texels)?,
+        srgb: up.put(&crate::texture::srgb_table()[..])?,
+        instances: up.put(&xforms)?,
+        lights: up.put(&light_tris)?,
+        light_cdf: up.put(lights.cdf())?,
+        light_area_pdf: up.put(&area_pdf)?,
+        punctual: up.put(&punctual)?,
+        env_texels: up.put(&env_texels)?,
+        env_conditional: up.put(env_tables.conditional)?,
+        env_marginal: up.put(env_tables.marginal)?,
+        num_materials: materials.len() as u32,
+        num_textures: textures.len() as u32,
+        num_lights: light_tris.len() as u32,
+        num_punctual: punctual.len() as u32,
+        num_instances: xforms.len() as u32,
+        env_width: env_tables.width as u32,
+        env_height: env_tables.height as u32,
+        env_total: env_tables.total,
+        p_env: prep.p_env,
+        cam_origin: c.origin.to_array(),
+        cam_forward: c.forward.to_array(),
+        cam_right: c.right.to_array(),
+        cam_up: c.up.to_array(),
+        sample: 0,
+        max_depth: prep.max_depth,
+        eps: prep.eps,
+        pad: [0; 2],
+    };
+
+    let sbt = ShaderBindingTable {
+        raygen: SbtRegion::from_headers(&[raygen.pack_header()]),
+        miss: SbtRegion::from_headers(&[miss_env.pack_header(), miss_shadow.pack_header()]),
+        hitgroup: SbtRegion::from_records(&records),
+        ..Default::default()
+    };
+    for sample in 0..opts.spp {
+        params.sample = sample;
+        let report = pipeline.launch_with(&params, &sbt, opts.width, opts.height, 1)?;
+        if let Some((index, e)) = report.first_exceptions.first() {
+            return Err(RenderError::Exceptions {
+                pass: sample,
+                count: report.exceptions,
+                first: format!("at pixel {:?}: {e}", &index[..2]),
+            });
+        }
+        progress(sample + 1);
+    }
+    let sums = accum.download()?;
+    // The structures lived until the last launch.
+    drop((ias, gas_of_mesh, up));
+    Ok(image_from_sums(opts.width, opts.height, &sums))
+}

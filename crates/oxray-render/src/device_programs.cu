@@ -1,0 +1,968 @@
+// The path tracer of `oxray render` as CUDA C++ programs: the same algorithm as the Rust
+// programs (programs.rs, bsdf.rs, lights.rs, texture.rs), written once against the guide's
+// device functions, so that it runs on every device: compiled by the host's C++ compiler on the
+// CPU and by NVRTC on a GPU. `device.rs` builds the scene and the buffers these programs read.
+//
+// What it does, as in the Rust programs: a pinhole camera with one jittered sample per pixel
+// and launch; glTF metallic-roughness surfaces (Lambert plus GGX sampled by visible normals)
+// and smooth dielectrics; emission; textures (bilinear, glTF wrap modes, sRGB through the same
+// table), vertex colours and normal maps; alpha MASK and BLEND in an any-hit program that both
+// ray types run; next-event estimation on emissive triangles (chosen by power) and on the
+// environment (chosen by importance over its texels), combined with BSDF sampling by the power
+// heuristic; punctual lights; Russian roulette. Random numbers follow the Rust sequence draw by
+// draw (same PCG hash, same seeds, same order).
+//
+// Device functions used: launch index and dimensions, optixTrace with payload words, payload
+// get/set, barycentrics, primitive and instance index, SBT data pointer, ray origin, direction
+// and tmax, optixIgnoreIntersection. Transforms and vertex positions come from this file's own
+// buffers (per-instance matrices, per-geometry vertex arrays), not from optixTransform* or
+// optixGetTriangleVertexData, so that the GPU pipeline needs nothing more.
+//
+// Every layout below is mirrored by a `#[repr(C)]` struct in device.rs: only 4- and 8-byte
+// fields, each at an offset that is a multiple of its size.
+
+#include <optix.h>
+
+namespace pt {
+
+typedef unsigned int u32;
+typedef unsigned long long u64;
+
+#define PTI static __forceinline__ __device__
+#define PTF static __device__
+
+// ---------------------------------------------------------------------------------------------
+// Data the host uploads
+// ---------------------------------------------------------------------------------------------
+
+// A texture reference: texture < 0 for none; uv' = (m0 u + m1 v + m2, m3 u + m4 v + m5).
+struct TexRef {
+    int texture;
+    u32 tex_coord;
+    float m[6];
+};
+
+struct Material {
+    float base_color[4];
+    float emissive[3];
+    float metallic;
+    float roughness;
+    float normal_scale;
+    float transmission;
+    float ior;
+    u32 alpha_mode;  // 0 opaque, 1 mask, 2 blend
+    float alpha_cutoff;
+    u32 double_sided;
+    u32 pad;
+    TexRef base_color_tex, metallic_roughness_tex, emissive_tex, normal_tex;
+};
+
+// A texture: `width * height` texels (RGBA8, top row first) at `offset` in the texel buffer.
+struct TextureDesc {
+    u32 offset, width, height;
+    u32 wrap_u, wrap_v;  // 0 repeat, 1 mirrored repeat, 2 clamp to edge
+    u32 pad[3];
+};
+
+// An emissive triangle in world space (lights.rs LightTriangle).
+struct LightTri {
+    float p0[3], e1[3], e2[3], normal[3];
+    float uv[6];
+    u32 material, two_sided;
+};
+
+// A punctual light; intensities in the scene's photometric units.
+struct Punctual {
+    u32 kind;  // 0 directional, 1 point, 2 spot
+    float position[3], direction[3], intensity[3];
+    float range;  // +inf: unlimited
+    float cos_inner, cos_outer;
+    u32 pad;
+};
+
+// An instance's object-to-world and world-to-object matrices (3x4, rows).
+struct InstanceXform {
+    float o2w[12];
+    float w2o[12];
+};
+
+// The hit-group record data: one geometry (a scene primitive) and its material.
+struct HitData {
+    u64 positions;  // float[3] per vertex
+    u64 normals;    // float[3] per vertex, or 0
+    u64 uvs0;       // float[2] per vertex, or 0
+    u64 uvs1;       // float[2] per vertex, or 0
+    u64 colors;     // float[4] per vertex, or 0
+    u64 triangles;  // u32[3] per triangle
+    u32 material, num_triangles;
+};
+
+struct Params {
+    u64 accum;  // float[4] per pixel: radiance sums and the sample count
+    u64 handle;
+    u64 materials, textures, texels, srgb, instances;
+    u64 lights, light_cdf, light_area_pdf;  // light_area_pdf: per material
+    u64 punctual;
+    u64 env_texels, env_conditional, env_marginal;  // float[3] per texel; cdfs
+    u32 num_materials, num_textures, num_lights, num_punctual, num_instances;
+    u32 env_width, env_height;
+    float env_total;
+    float p_env;
+    float cam_origin[3], cam_forward[3], cam_right[3], cam_up[3];
+    u32 sample, max_depth;
+    float eps;
+    u32 pad[2];
+};
+
+}  // namespace pt
+
+extern "C" __constant__ pt::Params params;
+
+namespace pt {
+
+// Ray types and miss programs.
+#define PT_RADIANCE 0u
+#define PT_SHADOW 1u
+#define PT_RAY_TYPES 2u
+#define PT_WORDS 16
+
+#define PT_PI 3.14159265358979323846f
+#define PT_TAU 6.28318530717958647692f
+#define PT_FRAC_1_PI 0.318309886183790671538f
+
+template <typename T>
+PTI const T* ptr(u64 address) {
+    return reinterpret_cast<const T*>(address);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Vectors (glam's operations in glam's order of evaluation)
+// ---------------------------------------------------------------------------------------------
+
+struct V2 {
+    float x, y;
+};
+struct V3 {
+    float x, y, z;
+};
+struct V4 {
+    float x, y, z, w;
+};
+
+PTI V2 v2(float x, float y) { return V2{x, y}; }
+PTI V3 v3(float x, float y, float z) { return V3{x, y, z}; }
+PTI V3 v3s(float s) { return V3{s, s, s}; }
+PTI V3 v3a(const float* a) { return V3{a[0], a[1], a[2]}; }
+PTI V4 v4(float x, float y, float z, float w) { return V4{x, y, z, w}; }
+PTI V3 operator+(V3 a, V3 b) { return v3(a.x + b.x, a.y + b.y, a.z + b.z); }
+PTI V3 operator-(V3 a, V3 b) { return v3(a.x - b.x, a.y - b.y, a.z - b.z); }
+PTI V3 operator*(V3 a, V3 b) { return v3(a.x * b.x, a.y * b.y, a.z * b.z); }
+PTI V3 operator*(V3 a, float s) { return v3(a.x * s, a.y * s, a.z * s); }
+PTI V3 operator*(float s, V3 a) { return v3(s * a.x, s * a.y, s * a.z); }
+PTI V3 operator/(V3 a, float s) { return v3(a.x / s, a.y / s, a.z / s); }
+PTI V3 operator-(V3 a) { return v3(-a.x, -a.y, -a.z); }
+PTI V2 operator+(V2 a, V2 b) { return v2(a.x + b.x, a.y + b.y); }
+PTI V2 operator-(V2 a, V2 b) { return v2(a.x - b.x, a.y - b.y); }
+PTI V2 operator*(V2 a, float s) { return v2(a.x * s, a.y * s); }
+PTI V4 operator+(V4 a, V4 b) { return v4(a.x + b.x, a.y + b.y, a.z + b.z, a.w + b.w); }
+PTI V4 operator*(V4 a, float s) { return v4(a.x * s, a.y * s, a.z * s, a.w * s); }
+PTI V3 xyz(V4 a) { return v3(a.x, a.y, a.z); }
+PTI float dot(V3 a, V3 b) { return (a.x * b.x) + (a.y * b.y) + (a.z * b.z); }
+PTI V3 cross(V3 a, V3 b) {
+    return v3(a.y * b.z - b.y * a.z, a.z * b.x - b.z * a.x, a.x * b.y - b.x * a.y);
+}
+PTI float length(V3 a) { return sqrtf(dot(a, a)); }
+PTI bool finite(float x) { return (__float_as_uint(x) & 0x7f800000u) != 0x7f800000u; }
+PTI bool finite3(V3 a) { return finite(a.x) && finite(a.y) && finite(a.z); }
+PTI bool is_zero(V3 a) { return a.x == 0.0f && a.y == 0.0f && a.z == 0.0f; }
+PTI V3 normalize(V3 a) { return a * (1.0f / length(a)); }
+PTI V3 normalize_or(V3 a, V3 fallback) {
+    float r = 1.0f / length(a);
+    return (finite(r) && r > 0.0f) ? a * r : fallback;
+}
+PTI V3 normalize_or_zero(V3 a) { return normalize_or(a, v3s(0.0f)); }
+PTI float maxf(float a, float b) { return fmaxf(a, b); }
+PTI float minf(float a, float b) { return fminf(a, b); }
+PTI float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
+PTI float max_element(V3 a) { return maxf(a.x, maxf(a.y, a.z)); }
+PTI V3 abs3(V3 a) { return v3(fabsf(a.x), fabsf(a.y), fabsf(a.z)); }
+PTI V3 lerp3(V3 a, V3 b, float s) { return a * (1.0f - s) + b * s; }
+PTI V4 lerp4(V4 a, V4 b, float s) { return a * (1.0f - s) + b * s; }
+PTI float3 f3(V3 a) { return make_float3(a.x, a.y, a.z); }
+PTI V3 from_f3(float3 a) { return v3(a.x, a.y, a.z); }
+
+// Rows of a 3x4 matrix applied to a point, a vector, and (through the inverse) a normal.
+PTI V3 xf_point(const float* m, V3 p) {
+    return v3(m[0] * p.x + m[1] * p.y + m[2] * p.z + m[3],
+              m[4] * p.x + m[5] * p.y + m[6] * p.z + m[7],
+              m[8] * p.x + m[9] * p.y + m[10] * p.z + m[11]);
+}
+PTI V3 xf_vector(const float* m, V3 v) {
+    return v3(m[0] * v.x + m[1] * v.y + m[2] * v.z, m[4] * v.x + m[5] * v.y + m[6] * v.z,
+              m[8] * v.x + m[9] * v.y + m[10] * v.z);
+}
+PTI V3 xf_normal(const float* inv, V3 n) {
+    return v3(inv[0] * n.x + inv[4] * n.y + inv[8] * n.z,
+              inv[1] * n.x + inv[5] * n.y + inv[9] * n.z,
+              inv[2] * n.x + inv[6] * n.y + inv[10] * n.z);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Random numbers (bsdf.rs Rng, hash)
+// ---------------------------------------------------------------------------------------------
+
+PTI u32 hash(u32 x) {
+    u32 s = x * 747796405u + 2891336453u;
+    u32 w = ((s >> ((s >> 28) + 4u)) ^ s) * 277803737u;
+    return (w >> 22) ^ w;
+}
+
+struct Rng {
+    u32 s;
+    __device__ float uniform() {
+        s = s * 747796405u + 2891336453u;
+        u32 w = ((s >> ((s >> 28) + 4u)) ^ s) * 277803737u;
+        return (float)((w >> 22) ^ w) * (1.0f / 4294967296.0f);
+    }
+};
+
+PTI Rng rng_new(u32 pixel, u32 sample, u32 salt) {
+    return Rng{hash(pixel ^ hash(sample + hash(salt)))};
+}
+
+PTI float luminance(V3 c) { return dot(c, v3(0.2126f, 0.7152f, 0.0722f)); }
+
+// ---------------------------------------------------------------------------------------------
+// The surface model (bsdf.rs)
+// ---------------------------------------------------------------------------------------------
+
+struct Surface {
+    V3 base;
+    float metallic, alpha;
+    bool dielectric;
+    float ior;
+};
+
+PTI Surface surface_new(V3 base, float metallic, float roughness, float transmission, float ior) {
+    float r = clampf(roughness, 0.0f, 1.0f);
+    Surface s;
+    s.base = base;
+    s.metallic = clampf(metallic, 0.0f, 1.0f);
+    s.alpha = maxf(r * r, 2e-3f);
+    s.dielectric = transmission >= 0.5f;
+    s.ior = (finite(ior) && ior >= 1.0f) ? ior : 1.5f;
+    return s;
+}
+
+struct BsdfSample {
+    V3 wi, weight;
+    float pdf;
+};
+
+// glam's any_orthonormal_pair.
+PTI void basis(V3 n, V3& t, V3& b) {
+    float sign = copysignf(1.0f, n.z);
+    float a = -1.0f / (sign + n.z);
+    float bb = n.x * n.y * a;
+    t = v3(1.0f + sign * n.x * n.x * a, sign * bb, -sign * n.x);
+    b = v3(bb, sign + n.y * n.y * a, -n.y);
+}
+
+PTI V3 to_local(V3 v, V3 n, V3 t, V3 b) { return v3(dot(v, t), dot(v, b), dot(v, n)); }
+
+PTI float pow5(float x) {
+    float x2 = x * x;
+    return x2 * x2 * x;
+}
+PTI V3 schlick(V3 f0, float c) { return f0 + (v3s(1.0f) - f0) * pow5(1.0f - clampf(c, 0.0f, 1.0f)); }
+PTI float ggx_d(float nh, float a2) {
+    float d = nh * nh * (a2 - 1.0f) + 1.0f;
+    return a2 / (PT_PI * d * d);
+}
+PTI float smith_g1(float nv, float a2) {
+    return 2.0f * nv / (nv + sqrtf(a2 + (1.0f - a2) * nv * nv));
+}
+PTI V3 f0_of(const Surface& s) { return lerp3(v3s(0.04f), s.base, s.metallic); }
+PTI V3 diffuse_colour(const Surface& s) { return s.base * (1.0f - s.metallic); }
+PTI float specular_probability(const Surface& s, float cos_o) {
+    float sp = luminance(schlick(f0_of(s), cos_o));
+    float d = luminance(diffuse_colour(s));
+    if (d <= 0.0f) return 1.0f;
+    return clampf(sp / (sp + d), 0.05f, 0.95f);
+}
+
+// BSDF times |cos| at wi, and the pdf of sampling wi.
+PTI V3 bsdf_eval(const Surface& s, V3 n, V3 wo, V3 wi, float& pdf) {
+    float cos_o = dot(n, wo), cos_i = dot(n, wi);
+    pdf = 0.0f;
+    if (s.dielectric || cos_o <= 0.0f || cos_i <= 0.0f) return v3s(0.0f);
+    V3 h = normalize(wo + wi);
+    float nh = maxf(dot(n, h), 0.0f), oh = maxf(dot(wo, h), 1e-6f);
+    float a2 = s.alpha * s.alpha;
+    float d = ggx_d(nh, a2);
+    float g1o = smith_g1(cos_o, a2);
+    V3 f = schlick(f0_of(s), oh);
+    V3 spec = f * (d * g1o * smith_g1(cos_i, a2) / (4.0f * cos_o));
+    V3 diff = (v3s(1.0f) - f) * diffuse_colour(s) * (PT_FRAC_1_PI * cos_i);
+    float ps = specular_probability(s, cos_o);
+    pdf = ps * d * g1o / (4.0f * cos_o) + (1.0f - ps) * cos_i * PT_FRAC_1_PI;
+    return spec + diff;
+}
+
+PTI V3 sample_vndf(V3 wo, float alpha, float u1, float u2) {
+    V3 vh = normalize(v3(alpha * wo.x, alpha * wo.y, wo.z));
+    float len2 = vh.x * vh.x + vh.y * vh.y;
+    V3 t1 = len2 > 0.0f ? v3(-vh.y, vh.x, 0.0f) / sqrtf(len2) : v3(1.0f, 0.0f, 0.0f);
+    V3 t2 = cross(vh, t1);
+    float r = sqrtf(u1);
+    float phi = PT_TAU * u2;
+    float p1 = r * cosf(phi);
+    float s = 0.5f * (1.0f + vh.z);
+    float p2 = (1.0f - s) * sqrtf(maxf(1.0f - p1 * p1, 0.0f)) + s * r * sinf(phi);
+    V3 nh = t1 * p1 + t2 * p2 + vh * sqrtf(maxf(1.0f - p1 * p1 - p2 * p2, 0.0f));
+    return normalize(v3(alpha * nh.x, alpha * nh.y, maxf(nh.z, 1e-6f)));
+}
+
+PTI BsdfSample sample_dielectric(const Surface& s, V3 n, V3 wo, bool entering, float u) {
+    float eta = entering ? 1.0f / s.ior : s.ior;
+    float cos_o = clampf(dot(n, wo), 0.0f, 1.0f);
+    float sin2_t = eta * eta * (1.0f - cos_o * cos_o);
+    V3 reflect = 2.0f * cos_o * n - wo;
+    if (sin2_t >= 1.0f) return BsdfSample{reflect, v3s(1.0f), 0.0f};
+    float cos_t = sqrtf(1.0f - sin2_t);
+    float rs = (eta * cos_o - cos_t) / (eta * cos_o + cos_t);
+    float rp = (cos_o - eta * cos_t) / (cos_o + eta * cos_t);
+    float fr = 0.5f * (rs * rs + rp * rp);
+    if (u < fr) return BsdfSample{reflect, v3s(1.0f), 0.0f};
+    return BsdfSample{normalize(-wo * eta + n * (eta * cos_o - cos_t)), s.base, 0.0f};
+}
+
+// False when the path ends (the sample fell below the surface).
+PTI bool bsdf_sample(const Surface& s, V3 n, V3 wo, bool entering, float u0, float u1, float u2,
+                     BsdfSample& out) {
+    if (s.dielectric) {
+        out = sample_dielectric(s, n, wo, entering, u0);
+        return true;
+    }
+    float cos_o = dot(n, wo);
+    if (cos_o <= 0.0f) return false;
+    V3 t, b;
+    basis(n, t, b);
+    V3 wi;
+    if (u0 < specular_probability(s, cos_o)) {
+        V3 wo_l = to_local(wo, n, t, b);
+        V3 h = sample_vndf(wo_l, s.alpha, u1, u2);
+        h = t * h.x + b * h.y + n * h.z;
+        wi = 2.0f * dot(wo, h) * h - wo;
+    } else {
+        float r = sqrtf(u1);
+        float phi = PT_TAU * u2;
+        wi = normalize(t * (r * cosf(phi)) + b * (r * sinf(phi)) + n * sqrtf(maxf(1.0f - u1, 0.0f)));
+    }
+    float pdf;
+    V3 f = bsdf_eval(s, n, wo, wi, pdf);
+    if (pdf <= 0.0f || !finite(pdf)) return false;
+    out = BsdfSample{wi, f / pdf, pdf};
+    return true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Textures (texture.rs)
+// ---------------------------------------------------------------------------------------------
+
+PTI u32 wrap(long long i, u32 n32, u32 mode) {
+    long long n = (long long)n32;
+    long long r;
+    if (mode == 2u) {
+        r = i < 0 ? 0 : (i > n - 1 ? n - 1 : i);
+    } else if (mode == 1u) {
+        long long m = i % (2 * n);
+        if (m < 0) m += 2 * n;
+        r = m < n ? m : 2 * n - 1 - m;
+    } else {
+        r = i % n;
+        if (r < 0) r += n;
+    }
+    return (u32)r;
+}
+
+PTI V4 texel(const TextureDesc& t, u32 x, u32 y, bool srgb) {
+    const unsigned char* c = ptr<unsigned char>(params.texels) + 4ull * ((u64)t.offset + (u64)y * t.width + x);
+    if (srgb) {
+        const float* lut = ptr<float>(params.srgb);
+        return v4(lut[c[0]], lut[c[1]], lut[c[2]], (float)c[3] / 255.0f);
+    }
+    return v4((float)c[0] / 255.0f, (float)c[1] / 255.0f, (float)c[2] / 255.0f,
+              (float)c[3] / 255.0f);
+}
+
+PTF V4 sample_texture(const TextureDesc& t, V2 uv, bool srgb) {
+    if (!finite(uv.x) || !finite(uv.y)) return texel(t, 0, 0, srgb);
+    float xf = clampf(uv.x, -1e6f, 1e6f) * (float)t.width - 0.5f;
+    float yf = clampf(uv.y, -1e6f, 1e6f) * (float)t.height - 0.5f;
+    float x0 = floorf(xf), y0 = floorf(yf);
+    float fx = xf - x0, fy = yf - y0;
+    long long xi = (long long)x0, yi = (long long)y0;
+    u32 xs[2] = {wrap(xi, t.width, t.wrap_u), wrap(xi + 1, t.width, t.wrap_u)};
+    u32 ys[2] = {wrap(yi, t.height, t.wrap_v), wrap(yi + 1, t.height, t.wrap_v)};
+    V4 top = lerp4(texel(t, xs[0], ys[0], srgb), texel(t, xs[1], ys[0], srgb), fx);
+    V4 bottom = lerp4(texel(t, xs[0], ys[1], srgb), texel(t, xs[1], ys[1], srgb), fx);
+    return lerp4(top, bottom, fy);
+}
+
+// Texture reference `r` at the coordinates of sets 0 and 1; white without a texture.
+PTF V4 tex(const TexRef& r, const V2* uvs, bool srgb) {
+    if (r.texture < 0 || (u32)r.texture >= params.num_textures) return v4(1.0f, 1.0f, 1.0f, 1.0f);
+    V2 uv = uvs[r.tex_coord < 1u ? r.tex_coord : 1u];
+    const float* m = r.m;
+    V2 mapped = v2(m[0] * uv.x + m[1] * uv.y + m[2], m[3] * uv.x + m[4] * uv.y + m[5]);
+    return sample_texture(ptr<TextureDesc>(params.textures)[r.texture], mapped, srgb);
+}
+
+PTI V3 emission(const Material& m, const V2* uvs) {
+    return v3a(m.emissive) * xyz(tex(m.emissive_tex, uvs, true));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Geometry of a hit
+// ---------------------------------------------------------------------------------------------
+
+PTI V3 attr3(u64 a, u32 i) { return v3a(ptr<float>(a) + 3ull * i); }
+PTI V2 attr2(u64 a, u32 i) {
+    const float* p = ptr<float>(a) + 2ull * i;
+    return v2(p[0], p[1]);
+}
+PTI V4 attr4(u64 a, u32 i) {
+    const float* p = ptr<float>(a) + 4ull * i;
+    return v4(p[0], p[1], p[2], p[3]);
+}
+
+struct Tri {
+    u32 i[3];
+};
+PTI Tri triangle_of(const HitData& g, u32 prim) {
+    const u32* t = ptr<u32>(g.triangles) + 3ull * prim;
+    return Tri{{t[0], t[1], t[2]}};
+}
+PTI V2 interp2(u64 a, Tri t, const float* b) {
+    if (a == 0ull) return v2(0.0f, 0.0f);
+    return attr2(a, t.i[0]) * b[0] + attr2(a, t.i[1]) * b[1] + attr2(a, t.i[2]) * b[2];
+}
+PTI void uvs_at(const HitData& g, Tri t, const float* b, V2* uvs) {
+    uvs[0] = interp2(g.uvs0, t, b);
+    uvs[1] = interp2(g.uvs1, t, b);
+}
+PTI V4 color_at(const HitData& g, Tri t, const float* b) {
+    if (g.colors == 0ull) return v4(1.0f, 1.0f, 1.0f, 1.0f);
+    return attr4(g.colors, t.i[0]) * b[0] + attr4(g.colors, t.i[1]) * b[1] +
+           attr4(g.colors, t.i[2]) * b[2];
+}
+
+PTI const HitData& hit_data() { return *reinterpret_cast<const HitData*>(optixGetSbtDataPointer()); }
+
+PTI const InstanceXform& instance_xform() {
+    u32 i = optixGetInstanceIndex();
+    if (i >= params.num_instances) i = 0u;
+    return ptr<InstanceXform>(params.instances)[i];
+}
+
+// ---------------------------------------------------------------------------------------------
+// The radiance payload (programs.rs PathState): 16 words, the random state first so that the
+// any-hit program can draw from it in both ray types
+// ---------------------------------------------------------------------------------------------
+
+struct PathState {
+    u32 seed, done, depth;
+    float pdf;
+    V3 radiance, throughput, origin, direction;
+};
+
+PTI void to_words(const PathState& s, u32* w) {
+    w[0] = s.seed;
+    w[1] = s.done;
+    w[2] = s.depth;
+    w[3] = __float_as_uint(s.pdf);
+    const V3* v[4] = {&s.radiance, &s.throughput, &s.origin, &s.direction};
+    for (int k = 0; k < 4; ++k) {
+        w[4 + 3 * k] = __float_as_uint(v[k]->x);
+        w[5 + 3 * k] = __float_as_uint(v[k]->y);
+        w[6 + 3 * k] = __float_as_uint(v[k]->z);
+    }
+}
+PTI PathState from_words(const u32* w) {
+    PathState s;
+    s.seed = w[0];
+    s.done = w[1];
+    s.depth = w[2];
+    s.pdf = __uint_as_float(w[3]);
+    V3* v[4] = {&s.radiance, &s.throughput, &s.origin, &s.direction};
+    for (int k = 0; k < 4; ++k) {
+        *v[k] = v3(__uint_as_float(w[4 + 3 * k]), __uint_as_float(w[5 + 3 * k]),
+                   __uint_as_float(w[6 + 3 * k]));
+    }
+    return s;
+}
+
+#define PT_GET(N) w[N] = optixGetPayload_##N();
+#define PT_SET(N) optixSetPayload_##N(w[N]);
+PTI PathState load_payload() {
+    u32 w[PT_WORDS];
+    PT_GET(0) PT_GET(1) PT_GET(2) PT_GET(3) PT_GET(4) PT_GET(5) PT_GET(6) PT_GET(7)
+    PT_GET(8) PT_GET(9) PT_GET(10) PT_GET(11) PT_GET(12) PT_GET(13) PT_GET(14) PT_GET(15)
+    return from_words(w);
+}
+PTI void store_payload(const PathState& s) {
+    u32 w[PT_WORDS];
+    to_words(s, w);
+    PT_SET(0) PT_SET(1) PT_SET(2) PT_SET(3) PT_SET(4) PT_SET(5) PT_SET(6) PT_SET(7)
+    PT_SET(8) PT_SET(9) PT_SET(10) PT_SET(11) PT_SET(12) PT_SET(13) PT_SET(14) PT_SET(15)
+}
+#undef PT_GET
+#undef PT_SET
+
+PTI float power_heuristic(float a, float b) {
+    float a2 = a * a, b2 = b * b;
+    return a2 + b2 > 0.0f ? a2 / (a2 + b2) : 0.0f;
+}
+
+// ---------------------------------------------------------------------------------------------
+// The environment (lights.rs Environment)
+// ---------------------------------------------------------------------------------------------
+
+PTI u32 env_texel_of(V3 d) {
+    float u = 0.5f + atan2f(d.x, -d.z) / PT_TAU;
+    float v = acosf(clampf(d.y, -1.0f, 1.0f)) / PT_PI;
+    float fx = u * (float)params.env_width, fy = v * (float)params.env_height;
+    // `as usize` saturates: negative (or NaN) to 0.
+    u32 x = fx > 0.0f ? (u32)minf(fx, 4294967040.0f) : 0u;
+    u32 y = fy > 0.0f ? (u32)minf(fy, 4294967040.0f) : 0u;
+    if (x > params.env_width - 1u) x = params.env_width - 1u;
+    if (y > params.env_height - 1u) y = params.env_height - 1u;
+    return y * params.env_width + x;
+}
+
+PTI V3 env_texel(u32 i) { return v3a(ptr<float>(params.env_texels) + 3ull * i); }
+
+PTI V3 env_radiance(V3 d) {
+    if (!finite3(d)) return v3s(0.0f);
+    return env_texel(env_texel_of(d));
+}
+
+PTF float env_pdf(V3 d) {
+    if (params.env_total <= 0.0f || !finite3(d)) return 0.0f;
+    u32 i = env_texel_of(d);
+    u32 y = i / params.env_width;
+    float centre = sinf(PT_PI * ((float)y + 0.5f) / (float)params.env_height);
+    float p_texel = luminance(env_texel(i)) * centre / params.env_total;
+    float sin_theta = maxf(sqrtf(maxf(1.0f - d.y * d.y, 0.0f)), 1e-6f);
+    return p_texel * (float)(params.env_width * params.env_height) /
+           (2.0f * PT_PI * PT_PI * sin_theta);
+}
+
+// The first index whose cumulative value exceeds u (Rust's partition_point(|&c| c <= u)).
+PTI u32 upper_bound(const float* cdf, u32 n, float u) {
+    u32 lo = 0u, hi = n;
+    while (lo < hi) {
+        u32 mid = lo + (hi - lo) / 2u;
+        if (cdf[mid] <= u) {
+            lo = mid + 1u;
+        } else {
+            hi = mid;
+        }
+    }
+    return lo;
+}
+
+PTI float within(const float* cdf, u32 i, float u) {
+    float lo = i == 0u ? 0.0f : cdf[i - 1u];
+    float hi = cdf[i];
+    return hi > lo ? clampf((u - lo) / (hi - lo), 0.0f, 0.999999f) : 0.5f;
+}
+
+PTI V3 direction_at(float u, float v) {
+    float phi = (u - 0.5f) * PT_TAU;
+    float theta = v * PT_PI;
+    float s = sinf(theta);
+    return v3(s * sinf(phi), cosf(theta), -s * cosf(phi));
+}
+
+// Draws a direction in proportion to radiance: false if the environment is black.
+PTF bool env_sample(float u0, float u1, V3& d, V3& l, float& pdf) {
+    if (params.env_total <= 0.0f) return false;
+    u32 w = params.env_width, h = params.env_height;
+    const float* marginal = ptr<float>(params.env_marginal);
+    u32 y = upper_bound(marginal, h, u0);
+    if (y > h - 1u) y = h - 1u;
+    const float* row = ptr<float>(params.env_conditional) + (u64)y * w;
+    u32 x = upper_bound(row, w, u1);
+    if (x > w - 1u) x = w - 1u;
+    float fy = within(marginal, y, u0);
+    float fx = within(row, x, u1);
+    d = direction_at(((float)x + fx) / (float)w, ((float)y + fy) / (float)h);
+    pdf = env_pdf(d);
+    if (!(pdf > 0.0f)) return false;
+    l = env_radiance(d);
+    return true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Shading
+// ---------------------------------------------------------------------------------------------
+
+struct Shading {
+    V3 point, ng, ns;
+    V2 uvs[2];
+    V4 color;
+    bool front;
+};
+
+PTF Shading shading(const Material& m, const HitData& g) {
+    const InstanceXform& x = instance_xform();
+    V3 dir = from_f3(optixGetWorldRayDirection());
+    Shading sh;
+    sh.point = from_f3(optixGetWorldRayOrigin()) + dir * optixGetRayTmax();
+    u32 prim = optixGetPrimitiveIndex();
+    bool has_t = prim < g.num_triangles;
+    Tri t = has_t ? triangle_of(g, prim) : Tri{{0u, 0u, 0u}};
+    V3 a = attr3(g.positions, t.i[0]), b = attr3(g.positions, t.i[1]),
+       c = attr3(g.positions, t.i[2]);
+    V3 ng = normalize_or(xf_normal(x.w2o, cross(b - a, c - a)), v3(0.0f, 1.0f, 0.0f));
+    sh.front = dot(ng, dir) < 0.0f;
+    ng = sh.front ? ng : -ng;
+    float2 bc = optixGetTriangleBarycentrics();
+    float bary[3] = {1.0f - bc.x - bc.y, bc.x, bc.y};
+    V3 ns = ng;
+    if (has_t) {
+        uvs_at(g, t, bary, sh.uvs);
+        sh.color = color_at(g, t, bary);
+        if (g.normals != 0ull) {
+            V3 n = attr3(g.normals, t.i[0]) * bary[0] + attr3(g.normals, t.i[1]) * bary[1] +
+                   attr3(g.normals, t.i[2]) * bary[2];
+            ns = normalize_or(xf_normal(x.w2o, n), ng);
+        }
+    } else {
+        sh.uvs[0] = v2(0.0f, 0.0f);
+        sh.uvs[1] = v2(0.0f, 0.0f);
+        sh.color = v4(1.0f, 1.0f, 1.0f, 1.0f);
+    }
+    if (dot(ns, ng) < 0.0f) ns = -ns;
+    if (m.normal_tex.texture >= 0 && has_t) {
+        u64 set = m.normal_tex.tex_coord == 1u ? g.uvs1 : g.uvs0;
+        if (set != 0ull) {
+            // Tangent frame from the triangle's positions and the normal map's coordinates.
+            V2 t0 = attr2(set, t.i[0]), t1 = attr2(set, t.i[1]), t2 = attr2(set, t.i[2]);
+            V2 d1 = t1 - t0, d2 = t2 - t0;
+            float det = d1.x * d2.y - d2.x * d1.y;
+            if (fabsf(det) > 1e-12f) {
+                V3 e1 = b - a, e2 = c - a;
+                V3 tangent = xf_vector(x.o2w, (e1 * d2.y - e2 * d1.y) / det);
+                tangent = normalize_or_zero(tangent - ns * dot(ns, tangent));
+                if (!is_zero(tangent)) {
+                    V3 bitangent = cross(ns, tangent);
+                    if (det < 0.0f) bitangent = -bitangent;
+                    V3 n = xyz(tex(m.normal_tex, sh.uvs, false)) * 2.0f - v3s(1.0f);
+                    n = v3(n.x * m.normal_scale, n.y * m.normal_scale, n.z);
+                    V3 mapped = normalize_or(tangent * n.x + bitangent * n.y + ns * n.z, ns);
+                    if (dot(mapped, ng) > 0.0f) ns = mapped;
+                }
+            }
+        }
+    }
+    if (dot(ns, -dir) <= 0.0f) ns = ng;
+    sh.ng = ng;
+    sh.ns = ns;
+    return sh;
+}
+
+PTI V3 offset(const Shading& s, V3 dir) {
+    float scale = params.eps + max_element(abs3(s.point)) * 1e-6f;
+    return dot(dir, s.ng) >= 0.0f ? s.point + s.ng * scale : s.point - s.ng * scale;
+}
+
+// Traces a shadow ray; true when nothing blocks it.
+PTI bool visible(u32 seed, V3 from, V3 dir, float tmax) {
+    u32 w0 = seed, w1 = 0u;
+    optixTrace(params.handle, f3(from), f3(dir), 0.0f, tmax, 0.0f, (OptixVisibilityMask)0xFF,
+               OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT | OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT,
+               PT_SHADOW, PT_RAY_TYPES, PT_SHADOW, w0, w1);
+    return w1 != 0u;
+}
+
+PTI float inf() { return __uint_as_float(0x7f800000u); }
+
+// One light sample (a triangle or the environment), weighted against BSDF sampling.
+PTF V3 next_event(Rng& rng, const Surface& surf, const Shading& sh, V3 wo) {
+    float pick = rng.uniform();
+    float u[3];
+    u[0] = rng.uniform();
+    u[1] = rng.uniform();
+    u[2] = rng.uniform();
+    if (pick < params.p_env) {
+        V3 wi, l;
+        float pdf;
+        if (!env_sample(u[0], u[1], wi, l, pdf)) return v3s(0.0f);
+        pdf = pdf * params.p_env;
+        float bsdf_pdf;
+        V3 f = bsdf_eval(surf, sh.ns, wo, wi, bsdf_pdf);
+        if (is_zero(f) || dot(wi, sh.ng) <= 0.0f) return v3s(0.0f);
+        if (!visible(rng.s, offset(sh, wi), wi, inf())) return v3s(0.0f);
+        return f * l * (power_heuristic(pdf, bsdf_pdf) / pdf);
+    }
+    if (params.num_lights == 0u) return v3s(0.0f);
+    u32 i = upper_bound(ptr<float>(params.light_cdf), params.num_lights, u[0]);
+    if (i > params.num_lights - 1u) i = params.num_lights - 1u;
+    const LightTri& tri = ptr<LightTri>(params.lights)[i];
+    float b1 = u[1], b2 = u[2];
+    if (b1 + b2 > 1.0f) {
+        b1 = 1.0f - b1;
+        b2 = 1.0f - b2;
+    }
+    V3 lp = v3a(tri.p0) + v3a(tri.e1) * b1 + v3a(tri.e2) * b2;
+    if (tri.material >= params.num_materials) return v3s(0.0f);
+    float area_pdf = ptr<float>(params.light_area_pdf)[tri.material];
+    const Material& lm = ptr<Material>(params.materials)[tri.material];
+    V3 from = offset(sh, lp - sh.point);
+    V3 to = lp - from;
+    float dist = length(to);
+    if (!(dist > 0.0f)) return v3s(0.0f);
+    V3 wi = to / dist;
+    V3 ln = v3a(tri.normal);
+    float cos_l = tri.two_sided ? fabsf(dot(ln, wi)) : -dot(ln, wi);
+    float bsdf_pdf;
+    V3 f = bsdf_eval(surf, sh.ns, wo, wi, bsdf_pdf);
+    if (is_zero(f) || dot(wi, sh.ng) <= 0.0f || cos_l <= 1e-6f) return v3s(0.0f);
+    V2 uv = v2(tri.uv[0], tri.uv[1]) * (1.0f - b1 - b2) + v2(tri.uv[2], tri.uv[3]) * b1 +
+            v2(tri.uv[4], tri.uv[5]) * b2;
+    // The light's texture coordinates are those of its emissive texture's set.
+    V2 uvs[2] = {uv, uv};
+    V3 le = emission(lm, uvs);
+    float pdf = (1.0f - params.p_env) * area_pdf * dist * dist / cos_l;
+    if (is_zero(le) || !(pdf > 0.0f)) return v3s(0.0f);
+    // Stop short of the light itself.
+    if (!visible(rng.s, from, wi, dist * (1.0f - 1e-4f) - params.eps)) return v3s(0.0f);
+    return f * le * (power_heuristic(pdf, bsdf_pdf) / pdf);
+}
+
+// glTF's punctual lights are photometric; the renderer works at 683 lm/W.
+#define PT_LUMENS_PER_WATT 683.0f
+
+// One punctual light, chosen uniformly, sampled exactly.
+PTF V3 punctual_light(Rng& rng, const Surface& surf, const Shading& sh, V3 wo) {
+    u32 n = params.num_punctual;
+    if (n == 0u) return v3s(0.0f);
+    float fi = rng.uniform() * (float)n;
+    u32 i = fi > 0.0f ? (u32)fi : 0u;
+    if (i > n - 1u) i = n - 1u;
+    const Punctual& l = ptr<Punctual>(params.punctual)[i];
+    V3 wi, e;
+    bool finite_dist;
+    if (l.kind == 0u) {
+        wi = -v3a(l.direction);
+        e = v3a(l.intensity);
+        finite_dist = false;
+    } else {
+        V3 to = v3a(l.position) - sh.point;
+        float d2 = dot(to, to);
+        if (!(d2 > 0.0f)) return v3s(0.0f);
+        float d = sqrtf(d2);
+        wi = to / d;
+        e = v3a(l.intensity) / d2;
+        // The extension's recommended window: smooth to zero at the range (infinite for
+        // none, where the window is 1).
+        float q = d / l.range;
+        float q2 = q * q;
+        float w = clampf(1.0f - q2 * q2, 0.0f, 1.0f);
+        e = e * (w * w);
+        if (l.kind == 2u) {
+            float scale = 1.0f / maxf(l.cos_inner - l.cos_outer, 1e-3f);
+            float t = clampf((dot(v3a(l.direction), -wi) - l.cos_outer) * scale, 0.0f, 1.0f);
+            e = e * (t * t);
+        }
+        finite_dist = true;
+    }
+    e = e / PT_LUMENS_PER_WATT;
+    if (is_zero(e) || dot(wi, sh.ng) <= 0.0f) return v3s(0.0f);
+    float unused;
+    V3 f = bsdf_eval(surf, sh.ns, wo, wi, unused);
+    if (is_zero(f)) return v3s(0.0f);
+    V3 from = offset(sh, wi);
+    float tmax = finite_dist ? length(v3a(l.position) - from) * (1.0f - 1e-4f) : inf();
+    if (!visible(rng.s, from, wi, tmax)) return v3s(0.0f);
+    return f * e * (float)n;
+}
+
+// Coverage of an alpha-tested material at the current candidate hit.
+PTI float alpha_at(const Material& m, const HitData& g) {
+    u32 prim = optixGetPrimitiveIndex();
+    if (prim >= g.num_triangles) return 1.0f;
+    Tri t = triangle_of(g, prim);
+    float2 bc = optixGetTriangleBarycentrics();
+    float b[3] = {1.0f - bc.x - bc.y, bc.x, bc.y};
+    V2 uvs[2];
+    uvs_at(g, t, b, uvs);
+    return m.base_color[3] * tex(m.base_color_tex, uvs, true).w * color_at(g, t, b).w;
+}
+
+}  // namespace pt
+
+using namespace pt;
+
+// ---------------------------------------------------------------------------------------------
+// The programs
+// ---------------------------------------------------------------------------------------------
+
+extern "C" __global__ void __raygen__camera() {
+    const uint3 idx = optixGetLaunchIndex();
+    const uint3 dim = optixGetLaunchDimensions();
+    u32 pixel = idx.y * dim.x + idx.x;
+    Rng rng = rng_new(pixel, params.sample, 0x5eedu);
+    float jx = rng.uniform();
+    float jy = rng.uniform();
+    float sx = 2.0f * ((float)idx.x + jx) / (float)dim.x - 1.0f;
+    float sy = 1.0f - 2.0f * ((float)idx.y + jy) / (float)dim.y;
+    V3 dir = normalize(v3a(params.cam_forward) + v3a(params.cam_right) * sx +
+                       v3a(params.cam_up) * sy);
+    PathState s;
+    s.seed = rng.s;
+    s.done = 0u;
+    s.depth = 0u;
+    s.pdf = 0.0f;
+    s.radiance = v3s(0.0f);
+    s.throughput = v3s(1.0f);
+    s.origin = v3a(params.cam_origin);
+    s.direction = dir;
+    // Each trace either ends the path or adds a vertex, and vertices are capped.
+    for (u32 k = 0; k <= params.max_depth; ++k) {
+        u32 w[PT_WORDS];
+        to_words(s, w);
+        optixTrace(params.handle, f3(s.origin), f3(s.direction), 0.0f, inf(), 0.0f,
+                   (OptixVisibilityMask)0xFF, OPTIX_RAY_FLAG_NONE, PT_RADIANCE, PT_RAY_TYPES,
+                   PT_RADIANCE, w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7], w[8], w[9], w[10],
+                   w[11], w[12], w[13], w[14], w[15]);
+        s = from_words(w);
+        if (s.done != 0u) break;
+    }
+    V3 r = s.radiance;
+    // A non-finite sample is dropped; the count still advances, so it reads as black.
+    if (!finite3(r)) r = v3s(0.0f);
+    // Four floats a pixel (not float4: the host buffer is only 4-byte aligned).
+    float* a = reinterpret_cast<float*>(params.accum) + 4ull * pixel;
+    a[0] = a[0] + r.x;
+    a[1] = a[1] + r.y;
+    a[2] = a[2] + r.z;
+    a[3] = a[3] + 1.0f;
+}
+
+extern "C" __global__ void __closesthit__radiance() {
+    PathState s = load_payload();
+    const HitData& g = hit_data();
+    if (g.material >= params.num_materials) {
+        s.done = 1u;
+        store_payload(s);
+        return;
+    }
+    const Material& m = ptr<Material>(params.materials)[g.material];
+    Shading sh = shading(m, g);
+    V3 dir = from_f3(optixGetWorldRayDirection());
+    V3 wo = -dir;
+    Rng rng{s.seed};
+    V3 thr = s.throughput;
+    V3 rad = s.radiance;
+
+    // Emission, weighted against the light sample that could have found it. Single-sided
+    // materials emit from their front face only.
+    V3 le = (sh.front || m.double_sided) ? emission(m, sh.uvs) : v3s(0.0f);
+    if (!is_zero(le)) {
+        float w = 1.0f;
+        if (s.pdf > 0.0f) {
+            float t = optixGetRayTmax();
+            float cos_l = maxf(fabsf(dot(sh.ng, wo)), 1e-6f);
+            float light_pdf = (1.0f - params.p_env) *
+                              ptr<float>(params.light_area_pdf)[g.material] * t * t / cos_l;
+            w = power_heuristic(s.pdf, light_pdf);
+        }
+        rad = rad + thr * le * w;
+    }
+    s.depth += 1u;
+    if (s.depth >= params.max_depth) {
+        s.done = 1u;
+    } else {
+        V4 base_tex = tex(m.base_color_tex, sh.uvs, true);
+        V4 mr = tex(m.metallic_roughness_tex, sh.uvs, false);
+        // glTF: the vertex colour multiplies the base colour factor and texture.
+        V3 base = v3a(m.base_color) * xyz(base_tex) * xyz(sh.color);
+        Surface surf =
+            surface_new(base, m.metallic * mr.z, m.roughness * mr.y, m.transmission, m.ior);
+        if (!surf.dielectric) {
+            rad = rad + thr * next_event(rng, surf, sh, wo);
+            rad = rad + thr * punctual_light(rng, surf, sh, wo);
+        }
+        float u0 = rng.uniform();
+        float u1 = rng.uniform();
+        float u2 = rng.uniform();
+        BsdfSample b;
+        if (bsdf_sample(surf, sh.ns, wo, sh.front, u0, u1, u2, b) &&
+            (surf.dielectric || dot(b.wi, sh.ng) > 0.0f)) {
+            thr = thr * b.weight;
+            s.pdf = b.pdf;
+            s.origin = offset(sh, b.wi);
+            s.direction = b.wi;
+            if (s.depth >= 2u) {
+                float q = clampf(max_element(thr), 0.05f, 1.0f);
+                if (rng.uniform() >= q) {
+                    s.done = 1u;
+                } else {
+                    thr = thr / q;
+                }
+            }
+            if (!finite3(thr)) s.done = 1u;
+        } else {
+            s.done = 1u;
+        }
+    }
+    s.seed = rng.s;
+    s.radiance = rad;
+    s.throughput = thr;
+    store_payload(s);
+}
+
+// Shadow rays end at the first opaque hit (DISABLE_CLOSESTHIT): this never runs. It is the
+// closest-hit program of the shadow ray type's groups, which the device-neutral API requires.
+extern "C" __global__ void __closesthit__shadow() {}
+
+// Cutouts for MASK materials, stochastic transparency for BLEND ones (both ray types).
+extern "C" __global__ void __anyhit__alpha() {
+    const HitData& g = hit_data();
+    if (g.material >= params.num_materials) return;
+    const Material& m = ptr<Material>(params.materials)[g.material];
+    if (m.alpha_mode == 0u) return;
+    float alpha = alpha_at(m, g);
+    bool keep;
+    if (m.alpha_mode == 1u) {
+        keep = alpha >= m.alpha_cutoff;
+    } else {
+        // One decision per (path state, primitive, instance): the same surface point is either
+        // in or out for this ray, whatever the traversal order.
+        u32 h = hash(optixGetPayload_0() ^
+                     hash(optixGetPrimitiveIndex() ^ hash(optixGetInstanceIndex())));
+        keep = alpha > (float)h * (1.0f / 4294967296.0f);
+    }
+    if (!keep) {
+        optixIgnoreIntersection();
+        return;
+    }
+}
+
+extern "C" __global__ void __miss__environment() {
+    PathState s = load_payload();
+    V3 d = from_f3(optixGetWorldRayDirection());
+    V3 l = env_radiance(d);
+    if (!is_zero(l)) {
+        float w = s.pdf > 0.0f ? power_heuristic(s.pdf, params.p_env * env_pdf(d)) : 1.0f;
+        s.radiance = s.radiance + s.throughput * l * w;
+    }
+    s.done = 1u;
+    store_payload(s);
+}
+
+extern "C" __global__ void __miss__shadow() { optixSetPayload_1(1u); }
