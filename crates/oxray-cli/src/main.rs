@@ -128,6 +128,10 @@ enum Command {
         /// the device of --backend.
         #[arg(long)]
         instances: Option<usize>,
+        /// Split every triangle of each mesh into 4^K at its edges' midpoints first (the same
+        /// surface with K more levels of triangles: a large mesh of a real shape).
+        #[arg(long, value_name = "K", default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=6))]
+        subdivide: u32,
         /// cpu: the CPU table. cuda, cuda:N, auto: the same ray sets on that device next to
         /// the CPU, with hit agreement (asking for CUDA without one is an error).
         #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
@@ -391,6 +395,7 @@ fn run(cli: Cli) -> Result<()> {
             runs,
             export,
             instances,
+            subdivide,
             backend,
         } => {
             if side == 0 || side > 16384 {
@@ -429,6 +434,14 @@ fn run(cli: Cli) -> Result<()> {
                     .unwrap_or("mesh")
                     .to_string();
                 sets.push((name, mesh));
+            }
+            if subdivide > 0 {
+                for (name, mesh) in &mut sets {
+                    *mesh = mesh.subdivided(subdivide).with_context(|| {
+                        format!("{name} split {subdivide} times would exceed 2^29 triangles")
+                    })?;
+                    name.push_str(&format!("/{}", 1u64 << (2 * subdivide)));
+                }
             }
             say(format_args!(
                 "threads: {}, rays per set: {}, median of {runs} runs",

@@ -4,11 +4,15 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// The binary under test: `OXRAY_BIN`, or the one Cargo built (a test binary copied to a GPU
+/// machine runs a copied `oxray`).
 fn oxray(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_oxray"))
-        .args(args)
-        .output()
-        .unwrap()
+    Command::new(
+        std::env::var_os("OXRAY_BIN").unwrap_or_else(|| env!("CARGO_BIN_EXE_oxray").into()),
+    )
+    .args(args)
+    .output()
+    .unwrap()
 }
 
 fn tmp(name: &str) -> PathBuf {

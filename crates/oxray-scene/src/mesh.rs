@@ -186,27 +186,48 @@ impl Mesh {
             [9, 8, 1],
         ];
         for _ in 0..subdivisions {
-            let mut mid = std::collections::HashMap::new();
-            let mut midpoint = |a: u32, b: u32, positions: &mut Vec<[f32; 3]>| {
-                *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    let (p, q) = (positions[a as usize], positions[b as usize]);
-                    positions.push(normalize([p[0] + q[0], p[1] + q[1], p[2] + q[2]]));
-                    positions.len() as u32 - 1
-                })
-            };
-            let mut next = Vec::with_capacity(triangles.len() * 4);
-            for [a, b, c] in triangles {
-                let ab = midpoint(a, b, &mut positions);
-                let bc = midpoint(b, c, &mut positions);
-                let ca = midpoint(c, a, &mut positions);
-                next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-            }
-            triangles = next;
+            triangles = split4(&mut positions, &triangles, |p, q| {
+                normalize([p[0] + q[0], p[1] + q[1], p[2] + q[2]])
+            });
         }
         Mesh {
             positions,
             triangles,
         }
+    }
+
+    /// The same surface with every triangle split `levels` times into four at its edges'
+    /// midpoints (so 4^`levels` times the triangles, vertices shared): a large mesh of a real
+    /// shape for benchmarks. `None` if it would have more than 2^29 triangles (the guide's limit
+    /// per GAS) or vertices that `u32` indices cannot name.
+    ///
+    /// ```
+    /// let m = oxray_scene::mesh::Mesh::icosphere(0).subdivided(2).unwrap();
+    /// assert_eq!(m.triangles.len(), 20 * 16);
+    /// assert_eq!(m.bounds(), oxray_scene::mesh::Mesh::icosphere(0).bounds());
+    /// ```
+    pub fn subdivided(&self, levels: u32) -> Option<Mesh> {
+        let tris = (self.triangles.len() as u64).checked_mul(4u64.checked_pow(levels)?)?;
+        // Each split adds at most 3 vertices per triangle of the level before.
+        let verts = self.positions.len() as u64 + 3 * tris;
+        if tris > 1 << 29 || verts > u32::MAX as u64 {
+            return None;
+        }
+        let mut positions = self.positions.clone();
+        let mut triangles = self.triangles.clone();
+        for _ in 0..levels {
+            triangles = split4(&mut positions, &triangles, |p, q| {
+                [
+                    (p[0] + q[0]) * 0.5,
+                    (p[1] + q[1]) * 0.5,
+                    (p[2] + q[2]) * 0.5,
+                ]
+            });
+        }
+        Some(Mesh {
+            positions,
+            triangles,
+        })
     }
 
     /// The box around the vertices as `(min, max)`.
@@ -221,6 +242,30 @@ impl Mesh {
         }
         (lo, hi)
     }
+}
+
+/// Splits every triangle into four at its edges' midpoints (`mid` makes a midpoint), each edge's
+/// midpoint made once and shared; the corners keep their order, so facing is kept.
+fn split4(
+    positions: &mut Vec<[f32; 3]>,
+    triangles: &[[u32; 3]],
+    mid: impl Fn([f32; 3], [f32; 3]) -> [f32; 3],
+) -> Vec<[u32; 3]> {
+    let mut made = std::collections::HashMap::new();
+    let mut midpoint = |a: u32, b: u32, positions: &mut Vec<[f32; 3]>| {
+        *made.entry((a.min(b), a.max(b))).or_insert_with(|| {
+            positions.push(mid(positions[a as usize], positions[b as usize]));
+            positions.len() as u32 - 1
+        })
+    };
+    let mut next = Vec::with_capacity(triangles.len() * 4);
+    for &[a, b, c] in triangles {
+        let ab = midpoint(a, b, positions);
+        let bc = midpoint(b, c, positions);
+        let ca = midpoint(c, a, positions);
+        next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+    }
+    next
 }
 
 /// Most vertices or triangles a flattened scene may have: indices are `u32`. Instancing lets a

@@ -1215,18 +1215,19 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
     r.dir = dir;
     r.tmin = tmin;
     r.tmax = tmax;
-    if (handle != 0ull && prepare_ray(r)) {
+    if (fast != nullptr) {
+        // The call site checked the root (a triangle GAS the pipeline's flags allow) and the
+        // ray, and walked it.
+        const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
+        __oxray_fast_resolve(*fast, t, a, root, best);
+        if (best.found) root.gas = t;
+    } else if (handle != 0ull && prepare_ray(r)) {
         const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
         __oxray_check_root(t);
-        if (fast != nullptr) {
-            __oxray_fast_resolve(*fast, t, a, root, best);
-            if (best.found) root.gas = t;
-        } else {
-            __oxray_Path path;
-            __oxray_copy_path(path, root);
-            float tm = tmax;
-            __oxray_walk(t, r, a, path, tmin, tm, best);
-        }
+        __oxray_Path path;
+        __oxray_copy_path(path, root);
+        float tm = tmax;
+        __oxray_walk(t, r, a, path, tmin, tm, best);
     }
     if (best.found) {
         if ((flags & OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT) == 0u) {
