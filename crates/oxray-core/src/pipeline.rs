@@ -185,3 +185,127 @@ pub struct LaunchReport {
     /// The first (up to five, by launch index) exceptions, with their launch indices.
     pub first_exceptions: Vec<([u32; 3], Exception)>,
 }
+
+impl LaunchReport {
+    /// What every backend does with a finished launch's exceptions. Without an exception
+    /// record, the built-in exception program (guide §13.14) stands in: the first five
+    /// exceptions go to the context's log callback at [`LogLevel::Error`] if one is set, and
+    /// are otherwise printed to stderr ([`builtin_exception_lines`]; the guide says stdout, where
+    /// a CUDA `printf` goes, but a library keeps its caller's stdout clean). In validation mode
+    /// they are logged even with an exception record, and the first built-in exception fails the
+    /// launch (§4.3).
+    pub fn settle(
+        self,
+        context: &DeviceContext,
+        has_exception_record: bool,
+    ) -> Result<LaunchReport, crate::LaunchError> {
+        let validation = context.is_validation_mode();
+        if context.has_log_callback() {
+            if !has_exception_record || validation {
+                for (index, e) in &self.first_exceptions {
+                    context.log(LogLevel::Error, "EXCEPTION", &exception_message(*index, e));
+                }
+            }
+        } else if !has_exception_record && !self.first_exceptions.is_empty() {
+            eprint!("{}", builtin_exception_lines(&self.first_exceptions));
+        }
+        if validation {
+            if let Some((index, e)) = self
+                .first_exceptions
+                .iter()
+                .find(|(_, e)| !e.code.is_user())
+            {
+                return Err(crate::LaunchError::ValidationFailure {
+                    index: *index,
+                    exception: *e,
+                });
+            }
+        }
+        Ok(self)
+    }
+}
+
+/// The message for one exception: `launch index [x, y, z]: <exception>`.
+fn exception_message(index: [u32; 3], e: &Exception) -> String {
+    format!("launch index {index:?}: {e}")
+}
+
+/// What the built-in exception program (guide §13.14) prints when a launch has no exception
+/// record and its context no log callback: one line for each of the first five exceptions (by
+/// launch index) of `first`.
+///
+/// ```
+/// use oxray_core::{Exception, ExceptionCode};
+/// let first = [([3, 0, 0], Exception::new(ExceptionCode(7), &[1, 2]))];
+/// assert_eq!(
+///     oxray_core::pipeline::builtin_exception_lines(&first),
+///     "[oxray][EXCEPTION] launch index [3, 0, 0]: user exception (code 7, details [1, 2])\n"
+/// );
+/// ```
+pub fn builtin_exception_lines(first: &[([u32; 3], Exception)]) -> String {
+    first
+        .iter()
+        .take(5)
+        .map(|(index, e)| format!("[oxray][EXCEPTION] {}\n", exception_message(*index, e)))
+        .collect()
+}
+
+#[cfg(test)]
+mod launch_report_tests {
+    use super::*;
+    use crate::ExceptionCode;
+
+    /// §13.14: the built-in exception program prints the first five exceptions, one line each.
+    #[test]
+    fn builtin_exception_lines_print_the_first_five_13_14() {
+        let first: Vec<_> = (0..7u32)
+            .map(|i| ([i, 1, 0], Exception::new(ExceptionCode(i as i32), &[i, 2])))
+            .collect();
+        let text = builtin_exception_lines(&first);
+        let lines: Vec<&str> = text.lines().collect();
+        assert_eq!(lines.len(), 5, "{text}");
+        assert_eq!(
+            lines[3],
+            "[oxray][EXCEPTION] launch index [3, 1, 0]: user exception (code 3, details [3, 2])"
+        );
+        let trace = [(
+            [0, 0, 2],
+            Exception::new(ExceptionCode::TRACE_DEPTH_EXCEEDED, &[]),
+        )];
+        assert_eq!(
+            builtin_exception_lines(&trace),
+            "[oxray][EXCEPTION] launch index [0, 0, 2]: trace depth exceeded (code -2)\n"
+        );
+        assert_eq!(builtin_exception_lines(&[]), "");
+    }
+
+    /// §4.3: in validation mode the first built-in exception fails the launch; user exceptions
+    /// do not; without validation nothing fails.
+    #[test]
+    fn validation_mode_fails_launches_on_built_in_exceptions_4_3() {
+        let user = ([1, 0, 0], Exception::new(ExceptionCode(5), &[]));
+        let depth = (
+            [2, 0, 0],
+            Exception::new(ExceptionCode::TRACE_DEPTH_EXCEEDED, &[]),
+        );
+        let report = LaunchReport {
+            exceptions: 2,
+            first_exceptions: vec![user, depth],
+        };
+        let quiet = DeviceContext::new().log_callback(LogLevel::Error, |_, _, _| {});
+        assert_eq!(report.clone().settle(&quiet, true), Ok(report.clone()));
+        let strict = quiet.clone().validation_mode(true);
+        assert_eq!(
+            report.clone().settle(&strict, true),
+            Err(crate::LaunchError::ValidationFailure {
+                index: [2, 0, 0],
+                exception: depth.1
+            })
+        );
+        let only_user = LaunchReport {
+            exceptions: 1,
+            first_exceptions: vec![user],
+        };
+        assert_eq!(only_user.clone().settle(&strict, true), Ok(only_user));
+    }
+}

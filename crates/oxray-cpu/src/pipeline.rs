@@ -184,53 +184,12 @@ impl<P> Pipeline<P> {
                     (n1 + n2, f1)
                 },
             );
-        let context = &self.shared.context;
-        if context.has_log_callback() {
-            if exception_group.is_none() || self.shared.validation_mode {
-                for (index, e) in &first {
-                    context.log(
-                        crate::LogLevel::Error,
-                        "EXCEPTION",
-                        &exception_message(*index, e),
-                    );
-                }
-            }
-        } else if exception_group.is_none() && !first.is_empty() {
-            // §13.14: the built-in exception program prints the first five exceptions. (The guide
-            // says stdout, where a CUDA `printf` goes; a library keeps its caller's stdout clean.)
-            eprint!("{}", builtin_exception_lines(&first));
-        }
-        // §4.3: in validation mode the first non-user exception fails the launch.
-        if self.shared.validation_mode {
-            if let Some((index, e)) = first.iter().find(|(_, e)| !e.code.is_user()) {
-                return Err(LaunchError::ValidationFailure {
-                    index: *index,
-                    exception: *e,
-                });
-            }
-        }
-        Ok(LaunchReport {
+        LaunchReport {
             exceptions: count,
             first_exceptions: first,
-        })
+        }
+        .settle(&self.shared.context, exception_group.is_some())
     }
-}
-
-/// The message for one exception: `launch index [x, y, z]: <exception>`.
-fn exception_message(index: [u32; 3], e: &Exception) -> String {
-    format!("launch index {index:?}: {e}")
-}
-
-/// What the built-in exception program (guide §13.14) prints when a launch has no exception
-/// record and its context no log callback: one line for each of the first five exceptions (by
-/// launch index) of `first`, e.g.
-/// `[oxray][EXCEPTION] launch index [3, 0, 0]: user exception (code 7, details [1, 2])`.
-pub(crate) fn builtin_exception_lines(first: &[([u32; 3], Exception)]) -> String {
-    first
-        .iter()
-        .take(5)
-        .map(|(index, e)| format!("[oxray][EXCEPTION] {}\n", exception_message(*index, e)))
-        .collect()
 }
 
 impl<P> Clone for PipelineShared<P> {
@@ -265,35 +224,5 @@ impl<P> Clone for Pipeline<P> {
         Pipeline {
             shared: self.shared.clone(),
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use oxray_core::ExceptionCode;
-
-    /// §13.14: the built-in exception program prints the first five exceptions, one line each.
-    #[test]
-    fn builtin_exception_lines_print_the_first_five_13_14() {
-        let first: Vec<_> = (0..7u32)
-            .map(|i| ([i, 1, 0], Exception::new(ExceptionCode(i as i32), &[i, 2])))
-            .collect();
-        let text = builtin_exception_lines(&first);
-        let lines: Vec<&str> = text.lines().collect();
-        assert_eq!(lines.len(), 5, "{text}");
-        assert_eq!(
-            lines[3],
-            "[oxray][EXCEPTION] launch index [3, 1, 0]: user exception (code 3, details [3, 2])"
-        );
-        let trace = [(
-            [0, 0, 2],
-            Exception::new(ExceptionCode::TRACE_DEPTH_EXCEEDED, &[]),
-        )];
-        assert_eq!(
-            builtin_exception_lines(&trace),
-            "[oxray][EXCEPTION] launch index [0, 0, 2]: trace depth exceeded (code -2)\n"
-        );
-        assert_eq!(builtin_exception_lines(&[]), "");
     }
 }

@@ -13,8 +13,8 @@ use bytemuck::{Pod, Zeroable};
 use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig};
 use oxray_core::sbt::{SbtRegion, ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
 use oxray_core::{
-    Exception, ExceptionCode, LaunchError, LaunchReport, PipelineCompileOptions, PipelineError,
-    PipelineLinkOptions, SbtHeader,
+    DeviceContext, Exception, ExceptionCode, LaunchError, LaunchReport, PipelineCompileOptions,
+    PipelineError, PipelineLinkOptions, SbtHeader,
 };
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -621,7 +621,7 @@ pub(crate) struct LaunchInfo {
     pub callable_stride: u32,
     pub callable_count: u32,
     pub max_graph_depth: u32,
-    pub reserved: u32,
+    pub validation: u32,
 }
 
 /// Where each region of an SBT lies in its packed bytes.
@@ -765,6 +765,7 @@ pub struct CudaPipeline {
     max_trace_depth: u32,
     max_graph_depth: u32,
     block: u32,
+    context: DeviceContext,
     scratch: Mutex<Option<(CudaSlice<u8>, CudaSlice<u32>)>>,
 }
 
@@ -814,10 +815,19 @@ impl CudaPipeline {
             max_trace_depth: link.max_trace_depth,
             max_graph_depth: DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH,
             block: pipeline_block(),
+            context: DeviceContext::new(),
             scratch: Mutex::new(None),
         };
         pipeline.reserve_stack()?;
         Ok(pipeline)
+    }
+
+    /// Sets the device context whose options launches follow (guide §4): in validation mode
+    /// every trace checks its ray (`INVALID_RAY`) and the first built-in exception fails the
+    /// launch (§4.3); without an exception record, the first five exceptions go to its log
+    /// callback, or to stderr (§13.14), as on the CPU backend.
+    pub fn set_device_context(&mut self, context: &DeviceContext) {
+        self.context = context.clone();
     }
 
     /// The compiled kernel's registers and local memory per thread, and its block size.
@@ -964,7 +974,7 @@ impl CudaPipeline {
             callable_stride: packed.callables.stride as u32,
             callable_count: packed.callables.count as u32,
             max_graph_depth: self.max_graph_depth,
-            reserved: 0,
+            validation: self.context.is_validation_mode() as u32,
         };
         let mut var = guarded("finding the launch information", || {
             self.module.get_global("__oxray_launch", stream)
@@ -987,7 +997,7 @@ impl CudaPipeline {
             .clone_dtoh(&d_exc.slice(..))
             .map_err(driver("copying exception records"))?;
         self.ctx.synchronize()?;
-        Ok(exception_report(&words))
+        Ok(exception_report(&words).settle(&self.context, packed.exception.is_some())?)
     }
 
     /// [`launch`](Self::launch) with typed launch parameters.

@@ -67,6 +67,9 @@ pub enum ProgramError {
     /// A rule of the guide about modules, groups or pipelines.
     #[error(transparent)]
     Pipeline(#[from] PipelineError),
+    /// A launch was refused or failed (bad SBT records, sizes, validation mode), on any device.
+    #[error(transparent)]
+    Launch(#[from] oxray_core::LaunchError),
     /// The CPU backend refused or failed (compiler, cache, loading, launch).
     #[error(transparent)]
     Cpu(#[from] CxxError),
@@ -302,11 +305,26 @@ impl Pipeline {
         height: u32,
         depth: u32,
     ) -> Result<LaunchReport, ProgramError> {
-        Ok(match &self.0 {
-            PipelineRepr::Cpu(p) => p.launch(params, sbt, width, height, depth)?,
+        // The guide's launch errors are the same on every device.
+        match &self.0 {
+            PipelineRepr::Cpu(p) => {
+                p.launch(params, sbt, width, height, depth)
+                    .map_err(|e| match e {
+                        CxxError::Launch(l) => ProgramError::Launch(l),
+                        CxxError::Pipeline(p) => ProgramError::Pipeline(p),
+                        other => ProgramError::Cpu(other),
+                    })
+            }
             #[cfg(feature = "cuda")]
-            PipelineRepr::Cuda(p) => p.launch(params, sbt, width, height, depth)?,
-        })
+            PipelineRepr::Cuda(p) => {
+                p.launch(params, sbt, width, height, depth)
+                    .map_err(|e| match e {
+                        oxray_cuda::CudaError::InvalidLaunch(l) => ProgramError::Launch(l),
+                        oxray_cuda::CudaError::Pipeline(p) => ProgramError::Pipeline(p),
+                        other => ProgramError::Cuda(other),
+                    })
+            }
+        }
     }
 
     /// Sets the deepest traversable graph a trace may enter (the last argument of
@@ -477,13 +495,9 @@ impl Device {
                         _ => Err(mixed()),
                     })
                     .collect::<Result<Vec<_>, _>>()?;
-                PipelineRepr::Cuda(Box::new(CudaPipeline::new(
-                    c.context(),
-                    compile,
-                    link,
-                    params_variable,
-                    &g,
-                )?))
+                let mut p = CudaPipeline::new(c.context(), compile, link, params_variable, &g)?;
+                p.set_device_context(self.context());
+                PipelineRepr::Cuda(Box::new(p))
             }
         }))
     }

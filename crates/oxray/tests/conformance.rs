@@ -855,3 +855,43 @@ fn the_suite_compiles_with_nvrtc() {
         .unwrap_or_else(|e| panic!("the suite does not compile for the GPU: {e}"));
     }
 }
+
+#[test]
+fn validation_mode_checks_rays_and_fails_the_launch_4_3() {
+    on_every_device(|device| {
+        let gas = quads(device);
+        let handle = gas.optix_handle().unwrap();
+        let dims = [4, 1, 1];
+        // Without validation a negative tmin is not checked (what the trace finds is undefined,
+        // guide §13.2, so only the absence of an exception is compared).
+        let s = extended(device, 2);
+        let sbt = s.sbt("rg_faults", &["ms"], &["hg_vertices"; 2], None);
+        let (plain, report) = s.run(&sbt, dims, |o| ext(o, handle, dims, 0, 3));
+        assert_eq!(report.exceptions, 0);
+        assert!(plain.iter().all(|o| o[0] == 0xFA17));
+        // In validation mode it raises INVALID_RAY with the ray's bits, and the launch fails.
+        let strict = device
+            .clone()
+            .with_context(oxray::DeviceContext::new().validation_mode(true));
+        let s = extended(&strict, 2);
+        let sbt = s.sbt("rg_faults", &["ms"], &["hg_vertices"; 2], Some("ex"));
+        let out = strict.create_buffer::<[u32; 8]>(4).unwrap();
+        let params = ext(out.device_ptr(), handle, dims, 0, 3);
+        let err = s.pipeline.launch_with(&params, &sbt, 4, 1, 1).unwrap_err();
+        let oxray::programs::ProgramError::Launch(oxray::LaunchError::ValidationFailure {
+            index,
+            exception,
+        }) = err
+        else {
+            panic!("{err:?}");
+        };
+        assert_eq!(index, [0, 0, 0]);
+        assert_eq!(exception.code, ExceptionCode::INVALID_RAY);
+        assert_eq!(exception.details()[6], (-1.0f32).to_bits(), "tmin");
+        let written = out.download().unwrap();
+        assert!(written
+            .iter()
+            .all(|o| o[2] == ExceptionCode::INVALID_RAY.0 as u32));
+        (plain, exception)
+    });
+}

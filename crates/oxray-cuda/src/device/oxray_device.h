@@ -219,7 +219,7 @@ struct __oxray_LaunchInfo {
     unsigned long long callables;
     u32 callable_stride, callable_count;
     u32 max_graph_depth;  // the pipeline's maximum traversable graph depth
-    u32 reserved;
+    u32 validation;       // 1 in validation mode (§4.3): traces check their rays
 };
 __constant__ __oxray_LaunchInfo __oxray_launch;
 
@@ -1180,6 +1180,20 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
     }
     if (st.depth + 1u > OXRAY_MAX_TRACE_DEPTH) {
         __oxray_throw(OPTIX_EXCEPTION_CODE_TRACE_DEPTH_EXCEEDED, 0, nullptr);
+    }
+    // Validation mode: the ray's checks of the CPU backend (`Ray::validate`), with the ray's
+    // bits as details.
+    if (__oxray_launch.validation != 0u) {
+        bool finite = isfinite(org.x) && isfinite(org.y) && isfinite(org.z) && isfinite(dir.x) &&
+                      isfinite(dir.y) && isfinite(dir.z);
+        bool zero = dir.x == 0.0f && dir.y == 0.0f && dir.z == 0.0f;
+        bool interval = !isnan(tmin) && !isnan(tmax) && tmin >= 0.0f && tmin <= tmax;
+        if (!finite || zero || !interval) {
+            u32 d[8] = {__float_as_uint(org.x), __float_as_uint(org.y), __float_as_uint(org.z),
+                        __float_as_uint(dir.x), __float_as_uint(dir.y), __float_as_uint(dir.z),
+                        __float_as_uint(tmin),  __float_as_uint(tmax)};
+            __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_RAY, 8, d);
+        }
     }
     // The caller's state (a hit or miss program's ray and payload, its record).
     const char* saved_record = st.record;

@@ -175,7 +175,8 @@ extern "C" __global__ void __closesthit__vertices() {
 
 // ----------------------------------------------------------------------------------------------
 // Built-in exceptions (guide §13.14): mode 1 traces with a miss index past the records, mode 2
-// recurses past the pipeline's trace depth.
+// recurses past the pipeline's trace depth, mode 3 traces a ray with a negative tmin (an
+// invalid ray, which only validation mode checks).
 // ----------------------------------------------------------------------------------------------
 
 extern "C" __global__ void __raygen__faults() {
@@ -183,7 +184,8 @@ extern "C" __global__ void __raygen__faults() {
     o[0] = 0xFA17u;
     unsigned int p0 = 0u;
     const unsigned int miss = ext.mode == 1u ? 5u : 0u;
-    optixTrace(ext.handle, make_float3(0.5f, 0.0f, ext.z), make_float3(0.0f, 0.0f, -1.0f), 0.0f,
+    const float tmin = ext.mode == 3u ? -1.0f : 0.0f;
+    optixTrace(ext.handle, make_float3(0.5f, 0.0f, ext.z), make_float3(0.0f, 0.0f, -1.0f), tmin,
                1e16f, 0.0f, 0xFFu, 0u, 0, 1, miss, p0);
     o[1] = p0;
 }
