@@ -498,7 +498,7 @@ fn user_exceptions_end_the_launch_index_and_run_the_exception_program_13_14() {
 // The extended module
 // ----------------------------------------------------------------------------------------------
 
-const EXT_GROUPS: [(&str, G); 13] = [
+const EXT_GROUPS: [(&str, G); 14] = [
     ("rg_grid", G::Rg("__raygen__ext_grid")),
     ("rg_calls", G::Rg("__raygen__callables")),
     ("rg_faults", G::Rg("__raygen__faults")),
@@ -528,6 +528,7 @@ const EXT_GROUPS: [(&str, G); 13] = [
         "hg_recurse",
         G::Hit(Some("__closesthit__recurse"), None, None),
     ),
+    ("hg_gas", G::Hit(Some("__closesthit__gas"), None, None)),
     ("call_mix", G::Call(Some("__direct_callable__mix"), None)),
     (
         "call_probe",
@@ -894,4 +895,52 @@ fn validation_mode_checks_rays_and_fails_the_launch_4_3() {
             .all(|o| o[2] == ExceptionCode::INVALID_RAY.0 as u32));
         (plain, exception)
     });
+}
+
+#[test]
+fn the_hit_gas_handle_is_the_traced_handle_13_7() {
+    on_every_device(|device| {
+        let gas = quads(device);
+        let handle = gas.optix_handle().unwrap();
+        let s = extended(device, 1);
+        let dims = [8, 4, 1];
+        let sbt = s.sbt("rg_grid", &["ms"], &["hg_gas"; 2], None);
+        let (out, _) = s.run(&sbt, dims, |o| ext(o, handle, dims, 0, 0));
+        assert!(out.iter().any(|o| o[0] == 1));
+        for o in out.iter().filter(|o| o[0] == 1) {
+            assert_eq!((o[1], o[2]), (1, 1), "optixGetGASTraversableHandle");
+        }
+        out
+    });
+}
+
+/// Both device headers define the same device functions (a program that compiles for one
+/// device compiles for the other, GPU-only intrinsics aside).
+#[test]
+fn both_device_headers_name_the_same_device_functions() {
+    fn names(header: &str) -> std::collections::BTreeSet<String> {
+        let mut out = std::collections::BTreeSet::new();
+        for (i, _) in header.match_indices("optix") {
+            let before = header[..i].chars().next_back();
+            if before.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_') {
+                continue;
+            }
+            let name: String = header[i..]
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect();
+            if name.len() > 5 && name.as_bytes()[5].is_ascii_uppercase() {
+                out.insert(name);
+            }
+        }
+        out
+    }
+    let gpu = names(oxray::cuda::DEVICE_HEADER);
+    let cpu = names(oxray::cpu::cxx::DEVICE_HEADER_CPU);
+    assert!(gpu.len() > 50, "{} names", gpu.len());
+    assert_eq!(
+        gpu.symmetric_difference(&cpu).collect::<Vec<_>>(),
+        Vec::<&String>::new(),
+        "device functions in one header only"
+    );
 }

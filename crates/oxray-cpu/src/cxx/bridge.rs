@@ -41,7 +41,7 @@ const PENDING_MISUSE: u32 = 6;
 
 /// The device functions a program kind may not call, by the index the header gives them (the
 /// detail of the exception that ends such a launch index).
-pub const MISUSED_FUNCTIONS: [&str; 15] = [
+pub const MISUSED_FUNCTIONS: [&str; 16] = [
     "optixGetWorldRayOrigin",
     "optixGetWorldRayDirection",
     "optixGetObjectRayOrigin",
@@ -57,6 +57,7 @@ pub const MISUSED_FUNCTIONS: [&str; 15] = [
     "a transform of the current hit",
     "optixGetTransformListSize",
     "optixGetTransformListHandle",
+    "optixGetGASTraversableHandle",
 ];
 
 /// The user exception that ends a launch index whose C++ program misbehaved in a way OptiX
@@ -137,6 +138,7 @@ pub(crate) struct CApi {
     transform_list:
         unsafe extern "C" fn(*mut CFrame, u32, *mut u32, *mut u32, *mut f32, *mut f32) -> u32,
     vertex_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
+    gas_handle: unsafe extern "C" fn(*mut CFrame) -> u64,
 }
 
 static API: CApi = CApi {
@@ -146,6 +148,7 @@ static API: CApi = CApi {
     transform: api_transform,
     transform_list: api_transform_list,
     vertex_data: api_vertex_data,
+    gas_handle: api_gas_handle,
 };
 
 /// A wrapped program: `__oxray_entry_<name>(frame)`, 0 when it returned, 1 when it unwound.
@@ -725,4 +728,19 @@ unsafe extern "C" fn api_vertex_data(f: *mut CFrame, out: *mut f32) {
     ];
     // SAFETY: the header passes 9 floats.
     unsafe { std::ptr::copy_nonoverlapping(flat.as_ptr(), out, 9) };
+}
+
+unsafe extern "C" fn api_gas_handle(f: *mut CFrame) -> u64 {
+    // SAFETY: the header passes the running program's frame.
+    let f = unsafe { &mut *f };
+    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
+    let gas = unsafe {
+        match f.kind {
+            KIND_CH => ctx_of::<Ch>(f).gas,
+            KIND_AH => ctx_of::<Ah>(f).gas,
+            _ => None,
+        }
+    };
+    // The structure's address: the value `optix_handle` gives a GAS traced directly.
+    gas.map_or(0, |g| g as *const crate::Gas as usize as u64)
 }

@@ -292,6 +292,8 @@ struct __oxray_Api {
                                    unsigned int* index, float* o2w, float* w2o);
     // The object-space vertices of the hit triangle (9 floats; zeros for a custom primitive).
     void (*vertex_data)(__oxray_Frame* f, float* v);
+    // The handle of the hit's GAS (its address, as `optix_handle` gives it; 0 if unknown).
+    unsigned long long (*gas_handle)(__oxray_Frame* f);
 };
 
 // Program kinds, as the runtime numbers them.
@@ -451,6 +453,11 @@ static inline void optixGetTriangleVertexData(float3 data[3]) {
     float v[9];
     __oxray_frame->api->vertex_data(__oxray_frame, v);
     for (int k = 0; k < 3; ++k) data[k] = make_float3(v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+}
+
+static inline OptixTraversableHandle optixGetGASTraversableHandle() {
+    __oxray_allow(__OXRAY_HIT_KINDS, 15);
+    return __oxray_frame->api->gas_handle(__oxray_frame);
 }
 
 static inline unsigned int optixUndefinedValue() { return 0u; }

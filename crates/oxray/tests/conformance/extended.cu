@@ -173,6 +173,13 @@ extern "C" __global__ void __closesthit__vertices() {
     optixSetPayload_7(__float_as_uint(v[2].y));
 }
 
+// The hit's GAS handle: 1, and whether it is the handle traced (a GAS traced directly).
+extern "C" __global__ void __closesthit__gas() {
+    optixSetPayload_0(1u);
+    optixSetPayload_1(optixGetGASTraversableHandle() == ext.handle ? 1u : 0u);
+    optixSetPayload_2(optixGetGASTraversableHandle() != 0ull ? 1u : 0u);
+}
+
 // ----------------------------------------------------------------------------------------------
 // Built-in exceptions (guide §13.14): mode 1 traces with a miss index past the records, mode 2
 // recurses past the pipeline's trace depth, mode 3 traces a ray with a negative tmin (an
