@@ -498,7 +498,7 @@ fn user_exceptions_end_the_launch_index_and_run_the_exception_program_13_14() {
 // The extended module
 // ----------------------------------------------------------------------------------------------
 
-const EXT_GROUPS: [(&str, G); 14] = [
+const EXT_GROUPS: [(&str, G); 16] = [
     ("rg_grid", G::Rg("__raygen__ext_grid")),
     ("rg_calls", G::Rg("__raygen__callables")),
     ("rg_faults", G::Rg("__raygen__faults")),
@@ -529,6 +529,11 @@ const EXT_GROUPS: [(&str, G); 14] = [
         G::Hit(Some("__closesthit__recurse"), None, None),
     ),
     ("hg_gas", G::Hit(Some("__closesthit__gas"), None, None)),
+    ("rg_sbt", G::Rg("__raygen__sbt")),
+    (
+        "hg_record",
+        G::Hit(Some("__closesthit__record"), None, None),
+    ),
     ("call_mix", G::Call(Some("__direct_callable__mix"), None)),
     (
         "call_probe",
@@ -943,4 +948,43 @@ fn both_device_headers_name_the_same_device_functions() {
         Vec::<&String>::new(),
         "device functions in one header only"
     );
+}
+
+#[test]
+fn the_sbt_index_uses_the_low_bits_of_the_trace_offset_and_stride_7_3() {
+    on_every_device(|device| {
+        let gas = quads(device);
+        let handle = gas.optix_handle().unwrap();
+        // Both sides through one instance of SBT offset 3, to add the instance's term.
+        let inst = [Instance::new(gas.handle()).sbt_offset(3)];
+        let ias = device
+            .build_ias(&BuildOptions::default(), &[(&inst[..]).into()])
+            .unwrap();
+        let s = extended(device, 1);
+        let records: Vec<_> = (0..24u32).map(|k| (s.header("hg_record"), k)).collect();
+        let sbt = ShaderBindingTable {
+            raygen: SbtRegion::from_headers(&[s.header("rg_sbt")]),
+            miss: SbtRegion::from_headers(&[s.header("ms")]),
+            hitgroup: SbtRegion::from_records(&records),
+            ..Default::default()
+        };
+        let dims = [8, 1, 1];
+        let mut all = Vec::new();
+        for (h, inst_offset) in [(handle, 0), (ias.optix_handle().unwrap(), 3)] {
+            // (offset, stride): 0x12 & 0xF = 2; stride 0x13 & 0xF = 3.
+            for (offset, stride) in [(0u32, 1u32), (1, 1), (2, 2), (0x12, 0x13), (5, 0)] {
+                let mode = offset | (stride << 8);
+                let (out, report) = s.run(&sbt, dims, |o| ext(o, h, dims, 0, mode));
+                assert_eq!(report.exceptions, 0, "{report:?}");
+                for (x, o) in out.iter().enumerate() {
+                    let gas_index = (x >= 4) as u32;
+                    assert_eq!((o[0], o[2]), (1, gas_index), "x {x}");
+                    let expect = inst_offset + gas_index * (stride & 0xF) + (offset & 0xF);
+                    assert_eq!(o[1], expect, "record for offset {offset} stride {stride}");
+                }
+                all.push(out);
+            }
+        }
+        all
+    });
 }

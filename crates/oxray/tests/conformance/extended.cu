@@ -173,6 +173,27 @@ extern "C" __global__ void __closesthit__vertices() {
     optixSetPayload_7(__float_as_uint(v[2].y));
 }
 
+// The SBT index formula (§7.3) with the trace's SBT offset and stride (only their low 4 bits
+// count): `mode` packs offset (bits 0-7) and stride (bits 8-15); the closest-hit program
+// reports the record it runs from (its SBT data) and the SBT-GAS index.
+extern "C" __global__ void __raygen__sbt() {
+    const uint3 i = optixGetLaunchIndex();
+    const float x = 2.0f * ((float)i.x + 0.5f) / (float)ext.width - 1.0f;
+    unsigned int p0 = 0u, p1 = 0u, p2 = 0u;
+    optixTrace(ext.handle, make_float3(x, 0.0f, ext.z), make_float3(0.0f, 0.0f, -1.0f), 0.0f,
+               1e16f, 0.0f, 0xFFu, 0u, ext.mode & 0xFFu, (ext.mode >> 8) & 0xFFu, 0, p0, p1, p2);
+    unsigned int* o = ext.out + 8 * ext_index();
+    o[0] = p0;
+    o[1] = p1;
+    o[2] = p2;
+}
+
+extern "C" __global__ void __closesthit__record() {
+    optixSetPayload_0(1u);
+    optixSetPayload_1(*reinterpret_cast<const unsigned int*>(optixGetSbtDataPointer()));
+    optixSetPayload_2(optixGetSbtGASIndex());
+}
+
 // The hit's GAS handle: 1, and whether it is the handle traced (a GAS traced directly).
 extern "C" __global__ void __closesthit__gas() {
     optixSetPayload_0(1u);
