@@ -498,7 +498,7 @@ fn user_exceptions_end_the_launch_index_and_run_the_exception_program_13_14() {
 // The extended module
 // ----------------------------------------------------------------------------------------------
 
-const EXT_GROUPS: [(&str, G); 16] = [
+const EXT_GROUPS: [(&str, G); 17] = [
     ("rg_grid", G::Rg("__raygen__ext_grid")),
     ("rg_calls", G::Rg("__raygen__callables")),
     ("rg_faults", G::Rg("__raygen__faults")),
@@ -533,6 +533,10 @@ const EXT_GROUPS: [(&str, G); 16] = [
     (
         "hg_record",
         G::Hit(Some("__closesthit__record"), None, None),
+    ),
+    (
+        "hg_mark",
+        G::Hit(Some("__closesthit__ah_seen"), Some("__anyhit__mark"), None),
     ),
     ("call_mix", G::Call(Some("__direct_callable__mix"), None)),
     (
@@ -981,6 +985,86 @@ fn the_sbt_index_uses_the_low_bits_of_the_trace_offset_and_stride_7_3() {
                     assert_eq!((o[0], o[2]), (1, gas_index), "x {x}");
                     let expect = inst_offset + gas_index * (stride & 0xF) + (offset & 0xF);
                     assert_eq!(o[1], expect, "record for offset {offset} stride {stride}");
+                }
+                all.push(out);
+            }
+        }
+        all
+    });
+}
+
+#[test]
+fn any_hit_precedence_geometry_instance_ray_13_2() {
+    use oxray::{GeometryFlags, InstanceFlags};
+    on_every_device(|device| {
+        // The quads, the left input with DISABLE_ANYHIT.
+        let left = [
+            [-1.0f32, -1.0, 0.0],
+            [0.0, -1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [-1.0, 1.0, 0.0],
+        ];
+        let right = left.map(|[x, y, z]| [x + 1.0, y, z]);
+        let idx = [[0u32, 1, 2], [0, 2, 3]];
+        let off = [GeometryFlags::DISABLE_ANYHIT];
+        let on = [GeometryFlags::empty()];
+        let a = TriangleInput::new(VertexBuffer::f32x3(&left))
+            .indices(IndexBuffer::u32x3(&idx))
+            .flags(&off);
+        let b = TriangleInput::new(VertexBuffer::f32x3(&right))
+            .indices(IndexBuffer::u32x3(&idx))
+            .flags(&on);
+        let gas = device
+            .build_gas(&BuildOptions::default(), &[a.into(), b.into()])
+            .unwrap();
+        let s = extended(device, 1);
+        let sbt = s.sbt("rg_grid", &["ms"], &["hg_mark"; 2], None);
+        let dims = [4, 1, 1];
+        let mut all = Vec::new();
+        for iflags in [
+            None,
+            Some(InstanceFlags::empty()),
+            Some(InstanceFlags::ENFORCE_ANYHIT),
+            Some(InstanceFlags::DISABLE_ANYHIT),
+        ] {
+            let ias = iflags.map(|f| {
+                let inst = [Instance::new(gas.handle()).flags(f)];
+                device
+                    .build_ias(&BuildOptions::default(), &[(&inst[..]).into()])
+                    .unwrap()
+            });
+            let handle = match &ias {
+                Some(i) => i.optix_handle().unwrap(),
+                None => gas.optix_handle().unwrap(),
+            };
+            for rflags in [
+                RayFlags::empty(),
+                RayFlags::ENFORCE_ANYHIT,
+                RayFlags::DISABLE_ANYHIT,
+            ] {
+                let (out, report) = s.run(&sbt, dims, |o| ext(o, handle, dims, 0, rflags.bits()));
+                assert_eq!(report.exceptions, 0);
+                // Rays 1 and 2 hit the left and the right input.
+                for (x, gflag_off) in [(1usize, true), (2, false)] {
+                    let o = out[x];
+                    assert_eq!((o[0], o[1]), (1, (x == 2) as u32));
+                    let mut expect = !gflag_off;
+                    match iflags {
+                        Some(f) if f.contains(InstanceFlags::DISABLE_ANYHIT) => expect = false,
+                        Some(f) if f.contains(InstanceFlags::ENFORCE_ANYHIT) => expect = true,
+                        _ => {}
+                    }
+                    if rflags.contains(RayFlags::DISABLE_ANYHIT) {
+                        expect = false;
+                    } else if rflags.contains(RayFlags::ENFORCE_ANYHIT) {
+                        expect = true;
+                    }
+                    assert_eq!(
+                        o[3] > 0,
+                        expect,
+                        "instance {iflags:?}, ray {rflags:?}, input {}",
+                        (x == 2) as u32
+                    );
                 }
                 all.push(out);
             }

@@ -194,6 +194,15 @@ extern "C" __global__ void __closesthit__record() {
     optixSetPayload_2(optixGetSbtGASIndex());
 }
 
+// Any-hit precedence (§13.2): an any-hit program that counts its calls in payload 3, and a
+// closest-hit program that keeps the count and reports the SBT-GAS index.
+extern "C" __global__ void __anyhit__mark() { optixSetPayload_3(optixGetPayload_3() + 1u); }
+
+extern "C" __global__ void __closesthit__ah_seen() {
+    optixSetPayload_0(1u);
+    optixSetPayload_1(optixGetSbtGASIndex());
+}
+
 // The hit's GAS handle: 1, and whether it is the handle traced (a GAS traced directly).
 extern "C" __global__ void __closesthit__gas() {
     optixSetPayload_0(1u);
