@@ -1,6 +1,11 @@
 //! Reading modules of CUDA C++ programs: what every backend that compiles them needs before
 //! its compiler runs (the CUDA backend with NVRTC, the CPU backend with the host's compiler).
 
+/// The guide's types and constants that programs name (`OptixTraversableHandle`, ray flags, hit
+/// kinds, exception codes, payload, transform and primitive types, `OptixStaticTransform`), the
+/// part both device headers share: each backend's compiler puts it before its device header.
+pub const OPTIX_TYPES_HEADER: &str = include_str!("optix_types.h");
+
 /// The entry-name prefixes of the eight program kinds (guide §6.2).
 pub const ENTRY_PREFIXES: [&str; 8] = [
     "__raygen__",

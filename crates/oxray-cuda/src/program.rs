@@ -78,12 +78,7 @@ impl CudaModule {
 
     /// Whether the source defines or declares the entry `name` (a word followed by `(`).
     pub fn has_entry(&self, name: &str) -> bool {
-        let s = &self.inner.source;
-        s.match_indices(name).any(|(i, _)| {
-            let before = s[..i].chars().next_back();
-            let after = s[i + name.len()..].trim_start().chars().next();
-            !before.is_some_and(|c| c.is_alphanumeric() || c == '_') && after == Some('(')
-        })
+        oxray_core::source::has_entry(&self.inner.source, name)
     }
 
     fn entry(
@@ -302,25 +297,6 @@ impl CudaProgramGroup {
     }
 }
 
-/// Replaces `#include <optix….h>` / `"optix….h"` lines (the header is already in the unit).
-fn strip_optix_includes(source: &str) -> String {
-    let mut out = String::with_capacity(source.len());
-    for line in source.lines() {
-        let t = line.trim_start();
-        let is_optix = t.starts_with('#')
-            && t[1..].trim_start().starts_with("include")
-            && t.split(['<', '"'])
-                .nth(1)
-                .is_some_and(|h| h.trim_start().starts_with("optix"));
-        if is_optix {
-            out.push_str("// (oxray_device.h) ");
-        }
-        out.push_str(line);
-        out.push('\n');
-    }
-    out
-}
-
 /// The CUDA C++ translation unit of a pipeline: traversal, device header, modules, dispatch and
 /// the kernel `__oxray_pipeline`. Compiled with [`pipeline_compile_options`].
 pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
@@ -333,6 +309,8 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
         any_hit as u32
     ));
     s.push_str(crate::KERNEL_SOURCE);
+    s.push_str("\n#line 1 \"optix_types.h\"\n");
+    s.push_str(oxray_core::source::OPTIX_TYPES_HEADER);
     s.push_str("\n#line 1 \"oxray_device.h\"\n");
     s.push_str(DEVICE_HEADER);
     // Modules, each once, in the order the groups name them.
@@ -350,7 +328,7 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     s.push_str("\n// Entry points of the modules are device functions.\n#undef __global__\n#define __global__ __device__\n");
     for (i, m) in modules.iter().enumerate() {
         s.push_str(&format!("#line 1 \"module{i}.cu\"\n"));
-        s.push_str(&strip_optix_includes(m.source()));
+        s.push_str(&oxray_core::source::strip_optix_includes(m.source()));
         s.push('\n');
     }
     s.push_str("#line 1 \"oxray_pipeline.cu\"\n#undef __global__\n#define __global__ __location__(global)\n");
@@ -1151,9 +1129,9 @@ mod tests {
 
     #[test]
     fn optix_includes_are_replaced_by_the_header() {
-        let s = strip_optix_includes(SRC);
-        assert!(s.contains("// (oxray_device.h) #include <optix.h>"));
-        assert!(s.contains("// (oxray_device.h)   #  include \"optix_device.h\""));
+        let s = oxray_core::source::strip_optix_includes(SRC);
+        assert!(s.contains("// (oxray device header) #include <optix.h>"));
+        assert!(s.contains("// (oxray device header)   #  include \"optix_device.h\""));
         assert!(s.contains("\n#include <cuda_fp16.h>"));
     }
 

@@ -190,81 +190,8 @@ static inline float atomicAdd(float* p, float v) {
 // Types and constants of the guide
 // ---------------------------------------------------------------------------------------------
 
-typedef unsigned long long CUdeviceptr;
-typedef unsigned long long OptixTraversableHandle;
-typedef unsigned int OptixVisibilityMask;
-
-enum OptixRayFlags {
-    OPTIX_RAY_FLAG_NONE = 0u,
-    OPTIX_RAY_FLAG_DISABLE_ANYHIT = 1u << 0,
-    OPTIX_RAY_FLAG_ENFORCE_ANYHIT = 1u << 1,
-    OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT = 1u << 2,
-    OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT = 1u << 3,
-    OPTIX_RAY_FLAG_CULL_BACK_FACING_TRIANGLES = 1u << 4,
-    OPTIX_RAY_FLAG_CULL_FRONT_FACING_TRIANGLES = 1u << 5,
-    OPTIX_RAY_FLAG_CULL_DISABLED_ANYHIT = 1u << 6,
-    OPTIX_RAY_FLAG_CULL_ENFORCED_ANYHIT = 1u << 7,
-    OPTIX_RAY_FLAG_FORCE_OPACITY_MICROMAP_2_STATE = 1u << 10,
-};
-
-enum OptixHitKind {
-    OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE = 0xFE,
-    OPTIX_HIT_KIND_TRIANGLE_BACK_FACE = 0xFF,
-};
-
-enum OptixPrimitiveType {
-    OPTIX_PRIMITIVE_TYPE_CUSTOM = 0x2500,
-    OPTIX_PRIMITIVE_TYPE_TRIANGLE = 0x2531,
-};
-
-enum OptixTransformType {
-    OPTIX_TRANSFORM_TYPE_NONE = 0,
-    OPTIX_TRANSFORM_TYPE_STATIC_TRANSFORM = 1,
-    OPTIX_TRANSFORM_TYPE_MATRIX_MOTION_TRANSFORM = 2,
-    OPTIX_TRANSFORM_TYPE_SRT_MOTION_TRANSFORM = 3,
-    OPTIX_TRANSFORM_TYPE_INSTANCE = 4,
-};
-
-enum OptixExceptionCodes {
-    OPTIX_EXCEPTION_CODE_STACK_OVERFLOW = -1,
-    OPTIX_EXCEPTION_CODE_TRACE_DEPTH_EXCEEDED = -2,
-    OPTIX_EXCEPTION_CODE_TRAVERSAL_DEPTH_EXCEEDED = -3,
-    OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE = -5,
-    OPTIX_EXCEPTION_CODE_INVALID_MISS_SBT = -6,
-    OPTIX_EXCEPTION_CODE_INVALID_HIT_SBT = -7,
-    OPTIX_EXCEPTION_CODE_UNSUPPORTED_PRIMITIVE_TYPE = -8,
-    OPTIX_EXCEPTION_CODE_INVALID_RAY = -9,
-    OPTIX_EXCEPTION_CODE_CALLABLE_PARAMETER_MISMATCH = -10,
-    OPTIX_EXCEPTION_CODE_BUILTIN_IS_MISMATCH = -11,
-    OPTIX_EXCEPTION_CODE_CALLABLE_INVALID_SBT = -12,
-    OPTIX_EXCEPTION_CODE_CALLABLE_NO_DC_SBT_RECORD = -13,
-    OPTIX_EXCEPTION_CODE_CALLABLE_NO_CC_SBT_RECORD = -14,
-    OPTIX_EXCEPTION_CODE_UNSUPPORTED_SINGLE_LEVEL_GAS = -15,
-    OPTIX_EXCEPTION_CODE_PAYLOAD_TYPE_MISMATCH = -33,
-};
-
-enum OptixPayloadTypeID {
-    OPTIX_PAYLOAD_TYPE_DEFAULT = 0,
-    OPTIX_PAYLOAD_TYPE_ID_0 = (1 << 0u),
-    OPTIX_PAYLOAD_TYPE_ID_1 = (1 << 1u),
-    OPTIX_PAYLOAD_TYPE_ID_2 = (1 << 2u),
-    OPTIX_PAYLOAD_TYPE_ID_3 = (1 << 3u),
-    OPTIX_PAYLOAD_TYPE_ID_4 = (1 << 4u),
-    OPTIX_PAYLOAD_TYPE_ID_5 = (1 << 5u),
-    OPTIX_PAYLOAD_TYPE_ID_6 = (1 << 6u),
-    OPTIX_PAYLOAD_TYPE_ID_7 = (1 << 7u),
-};
-
-#define OPTIX_SBT_RECORD_HEADER_SIZE ((size_t)32)
-#define OPTIX_SBT_RECORD_ALIGNMENT 16ull
-
-// A static transform (§5.9): child, then the object-to-world and world-to-object rows.
-struct OptixStaticTransform {
-    OptixTraversableHandle child;
-    unsigned int pad[2];
-    float transform[12];
-    float invTransform[12];
-};
+// The guide's types and constants: optix_types.h (oxray_core::source::OPTIX_TYPES_HEADER),
+// which the module compiler puts before this header.
 
 // ---------------------------------------------------------------------------------------------
 // The frame of a running program, shared with the Rust runtime (oxray-cpu/src/cxx/bridge.rs)

@@ -45,7 +45,9 @@ pub(crate) fn kind_of(name: &str) -> Option<ProgramKind> {
 /// The unit's source: header, modules (each once), definitions of variables the modules
 /// declare `extern "C"`, the launch-parameter accessors, and a wrapper per entry point.
 pub(crate) fn unit_source(modules: &[CxxModule], params: Option<&str>) -> String {
-    let mut s = String::from("#line 1 \"oxray_device_cpu.h\"\n");
+    let mut s = String::from("#line 1 \"optix_types.h\"\n");
+    s.push_str(oxray_core::source::OPTIX_TYPES_HEADER);
+    s.push_str("#line 1 \"oxray_device_cpu.h\"\n");
     s.push_str(DEVICE_HEADER_CPU);
     let mut externs: Vec<String> = Vec::new();
     for (i, m) in modules.iter().enumerate() {
