@@ -7,7 +7,8 @@
 # MESH: .obj/.ply files; default: the bunny and igea from ../shared/data/meshes (relative
 # to the repository root) when present, else what `oxray bench` uses by default.
 # Environment: RUNS (default 5, both sides), THREADS (default: the thread count embreex's
-# run() traces with, measured by `bench_embree.py --print-threads`), PYTHON (default
+# run() traces with, measured by `bench_embree.py --print-threads`), CARGO_TARGET_DIR (where
+# cargo builds), PYTHON (default
 # python3; numpy and embreex are installed into scripts/.venv-embree when missing).
 # Writes bench-out/rays (meshes and rays exported by oxray); prints both tables.
 set -euo pipefail
@@ -42,7 +43,7 @@ echo "threads: $threads (the number embreex's run() traces with; both sides use 
 rm -rf "$out"
 echo
 echo "== oxray"
-target/release/oxray bench --threads "$threads" --runs "$runs" --export "$out" ${meshes[@]+"${meshes[@]}"} 2>&1
+"${CARGO_TARGET_DIR:-target}/release/oxray" bench --threads "$threads" --runs "$runs" --export "$out" ${meshes[@]+"${meshes[@]}"} 2>&1
 echo
 echo "== Embree (embreex)"
 "$py" scripts/bench_embree.py "$out" --runs "$runs" --threads "$threads" 2>&1

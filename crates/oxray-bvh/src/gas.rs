@@ -1,12 +1,14 @@
 //! The geometry acceleration structure: primitives of one kind from one or more build inputs,
-//! under a 4-wide BVH.
+//! under a 4-wide BVH (and an 8-wide one where the CPU backend asks for it).
 
 use crate::build::{build_bvh2, BuildConfig};
 use crate::bvh2::Bvh2;
 use crate::bvh4::Bvh4;
+use crate::bvh8::Bvh8;
 use crate::stats::BvhStats;
 use crate::triangle::is_degenerate;
 use crate::triangle4::Triangle4;
+use crate::wide::{leaf_starts, WideNode};
 use bytemuck::Zeroable;
 use glam::Vec3;
 use oxray_core::validate::{validate_sbt_offsets, validate_structure};
@@ -57,6 +59,18 @@ pub struct GasInfo {
     pub stats: BvhStats,
 }
 
+/// The node layouts a GAS is built with, besides the canonical tree's 4-wide layout that every
+/// structure has ([`GasData::bvh`]: updates, statistics, the CUDA backend's layouts start from
+/// it).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum NodeWidth {
+    /// The 4-wide layout only.
+    #[default]
+    Four,
+    /// Also the 8-wide layout ([`GasData::bvh8`]), for 8-wide SIMD traversal (AVX2, AVX-512).
+    Eight,
+}
+
 /// Bytes a built GAS occupies.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct GasMemory {
@@ -100,6 +114,9 @@ pub struct GasData {
     pub build_flags: BuildFlags,
     /// The 4-wide BVH; leaves point at slots (triangle GAS: at the first slot of a block).
     pub bvh: Bvh4,
+    /// The 8-wide BVH of a structure built with [`NodeWidth::Eight`]: collapsed from the same
+    /// binary tree, with the same leaves (the same slot ranges) as [`bvh`](Self::bvh).
+    pub bvh8: Option<Bvh8>,
     /// Triangles in blocks of four, in leaf-slot order (triangle GAS): slot `s` is lane `s % 4`
     /// of block `s / 4`. Each leaf starts a new block; unused lanes have no primitive.
     pub triangles: Vec<Triangle4>,
@@ -198,7 +215,38 @@ impl GasData {
     /// every rule checked. Primitives that can never be hit (a NaN or infinite coordinate, a
     /// zero-area triangle, an inverted box) are left out: they are inactive.
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<GasData, BuildError> {
-        Ok(Self::build_impl(options, inputs, false)?.0)
+        Ok(Self::build_impl(options, inputs, false, NodeWidth::Four)?.0)
+    }
+
+    /// [`build`](Self::build) with the node layouts of `width`: with [`NodeWidth::Eight`], the
+    /// structure also holds the 8-wide layout ([`bvh8`](Self::bvh8)). The 4-wide layout, the
+    /// primitives and every table are those of [`build`](Self::build), byte for byte.
+    ///
+    /// ```
+    /// use oxray_bvh::{GasData, NodeWidth};
+    /// use oxray_core::{BuildOptions, TriangleInput, VertexBuffer};
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let inputs = [TriangleInput::new(VertexBuffer::f32x3(&v)).into()];
+    /// let gas = GasData::build_with_width(&BuildOptions::default(), &inputs, NodeWidth::Eight)?;
+    /// let b8 = gas.bvh8.as_ref().unwrap();
+    /// assert_eq!((b8.nodes[0].child[0], b8.nodes[0].count[0]), (0, 1));
+    /// # Ok::<(), oxray_core::BuildError>(())
+    /// ```
+    pub fn build_with_width(
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+        width: NodeWidth,
+    ) -> Result<GasData, BuildError> {
+        Ok(Self::build_impl(options, inputs, false, width)?.0)
+    }
+
+    /// The node layouts the structure holds.
+    pub fn width(&self) -> NodeWidth {
+        if self.bvh8.is_some() {
+            NodeWidth::Eight
+        } else {
+            NodeWidth::Four
+        }
     }
 
     /// [`build`](Self::build), also returning the canonical binary BVH the builder made, with
@@ -209,7 +257,7 @@ impl GasData {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<(GasData, Bvh2), BuildError> {
-        let (gas, tree) = Self::build_impl(options, inputs, true)?;
+        let (gas, tree) = Self::build_impl(options, inputs, true, NodeWidth::Four)?;
         Ok((gas, tree.unwrap_or_default()))
     }
 
@@ -217,6 +265,7 @@ impl GasData {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
         keep_tree: bool,
+        width: NodeWidth,
     ) -> Result<(GasData, Option<Bvh2>), BuildError> {
         if options.operation == BuildOperation::Update {
             return Err(BuildError::InvalidUpdate(UpdateRule::NoStructure));
@@ -275,6 +324,7 @@ impl GasData {
             },
             build_flags: options.flags,
             bvh: Bvh4 { nodes: Vec::new() },
+            bvh8: None,
             triangles: Vec::new(),
             aabbs: Vec::new(),
             slot_prim: Vec::new(),
@@ -326,10 +376,19 @@ impl GasData {
                     .par_iter()
                     .map(|&k| ids[k as usize])
                     .collect();
-                let before = keep_tree.then(|| leaf_starts(&gas.bvh));
+                let remap = keep_tree || width == NodeWidth::Eight;
+                let before = remap.then(|| leaf_starts(&gas.bvh.nodes));
                 (gas.triangles, gas.slot_prim) = pack_triangles(&mut gas.bvh, &global, &tris);
                 if let Some(before) = before {
-                    tree = Some(remap_leaves(bvh2, &before, &leaf_starts(&gas.bvh)));
+                    let map = leaf_map(&before, &leaf_starts(&gas.bvh.nodes));
+                    if width == NodeWidth::Eight {
+                        let mut b8 = Bvh8::from(&bvh2);
+                        remap_wide_leaves(&mut b8.nodes, &map);
+                        gas.bvh8 = Some(b8);
+                    }
+                    if keep_tree {
+                        tree = Some(remap_leaves(bvh2, &map));
+                    }
                 }
                 if let Some(active) = active {
                     crate::refit::deactivate_lanes(&mut gas.triangles, &gas.slot_prim, &active);
@@ -387,6 +446,9 @@ impl GasData {
                     .collect();
                 gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
                 gas.bvh = Bvh4::from(&bvh2);
+                if width == NodeWidth::Eight {
+                    gas.bvh8 = Some(Bvh8::from(&bvh2));
+                }
                 if keep_inactive {
                     gas.bounds = crate::refit::refit_aabb_boxes(&mut gas);
                 }
@@ -480,7 +542,7 @@ impl GasData {
         fn bytes<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
         }
-        let node_bytes = bytes(&self.bvh.nodes);
+        let node_bytes = bytes(&self.bvh.nodes) + self.bvh8.as_ref().map_or(0, |b| bytes(&b.nodes));
         let primitive_bytes = bytes(&self.triangles) + bytes(&self.aabbs);
         GasMemory {
             output_bytes: node_bytes
@@ -497,6 +559,9 @@ impl GasData {
 
     fn shrink_to_fit(&mut self) {
         self.bvh.nodes.shrink_to_fit();
+        if let Some(b8) = &mut self.bvh8 {
+            b8.nodes.shrink_to_fit();
+        }
         self.triangles.shrink_to_fit();
         self.aabbs.shrink_to_fit();
         self.slot_prim.shrink_to_fit();
@@ -519,6 +584,7 @@ impl GasData {
         }
         Some(
             bytes(&self.bvh.nodes)
+                + self.bvh8.as_ref().map_or(0, |b| bytes(&b.nodes))
                 + bytes(&self.triangles)
                 + bytes(&self.aabbs)
                 + bytes(&self.slot_prim)
@@ -619,26 +685,44 @@ fn place_inactive(boxes: &mut [Option<Aabb>], fallback: impl Fn(usize) -> Aabb) 
 /// Marks an unused lane of a [`Triangle4`] block in [`GasData::slot_prim`].
 pub const NO_PRIMITIVE: u32 = u32::MAX;
 
-/// The first slot of every leaf lane of a 4-wide BVH, in node and lane order.
-fn leaf_starts(bvh: &Bvh4) -> Vec<u32> {
-    bvh.nodes
-        .iter()
-        .flat_map(|n| (0..4).filter(|&l| n.count[l] > 0).map(|l| n.child[l]))
-        .collect()
-}
-
-/// Points the leaves of the binary tree at the slots the packing gave them: the 4-wide layout's
-/// leaves are the binary tree's, so each binary leaf's first slot before packing (`before`)
-/// maps to one after (`after`, in the same order).
-fn remap_leaves(mut tree: Bvh2, before: &[u32], after: &[u32]) -> Bvh2 {
+/// The map from a binary leaf's first slot before packing (`before`, the 4-wide layout's leaf
+/// starts in node and lane order) to its first slot after (`after`, in the same order), sorted
+/// for lookups: the wide layouts' leaves are the binary tree's.
+fn leaf_map(before: &[u32], after: &[u32]) -> Vec<(u32, u32)> {
     let mut map: Vec<(u32, u32)> = before.iter().copied().zip(after.iter().copied()).collect();
     map.sort_unstable();
+    map
+}
+
+/// The packed first slot of the binary leaf starting at `start`.
+fn packed_start(map: &[(u32, u32)], start: u32) -> Option<u32> {
+    map.binary_search_by_key(&start, |&(b, _)| b)
+        .ok()
+        .map(|i| map[i].1)
+}
+
+/// Points the leaves of the binary tree at the slots the packing gave them.
+fn remap_leaves(mut tree: Bvh2, map: &[(u32, u32)]) -> Bvh2 {
     for node in tree.nodes.iter_mut().filter(|n| n.is_leaf()) {
-        if let Ok(i) = map.binary_search_by_key(&node.left_first, |&(b, _)| b) {
-            node.left_first = map[i].1;
+        if let Some(s) = packed_start(map, node.left_first) {
+            node.left_first = s;
         }
     }
     tree
+}
+
+/// Points the leaves of another wide layout (collapsed from the same binary tree) at the slots
+/// the packing gave them.
+fn remap_wide_leaves<N: WideNode>(nodes: &mut [N], map: &[(u32, u32)]) {
+    nodes.par_iter_mut().for_each(|n| {
+        for l in 0..N::WIDTH {
+            if n.count(l) > 0 {
+                let s = packed_start(map, n.child(l));
+                debug_assert!(s.is_some(), "every leaf of the tree is packed");
+                n.set_child(l, s.unwrap_or(u32::MAX));
+            }
+        }
+    });
 }
 
 /// Lays the triangles of every leaf out in blocks of four, leaves in node order, and points the
@@ -827,6 +911,78 @@ mod tests {
                     for p in tri {
                         assert!(node.bounds().contains(p.into()));
                     }
+                }
+            }
+        }
+    }
+
+    fn wide_leaves<N: WideNode>(nodes: &[N]) -> Vec<(u32, u32)> {
+        let mut out: Vec<(u32, u32)> = nodes
+            .iter()
+            .flat_map(|n| {
+                (0..N::WIDTH)
+                    .filter(|&l| n.count(l) > 0)
+                    .map(|l| (n.child(l), n.count(l)))
+            })
+            .collect();
+        out.sort_unstable();
+        out
+    }
+
+    #[test]
+    fn the_8_wide_layout_adds_to_the_4_wide_structure_and_shares_its_leaves() {
+        let n = 40u32;
+        let mut v = Vec::new();
+        for y in 0..=n {
+            for x in 0..=n {
+                v.push([x as f32, y as f32, ((x * 5 + y * 3) % 7) as f32 * 0.3]);
+            }
+        }
+        let mut t = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                let i = y * (n + 1) + x;
+                t.push([i, i + 1, i + n + 2]);
+                t.push(if x == y {
+                    [i, i, i + 1]
+                } else {
+                    [i, i + n + 2, i + n + 1]
+                });
+            }
+        }
+        let boxes: Vec<Aabb> = (0..300)
+            .map(|i| Aabb::new(Vec3::splat(i as f32), Vec3::splat(i as f32 + 0.5)))
+            .collect();
+        for flags in [
+            BuildFlags::empty(),
+            BuildFlags::PREFER_FAST_TRACE,
+            BuildFlags::ALLOW_UPDATE | BuildFlags::ALLOW_COMPACTION,
+        ] {
+            let options = BuildOptions::new(flags);
+            let tri = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u32x3(&t));
+            let custom = CustomPrimitiveInput::new(AabbBuffer::new(&boxes));
+            for input in [tri.into(), custom.into()] {
+                let four = GasData::build(&options, &[input]).unwrap();
+                let eight =
+                    GasData::build_with_width(&options, &[input], NodeWidth::Eight).unwrap();
+                assert_eq!(four.width(), NodeWidth::Four);
+                assert_eq!(eight.width(), NodeWidth::Eight);
+                assert_eq!(four.bvh.nodes, eight.bvh.nodes);
+                let bytes = |t: &[Triangle4]| bytemuck::cast_slice::<_, u8>(t).to_vec();
+                assert!(bytes(&four.triangles) == bytes(&eight.triangles));
+                assert_eq!(four.slot_prim, eight.slot_prim);
+                let b8 = eight.bvh8.as_ref().unwrap();
+                assert_eq!(wide_leaves(&b8.nodes), wide_leaves(&eight.bvh.nodes));
+                assert!(eight.memory().node_bytes > four.memory().node_bytes);
+                // Saved and loaded with both layouts.
+                let back = GasData::from_bytes(&eight.to_bytes()).unwrap();
+                assert_eq!(back.bvh8.as_ref().unwrap().nodes, b8.nodes);
+                let back = GasData::from_bytes(&four.to_bytes()).unwrap();
+                assert!(back.bvh8.is_none());
+                if flags.contains(BuildFlags::ALLOW_COMPACTION) {
+                    let c = eight.compact().unwrap();
+                    assert_eq!(c.compacted_size(), Some(c.memory().output_bytes));
+                    assert_eq!(c.memory().output_bytes, eight.compacted_size().unwrap());
                 }
             }
         }

@@ -2,7 +2,8 @@
 //!
 //! Bounding volume hierarchies for every oxray backend. Builders produce one canonical binary
 //! BVH ([`Bvh2`]); traversal layouts are derived from it ([`Bvh4`], the 4-wide layout of the
-//! CPU backend, from which the CUDA backend's node layouts are derived in turn). Leaf blocks
+//! CPU backend's SSE and portable kernels, from which the CUDA backend's node layouts are
+//! derived in turn; [`Bvh8`], the 8-wide layout of its AVX2 and AVX-512 kernels). Leaf blocks
 //! ([`Triangle4`]) and the watertight triangle test live here too, so that every backend
 //! intersects primitives with the same arithmetic and finds bit-identical hits.
 //!
@@ -29,6 +30,7 @@
 mod build;
 mod bvh2;
 mod bvh4;
+mod bvh8;
 pub mod export;
 pub mod gas;
 pub mod ias;
@@ -38,20 +40,30 @@ pub mod serialize;
 mod stats;
 pub mod triangle;
 pub mod triangle4;
+pub mod wide;
 
 pub use build::{build_bvh2, temp_bytes, BuildConfig};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh4::{Bvh4, Bvh4Node};
+pub use bvh8::{Bvh8, Bvh8Node};
 pub use export::{ExportedTriangle, GasExport};
-pub use gas::{GasData, GasInfo, GasKind, GasMemory, InputRecord, InputShape, NO_PRIMITIVE};
+pub use gas::{
+    GasData, GasInfo, GasKind, GasMemory, InputRecord, InputShape, NodeWidth, NO_PRIMITIVE,
+};
 pub use ias::{IasData, InstanceData};
 pub use memory::{compute_memory_usage, AccelBufferSizes};
 pub use stats::BvhStats;
 pub use triangle4::Triangle4;
+pub use wide::WideNode;
 
-/// A traversal stack of this many entries is always enough: the builder bounds the depth of
-/// [`Bvh2`] by [`MAX_BVH2_DEPTH`], and a 4-wide node pushes at most 3 entries per level.
+/// A traversal stack of this many entries is always enough for a [`Bvh4`]: the builder bounds
+/// the depth of [`Bvh2`] by [`MAX_BVH2_DEPTH`], and a 4-wide node pushes at most 3 entries per
+/// level.
 pub const TRAVERSAL_STACK_SIZE: usize = 3 * MAX_BVH2_DEPTH + 4;
+
+/// The same for a [`Bvh8`] (and for a [`Bvh4`]): an 8-wide node pushes at most 7 entries per
+/// level, and its depth is at most the binary tree's.
+pub const WIDE_TRAVERSAL_STACK_SIZE: usize = 7 * MAX_BVH2_DEPTH + 8;
 
 /// Past this depth the builder splits at the object median, so that the depth stays within
 /// `FORCE_MEDIAN_DEPTH + log2(2^29)`.

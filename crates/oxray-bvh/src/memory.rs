@@ -63,9 +63,11 @@ pub fn sizes_for(s: &InputSummary, num_inputs: usize) -> AccelBufferSizes {
 
 fn output_bound(s: &InputSummary, num_inputs: usize) -> usize {
     let n = s.num_primitives as usize;
-    // A 4-wide node absorbs at least one binary inner node, and a binary tree over n leaves has
-    // n - 1 inner nodes, so n - 1 nodes (and the root) always suffice.
-    let nodes = n.saturating_sub(1).max(1) * std::mem::size_of::<Bvh4Node>();
+    // A 4-wide (or 8-wide) node absorbs at least one binary inner node, and a binary tree over n
+    // leaves has n - 1 inner nodes, so n - 1 nodes (and the root) always suffice; the CPU
+    // backend may keep both layouts.
+    let nodes = n.saturating_sub(1).max(1)
+        * (std::mem::size_of::<Bvh4Node>() + std::mem::size_of::<crate::Bvh8Node>());
     // Triangles go in blocks of four, a leaf starting a new block: a leaf of c triangles takes
     // ceil(c / 4) <= c blocks, so at most one block (and four slots) per triangle.
     let (per_prim, slots) = match s.kind {

@@ -1,6 +1,6 @@
 //! Updates (refits) of built structures (guide §5.6): the same tree, new primitive data. Leaf
 //! boxes are recomputed from the new primitives, then node boxes bottom-up over the existing
-//! 4-wide layout; the topology (which primitive is in which leaf, which node is where) never
+//! wide layouts (the 4-wide one, and the 8-wide one where the structure has it); the topology (which primitive is in which leaf, which node is where) never
 //! changes, so the traversal code and every table that resolves a hit stay as they are.
 //!
 //! A refit keeps the hits exact (every box still holds its primitives) but not the tree's
@@ -8,10 +8,10 @@
 //! them, and traversal visits more nodes. The SAH cost ([`crate::BvhStats::sah_cost`]) of the
 //! refit tree against a rebuild measures that; rebuild when it has grown too much.
 
-use crate::bvh4::Bvh4Node;
 use crate::gas::{check_indices, decode_triangle, GasData, GasKind, InputShape, NO_PRIMITIVE};
 use crate::triangle::is_degenerate;
 use crate::triangle4::Triangle4;
+use crate::wide::WideNode;
 use glam::Vec3;
 use oxray_core::validate::{validate_sbt_offsets, validate_structure};
 use oxray_core::{
@@ -20,35 +20,32 @@ use oxray_core::{
 };
 use rayon::prelude::*;
 
-/// Recomputes every box of a 4-wide BVH: leaf lanes from `leaf(first_slot, count)`, inner lanes
+/// Recomputes every box of a wide BVH: leaf lanes from `leaf(first_slot, count)`, inner lanes
 /// as the union of their child node's lanes, bottom-up. Relies on every child node being
-/// stored after its parent (as [`crate::Bvh4`]'s collapse lays them out, and as the loader
-/// checks). Returns the box of the root's lanes.
-pub(crate) fn refit_nodes(
-    nodes: &mut [Bvh4Node],
+/// stored after its parent (as the collapse lays them out, and as the loader checks). Returns
+/// the box of the root's lanes.
+pub(crate) fn refit_nodes<N: WideNode>(
+    nodes: &mut [N],
     leaf: impl Fn(u32, u32) -> Aabb + Sync + Send,
 ) -> Aabb {
     nodes.par_iter_mut().for_each(|n| {
-        for lane in 0..4 {
-            if n.count[lane] > 0 {
-                let b = leaf(n.child[lane], n.count[lane]);
+        for lane in 0..N::WIDTH {
+            if n.count(lane) > 0 {
+                let b = leaf(n.child(lane), n.count(lane));
                 n.set_bounds(lane, &b);
             }
         }
     });
     for i in (0..nodes.len()).rev() {
-        for lane in 0..4 {
-            let (child, count) = (nodes[i].child[lane], nodes[i].count[lane]);
+        for lane in 0..N::WIDTH {
+            let (child, count) = (nodes[i].child(lane), nodes[i].count(lane));
             if count == 0 && child != u32::MAX {
-                let c = &nodes[child as usize];
-                let b = (0..4).fold(Aabb::EMPTY, |a, l| a.union(&c.child_bounds(l)));
+                let b = nodes[child as usize].bounds();
                 nodes[i].set_bounds(lane, &b);
             }
         }
     }
-    nodes.first().map_or(Aabb::EMPTY, |root| {
-        (0..4).fold(Aabb::EMPTY, |a, l| a.union(&root.child_bounds(l)))
-    })
+    nodes.first().map_or(Aabb::EMPTY, |root| root.bounds())
 }
 
 /// The lane value of an inactive triangle: NaN everywhere, which the watertight test never
@@ -72,7 +69,7 @@ pub(crate) fn deactivate_lanes(blocks: &mut [Triangle4], slot_prim: &[u32], acti
 /// Refits the node boxes of a triangle GAS from its blocks; returns the new bounds.
 pub(crate) fn refit_triangle_boxes(gas: &mut GasData) -> Aabb {
     let blocks = &gas.triangles;
-    refit_nodes(&mut gas.bvh.nodes, |first, count| {
+    let leaf = |first: u32, count: u32| {
         let mut b = Aabb::EMPTY;
         for slot in first as usize..(first + count) as usize {
             let (block, lane) = (&blocks[slot / 4], slot % 4);
@@ -84,18 +81,26 @@ pub(crate) fn refit_triangle_boxes(gas: &mut GasData) -> Aabb {
             }
         }
         b
-    })
+    };
+    if let Some(b8) = &mut gas.bvh8 {
+        refit_nodes(&mut b8.nodes, leaf);
+    }
+    refit_nodes(&mut gas.bvh.nodes, leaf)
 }
 
 /// Refits the node boxes of a custom-primitive GAS from its boxes; returns the new bounds.
 pub(crate) fn refit_aabb_boxes(gas: &mut GasData) -> Aabb {
     let boxes = &gas.aabbs;
-    refit_nodes(&mut gas.bvh.nodes, |first, count| {
+    let leaf = |first: u32, count: u32| {
         boxes[first as usize..(first + count) as usize]
             .iter()
             .filter(|b| b.is_finite_valid())
             .fold(Aabb::EMPTY, |a, b| a.union(b))
-    })
+    };
+    if let Some(b8) = &mut gas.bvh8 {
+        refit_nodes(&mut b8.nodes, leaf);
+    }
+    refit_nodes(&mut gas.bvh.nodes, leaf)
 }
 
 /// Box `i` of a validated custom-primitive input.

@@ -14,12 +14,15 @@
 //!
 //! Layout (little-endian): magic `OXRAYAS\0`, version (`u32`), kind (`u32`: 1 GAS, 2 IAS),
 //! payload length (`u64`), checksum of the payload (`u64`), then the payload: a fixed header
-//! of scalars and array lengths, then the arrays.
+//! of scalars and array lengths, then the arrays. Version 2 added a GAS's 8-wide layout (an
+//! array that may be empty), checked as strictly as the 4-wide one; version 1 is still read.
 
 use crate::bvh4::{Bvh4, Bvh4Node};
+use crate::bvh8::{Bvh8, Bvh8Node};
 use crate::gas::{GasData, GasKind, InputRecord, InputShape, NO_PRIMITIVE};
 use crate::ias::{validate_instance, IasData, InstanceData};
 use crate::triangle4::Triangle4;
+use crate::wide::WideNode;
 use crate::MAX_BVH2_DEPTH;
 use bytemuck::Pod;
 use oxray_core::{
@@ -29,8 +32,10 @@ use oxray_core::{
 
 /// The first bytes of every saved structure.
 pub const MAGIC: [u8; 8] = *b"OXRAYAS\0";
-/// The version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+/// The version this build writes. It reads it and every earlier version.
+pub const FORMAT_VERSION: u32 = 2;
+/// The first version with a GAS's optional 8-wide layout (version 1 has none).
+const VERSION_BVH8: u32 = 2;
 const KIND_GAS: u32 = 1;
 const KIND_IAS: u32 = 2;
 const HEADER: usize = 8 + 4 + 4 + 8 + 8;
@@ -140,8 +145,8 @@ fn kind_name(kind: u32) -> &'static str {
     }
 }
 
-/// Checks the header; returns the payload.
-fn unframe(bytes: &[u8], want: u32) -> Result<&[u8], LoadError> {
+/// Checks the header; returns the version and the payload.
+fn unframe(bytes: &[u8], want: u32) -> Result<(u32, &[u8]), LoadError> {
     if cfg!(target_endian = "big") {
         return Err(LoadError::Unsupported("loading on a big-endian host"));
     }
@@ -150,7 +155,7 @@ fn unframe(bytes: &[u8], want: u32) -> Result<&[u8], LoadError> {
         return Err(LoadError::BadMagic);
     }
     let version = r.u32("the version")?;
-    if version != FORMAT_VERSION {
+    if version == 0 || version > FORMAT_VERSION {
         return Err(LoadError::UnsupportedVersion {
             found: version,
             supported: FORMAT_VERSION,
@@ -173,15 +178,15 @@ fn unframe(bytes: &[u8], want: u32) -> Result<&[u8], LoadError> {
     if computed != stored {
         return Err(LoadError::Checksum { stored, computed });
     }
-    Ok(payload)
+    Ok((version, payload))
 }
 
-/// Checks a 4-wide node array: every used lane's child is a later node referenced once, no
+/// Checks a wide node array: every used lane's child is a later node referenced once, no
 /// deeper than the traversal stack allows, every unused lane has the empty box that no ray
 /// enters, and every leaf lies in `[0, slots)` (starting a triangle block where `block` is 4).
 /// `leaf_ok(slots)` checks a leaf's slots further.
-fn check_nodes(
-    nodes: &[Bvh4Node],
+fn check_nodes<N: WideNode>(
+    nodes: &[N],
     slots: u64,
     block: u64,
     mut leaf_ok: impl FnMut(std::ops::Range<usize>) -> bool,
@@ -192,11 +197,11 @@ fn check_nodes(
     let mut depth = vec![0u32; nodes.len()];
     let mut referenced = vec![false; nodes.len()];
     for (i, n) in nodes.iter().enumerate() {
-        for lane in 0..4 {
-            let (child, count) = (n.child[lane], n.count[lane]);
+        for lane in 0..N::WIDTH {
+            let (child, count) = (n.child(lane), n.count(lane));
             if count == 0 && child == u32::MAX {
                 let empty = (0..3).all(|a| {
-                    n.bounds[a][lane] == f32::INFINITY && n.bounds[3 + a][lane] == f32::NEG_INFINITY
+                    n.bound(a, lane) == f32::INFINITY && n.bound(3 + a, lane) == f32::NEG_INFINITY
                 });
                 if !empty {
                     return Err(invalid("unused node lane with a box", i));
@@ -249,8 +254,10 @@ impl GasData {
         w.u32(self.build_flags.bits());
         w.u32(self.num_primitives);
         w.aabb(&self.bounds);
+        let bvh8: &[Bvh8Node] = self.bvh8.as_ref().map_or(&[], |b| &b.nodes);
         for n in [
             self.bvh.nodes.len(),
+            bvh8.len(),
             self.triangles.len(),
             self.aabbs.len(),
             self.slot_prim.len(),
@@ -262,6 +269,7 @@ impl GasData {
             w.u64(n as u64);
         }
         w.pod(&self.bvh.nodes);
+        w.pod(bvh8);
         w.pod(&self.triangles);
         w.pod(&self.aabbs);
         w.pod(&self.slot_prim);
@@ -298,9 +306,8 @@ impl GasData {
     /// Loads a structure saved by [`to_bytes`](Self::to_bytes), checking everything (see the
     /// [module](self) documentation). It gets a new lineage: it is a new structure.
     pub fn from_bytes(bytes: &[u8]) -> Result<GasData, LoadError> {
-        let mut r = Reader {
-            bytes: unframe(bytes, KIND_GAS)?,
-        };
+        let (version, payload) = unframe(bytes, KIND_GAS)?;
+        let mut r = Reader { bytes: payload };
         let kind = match r.u32("the primitive kind")? {
             0 => GasKind::Triangles,
             1 => GasKind::CustomPrimitives,
@@ -313,12 +320,16 @@ impl GasData {
             return Err(invalid("primitive count", 0));
         }
         let bounds = r.aabb("the bounds")?;
-        let mut counts = [0u64; 8];
-        for c in &mut counts {
-            *c = r.u64("the array lengths")?;
+        let mut counts = [0u64; 9];
+        for (i, c) in counts.iter_mut().enumerate() {
+            // Version 1 has no 8-wide layout.
+            if i != 1 || version >= VERSION_BVH8 {
+                *c = r.u64("the array lengths")?;
+            }
         }
-        let [nn, nt, na, ns, no, ni, nr, nsh] = counts;
+        let [nn, n8, nt, na, ns, no, ni, nr, nsh] = counts;
         let nodes: Vec<Bvh4Node> = r.array(nn, "the nodes")?;
+        let nodes8: Vec<Bvh8Node> = r.array(n8, "the 8-wide nodes")?;
         let triangles: Vec<Triangle4> = r.array(nt, "the triangles")?;
         let aabbs: Vec<Aabb> = r.array(na, "the boxes")?;
         let slot_prim: Vec<u32> = r.array(ns, "the slot table")?;
@@ -350,6 +361,15 @@ impl GasData {
         check_nodes(&nodes, ns, block, |slots| {
             slot_prim[slots].iter().all(|&g| g != NO_PRIMITIVE)
         })?;
+        // The 8-wide layout is checked as strictly; it may be absent.
+        let bvh8 = if nodes8.is_empty() {
+            None
+        } else {
+            check_nodes(&nodes8, ns, block, |slots| {
+                slot_prim[slots].iter().all(|&g| g != NO_PRIMITIVE)
+            })?;
+            Some(Bvh8 { nodes: nodes8 })
+        };
 
         // Build inputs, SBT records and offsets.
         if raw_inputs.is_empty() {
@@ -449,6 +469,7 @@ impl GasData {
             kind,
             build_flags,
             bvh: Bvh4 { nodes },
+            bvh8,
             triangles,
             aabbs,
             slot_prim,
@@ -507,7 +528,7 @@ impl IasData {
     /// checked as a build checks it, and the tree as [`GasData::from_bytes`] does.
     pub fn from_bytes(bytes: &[u8], children: &[TraversableHandle]) -> Result<IasData, LoadError> {
         let mut r = Reader {
-            bytes: unframe(bytes, KIND_IAS)?,
+            bytes: unframe(bytes, KIND_IAS)?.1,
         };
         let build_flags =
             BuildFlags::from_bits(r.u32("the build flags")?).ok_or(invalid("build flags", 0))?;

@@ -3,7 +3,7 @@
 
 use crate::query::{any_batch, closest_batch};
 use crate::traversal::NodeRef;
-use crate::{Gas, Ias};
+use crate::{Gas, Ias, Isa};
 use oxray_core::{
     AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, Hit, QueryError,
     Ray, TraversableHandle,
@@ -26,13 +26,36 @@ use std::sync::Arc;
 /// assert_eq!((hits[0].map(|h| h.t), hits[1]), (Some(1.0), None));
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Cpu;
+#[derive(Clone, Copy, Debug)]
+pub struct Cpu {
+    /// The kernel of the structures it builds.
+    isa: Isa,
+}
 
 impl Cpu {
-    /// The CPU backend.
+    /// The CPU backend, with the process's traversal kernel: the best the processor has, or the
+    /// one `OXRAY_CPU_ISA` forces ([`Isa::selected`]).
     pub fn new() -> Self {
-        Cpu
+        Cpu {
+            isa: Isa::selected(),
+        }
+    }
+
+    /// The CPU backend with the traversal kernel `isa`, clamped to what the processor has
+    /// ([`Isa::clamp`]).
+    pub fn with_isa(isa: Isa) -> Self {
+        Cpu { isa: isa.clamp() }
+    }
+
+    /// The traversal kernel of the structures it builds.
+    pub fn isa(&self) -> Isa {
+        self.isa
+    }
+}
+
+impl Default for Cpu {
+    fn default() -> Self {
+        Cpu::new()
     }
 }
 
@@ -104,7 +127,7 @@ impl AccelBackend for Cpu {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<Gas, BuildError> {
-        Gas::build(options, inputs)
+        Gas::build_with_isa(self.isa, options, inputs)
     }
 
     fn build_ias(

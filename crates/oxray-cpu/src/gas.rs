@@ -1,7 +1,8 @@
 //! The CPU backend's geometry acceleration structure: the backend-neutral [`GasData`] in host
 //! memory, traversed in place.
 
-use oxray_bvh::GasData;
+use crate::Isa;
+use oxray_bvh::{GasData, NodeWidth};
 use oxray_core::{
     Aabb, BackendKind, BuildError, BuildInput, BuildOptions, Traversable, TraversableKind,
 };
@@ -30,16 +31,54 @@ use std::sync::Arc;
 #[derive(Clone, Debug)]
 pub struct Gas {
     data: GasData,
+    /// The kernel that traverses it: one this processor runs, whose layout `data` holds.
+    isa: Isa,
 }
 
 impl Gas {
     /// Builds a GAS (`optixAccelBuild`). Inputs must all be of one kind; see [`BuildError`] for
     /// every rule checked. Primitives that can never be hit (a NaN or infinite coordinate, a
     /// zero-area triangle, an inverted box) are left out: they are inactive.
+    ///
+    /// It is traversed by the process's kernel ([`Isa::selected`]).
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Gas, BuildError> {
-        Ok(Gas {
-            data: GasData::build(options, inputs)?,
-        })
+        Self::build_with_isa(Isa::selected(), options, inputs)
+    }
+
+    /// [`build`](Self::build) for the kernel `isa` (clamped to what the processor has, see
+    /// [`Isa::clamp`]): the structure holds the node layout that kernel traverses. The hits are
+    /// those of every other kernel (see [`Isa`]).
+    pub fn build_with_isa(
+        isa: Isa,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<Gas, BuildError> {
+        let isa = isa.clamp();
+        let data = GasData::build_with_width(options, inputs, isa.width())?;
+        Ok(Gas::from_data_with_isa(data, isa))
+    }
+
+    /// Wraps built (or loaded, or compacted) data for the kernel `isa`, clamped to what the
+    /// processor has; a kernel of 8-wide nodes falls back to the 4-wide one ([`Isa::Sse`]) if
+    /// the data has no 8-wide layout.
+    pub fn from_data_with_isa(data: GasData, isa: Isa) -> Gas {
+        let isa = Self::kernel_for(&data, isa);
+        Gas { data, isa }
+    }
+
+    /// The kernel that traverses this structure.
+    pub fn isa(&self) -> Isa {
+        self.isa
+    }
+
+    /// A kernel this processor runs, whose layout `data` holds.
+    fn kernel_for(data: &GasData, isa: Isa) -> Isa {
+        let isa = isa.clamp();
+        if isa.width() == NodeWidth::Eight && data.bvh8.is_none() {
+            Isa::Sse
+        } else {
+            isa
+        }
     }
 
     /// The built data.
@@ -60,8 +99,10 @@ impl Gas {
 }
 
 impl From<GasData> for Gas {
+    /// Wraps data for the process's kernel ([`Isa::selected`]); see
+    /// [`Gas::from_data_with_isa`].
     fn from(data: GasData) -> Self {
-        Gas { data }
+        Gas::from_data_with_isa(data, Isa::selected())
     }
 }
 

@@ -11,6 +11,9 @@
 //!   batches) and the pipeline's `optixTrace` are visitors of one traversal kernel.
 //! - [`Cpu`] implements [`AccelBackend`](oxray_core::AccelBackend) for the `oxray` facade's
 //!   `Device`.
+//! - Traversal runs the SIMD kernel the processor has, chosen once ([`Isa`]: 8-wide nodes with
+//!   AVX2, 4-wide with SSE or NEON; `OXRAY_CPU_ISA` forces one); every kernel finds
+//!   bit-identical hits.
 //! - The program model: a [`Module`] registers Rust programs under OptiX entry names; each
 //!   program kind receives its own context type with exactly the device functions the guide's
 //!   §13 table allows it.
@@ -35,6 +38,7 @@ pub mod cxx;
 mod gas;
 mod ias;
 mod interrupt;
+mod isa;
 mod output;
 pub mod pipeline;
 pub mod program;
@@ -45,6 +49,7 @@ pub use backend::{Cpu, CpuBatch};
 pub use gas::Gas;
 pub use ias::Ias;
 pub use interrupt::{Interrupt, ProgramResult};
+pub use isa::{Isa, ISA_ENV};
 pub use output::OutputBuffer;
 pub use pipeline::Pipeline;
 pub use program::{

@@ -206,32 +206,123 @@ fn make_ray(spec: &RaySpec, tris: &[Tri]) -> Ray {
     Ray::with_interval(origin, direction, tmin, tmax)
 }
 
-fn soup_gas(tris: &[Tri], flags: BuildFlags) -> Gas {
+/// One structure per CPU traversal kernel the processor runs ([`common::kernels`]): the checks
+/// run on each, and every query asks each of them and checks that they agree (t, u, v and
+/// facing bit for bit; the primitive unless two are hit at the same t).
+struct Gases(Vec<Gas>);
+
+impl Gases {
+    fn build(options: &BuildOptions, inputs: &[oxray::BuildInput<'_>]) -> Gases {
+        Gases(
+            common::kernels()
+                .into_iter()
+                .map(|isa| Gas::build_with_isa(isa, options, inputs).expect("a valid input builds"))
+                .collect(),
+        )
+    }
+
+    fn each(&self) -> &[Gas] {
+        &self.0
+    }
+
+    fn num_primitives(&self) -> u32 {
+        self.0[0].num_primitives()
+    }
+
+    fn num_active_primitives(&self) -> u32 {
+        self.0[0].num_active_primitives()
+    }
+
+    /// The first kernel's hit, once every kernel agrees with it.
+    fn agree(
+        &self,
+        ray: &Ray,
+        mut hit: impl FnMut(&Gas) -> Option<oxray::Hit>,
+    ) -> Option<oxray::Hit> {
+        let first = hit(&self.0[0]);
+        for g in &self.0[1..] {
+            let h = hit(g);
+            let t = |h: &Option<oxray::Hit>| h.map(|h| h.t.to_bits());
+            assert_eq!(
+                t(&h),
+                t(&first),
+                "kernel {} against {}; ray {ray:?}",
+                g.isa(),
+                self.0[0].isa()
+            );
+            if h.map(|h| h.primitive_index) == first.map(|h| h.primitive_index) {
+                assert_eq!(
+                    h,
+                    first,
+                    "kernel {} against {}; ray {ray:?}",
+                    g.isa(),
+                    self.0[0].isa()
+                );
+            }
+        }
+        first
+    }
+
+    fn intersect(&self, ray: &Ray) -> Option<oxray::Hit> {
+        self.agree(ray, |g| g.intersect(ray))
+    }
+
+    fn intersect_with<C: oxray::cpu::CustomIntersector>(
+        &self,
+        ray: &Ray,
+        c: &mut C,
+    ) -> Option<oxray::Hit> {
+        self.agree(ray, |g| g.intersect_with(ray, c))
+    }
+
+    fn occluded(&self, ray: &Ray) -> bool {
+        self.occluded_by(ray, |g| g.occluded(ray))
+    }
+
+    fn occluded_with<C: oxray::cpu::CustomIntersector>(&self, ray: &Ray, c: &mut C) -> bool {
+        self.occluded_by(ray, |g| g.occluded_with(ray, c))
+    }
+
+    fn occluded_by(&self, ray: &Ray, mut f: impl FnMut(&Gas) -> bool) -> bool {
+        let first = f(&self.0[0]);
+        for g in &self.0[1..] {
+            assert_eq!(f(g), first, "kernel {} occlusion; ray {ray:?}", g.isa());
+        }
+        first
+    }
+}
+
+fn soup_gas(tris: &[Tri], flags: BuildFlags) -> Gases {
     let verts: Vec<[f32; 3]> = tris.iter().flatten().copied().collect();
-    Gas::build(
+    Gases::build(
         &BuildOptions::new(flags),
         &[TriangleInput::new(VertexBuffer::f32x3(&verts)).into()],
     )
-    .expect("a valid soup builds")
 }
 
-/// Checks closest hit and occlusion of `ray` against the brute-force reference.
-fn check_ray(gas: &Gas, tris: &[Tri], ray: &Ray) -> Result<(), String> {
-    check_closest(gas.intersect(ray), tris, ray)?;
+/// Checks closest hit and occlusion of `ray` against the brute-force reference, on every
+/// kernel.
+fn check_ray(gases: &Gases, tris: &[Tri], ray: &Ray) -> Result<(), String> {
     let any = !reference_hits(tris, ray).is_empty();
-    if gas.occluded(ray) != any {
-        return Err(format!(
-            "occluded = {} but the reference says {any}; ray {ray:?}",
-            !any
-        ));
+    for gas in gases.each() {
+        let kernel = gas.isa();
+        check_closest(gas.intersect(ray), tris, ray)
+            .map_err(|e| format!("{kernel} kernel: {e}"))?;
+        if gas.occluded(ray) != any {
+            return Err(format!(
+                "{kernel} kernel: occluded = {} but the reference says {any}; ray {ray:?}",
+                !any
+            ));
+        }
     }
+    gases.intersect(ray);
     Ok(())
 }
 
 /// Checks the same ray with its interval closed exactly on the reference's closest hit t*:
 /// `[tmin, t*]` and `[t*, t*]` must both report a hit at t* (§13.2: the interval is closed).
 /// Skipped when t* is not finite.
-fn check_interval_closed_on_hit(gas: &Gas, tris: &[Tri], ray: &Ray) -> Result<(), String> {
+fn check_interval_closed_on_hit(gases: &Gases, tris: &[Tri], ray: &Ray) -> Result<(), String> {
     let Some(best) = reference_closest(tris, ray) else {
         return Ok(());
     };
@@ -247,12 +338,15 @@ fn check_interval_closed_on_hit(gas: &Gas, tris: &[Tri], ray: &Ray) -> Result<()
             ..*ray
         },
     ] {
-        check_closest(gas.intersect(&r), tris, &r)
-            .map_err(|e| format!("with the interval closed on t* = {t}: {e}"))?;
-        if !gas.occluded(&r) {
-            return Err(format!(
-                "not occluded with the interval closed on t* = {t}; ray {r:?}"
-            ));
+        for gas in gases.each() {
+            let kernel = gas.isa();
+            check_closest(gas.intersect(&r), tris, &r)
+                .map_err(|e| format!("{kernel} kernel, interval closed on t* = {t}: {e}"))?;
+            if !gas.occluded(&r) {
+                return Err(format!(
+                    "{kernel} kernel: not occluded with the interval closed on t* = {t}; ray {r:?}"
+                ));
+            }
         }
     }
     Ok(())
@@ -346,7 +440,7 @@ proptest! {
     ) {
         let tris = place(&tris, placement);
         let presets = [BuildFlags::empty(), BuildFlags::PREFER_FAST_BUILD, BuildFlags::PREFER_FAST_TRACE];
-        let gases: Vec<Gas> = presets.iter().map(|&f| soup_gas(&tris, f)).collect();
+        let gases: Vec<Gases> = presets.iter().map(|&f| soup_gas(&tris, f)).collect();
         for spec in &rays {
             let ray = make_ray(spec, &tris);
             // Bit patterns, with -0 folded into +0 (the same distance).
@@ -355,7 +449,7 @@ proptest! {
             let occ: Vec<bool> = gases.iter().map(|g| g.occluded(&ray)).collect();
             prop_assert!(occ.iter().all(|o| *o == occ[0]), "presets disagree on occlusion: {:?}", occ);
             for (g, f) in gases.iter().zip(presets) {
-                if let Err(e) = check_closest(g.intersect(&ray), &tris, &ray) {
+                if let Err(e) = check_ray(g, &tris, &ray) {
                     return Err(TestCaseError::fail(format!("{f:?}: {e}")));
                 }
             }
@@ -638,10 +732,10 @@ proptest! {
         rays in prop::collection::vec(custom_ray(), 24),
     ) {
         let shape = if sphere { Shape::Sphere } else { Shape::Box };
-        let gas = Gas::build(
+        let gas = Gases::build(
             &BuildOptions::default(),
             &[CustomPrimitiveInput::new(AabbBuffer::new(&boxes)).into()],
-        ).unwrap();
+        );
         let active: Vec<usize> = (0..boxes.len()).filter(|&i| boxes[i].is_finite_valid()).collect();
         prop_assert_eq!(gas.num_active_primitives() as usize, active.len());
         let valid_tris: Vec<Tri> = active.iter().map(|&i| {

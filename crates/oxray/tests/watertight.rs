@@ -15,14 +15,27 @@ use std::collections::{HashMap, HashSet};
 
 const TOLERANCE: f32 = 1e-4;
 
-fn mesh_gas(mesh: &Mesh) -> Gas {
-    Gas::build(
-        &BuildOptions::new(BuildFlags::PREFER_FAST_TRACE),
-        &[TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
-            .indices(IndexBuffer::u32x3(&mesh.triangles))
-            .into()],
+/// The mesh built for every CPU traversal kernel the processor runs ([`common::kernels`]);
+/// rays are checked on each. Dereferences to the first, for the structure's facts.
+struct Gases(Vec<Gas>);
+
+impl std::ops::Deref for Gases {
+    type Target = Gas;
+    fn deref(&self) -> &Gas {
+        &self.0[0]
+    }
+}
+
+fn mesh_gas(mesh: &Mesh) -> Gases {
+    let input = TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles));
+    let options = BuildOptions::new(BuildFlags::PREFER_FAST_TRACE);
+    Gases(
+        common::kernels()
+            .into_iter()
+            .map(|isa| Gas::build_with_isa(isa, &options, &[input.into()]).expect("mesh builds"))
+            .collect(),
     )
-    .expect("mesh builds")
 }
 
 /// Collects leaks instead of stopping at the first, so that a failure says how many rays leak.
@@ -33,9 +46,28 @@ struct Leaks {
 }
 
 impl Leaks {
-    /// Casts `origin -> target`; the hit must exist, lie at `t <= 1 + TOLERANCE`, and (when
-    /// `faces` is given) be one of those faces.
+    /// Casts `origin -> target` on every kernel; the hit must exist, lie at `t <= 1 +
+    /// TOLERANCE`, and (when `faces` is given) be one of those faces.
     fn check(
+        &mut self,
+        gases: &Gases,
+        origin: Vec3,
+        target: Vec3,
+        faces: Option<&[usize]>,
+        what: &str,
+    ) {
+        for gas in &gases.0 {
+            self.check_one(
+                gas,
+                origin,
+                target,
+                faces,
+                &format!("{} kernel, {what}", gas.isa()),
+            );
+        }
+    }
+
+    fn check_one(
         &mut self,
         gas: &Gas,
         origin: Vec3,

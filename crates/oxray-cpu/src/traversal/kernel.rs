@@ -14,7 +14,7 @@
 use super::leaf::{LeafEnd, LeafIntersector};
 use super::node::NodeLayout;
 use super::ray::PreparedRay;
-use oxray_bvh::TRAVERSAL_STACK_SIZE;
+use oxray_bvh::WIDE_TRAVERSAL_STACK_SIZE;
 use oxray_core::ray::TMAX_SLACK;
 
 /// What a visitor decides about a candidate hit (guide §13.4, §13.13).
@@ -58,8 +58,8 @@ pub(crate) struct Entry {
 }
 
 /// Entries of the per-thread stack: enough for the deepest graph (31 levels) of the deepest BVHs
-/// oxray builds.
-pub(crate) const STACK_ENTRIES: usize = 32 * TRAVERSAL_STACK_SIZE;
+/// oxray builds, in the widest layout.
+pub(crate) const STACK_ENTRIES: usize = 32 * WIDE_TRAVERSAL_STACK_SIZE;
 
 thread_local! {
     static STACK: std::cell::RefCell<Vec<Entry>> = const { std::cell::RefCell::new(Vec::new()) };
@@ -176,4 +176,25 @@ pub(crate) fn traverse<N: NodeLayout, L: LeafIntersector<V>, V>(
             }
         }
     }
+}
+
+/// [`traverse`] over 8-wide nodes with AVX2, the whole kernel (leaf tests and visitor included)
+/// compiled for AVX2.
+///
+/// # Safety
+///
+/// The processor must have the features this function is compiled with (checked by
+/// [`crate::Isa::is_available`] for [`crate::Isa::Avx2`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
+pub(crate) unsafe fn traverse_avx2<L: LeafIntersector<V>, V>(
+    nodes: &[oxray_bvh::Bvh8Node],
+    leaves: &L,
+    ray: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    traverse::<super::node::Bvh8Avx2, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
 }

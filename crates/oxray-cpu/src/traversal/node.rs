@@ -1,10 +1,21 @@
 //! Node layouts: how the children of one node are tested against a ray. A layout is one axis
-//! of the traversal kernel ([`super::kernel::traverse`]); a new layout (8-wide, quantised) is a
+//! of the traversal kernel ([`super::kernel::traverse`]); a new layout (quantised, say) is a
 //! new implementation of [`NodeLayout`], and every primitive kind and visitor runs on it.
+//!
+//! - [`Bvh4`]: 4-wide nodes, SSE on x86-64, portable code elsewhere;
+//! - [`Bvh8Scalar`]: 8-wide nodes, portable code (the reference of the SIMD 8-wide layouts);
+//! - `Bvh8Avx2` (x86-64): 8-wide nodes with AVX2. Its test is a `#[target_feature]`
+//!   function: only the kernel of [`super::kernel`] compiled with those features traverses
+//!   it, and only once the processor was found to have them ([`crate::Isa`]).
+//!
+//! Every layout computes the same slab distances with the same `f32` operations in the same
+//! order (no fused multiply-add: Rust never contracts), so a box is entered by one layout iff
+//! it is by another, and the conservative far-plane scaling (`ROBUST_FAR`, `TMAX_SLACK`) is
+//! the same everywhere.
 
 use super::kernel::Entry;
 use super::ray::PreparedRay;
-use oxray_bvh::Bvh4Node;
+use oxray_bvh::{Bvh4Node, Bvh8Node};
 use oxray_core::ray::ROBUST_FAR;
 
 /// A node layout of the CPU kernel.
@@ -84,22 +95,166 @@ fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
 fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 4], u32) {
-    use oxray_core::ray::{max_ignore_nan, min_ignore_nan};
-    let b = &node.bounds;
-    let mut tn = [tmin; 4];
-    let mut tf = [tmax; 4];
+    intersect_portable(&node.bounds, r, tmin, tmax)
+}
+
+/// The box test lane by lane, for any width: the operations of the SIMD forms, with their
+/// NaN rule (`maxps`/`minps` return their second operand when either is NaN).
+#[inline(always)]
+fn intersect_portable<const W: usize>(
+    b: &[[f32; W]; 6],
+    r: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+) -> ([f32; W], u32) {
+    // `x > y ? x : y` with the NaN rule of `maxps(x, y)`, and likewise for min.
+    #[inline(always)]
+    fn max_ps(x: f32, y: f32) -> f32 {
+        if x > y {
+            x
+        } else {
+            y
+        }
+    }
+    #[inline(always)]
+    fn min_ps(x: f32, y: f32) -> f32 {
+        if x < y {
+            x
+        } else {
+            y
+        }
+    }
+    let mut tn = [tmin; W];
+    let mut tf = [tmax; W];
     for a in 0..3 {
         let nb = &b[r.near[a]];
         let fb = &b[r.far[a]];
         let (o, inv) = (r.org[a], r.inv[a]);
-        for l in 0..4 {
-            tn[l] = max_ignore_nan(tn[l], (nb[l] - o) * inv);
-            tf[l] = min_ignore_nan(tf[l], (fb[l] - o) * inv * ROBUST_FAR);
+        for l in 0..W {
+            tn[l] = max_ps((nb[l] - o) * inv, tn[l]);
+            tf[l] = min_ps((fb[l] - o) * inv * ROBUST_FAR, tf[l]);
         }
     }
     let mut mask = 0;
-    for l in 0..4 {
+    for l in 0..W {
         mask |= ((tn[l] <= tf[l]) as u32) << l;
     }
     (tn, mask)
+}
+
+/// The 8-wide layout ([`Bvh8Node`]) tested lane by lane with portable code.
+pub(crate) struct Bvh8Scalar;
+
+impl NodeLayout for Bvh8Scalar {
+    type Node = Bvh8Node;
+    type Dists = [f32; 8];
+
+    #[inline(always)]
+    fn intersect(node: &Bvh8Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 8], u32) {
+        intersect_portable(&node.bounds, ray, tmin, tmax)
+    }
+
+    #[inline(always)]
+    fn entry(node: &Bvh8Node, lane: usize, dist: f32) -> Entry {
+        entry8(node, lane, dist)
+    }
+}
+
+#[inline(always)]
+fn entry8(node: &Bvh8Node, lane: usize, dist: f32) -> Entry {
+    Entry {
+        child: node.child[lane],
+        count: node.count[lane],
+        dist,
+    }
+}
+
+/// The 8-wide layout tested with AVX2. Traversed only by
+/// [`traverse_avx2`](super::kernel::traverse_avx2).
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct Bvh8Avx2;
+
+#[cfg(target_arch = "x86_64")]
+impl NodeLayout for Bvh8Avx2 {
+    type Node = Bvh8Node;
+    type Dists = [f32; 8];
+
+    #[inline(always)]
+    fn intersect(node: &Bvh8Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 8], u32) {
+        // SAFETY: this layout is traversed only by `kernel::traverse_avx2`, which is called only
+        // for a structure whose kernel is `Isa::Avx2`, and a structure gets that kernel only
+        // after `Isa::is_available` detected AVX2 (and the features `intersect8_avx2` is
+        // compiled with) on this processor.
+        unsafe { intersect8_avx2(node, ray, tmin, tmax) }
+    }
+
+    #[inline(always)]
+    fn entry(node: &Bvh8Node, lane: usize, dist: f32) -> Entry {
+        entry8(node, lane, dist)
+    }
+}
+
+/// The slab distances of the eight lanes with AVX: the operations of [`intersect4`], eight
+/// lanes at a time.
+///
+/// # Safety
+///
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn slabs8(
+    node: &Bvh8Node,
+    r: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
+    let b = &node.bounds;
+    // SAFETY: `Bvh8Node` is `repr(C, align(64))` with `bounds` (rows of `[f32; 8]`) first, so
+    // each row is a 32-byte aligned, in-bounds load of 8 floats.
+    unsafe {
+        let load = |row: &[f32; 8]| _mm256_load_ps(row.as_ptr());
+        let mut tn = _mm256_set1_ps(tmin);
+        let mut tf = _mm256_set1_ps(tmax);
+        let robust = _mm256_set1_ps(ROBUST_FAR);
+        for a in 0..3 {
+            let o = _mm256_set1_ps(r.org[a]);
+            let inv = _mm256_set1_ps(r.inv[a]);
+            let n = _mm256_mul_ps(_mm256_sub_ps(load(&b[r.near[a]]), o), inv);
+            let f = _mm256_mul_ps(
+                _mm256_mul_ps(_mm256_sub_ps(load(&b[r.far[a]]), o), inv),
+                robust,
+            );
+            // vmaxps/vminps return their second operand when either is NaN.
+            tn = _mm256_max_ps(n, tn);
+            tf = _mm256_min_ps(f, tf);
+        }
+        (tn, tf)
+    }
+}
+
+/// Tests a ray against the eight boxes of a node with AVX2; returns the entry distances and
+/// a hit mask.
+///
+/// # Safety
+///
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn intersect8_avx2(
+    node: &Bvh8Node,
+    r: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+) -> ([f32; 8], u32) {
+    use std::arch::x86_64::*;
+    // SAFETY: the caller guarantees AVX2.
+    let (tn, tf) = unsafe { slabs8(node, r, tmin, tmax) };
+    let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
+    let mut dist = [0.0f32; 8];
+    // SAFETY: `dist` is 8 writable floats (unaligned store).
+    unsafe { _mm256_storeu_ps(dist.as_mut_ptr(), tn) };
+    (dist, mask)
 }

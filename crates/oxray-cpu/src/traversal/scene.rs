@@ -5,10 +5,10 @@
 
 use super::kernel::{traverse, Entry, GasVisitor};
 use super::leaf::{AabbLeaves, LeafEnd, LeafIntersector, TriangleLeaves};
-use super::node::Bvh4;
+use super::node::{Bvh4, Bvh8Scalar};
 use super::ray::PreparedRay;
 use crate::gas::CpuNode;
-use crate::{Gas, Ias};
+use crate::{Gas, Ias, Isa};
 use oxray_bvh::GasKind;
 use oxray_bvh::InstanceData as InstanceRecord;
 use oxray_core::ray::min_ignore_nan;
@@ -146,16 +146,15 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
             let Some(prepared) = PreparedRay::new(ray) else {
                 return (ray.tmax, false);
             };
-            let nodes = &gas.bvh.nodes;
             let (tmin, tmax) = (ray.tmin, ray.tmax);
             match gas.kind {
                 GasKind::Triangles => {
                     let leaves = TriangleLeaves(&gas.triangles);
-                    traverse::<Bvh4, _, _>(nodes, &leaves, &prepared, tmin, tmax, visitor, stack)
+                    traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
                 }
                 GasKind::CustomPrimitives => {
                     let leaves = AabbLeaves(&gas.aabbs);
-                    traverse::<Bvh4, _, _>(nodes, &leaves, &prepared, tmin, tmax, visitor, stack)
+                    traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
                 }
             }
         }
@@ -178,6 +177,35 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
             let r = transform_ray(st.inverse(), ray);
             traverse_node(child, &p, &r, visitor, stack)
         }
+    }
+}
+
+/// Traverses a GAS with the kernel it was given (once, when it was built or loaded: see
+/// [`Gas::isa`]).
+#[inline(always)]
+fn traverse_gas<L: LeafIntersector<V>, V>(
+    gas: &Gas,
+    leaves: &L,
+    prepared: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    let isa = gas.isa();
+    let Some(b8) = gas.bvh8.as_ref().filter(|_| isa != Isa::Sse) else {
+        let nodes = &gas.bvh.nodes;
+        return traverse::<Bvh4, _, _>(nodes, leaves, prepared, tmin, tmax, visitor, stack);
+    };
+    let nodes = &b8.nodes;
+    match isa {
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: a `Gas` is given `Isa::Avx2` only where `Isa::is_available` found AVX2 and
+        // the other features of the kernel on this processor (`Gas::kernel_for`).
+        Isa::Avx2 => unsafe {
+            super::kernel::traverse_avx2(nodes, leaves, prepared, tmin, tmax, visitor, stack)
+        },
+        _ => traverse::<Bvh8Scalar, _, _>(nodes, leaves, prepared, tmin, tmax, visitor, stack),
     }
 }
 

@@ -30,3 +30,17 @@ pub fn proptest_config(cases: u32) -> proptest::test_runner::Config {
         ..Default::default()
     }
 }
+
+/// The CPU traversal kernels this processor runs: the oracle tests run on each. The kernels it
+/// lacks are named once, as skipped.
+pub fn kernels() -> Vec<oxray::cpu::Isa> {
+    static SKIPPED: std::sync::Once = std::sync::Once::new();
+    SKIPPED.call_once(|| {
+        for isa in oxray::cpu::Isa::ALL {
+            if !isa.is_available() {
+                eprintln!("skipping the {isa} traversal kernel: this processor lacks it");
+            }
+        }
+    });
+    oxray::cpu::Isa::available()
+}
