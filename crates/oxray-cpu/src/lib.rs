@@ -12,7 +12,7 @@
 //! - [`Cpu`] implements [`AccelBackend`](oxray_core::AccelBackend) for the `oxray` facade's
 //!   `Device`.
 //! - Traversal runs the SIMD kernel the processor has, chosen once ([`Isa`]: 8-wide nodes with
-//!   AVX2, 4-wide with SSE or NEON; `OXRAY_CPU_ISA` forces one); every kernel finds
+//!   AVX2 or AVX-512, 4-wide with SSE or NEON; `OXRAY_CPU_ISA` forces one); every kernel finds
 //!   bit-identical hits.
 //! - The program model: a [`Module`] registers Rust programs under OptiX entry names; each
 //!   program kind receives its own context type with exactly the device functions the guide's

@@ -1,4 +1,4 @@
-//! Every traversal kernel the processor runs ([`Isa`]: 8-wide nodes with AVX2, the
+//! Every traversal kernel the processor runs ([`Isa`]: 8-wide nodes with AVX2 or AVX-512, the
 //! portable 8-wide kernel, 4-wide nodes with SSE) finds the same hits: t, u, v and facing bit
 //! for bit, and the same primitive unless two primitives are hit at exactly the same distance
 //! (then the one reported must be one of them, and the same for every thread count); the same

@@ -198,3 +198,24 @@ pub(crate) unsafe fn traverse_avx2<L: LeafIntersector<V>, V>(
 ) -> (f32, bool) {
     traverse::<super::node::Bvh8Avx2, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
 }
+
+/// [`traverse`] over 8-wide nodes with AVX-512 (VL) compares, the whole kernel compiled for
+/// AVX-512.
+///
+/// # Safety
+///
+/// The processor must have the features this function is compiled with (checked by
+/// [`crate::Isa::is_available`] for [`crate::Isa::Avx512`]).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl")]
+pub(crate) unsafe fn traverse_avx512<L: LeafIntersector<V>, V>(
+    nodes: &[oxray_bvh::Bvh8Node],
+    leaves: &L,
+    ray: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    traverse::<super::node::Bvh8Avx512, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
+}

@@ -4,9 +4,10 @@
 //!
 //! - [`Bvh4`]: 4-wide nodes, SSE on x86-64, portable code elsewhere;
 //! - [`Bvh8Scalar`]: 8-wide nodes, portable code (the reference of the SIMD 8-wide layouts);
-//! - `Bvh8Avx2` (x86-64): 8-wide nodes with AVX2. Its test is a `#[target_feature]`
-//!   function: only the kernel of [`super::kernel`] compiled with those features traverses
-//!   it, and only once the processor was found to have them ([`crate::Isa`]).
+//! - `Bvh8Avx2`, `Bvh8Avx512` (x86-64): 8-wide nodes with AVX2, or AVX-512's mask compares.
+//!   Their tests are `#[target_feature]` functions: only the kernels of
+//!   [`super::kernel`] compiled with those features traverse them, and only once the processor
+//!   was found to have them ([`crate::Isa`]).
 //!
 //! Every layout computes the same slab distances with the same `f32` operations in the same
 //! order (no fused multiply-add: Rust never contracts), so a box is entered by one layout iff
@@ -182,10 +183,34 @@ impl NodeLayout for Bvh8Avx2 {
     #[inline(always)]
     fn intersect(node: &Bvh8Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 8], u32) {
         // SAFETY: this layout is traversed only by `kernel::traverse_avx2`, which is called only
-        // for a structure whose kernel is `Isa::Avx2`, and a structure gets that kernel only
-        // after `Isa::is_available` detected AVX2 (and the features `intersect8_avx2` is
-        // compiled with) on this processor.
+        // for a structure whose kernel is `Isa::Avx2` or `Isa::Avx512`, and a structure gets
+        // those kernels only after `Isa::is_available` detected AVX2 (and the features
+        // `intersect8_avx2` is compiled with) on this processor.
         unsafe { intersect8_avx2(node, ray, tmin, tmax) }
+    }
+
+    #[inline(always)]
+    fn entry(node: &Bvh8Node, lane: usize, dist: f32) -> Entry {
+        entry8(node, lane, dist)
+    }
+}
+
+/// The 8-wide layout tested with AVX-512 (VL): the compare writes a mask register. Traversed
+/// only by [`traverse_avx512`](super::kernel::traverse_avx512).
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct Bvh8Avx512;
+
+#[cfg(target_arch = "x86_64")]
+impl NodeLayout for Bvh8Avx512 {
+    type Node = Bvh8Node;
+    type Dists = [f32; 8];
+
+    #[inline(always)]
+    fn intersect(node: &Bvh8Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 8], u32) {
+        // SAFETY: traversed only by `kernel::traverse_avx512`, called only for a structure
+        // whose kernel is `Isa::Avx512`, which `Isa::is_available` gives only after detecting
+        // AVX2, AVX-512F and AVX-512VL on this processor.
+        unsafe { intersect8_avx512(node, ray, tmin, tmax) }
     }
 
     #[inline(always)]
@@ -253,6 +278,30 @@ unsafe fn intersect8_avx2(
     // SAFETY: the caller guarantees AVX2.
     let (tn, tf) = unsafe { slabs8(node, r, tmin, tmax) };
     let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
+    let mut dist = [0.0f32; 8];
+    // SAFETY: `dist` is 8 writable floats (unaligned store).
+    unsafe { _mm256_storeu_ps(dist.as_mut_ptr(), tn) };
+    (dist, mask)
+}
+
+/// [`intersect8_avx2`] with AVX-512VL's compare into a mask register.
+///
+/// # Safety
+///
+/// The processor must have AVX2, AVX-512F and AVX-512VL.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl")]
+#[inline]
+unsafe fn intersect8_avx512(
+    node: &Bvh8Node,
+    r: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+) -> ([f32; 8], u32) {
+    use std::arch::x86_64::*;
+    // SAFETY: the caller guarantees AVX2.
+    let (tn, tf) = unsafe { slabs8(node, r, tmin, tmax) };
+    let mask = _mm256_cmp_ps_mask::<_CMP_LE_OQ>(tn, tf) as u32;
     let mut dist = [0.0f32; 8];
     // SAFETY: `dist` is 8 writable floats (unaligned store).
     unsafe { _mm256_storeu_ps(dist.as_mut_ptr(), tn) };

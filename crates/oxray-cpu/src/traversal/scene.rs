@@ -205,6 +205,11 @@ fn traverse_gas<L: LeafIntersector<V>, V>(
         Isa::Avx2 => unsafe {
             super::kernel::traverse_avx2(nodes, leaves, prepared, tmin, tmax, visitor, stack)
         },
+        #[cfg(target_arch = "x86_64")]
+        // SAFETY: likewise for `Isa::Avx512` and its features.
+        Isa::Avx512 => unsafe {
+            super::kernel::traverse_avx512(nodes, leaves, prepared, tmin, tmax, visitor, stack)
+        },
         _ => traverse::<Bvh8Scalar, _, _>(nodes, leaves, prepared, tmin, tmax, visitor, stack),
     }
 }
