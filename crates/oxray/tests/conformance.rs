@@ -95,7 +95,7 @@ impl Suite {
             .collect();
         let list: Vec<ProgramGroup> = groups.iter().map(|(_, g)| g.clone()).collect();
         let compile = PipelineCompileOptions {
-            num_payload_values: 8,
+            num_payload_values: 32,
             num_attribute_values: 3,
             ..Default::default()
         };
@@ -498,7 +498,7 @@ fn user_exceptions_end_the_launch_index_and_run_the_exception_program_13_14() {
 // The extended module
 // ----------------------------------------------------------------------------------------------
 
-const EXT_GROUPS: [(&str, G); 17] = [
+const EXT_GROUPS: [(&str, G); 19] = [
     ("rg_grid", G::Rg("__raygen__ext_grid")),
     ("rg_calls", G::Rg("__raygen__callables")),
     ("rg_faults", G::Rg("__raygen__faults")),
@@ -537,6 +537,11 @@ const EXT_GROUPS: [(&str, G); 17] = [
     (
         "hg_mark",
         G::Hit(Some("__closesthit__ah_seen"), Some("__anyhit__mark"), None),
+    ),
+    ("rg_payload32", G::Rg("__raygen__payload32")),
+    (
+        "hg_payload32",
+        G::Hit(Some("__closesthit__payload32"), None, None),
     ),
     ("call_mix", G::Call(Some("__direct_callable__mix"), None)),
     (
@@ -852,7 +857,7 @@ fn the_suite_compiles_with_nvrtc() {
             groups.push(r.unwrap_or_else(|e| panic!("{label}: {e}")));
         }
         let compile = PipelineCompileOptions {
-            num_payload_values: 8,
+            num_payload_values: 32,
             num_attribute_values: 3,
             ..Default::default()
         };
@@ -1070,5 +1075,31 @@ fn any_hit_precedence_geometry_instance_ray_13_2() {
             }
         }
         all
+    });
+}
+
+#[test]
+fn thirty_two_payload_words_are_copied_in_and_out_14() {
+    on_every_device(|device| {
+        let gas = quads(device);
+        let handle = gas.optix_handle().unwrap();
+        let s = extended(device, 1);
+        let sbt = s.sbt("rg_payload32", &["ms"], &["hg_payload32"; 2], None);
+        let dims = [4, 1, 1];
+        let (out, report) = s.run(&sbt, dims, |o| ext(o, handle, dims, 0, 0));
+        assert_eq!(report.exceptions, 0, "{report:?}");
+        let words: Vec<u32> = (0..32).map(|k| 1000 + k).collect();
+        let folded = words
+            .iter()
+            .enumerate()
+            .fold(0u32, |f, (k, w)| f ^ (w << (k % 8)));
+        let sum = words[..31]
+            .iter()
+            .zip(0u32..)
+            .fold(0u32, |s, (w, k)| s.wrapping_mul(31).wrapping_add(w * 3 + k));
+        for o in &out {
+            assert_eq!(o[..4], [sum, folded, 3000, 1030 * 3 + 30]);
+        }
+        out
     });
 }

@@ -203,6 +203,63 @@ extern "C" __global__ void __closesthit__ah_seen() {
     optixSetPayload_1(optixGetSbtGASIndex());
 }
 
+// 32 payload words (§14, the most a trace passes): the closest-hit program reads every word,
+// folds them into one value it returns in word 31, and rewrites words 0-30.
+extern "C" __global__ void __raygen__payload32() {
+    unsigned int p[32];
+    for (unsigned int k = 0; k < 32u; ++k) p[k] = 1000u + k;
+    const uint3 i = optixGetLaunchIndex();
+    const float x = 2.0f * ((float)i.x + 0.5f) / (float)ext.width - 1.0f;
+    optixTrace(ext.handle, make_float3(x, 0.0f, ext.z), make_float3(0.0f, 0.0f, -1.0f), 0.0f,
+               1e16f, 0.0f, 0xFFu, 0u, 0, 1, 0, p[0], p[1], p[2], p[3], p[4], p[5], p[6], p[7],
+               p[8], p[9], p[10], p[11], p[12], p[13], p[14], p[15], p[16], p[17], p[18], p[19],
+               p[20], p[21], p[22], p[23], p[24], p[25], p[26], p[27], p[28], p[29], p[30], p[31]);
+    unsigned int* o = ext.out + 8 * ext_index();
+    unsigned int sum = 0u;
+    for (unsigned int k = 0; k < 31u; ++k) sum = sum * 31u + p[k];
+    o[0] = sum;
+    o[1] = p[31];
+    o[2] = p[0];
+    o[3] = p[30];
+}
+
+extern "C" __global__ void __closesthit__payload32() {
+    const unsigned int folded = (optixGetPayload_0() << 0) ^ (optixGetPayload_1() << 1) ^ (optixGetPayload_2() << 2) ^ (optixGetPayload_3() << 3) ^ (optixGetPayload_4() << 4) ^ (optixGetPayload_5() << 5) ^ (optixGetPayload_6() << 6) ^ (optixGetPayload_7() << 7) ^ (optixGetPayload_8() << 0) ^ (optixGetPayload_9() << 1) ^ (optixGetPayload_10() << 2) ^ (optixGetPayload_11() << 3) ^ (optixGetPayload_12() << 4) ^ (optixGetPayload_13() << 5) ^ (optixGetPayload_14() << 6) ^ (optixGetPayload_15() << 7) ^ (optixGetPayload_16() << 0) ^ (optixGetPayload_17() << 1) ^ (optixGetPayload_18() << 2) ^ (optixGetPayload_19() << 3) ^ (optixGetPayload_20() << 4) ^ (optixGetPayload_21() << 5) ^ (optixGetPayload_22() << 6) ^ (optixGetPayload_23() << 7) ^ (optixGetPayload_24() << 0) ^ (optixGetPayload_25() << 1) ^ (optixGetPayload_26() << 2) ^ (optixGetPayload_27() << 3) ^ (optixGetPayload_28() << 4) ^ (optixGetPayload_29() << 5) ^ (optixGetPayload_30() << 6) ^ (optixGetPayload_31() << 7);
+    optixSetPayload_0(optixGetPayload_0() * 3u + 0u);
+    optixSetPayload_1(optixGetPayload_1() * 3u + 1u);
+    optixSetPayload_2(optixGetPayload_2() * 3u + 2u);
+    optixSetPayload_3(optixGetPayload_3() * 3u + 3u);
+    optixSetPayload_4(optixGetPayload_4() * 3u + 4u);
+    optixSetPayload_5(optixGetPayload_5() * 3u + 5u);
+    optixSetPayload_6(optixGetPayload_6() * 3u + 6u);
+    optixSetPayload_7(optixGetPayload_7() * 3u + 7u);
+    optixSetPayload_8(optixGetPayload_8() * 3u + 8u);
+    optixSetPayload_9(optixGetPayload_9() * 3u + 9u);
+    optixSetPayload_10(optixGetPayload_10() * 3u + 10u);
+    optixSetPayload_11(optixGetPayload_11() * 3u + 11u);
+    optixSetPayload_12(optixGetPayload_12() * 3u + 12u);
+    optixSetPayload_13(optixGetPayload_13() * 3u + 13u);
+    optixSetPayload_14(optixGetPayload_14() * 3u + 14u);
+    optixSetPayload_15(optixGetPayload_15() * 3u + 15u);
+    optixSetPayload_16(optixGetPayload_16() * 3u + 16u);
+    optixSetPayload_17(optixGetPayload_17() * 3u + 17u);
+    optixSetPayload_18(optixGetPayload_18() * 3u + 18u);
+    optixSetPayload_19(optixGetPayload_19() * 3u + 19u);
+    optixSetPayload_20(optixGetPayload_20() * 3u + 20u);
+    optixSetPayload_21(optixGetPayload_21() * 3u + 21u);
+    optixSetPayload_22(optixGetPayload_22() * 3u + 22u);
+    optixSetPayload_23(optixGetPayload_23() * 3u + 23u);
+    optixSetPayload_24(optixGetPayload_24() * 3u + 24u);
+    optixSetPayload_25(optixGetPayload_25() * 3u + 25u);
+    optixSetPayload_26(optixGetPayload_26() * 3u + 26u);
+    optixSetPayload_27(optixGetPayload_27() * 3u + 27u);
+    optixSetPayload_28(optixGetPayload_28() * 3u + 28u);
+    optixSetPayload_29(optixGetPayload_29() * 3u + 29u);
+    optixSetPayload_30(optixGetPayload_30() * 3u + 30u);
+    optixSetPayload_31(optixGetPayload_31() * 3u + 31u);
+    optixSetPayload_31(folded);
+}
+
 // The hit's GAS handle: 1, and whether it is the handle traced (a GAS traced directly).
 extern "C" __global__ void __closesthit__gas() {
     optixSetPayload_0(1u);
