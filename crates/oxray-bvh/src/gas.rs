@@ -865,14 +865,13 @@ mod tests {
         out
     }
 
-    #[test]
-    fn the_canonical_tree_points_at_the_same_leaf_slots_as_the_4_wide_layout() {
-        // A grid with some degenerate triangles, so that slots and primitives differ.
-        let n = 30u32;
+    /// An `n` x `n` grid of quads with heights `((x * a + y * 3) % m) * h`, whose diagonal quads
+    /// have a degenerate triangle, so that leaf slots and primitive indices differ.
+    fn bumpy_grid(n: u32, a: u32, m: u32, h: f32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
         let mut v = Vec::new();
         for y in 0..=n {
             for x in 0..=n {
-                v.push([x as f32, y as f32, ((x * 7 + y * 3) % 5) as f32 * 0.2]);
+                v.push([x as f32, y as f32, ((x * a + y * 3) % m) as f32 * h]);
             }
         }
         let mut t = Vec::new();
@@ -887,6 +886,13 @@ mod tests {
                 });
             }
         }
+        (v, t)
+    }
+
+    #[test]
+    fn the_canonical_tree_points_at_the_same_leaf_slots_as_the_4_wide_layout() {
+        // A grid with some degenerate triangles, so that slots and primitives differ.
+        let (v, t) = bumpy_grid(30, 7, 5, 0.2);
         for flags in [BuildFlags::empty(), BuildFlags::PREFER_FAST_TRACE] {
             let input = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u32x3(&t));
             let options = BuildOptions::new(flags);
@@ -931,25 +937,7 @@ mod tests {
 
     #[test]
     fn the_8_wide_layout_adds_to_the_4_wide_structure_and_shares_its_leaves() {
-        let n = 40u32;
-        let mut v = Vec::new();
-        for y in 0..=n {
-            for x in 0..=n {
-                v.push([x as f32, y as f32, ((x * 5 + y * 3) % 7) as f32 * 0.3]);
-            }
-        }
-        let mut t = Vec::new();
-        for y in 0..n {
-            for x in 0..n {
-                let i = y * (n + 1) + x;
-                t.push([i, i + 1, i + n + 2]);
-                t.push(if x == y {
-                    [i, i, i + 1]
-                } else {
-                    [i, i + n + 2, i + n + 1]
-                });
-            }
-        }
+        let (v, t) = bumpy_grid(40, 5, 7, 0.3);
         let boxes: Vec<Aabb> = (0..300)
             .map(|i| Aabb::new(Vec3::splat(i as f32), Vec3::splat(i as f32 + 0.5)))
             .collect();

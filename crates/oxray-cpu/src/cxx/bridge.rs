@@ -526,15 +526,23 @@ unsafe extern "C" fn api_trace(
             std::slice::from_raw_parts_mut(payload, n as usize),
         )
     };
-    let resolved: Option<TraversableHandle> = if handle == 0 {
-        Some(TraversableHandle::NULL)
+    static NULL: TraversableHandle = TraversableHandle::NULL;
+    // Borrowed from the launch's snapshot, not cloned: a clone would touch the structure's
+    // shared reference count on every trace of every thread.
+    let resolved: Option<*const TraversableHandle> = if handle == 0 {
+        Some(&NULL)
     } else {
-        launch_of(f).and_then(|l| l.handle(handle).cloned())
+        launch_of(f)
+            .and_then(|l| l.handle(handle))
+            .map(|h| h as *const _)
     };
     let Some(h) = resolved else {
         return raise(f, ExceptionCode::TRAVERSAL_INVALID_TRAVERSABLE, &[]);
     };
-    let ray = TraceRay::new(&h, org, dir)
+    // SAFETY: `h` is the static null handle or lives in the launch's snapshot, which the launch
+    // (and so every program of it) outlives; nothing mutates the snapshot during the launch.
+    let h = unsafe { &*h };
+    let ray = TraceRay::new(h, org, dir)
         .interval(tmin, tmax)
         .time(time)
         .visibility_mask(mask)
