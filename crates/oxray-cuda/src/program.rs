@@ -417,15 +417,10 @@ __oxray_pipeline() {
     __oxray_ThreadState state;
     __oxray_states[threadIdx.x] = &state;
     __oxray_ThreadState& s = __oxray_state();
-    uint3 d = __oxray_launch.dims;
-    s.launch_index = make_uint3(i % d.x, (i / d.x) % d.y, i / (d.x * d.y));
     s.depth = 0u;
-    s.ah_action = 0u;
     s.calls = 0u;
     s.report = nullptr;
     s.ray.path = nullptr;
-    s.exception_code = 0;
-    s.exception_ndetails = 0u;
     s.record = reinterpret_cast<const char*>(__oxray_launch.raygen);
     __oxray_call_raygen(__oxray_group_of(s.record));
 }
@@ -733,6 +728,13 @@ pub(crate) fn exception_report(words: &[u32]) -> LaunchReport {
     }
 }
 
+/// The device address of a pipeline's private buffer. Only the pipeline's stream uses these
+/// buffers, so the access record cudarc keeps for other streams is not needed past this call.
+fn device_address<T>(buffer: &CudaSlice<T>, stream: &Arc<cudarc::driver::CudaStream>) -> u64 {
+    let (address, _record) = buffer.device_ptr(stream);
+    address
+}
+
 /// A pipeline of CUDA C++ programs (`OptixPipeline`), compiled into one kernel.
 pub struct CudaPipeline {
     ctx: CudaContext,
@@ -744,7 +746,19 @@ pub struct CudaPipeline {
     max_graph_depth: u32,
     block: u32,
     context: DeviceContext,
-    scratch: Mutex<Option<(CudaSlice<u8>, CudaSlice<u32>)>>,
+    scratch: Mutex<Option<LaunchScratch>>,
+}
+
+/// A pipeline's buffers between launches: the SBT's device copy, the exception records, and
+/// what the device already holds, so that a launch issues only the copies it needs (a launch of
+/// a million rays takes a fraction of a millisecond; each copy costs microseconds).
+struct LaunchScratch {
+    sbt: CudaSlice<u8>,
+    exceptions: CudaSlice<u32>,
+    /// The launch information last written to the module's `__oxray_launch`.
+    info: Option<LaunchInfo>,
+    /// Whether the last launch raised exceptions: the count is cleared before the next one.
+    raised: bool,
 }
 
 impl std::fmt::Debug for CudaPipeline {
@@ -910,31 +924,42 @@ impl CudaPipeline {
         let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         let grow = scratch
             .as_ref()
-            .is_none_or(|(s, _)| s.len() < packed.bytes.len());
+            .is_none_or(|s| s.sbt.len() < packed.bytes.len());
         if grow {
             *scratch = None;
-            let s = stream
+            let sbt = stream
                 .alloc_zeros::<u8>(packed.bytes.len().next_power_of_two())
                 .map_err(driver("allocating the SBT"))?;
-            let e = stream
+            let exceptions = stream
                 .alloc_zeros::<u32>(16 + 16 * EXCEPTION_RECORDS)
                 .map_err(driver("allocating exception records"))?;
-            *scratch = Some((s, e));
+            *scratch = Some(LaunchScratch {
+                sbt,
+                exceptions,
+                info: None,
+                raised: false,
+            });
         }
-        let Some((d_sbt, d_exc)) = scratch.as_mut() else {
+        let Some(scratch) = scratch.as_mut() else {
             return Err(CudaError::Launch("scratch buffers missing".into()));
         };
+        // Every launch sees the SBT it is given, as OptiX reads the user's SBT at each launch.
         stream
             .memcpy_htod(
                 &packed.bytes[..],
-                &mut d_sbt.slice_mut(..packed.bytes.len()),
+                &mut scratch.sbt.slice_mut(..packed.bytes.len()),
             )
             .map_err(driver("copying the SBT"))?;
-        stream
-            .memset_zeros(d_exc)
-            .map_err(driver("clearing exception records"))?;
-        let (base, _g1) = d_sbt.device_ptr(stream);
-        let (exc, _g2) = d_exc.device_ptr(stream);
+        // The records past the count are never read: clearing the count is enough, and only
+        // a launch that raised exceptions leaves it set.
+        if scratch.raised {
+            stream
+                .memset_zeros(&mut scratch.exceptions.slice_mut(..1))
+                .map_err(driver("clearing exception records"))?;
+            scratch.raised = false;
+        }
+        let base = device_address(&scratch.sbt, stream);
+        let exc = device_address(&scratch.exceptions, stream);
         let at = |r: &PackedRegion| base + r.offset as u64;
         let info = LaunchInfo {
             dims: [width, height, depth],
@@ -954,12 +979,15 @@ impl CudaPipeline {
             max_graph_depth: self.max_graph_depth,
             validation: self.context.is_validation_mode() as u32,
         };
-        let mut var = guarded("finding the launch information", || {
-            self.module.get_global("__oxray_launch", stream)
-        })?;
-        stream
-            .memcpy_htod(bytemuck::bytes_of(&info), &mut var)
-            .map_err(driver("copying the launch information"))?;
+        if scratch.info != Some(info) {
+            let mut var = guarded("finding the launch information", || {
+                self.module.get_global("__oxray_launch", stream)
+            })?;
+            stream
+                .memcpy_htod(bytemuck::bytes_of(&info), &mut var)
+                .map_err(driver("copying the launch information"))?;
+            scratch.info = Some(info);
+        }
         let cfg = LaunchConfig {
             grid_dim: (total.div_ceil(self.block), 1, 1),
             block_dim: (self.block, 1, 1),
@@ -971,9 +999,19 @@ impl CudaPipeline {
         // synchronized below while `scratch` is locked) and in the launch parameters and
         // traversables the user's programs read, which the user provides as for OptiX.
         unsafe { launch.launch(cfg) }.map_err(driver("launching a pipeline"))?;
-        let words = stream
-            .clone_dtoh(&d_exc.slice(..))
+        // The count first (one word); the records only when there are some.
+        let mut count = [0u32; 1];
+        stream
+            .memcpy_dtoh(&scratch.exceptions.slice(..1), &mut count)
             .map_err(driver("copying exception records"))?;
+        let words = if count[0] > 0 {
+            scratch.raised = true;
+            stream
+                .clone_dtoh(&scratch.exceptions.slice(..))
+                .map_err(driver("copying exception records"))?
+        } else {
+            count.to_vec()
+        };
         self.ctx.synchronize()?;
         Ok(exception_report(&words).settle(&self.context, packed.exception.is_some())?)
     }

@@ -173,11 +173,15 @@ struct __oxray_RayState {
     u32 slot;  // leaf slot of a triangle hit (vertex data), ~0u for a custom primitive
     u32 attr[8];
     const __oxray_Path* path;
+    // The GAS hit on a trace's fast path, whose path is the shared root (`__oxray_root_path`).
+    const __oxray_Traversable* gas;
     u32 payload[OXRAY_NUM_PAYLOAD_VALUES > 0 ? OXRAY_NUM_PAYLOAD_VALUES : 1];
 };
 
+// Each field is written only where it starts to matter (the kernel sets `depth`, `calls`,
+// `record`, `report` and `ray.path`): every word a thread writes here is local memory that the
+// device eventually writes back to DRAM, which a launch of a million short rays feels.
 struct __oxray_ThreadState {
-    uint3 launch_index;
     u32 depth;       // traces in progress
     u32 ah_action;   // set by any-hit: 0 accept, 1 ignore, 2 terminate
     u32 calls;       // callables in progress
@@ -197,6 +201,13 @@ __shared__ __oxray_ThreadState* __oxray_states[OXRAY_PIPELINE_BLOCK];
 
 static __forceinline__ __device__ __oxray_ThreadState& __oxray_state() {
     return *__oxray_states[threadIdx.x];
+}
+
+// The launch index of this thread (the kernel runs one thread per index, x fastest).
+static __forceinline__ __device__ uint3 __oxray_launch_index() {
+    const u32 i = blockIdx.x * blockDim.x + threadIdx.x;
+    const uint3 d = __oxray_launch.dims;
+    return make_uint3(i % d.x, (i / d.x) % d.y, i / (d.x * d.y));
 }
 
 // Generated with the pipeline: calls the program of the given kind of the group whose index the
@@ -229,9 +240,10 @@ static __noinline__ __device__ void __oxray_raise() {
     u32 slot = atomicAdd(out, 1u);
     if (slot < OXRAY_EXCEPTION_RECORDS) {
         u32* r = out + 16 + 16 * slot;
-        r[0] = s.launch_index.x;
-        r[1] = s.launch_index.y;
-        r[2] = s.launch_index.z;
+        const uint3 index = __oxray_launch_index();
+        r[0] = index.x;
+        r[1] = index.y;
+        r[2] = index.z;
         r[3] = (u32)s.exception_code;
         for (int i = 0; i < 8; ++i) r[4 + i] = s.exception_details[i];
         r[12] = s.exception_ndetails;
@@ -251,9 +263,7 @@ static __forceinline__ __device__ void __oxray_throw(int code, u32 n, const u32*
 // Device functions: launch, SBT, ray and hit queries
 // ---------------------------------------------------------------------------------------------
 
-static __forceinline__ __device__ uint3 optixGetLaunchIndex() {
-    return __oxray_state().launch_index;
-}
+static __forceinline__ __device__ uint3 optixGetLaunchIndex() { return __oxray_launch_index(); }
 static __forceinline__ __device__ uint3 optixGetLaunchDimensions() { return __oxray_launch.dims; }
 
 static __forceinline__ __device__ CUdeviceptr optixGetSbtDataPointer() {
@@ -329,7 +339,10 @@ static __forceinline__ __device__ float2 optixGetTriangleBarycentrics() {
 // intersection program reported (0 past those).
 #define __OXRAY_ATTRIBUTE(N)                                                                \
     static __forceinline__ __device__ unsigned int optixGetAttribute_##N() {                \
-        return __oxray_state().ray.attr[N];                                                 \
+        const __oxray_ThreadState& s = __oxray_state();                                     \
+        /* A triangle has two attributes (§13.4): the others read as zero. */               \
+        if (N >= 2 && s.ray.slot != 0xffffffffu) return 0u;                                 \
+        return s.ray.attr[N];                                                               \
     }
 __OXRAY_ATTRIBUTE(0) __OXRAY_ATTRIBUTE(1) __OXRAY_ATTRIBUTE(2) __OXRAY_ATTRIBUTE(3)
 __OXRAY_ATTRIBUTE(4) __OXRAY_ATTRIBUTE(5) __OXRAY_ATTRIBUTE(6) __OXRAY_ATTRIBUTE(7)
@@ -347,14 +360,23 @@ static __forceinline__ __device__ void optixSetPayloadTypes(unsigned int typeMas
 // Object space, transforms and the transform list (guide §13.5, §13.9, §13.11)
 // ---------------------------------------------------------------------------------------------
 
+// Without transforms on the path, the object-space ray is the world ray (the fast path's
+// shared root path keeps no ray of its own).
 static __forceinline__ __device__ float3 optixGetObjectRayOrigin() {
-    return __oxray_state().ray.path->org;
+    const __oxray_ThreadState& s = __oxray_state();
+    return s.ray.path->len == 0u ? s.ray.org : s.ray.path->org;
 }
 static __forceinline__ __device__ float3 optixGetObjectRayDirection() {
-    return __oxray_state().ray.path->dir;
+    const __oxray_ThreadState& s = __oxray_state();
+    return s.ray.path->len == 0u ? s.ray.dir : s.ray.path->dir;
+}
+// The GAS of the current hit: the path's, or the fast path's root GAS.
+static __forceinline__ __device__ const __oxray_Traversable* __oxray_hit_gas() {
+    const __oxray_ThreadState& s = __oxray_state();
+    return s.ray.path->gas != nullptr ? s.ray.path->gas : s.ray.gas;
 }
 static __forceinline__ __device__ OptixTraversableHandle optixGetGASTraversableHandle() {
-    return reinterpret_cast<OptixTraversableHandle>(__oxray_state().ray.path->gas);
+    return reinterpret_cast<OptixTraversableHandle>(__oxray_hit_gas());
 }
 static __forceinline__ __device__ unsigned int optixGetTransformListSize() {
     return __oxray_state().ray.path->len;
@@ -504,7 +526,7 @@ static __forceinline__ __device__ float3 optixTransformNormalFromObjectToWorldSp
 // a custom primitive.
 static __forceinline__ __device__ void optixGetTriangleVertexData(float3 data[3]) {
     __oxray_ThreadState& s = __oxray_state();
-    const __oxray_Traversable* g = s.ray.path->gas;
+    const __oxray_Traversable* g = __oxray_hit_gas();
     if (g == nullptr || g->kind != __OXRAY_GAS || s.ray.slot == 0xffffffffu) {
         for (int k = 0; k < 3; ++k) data[k] = make_float3(0.0f, 0.0f, 0.0f);
         return;
@@ -1057,36 +1079,22 @@ static __forceinline__ __device__ Best __oxray_fast_walk(const TraceRay& r,
     return best;
 }
 
-// A fast walk's result as the closest hit of a trace.
-static __forceinline__ __device__ void __oxray_fast_resolve(const Best& fast,
-                                                           const __oxray_Traversable* g,
-                                                           const __oxray_TraceArgs& a,
-                                                           const __oxray_Path& root,
-                                                           __oxray_Best& out) {
-    if (fast.slot == MISS_SLOT) return;
-    const u32 s = fast.slot & ~BACK_FACE_BIT;
-    const uint2 info = reinterpret_cast<const uint2*>(g->info)[s];
-    out.found = true;
-    out.t = fast.t;
-    out.prim = info.x;
-    out.sbt_gas_index = info.y;
-    out.hit_kind = (fast.slot & BACK_FACE_BIT) ? OPTIX_HIT_KIND_TRIANGLE_BACK_FACE
-                                                : OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE;
-    out.slot = s;
-    out.attr[0] = __float_as_uint(fast.u);
-    out.attr[1] = __float_as_uint(fast.v);
-    for (int k = 2; k < 8; ++k) out.attr[k] = 0u;
-    out.record = __oxray_hit_record(a, root, info.y);
-    // The path is the root's, with the GAS set by the caller: no copy.
-}
+// The caller's state while a trace runs: its record, and (for a trace from a hit or miss
+// program) its ray and payload. It lives in the caller's frame.
+struct __oxray_Frame {
+    const char* record;
+    __oxray_RayState ray;
+};
 
-static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle, float3 org,
-                                                  float3 dir, float tmin, float tmax, float time,
-                                                  OptixVisibilityMask mask, unsigned int flags,
-                                                  unsigned int sbt_offset, unsigned int sbt_stride,
-                                                  unsigned int miss_index, unsigned int n,
-                                                  unsigned int* payload, const Best* fast) {
-    __oxray_ThreadState& st = __oxray_state();
+// What every trace does first: the checks of the guide's limits (payload count, trace depth)
+// and, in validation mode, of the ray; then the caller's state goes into `frame`, and the ray
+// and payload into the state.
+static __forceinline__ __device__ void __oxray_enter(__oxray_ThreadState& st, float3 org,
+                                                     float3 dir, float tmin, float tmax,
+                                                     float time, OptixVisibilityMask mask,
+                                                     unsigned int flags, unsigned int n,
+                                                     const unsigned int* payload,
+                                                     __oxray_Frame& frame) {
     if (n > OXRAY_NUM_PAYLOAD_VALUES) {
         u32 d[2] = {n, (u32)OXRAY_NUM_PAYLOAD_VALUES};
         __oxray_throw(OPTIX_EXCEPTION_CODE_PAYLOAD_TYPE_MISMATCH, 2, d);
@@ -1108,18 +1116,59 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
             __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_RAY, 8, d);
         }
     }
-    // The caller's state (a hit or miss program's ray and payload, its record).
-    const char* saved_record = st.record;
-    __oxray_RayState saved;
-    if (st.depth > 0u) saved = st.ray;
+    frame.record = st.record;
+    if (st.depth > 0u) frame.ray = st.ray;
     st.depth += 1u;
     for (u32 i = 0; i < n; ++i) st.ray.payload[i] = payload[i];
     st.ray.org = org;
     st.ray.dir = dir;
     st.ray.tmin = tmin;
+    st.ray.tmax = tmax;
     st.ray.time = time;
     st.ray.flags = flags;
     st.ray.mask = mask & 0xFFu;
+}
+
+// The miss program `miss_index` (raises INVALID_MISS_SBT beyond the region), with the world
+// ray (its tmax as traced) and the root's path.
+static __forceinline__ __device__ void __oxray_miss(__oxray_ThreadState& st,
+                                                    unsigned int miss_index,
+                                                    const __oxray_Path* root) {
+    if (miss_index >= __oxray_launch.miss_count) {
+        u32 d[1] = {miss_index};
+        __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_MISS_SBT, 1, d);
+    }
+    st.ray.path = root;
+    st.ray.gas = nullptr;
+    st.record = reinterpret_cast<const char*>(__oxray_launch.miss) +
+                (unsigned long long)miss_index * __oxray_launch.miss_stride;
+    __oxray_call_miss(__oxray_group_of(st.record));
+}
+
+// What every trace does last: the payload copied out, the caller's state back.
+static __forceinline__ __device__ void __oxray_leave(__oxray_ThreadState& st, unsigned int n,
+                                                     unsigned int* payload,
+                                                     const __oxray_Frame& frame) {
+    for (u32 i = 0; i < n; ++i) payload[i] = st.ray.payload[i];
+    st.depth -= 1u;
+    st.record = frame.record;
+    if (st.depth > 0u) st.ray = frame.ray;
+}
+
+// The path of a trace with no transforms above its GAS, shared by the fast path's traces: the
+// object-space ray is then the world ray, and the GAS is the state's (`__oxray_hit_gas`).
+__device__ const __oxray_Path __oxray_root_path = {0u, 0u, 0xffffffffu, 0u, 0u, nullptr,
+                                                   {0.0f, 0.0f, 0.0f}, {0.0f, 0.0f, 0.0f}, {}};
+
+static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle, float3 org,
+                                                  float3 dir, float tmin, float tmax, float time,
+                                                  OptixVisibilityMask mask, unsigned int flags,
+                                                  unsigned int sbt_offset, unsigned int sbt_stride,
+                                                  unsigned int miss_index, unsigned int n,
+                                                  unsigned int* payload) {
+    __oxray_ThreadState& st = __oxray_state();
+    __oxray_Frame frame;
+    __oxray_enter(st, org, dir, tmin, tmax, time, mask, flags, n, payload, frame);
 
     // The path of the root: no transforms, the world ray.
     __oxray_Path root;
@@ -1142,13 +1191,7 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
     r.dir = dir;
     r.tmin = tmin;
     r.tmax = tmax;
-    if (fast != nullptr) {
-        // The call site checked the root (a triangle GAS the pipeline's flags allow) and the
-        // ray, and walked it.
-        const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
-        __oxray_fast_resolve(*fast, t, a, root, best);
-        if (best.found) root.gas = t;
-    } else if (handle != 0ull && prepare_ray(r)) {
+    if (handle != 0ull && prepare_ray(r)) {
         const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
         __oxray_check_root(t);
         __oxray_Path path;
@@ -1164,25 +1207,55 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
             st.ray.hit_kind = best.hit_kind;
             st.ray.slot = best.slot;
             for (int k = 0; k < 8; ++k) st.ray.attr[k] = best.attr[k];
-            st.ray.path = fast != nullptr ? &root : &best.path;
+            st.ray.path = &best.path;
             st.record = best.record;
             __oxray_call_closesthit(__oxray_group_of(best.record));
         }
     } else {
-        if (miss_index >= __oxray_launch.miss_count) {
-            u32 d[1] = {miss_index};
-            __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_MISS_SBT, 1, d);
-        }
-        st.ray.tmax = tmax;
-        st.ray.path = &root;
-        st.record = reinterpret_cast<const char*>(__oxray_launch.miss) +
-                    (unsigned long long)miss_index * __oxray_launch.miss_stride;
-        __oxray_call_miss(__oxray_group_of(st.record));
+        __oxray_miss(st, miss_index, &root);
     }
-    for (u32 i = 0; i < n; ++i) payload[i] = st.ray.payload[i];
-    st.depth -= 1u;
-    st.record = saved_record;
-    if (st.depth > 0u) st.ray = saved;
+    __oxray_leave(st, n, payload, frame);
+}
+
+// The end of a trace whose traversal the call site did (`optixTrace`, after `__oxray_enter`
+// and `__oxray_fast_walk`): the closest hit `fast` of the triangle GAS `g`, written straight
+// into the state (no intermediate hit record, no path of its own: the shared root path), then
+// the closest-hit or miss program. The ray's flags are read back from the state, so that the
+// call site keeps as few values alive across its walk as the query kernels do.
+static __noinline__ __device__ void __oxray_trace_fast(const __oxray_Traversable* g, Best fast,
+                                                       unsigned int sbt_offset,
+                                                       unsigned int sbt_stride,
+                                                       unsigned int miss_index, unsigned int n,
+                                                       unsigned int* payload,
+                                                       const __oxray_Frame& frame) {
+    __oxray_ThreadState& st = __oxray_state();
+    if (fast.slot != MISS_SLOT) {
+        const u32 flags = st.ray.flags;
+        if ((flags & OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT) == 0u) {
+            const u32 s = fast.slot & ~BACK_FACE_BIT;
+            const uint2 info = reinterpret_cast<const uint2*>(g->info)[s];
+            __oxray_TraceArgs a;
+            a.flags = flags;
+            a.sbt_offset = sbt_offset;
+            a.sbt_stride = sbt_stride;
+            const char* record = __oxray_hit_record(a, __oxray_root_path, info.y);
+            st.ray.tmax = fast.t;
+            st.ray.prim = info.x;
+            st.ray.sbt_gas_index = info.y;
+            st.ray.hit_kind = (fast.slot & BACK_FACE_BIT) ? OPTIX_HIT_KIND_TRIANGLE_BACK_FACE
+                                                          : OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE;
+            st.ray.slot = s;
+            st.ray.attr[0] = __float_as_uint(fast.u);
+            st.ray.attr[1] = __float_as_uint(fast.v);
+            st.ray.path = &__oxray_root_path;
+            st.ray.gas = g;
+            st.record = record;
+            __oxray_call_closesthit(__oxray_group_of(record));
+        }
+    } else {
+        __oxray_miss(st, miss_index, &__oxray_root_path);
+    }
+    __oxray_leave(st, n, payload, frame);
 }
 
 // The guide's optixTrace: 0 to 32 payload words, passed by reference, copied in and out.
@@ -1198,8 +1271,7 @@ static __forceinline__ __device__ void optixTrace(OptixTraversableHandle handle,
     static_assert(sizeof...(Payload) <= 32, "optixTrace takes at most 32 payload values");
     constexpr unsigned int n = sizeof...(Payload);
     unsigned int p[n > 0 ? n : 1] = {static_cast<unsigned int>(payload)...};
-    Best fast;
-    bool use_fast = false;
+    bool traced = false;
     if (__oxray_fast_root(handle, rayFlags)) {
         TraceRay r;
         r.org = rayOrigin;
@@ -1207,14 +1279,22 @@ static __forceinline__ __device__ void optixTrace(OptixTraversableHandle handle,
         r.tmin = tmin;
         r.tmax = tmax;
         if (prepare_ray(r)) {
+            // The ray and payload go into the state before the walk, so that only the walk's
+            // own values are alive during it.
+            __oxray_Frame frame;
+            __oxray_enter(__oxray_state(), rayOrigin, rayDirection, tmin, tmax, rayTime,
+                          visibilityMask, rayFlags, n, p, frame);
             const __oxray_Traversable* g = reinterpret_cast<const __oxray_Traversable*>(handle);
-            fast = (rayFlags & OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT) ? __oxray_fast_walk<true>(r, g)
-                                                                      : __oxray_fast_walk<false>(r, g);
-            use_fast = true;
+            const bool first = (rayFlags & OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT) != 0u;
+            Best fast = first ? __oxray_fast_walk<true>(r, g) : __oxray_fast_walk<false>(r, g);
+            __oxray_trace_fast(g, fast, SBToffset, SBTstride, missSBTIndex, n, p, frame);
+            traced = true;
         }
     }
-    __oxray_trace(handle, rayOrigin, rayDirection, tmin, tmax, rayTime, visibilityMask, rayFlags,
-                  SBToffset, SBTstride, missSBTIndex, n, p, use_fast ? &fast : nullptr);
+    if (!traced) {
+        __oxray_trace(handle, rayOrigin, rayDirection, tmin, tmax, rayTime, visibilityMask,
+                      rayFlags, SBToffset, SBTstride, missSBTIndex, n, p);
+    }
     unsigned int i = 0;
     ((payload = p[i++]), ...);
     (void)i;

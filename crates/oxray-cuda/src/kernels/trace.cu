@@ -238,14 +238,30 @@ struct Best {
 
 // Intersects the triangles of leaf slots [start, start + count). Returns true when an any-hit
 // query may stop.
+// Nodes and triangles are read-only while rays are traced: loaded through the read-only data
+// cache, which the compiler picks by itself only for a kernel's own `const __restrict__`
+// parameters (the query kernels), not for addresses a pipeline reads from its traversables.
+// `-DOXRAY_READONLY_LOADS=0` turns it off, for comparison.
+#ifndef OXRAY_READONLY_LOADS
+#define OXRAY_READONLY_LOADS 1
+#endif
+template <typename T>
+__device__ __forceinline__ T load_ro(const T* p) {
+#if OXRAY_READONLY_LOADS
+    return __ldg(p);
+#else
+    return *p;
+#endif
+}
+
 template <bool ANY>
 __device__ __forceinline__ bool leaf(const TraceRay& r, const float4* __restrict__ tris, u32 start,
                                      u32 count, float tmin, float& tmax, float& box_tmax,
                                      Best& best) {
     for (u32 s = start; s < start + count; ++s) {
-        float4 q0 = tris[3 * s];
-        float4 q1 = tris[3 * s + 1];
-        float4 q2 = tris[3 * s + 2];
+        float4 q0 = load_ro(tris + 3 * s);
+        float4 q1 = load_ro(tris + 3 * s + 1);
+        float4 q2 = load_ro(tris + 3 * s + 2);
         TriHit h;
         if (intersect_triangle(r, make_float3(q0.x, q0.y, q0.z), make_float3(q1.x, q1.y, q1.z),
                                make_float3(q2.x, q2.y, q2.z), tmin, tmax, h)) {
@@ -403,8 +419,8 @@ __device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __res
     for (;;) {
         if (cur.count == 0) {
             const float4* n = nodes + 4 * (size_t)cur.child;
-            float4 n0 = n[0], n1 = n[1], n2 = n[2];
-            uint4 links = reinterpret_cast<const uint4*>(n)[3];
+            float4 n0 = load_ro(n), n1 = load_ro(n + 1), n2 = load_ro(n + 2);
+            uint4 links = load_ro(reinterpret_cast<const uint4*>(n) + 3);
             float d0, d1;
             bool h0 = slab(r, r.neg_x ? n0.y : n0.x, r.neg_y ? n0.w : n0.z, r.neg_z ? n2.y : n2.x,
                            r.neg_x ? n0.x : n0.y, r.neg_y ? n0.z : n0.w, r.neg_z ? n2.x : n2.y,
