@@ -121,9 +121,14 @@ enum Command {
         /// Repetitions of each measurement (the median is reported).
         #[arg(long, default_value_t = 5)]
         runs: usize,
-        /// Also write each mesh and its rays here, for scripts/bench_embree.py.
+        /// Also write each mesh, its rays and oxray's answers here, for
+        /// scripts/bench_embree.py and scripts/embree3_bench.c.
         #[arg(long)]
         export: Option<PathBuf>,
+        /// The build whose structure the ray columns trace (and --export answers with):
+        /// default, fast-build (PREFER_FAST_BUILD) or fast-trace (PREFER_FAST_TRACE).
+        #[arg(long, default_value = "default")]
+        build: String,
         /// Also build an IAS of this many instances of the first mesh and trace through it, on
         /// the device of --backend.
         #[arg(long)]
@@ -394,10 +399,12 @@ fn run(cli: Cli) -> Result<()> {
             side,
             runs,
             export,
+            build,
             instances,
             subdivide,
             backend,
         } => {
+            let traced = bench::preset_index(&build).map_err(anyhow::Error::msg)?;
             if side == 0 || side > 16384 {
                 bail!("--side must be in 1..=16384, got {side}");
             }
@@ -444,7 +451,7 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
             say(format_args!(
-                "threads: {}, rays per set: {}, median of {runs} runs",
+                "threads: {}, rays per set: {}, median of {runs} runs, rays traced on the {build} build",
                 pool.current_num_threads(),
                 side * side
             ))?;
@@ -462,7 +469,7 @@ fn run(cli: Cli) -> Result<()> {
             for (name, mesh) in &sets {
                 let rays = bench::bench_rays(mesh, side);
                 if let Some(dir) = &export {
-                    let gas = bench::build_gas(mesh, oxray::BuildFlags::empty())?;
+                    let gas = bench::build_preset(mesh, traced)?;
                     bench::export(dir, name, mesh, &rays)
                         .and_then(|_| bench::export_hits(dir, name, &gas, &rays))
                         .with_context(|| format!("cannot write to {}", dir.display()))?;
@@ -477,7 +484,9 @@ fn run(cli: Cli) -> Result<()> {
                     continue;
                 }
                 let r = pool
-                    .install(|| bench::run(name, mesh, runs, &rays).map_err(|e| e.to_string()))
+                    .install(|| {
+                        bench::run(name, mesh, runs, &rays, traced).map_err(|e| e.to_string())
+                    })
                     .map_err(anyhow::Error::msg)?;
                 say(format_args!(
                     "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) |",
