@@ -130,10 +130,11 @@ def main():
                       f"| {fmt(b)} | {ratio(o, b)} |")
     print()
     print("Build, ms (medians): oxray's presets (`Gas::build`: decode, BVH, wide layout, triangle "
-          "packing) against Embree's MEDIUM quality (rtcCommitScene); Embree 4's is on one "
+          "packing; fast-trace = PREFER_FAST_TRACE with spatial splits, fast-trace-binned = the same "
+          "without them) against Embree's MEDIUM quality (rtcCommitScene); Embree 4's is on one "
           "thread. Ratios are Embree 3 / oxray (above 1: oxray builds faster).")
     print()
-    names = ["default", "fast-build", "fast-trace"]
+    names = ["default", "fast-build", "fast-trace", "fast-trace-binned"]
     nb = max((len(r["build"]) for t in threads for r in ox[t].values()), default=3)
     names = names[:nb]
     print("| mesh | threads | " + " | ".join(f"oxray {n}" for n in names)

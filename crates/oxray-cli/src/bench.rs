@@ -72,14 +72,16 @@ pub struct BenchResult {
     /// Triangles.
     pub triangles: usize,
     /// Median build time (ms) of each of the [`PRESETS`].
-    pub build_ms: [f64; 3],
+    pub build_ms: [f64; 4],
     /// SAH cost of each preset's build.
-    pub sah: [f64; 3],
+    pub sah: [f64; 4],
+    /// Leaf references per triangle of each preset's build (above 1 with spatial splits).
+    pub refs_per_tri: [f64; 4],
     /// Mrays/s (median) for primary closest, primary any, diffuse closest, diffuse any and
     /// shadow (any hit, bounded by the light's distance).
     pub mrays: [f64; 5],
     /// Mrays/s of incoherent closest hit on each preset's build.
-    pub mrays_by_flags: [f64; 3],
+    pub mrays_by_flags: [f64; 4],
     /// Fraction of primary, diffuse and shadow rays that hit (are blocked, for shadow rays).
     pub hit_rate: [f64; 3],
     /// Mrays/s of the coherent rays traced through the programmable pipeline (trivial
@@ -88,16 +90,30 @@ pub struct BenchResult {
 }
 
 /// The build presets the benchmark compares, in its columns' order, by the names `--build`
-/// takes.
-pub const PRESETS: [(&str, BuildFlags); 3] = [
-    ("default", BuildFlags::empty()),
-    ("fast-build", BuildFlags::PREFER_FAST_BUILD),
-    ("fast-trace", BuildFlags::PREFER_FAST_TRACE),
+/// takes: the build flags, and whether the build may use spatial splits where the flags choose
+/// them (`fast-trace-binned` is `PREFER_FAST_TRACE` without them, the binned SAH build that
+/// preset was before, for comparison).
+pub const PRESETS: [(&str, BuildFlags, bool); 4] = [
+    ("default", BuildFlags::empty(), true),
+    ("fast-build", BuildFlags::PREFER_FAST_BUILD, true),
+    ("fast-trace", BuildFlags::PREFER_FAST_TRACE, true),
+    ("fast-trace-binned", BuildFlags::PREFER_FAST_TRACE, false),
 ];
 
 /// Builds a GAS over a mesh on the CPU with preset `k` of [`PRESETS`].
 pub fn build_preset(mesh: &Mesh, k: usize) -> Result<Gas, oxray::BuildError> {
-    build_gas(mesh, PRESETS[k].1)
+    let (_, flags, splits) = PRESETS[k];
+    if splits {
+        return build_gas(mesh, flags);
+    }
+    let isa = oxray::cpu::Isa::selected();
+    let data = oxray::bvh::GasData::build_with_spatial_splits(
+        &BuildOptions::new(flags),
+        &[mesh_input(mesh)],
+        isa.width(),
+        None,
+    )?;
+    Ok(Gas::from_data_with_isa(data, isa))
 }
 
 /// The index in [`PRESETS`] of a preset's name.
@@ -138,6 +154,8 @@ pub fn run(
         let gas = gas.expect("runs >= 1");
         res.build_ms[k] = median(times);
         res.sah[k] = gas.stats().sah_cost;
+        res.refs_per_tri[k] =
+            gas.data().num_references() as f64 / gas.data().num_active_primitives().max(1) as f64;
         gases.push(gas);
     }
     let gas = gases.get(traced).ok_or("no such build preset")?;
