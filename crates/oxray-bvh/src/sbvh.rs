@@ -1,7 +1,7 @@
 //! Spatial splits for triangle BVHs (SBVH: Stich, Friedrich and Dietrich, "Spatial Splits in
 //! Bounding Volume Hierarchies", HPG 2009).
 //!
-//! At every node the builder compares the best binned object split (as [`build_bvh2`]) with
+//! At every node the builder compares the best binned object split (as [`build_bvh2`](crate::build_bvh2)) with
 //! the best *spatial* split: the node's box is cut into slabs along an axis, each triangle is
 //! chopped at the slab planes and each piece's box (the triangle clipped to the slab, within
 //! the reference's box) goes into its slab. A triangle that straddles the chosen plane is then
@@ -11,7 +11,7 @@
 //! share of the split budget lasts: at most [`SpatialSplits::budget`] more references than
 //! triangles over the whole tree, the rest of a node's share going to its children in
 //! proportion to their references. Where a node's share is spent, its subtree is built by
-//! [`build_bvh2`]'s binned builder over the references' boxes.
+//! [`build_bvh2`](crate::build_bvh2)'s binned builder over the references' boxes.
 //!
 //! A leaf may thus hold a triangle that another leaf holds too: a ray can meet the same
 //! triangle twice. Hits are the same (the same triangle test on the same vertices), but an
