@@ -9,6 +9,7 @@ Input (all little endian), for every NAME.mesh in DIR:
   NAME.mesh            u32 vertex count, u32 triangle count, f32x3 vertices, u32x3 triangles
   NAME.coherent.rays   f32[8] per ray: ox oy oz tmin dx dy dz tmax (tmax may be +inf)
   NAME.incoherent.rays same layout
+  NAME.shadow.rays     same layout (optional; any hit only)
   NAME.coherent.oxray-hits (optional) f32 t per ray, +inf for a miss: cross-checked
 Nothing is written into DIR.
 
@@ -333,8 +334,8 @@ def bench(args, nthreads, probe):
     if probe:
         print(f"thread probe (unpinned, default arguments, 2^20 rays on a sphere): {probe}")
     print("| mesh | tris | scene flags | build ms (rtcCommitScene) | upload ms (embreex TriangleMesh) "
-          "| coherent closest | coherent any | incoherent closest | incoherent any | hit rate coherent / incoherent |")
-    print("|---|---:|---|---:|---:|---:|---:|---:|---:|---|")
+          "| coherent closest | coherent any | incoherent closest | incoherent any | shadow any | hit rate coherent / incoherent |")
+    print("|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|")
 
     notes = []
     build_meter = ThreadMeter()
@@ -344,7 +345,7 @@ def bench(args, nthreads, probe):
         name = os.path.basename(path)[:-len(".mesh")]
         v, t = load_mesh(np, path)
         sets = {}
-        for kind in ("coherent", "incoherent"):
+        for kind in ("coherent", "incoherent", "shadow"):
             p = os.path.join(args.dir, f"{name}.{kind}.rays")
             if os.path.exists(p):
                 sets[kind] = RaySet(np, p)
@@ -375,10 +376,12 @@ def bench(args, nthreads, probe):
             mr = {}
             hit = {}
             for kind, rays in sets.items():
-                s = timed_queries(scene, rays, closest_q, args.runs, extra, trace_meter["closest"])
-                mr[kind, "closest"] = rays.n / s / 1e6
                 s = timed_queries(scene, rays, "OCCLUDED", args.runs, extra, trace_meter["OCCLUDED"])
                 mr[kind, "any"] = rays.n / s / 1e6
+                if kind == "shadow":
+                    continue  # shadow rays: any hit only
+                s = timed_queries(scene, rays, closest_q, args.runs, extra, trace_meter["closest"])
+                mr[kind, "closest"] = rays.n / s / 1e6
                 ids = scene.run(rays.org, rays.dir, dists=rays.tfar, query="INTERSECT", **extra)
                 hit[kind] = float(np.mean(ids >= 0))
                 hp = os.path.join(args.dir, f"{name}.{kind}.oxray-hits")
@@ -401,7 +404,7 @@ def bench(args, nthreads, probe):
             hr = " / ".join(f"{100 * hit[k]:.1f}%" if k in hit else "-" for k in ("coherent", "incoherent"))
             print(f"| {name} | {len(t)} | {flag} | {median(build) * 1e3:.1f} "
                   f"| {median(upload) * 1e3:.1f} | {f('coherent', 'closest')} | {f('coherent', 'any')} "
-                  f"| {f('incoherent', 'closest')} | {f('incoherent', 'any')} | {hr} |", flush=True)
+                  f"| {f('incoherent', 'closest')} | {f('incoherent', 'any')} | {f('shadow', 'any')} | {hr} |", flush=True)
             del scene
             scene = None
 

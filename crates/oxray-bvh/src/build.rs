@@ -60,31 +60,31 @@ impl BuildConfig {
 }
 
 /// Nodes with fewer primitives than this use 8 bins whatever the configuration.
-const SMALL_NODE: usize = 64;
+pub(crate) const SMALL_NODE: usize = 64;
 /// Largest node the exact sweep handles (its scratch lives on the stack).
 const MAX_SWEEP: usize = 256;
 /// Subtrees smaller than this are built on the current thread.
-const PARALLEL_SUBTREE: usize = 1024;
+pub(crate) const PARALLEL_SUBTREE: usize = 1024;
 /// Nodes larger than this bin their primitives in parallel chunks of this size.
-const PARALLEL_BINNING: usize = 1 << 13;
+pub(crate) const PARALLEL_BINNING: usize = 1 << 13;
 
 /// A box with a fourth, unused lane, so that unions compile to `minps`/`maxps`.
 #[repr(C, align(16))]
 #[derive(Clone, Copy, Debug)]
-struct Box4 {
-    lo: [f32; 4],
-    hi: [f32; 4],
+pub(crate) struct Box4 {
+    pub(crate) lo: [f32; 4],
+    pub(crate) hi: [f32; 4],
 }
 
 impl Box4 {
-    const EMPTY: Box4 = Box4 {
+    pub(crate) const EMPTY: Box4 = Box4 {
         lo: [f32::INFINITY; 4],
         hi: [f32::NEG_INFINITY; 4],
     };
 
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    fn grow(&mut self, o: &Box4) {
+    pub(crate) fn grow(&mut self, o: &Box4) {
         use std::arch::x86_64::*;
         // SAFETY: SSE is part of the x86_64 baseline; `Box4` is `align(16)` and its rows are
         // `[f32; 4]`, so the loads and stores are aligned and in bounds. `minps(a, b)` returns `b`
@@ -99,7 +99,7 @@ impl Box4 {
 
     #[cfg(not(target_arch = "x86_64"))]
     #[inline(always)]
-    fn grow(&mut self, o: &Box4) {
+    pub(crate) fn grow(&mut self, o: &Box4) {
         for i in 0..4 {
             self.lo[i] = if o.lo[i] < self.lo[i] {
                 o.lo[i]
@@ -115,21 +115,21 @@ impl Box4 {
     }
 
     #[inline(always)]
-    fn grow_point(&mut self, p: &[f32; 4]) {
+    pub(crate) fn grow_point(&mut self, p: &[f32; 4]) {
         for i in 0..4 {
             self.lo[i] = if p[i] < self.lo[i] { p[i] } else { self.lo[i] };
             self.hi[i] = if p[i] > self.hi[i] { p[i] } else { self.hi[i] };
         }
     }
 
-    fn aabb(&self) -> Aabb {
+    pub(crate) fn aabb(&self) -> Aabb {
         Aabb::new(
             [self.lo[0], self.lo[1], self.lo[2]].into(),
             [self.hi[0], self.hi[1], self.hi[2]].into(),
         )
     }
 
-    fn half_area(&self) -> f32 {
+    pub(crate) fn half_area(&self) -> f32 {
         self.aabb().half_area()
     }
 }
@@ -137,10 +137,10 @@ impl Box4 {
 /// The builder's view of one primitive: its box, with the primitive's id in the bits of the
 /// unused fourth lane of `hi` (ids are below 2^29, so those bits are a small finite float).
 #[derive(Clone, Copy, Debug)]
-pub(crate) struct PrimRef(Box4);
+pub(crate) struct PrimRef(pub(crate) Box4);
 
 impl PrimRef {
-    fn new(b: &Aabb, id: u32) -> Self {
+    pub(crate) fn new(b: &Aabb, id: u32) -> Self {
         PrimRef(Box4 {
             lo: [b.min.x, b.min.y, b.min.z, 0.0],
             hi: [b.max.x, b.max.y, b.max.z, f32::from_bits(id)],
@@ -148,13 +148,13 @@ impl PrimRef {
     }
 
     #[inline(always)]
-    fn id(&self) -> u32 {
+    pub(crate) fn id(&self) -> u32 {
         self.0.hi[3].to_bits()
     }
 
     /// The centroid; binning and partitioning both use this, so they agree bit for bit.
     #[inline(always)]
-    fn centroid(&self) -> [f32; 4] {
+    pub(crate) fn centroid(&self) -> [f32; 4] {
         let b = &self.0;
         std::array::from_fn(|i| b.lo[i] * 0.5 + b.hi[i] * 0.5)
     }
@@ -169,12 +169,23 @@ pub fn temp_bytes(n: usize) -> usize {
 
 /// Builds a binary BVH over `bounds` (every box must be finite and valid).
 pub fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
-    let config = BuildConfig {
+    build_bvh2_at(bounds, config, 0)
+}
+
+/// The configuration the builder works with: bins a power of two in 8..=32, sizes in range.
+pub(crate) fn normalized(config: &BuildConfig) -> BuildConfig {
+    BuildConfig {
         bins: config.bins.clamp(8, 32).next_power_of_two(),
         max_leaf_size: config.max_leaf_size.max(1),
         sweep_threshold: config.sweep_threshold.min(MAX_SWEEP),
         ..*config
-    };
+    }
+}
+
+/// [`build_bvh2`] for a subtree whose root is at `depth` of a larger tree (the spatial-split
+/// builder's subtrees), so that the depth bound holds for the whole tree.
+pub(crate) fn build_bvh2_at(bounds: &[Aabb], config: &BuildConfig, depth: usize) -> Bvh2 {
+    let config = normalized(config);
     let mut refs: Vec<PrimRef> = bounds
         .par_iter()
         .enumerate()
@@ -195,7 +206,7 @@ pub fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
         1,
         root_bounds,
         root_centroids,
-        0,
+        depth,
         &config,
     );
     Bvh2 {
@@ -205,7 +216,7 @@ pub fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
 }
 
 /// The box of the primitives and the box of their centroids.
-fn reduce(refs: &[PrimRef]) -> (Box4, Box4) {
+pub(crate) fn reduce(refs: &[PrimRef]) -> (Box4, Box4) {
     let fold = |(mut b, mut c): (Box4, Box4), r: &PrimRef| {
         b.grow(&r.0);
         c.grow_point(&r.centroid());
@@ -230,7 +241,7 @@ fn reduce(refs: &[PrimRef]) -> (Box4, Box4) {
 
 /// A chosen split.
 #[derive(Clone, Copy)]
-enum Split {
+pub(crate) enum Split {
     /// Left iff the bin of the centroid along `axis` is below `bin`.
     Binned {
         axis: usize,
@@ -355,7 +366,7 @@ struct Sides {
 /// Returns the best binned split, its SAH cost (area-weighted primitive count, not yet divided
 /// by the parent's area) and the boxes of its sides (the centroid boxes are filled in by the
 /// partition).
-fn best_binned_split<const B: usize>(
+pub(crate) fn best_binned_split<const B: usize>(
     refs: &[PrimRef],
     cb: &Box4,
     block: usize,
@@ -431,7 +442,7 @@ fn best_binned_split<const B: usize>(
 }
 
 /// The axis along which a box is widest.
-fn widest_axis(b: &Box4) -> usize {
+pub(crate) fn widest_axis(b: &Box4) -> usize {
     let e = [b.hi[0] - b.lo[0], b.hi[1] - b.lo[1], b.hi[2] - b.lo[2]];
     if e[0] >= e[1] && e[0] >= e[2] {
         0
@@ -444,7 +455,7 @@ fn widest_axis(b: &Box4) -> usize {
 
 /// The split of a node of at most two blocks: sorted along the widest centroid axis, one full
 /// block on the left.
-fn small_split(refs: &mut [PrimRef], cb: &Box4, block: usize) -> Option<(Split, f32)> {
+pub(crate) fn small_split(refs: &mut [PrimRef], cb: &Box4, block: usize) -> Option<(Split, f32)> {
     let e = [
         cb.hi[0] - cb.lo[0],
         cb.hi[1] - cb.lo[1],
@@ -472,7 +483,7 @@ fn small_split(refs: &mut [PrimRef], cb: &Box4, block: usize) -> Option<(Split, 
 }
 
 /// Exact SAH: sorts along each axis and evaluates every split position.
-fn best_sweep_split(refs: &mut [PrimRef], block: usize) -> Option<(Split, f32)> {
+pub(crate) fn best_sweep_split(refs: &mut [PrimRef], block: usize) -> Option<(Split, f32)> {
     let n = refs.len();
     let mut right_area = [0.0f32; MAX_SWEEP];
     let mut best: Option<(Split, f32)> = None;
@@ -507,7 +518,10 @@ fn sort_by_centroid(refs: &mut [PrimRef], axis: usize) {
 
 /// Applies a split; returns how many primitives went left and, for a binned split, the boxes of
 /// the sides' centroids.
-fn partition<const B: usize>(refs: &mut [PrimRef], split: Split) -> (usize, Option<[Box4; 2]>) {
+pub(crate) fn partition<const B: usize>(
+    refs: &mut [PrimRef],
+    split: Split,
+) -> (usize, Option<[Box4; 2]>) {
     match split {
         Split::Binned {
             axis,

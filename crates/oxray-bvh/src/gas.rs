@@ -5,6 +5,7 @@ use crate::build::{build_bvh2, BuildConfig};
 use crate::bvh2::Bvh2;
 use crate::bvh4::Bvh4;
 use crate::bvh8::Bvh8;
+use crate::sbvh::{build_sbvh2, SpatialSplits};
 use crate::stats::BvhStats;
 use crate::triangle::is_degenerate;
 use crate::triangle4::Triangle4;
@@ -214,8 +215,34 @@ impl GasData {
     /// Builds a GAS (`optixAccelBuild`). Inputs must all be of one kind; see [`BuildError`] for
     /// every rule checked. Primitives that can never be hit (a NaN or infinite coordinate, a
     /// zero-area triangle, an inverted box) are left out: they are inactive.
+    ///
+    /// A triangle build with `PREFER_FAST_TRACE` and without `ALLOW_UPDATE` uses spatial
+    /// splits ([`spatial_splits`]): a leaf may then hold a triangle that another leaf holds
+    /// too (never one whose SBT record has `REQUIRE_SINGLE_ANYHIT_CALL`).
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<GasData, BuildError> {
-        Ok(Self::build_impl(options, inputs, false, NodeWidth::Four)?.0)
+        Ok(Self::build_impl(
+            options,
+            inputs,
+            false,
+            NodeWidth::Four,
+            spatial_splits(options),
+        )?
+        .0)
+    }
+
+    /// [`build_with_width`](Self::build_with_width) with the spatial-split setting `splits`
+    /// instead of the one the build flags choose (`None`: no spatial splits), to compare
+    /// builders. Where the rules exclude spatial splits they stay off whatever `splits` says:
+    /// custom primitives, `ALLOW_UPDATE` builds (a refit needs one reference per primitive),
+    /// and the primitives of SBT records with `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1).
+    pub fn build_with_spatial_splits(
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+        width: NodeWidth,
+        splits: Option<SpatialSplits>,
+    ) -> Result<GasData, BuildError> {
+        let splits = splits.filter(|_| !options.flags.contains(BuildFlags::ALLOW_UPDATE));
+        Ok(Self::build_impl(options, inputs, false, width, splits)?.0)
     }
 
     /// [`build`](Self::build) with the node layouts of `width`: with [`NodeWidth::Eight`], the
@@ -237,7 +264,7 @@ impl GasData {
         inputs: &[BuildInput<'_>],
         width: NodeWidth,
     ) -> Result<GasData, BuildError> {
-        Ok(Self::build_impl(options, inputs, false, width)?.0)
+        Ok(Self::build_impl(options, inputs, false, width, spatial_splits(options))?.0)
     }
 
     /// The node layouts the structure holds.
@@ -257,7 +284,13 @@ impl GasData {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<(GasData, Bvh2), BuildError> {
-        let (gas, tree) = Self::build_impl(options, inputs, true, NodeWidth::Four)?;
+        let (gas, tree) = Self::build_impl(
+            options,
+            inputs,
+            true,
+            NodeWidth::Four,
+            spatial_splits(options),
+        )?;
         Ok((gas, tree.unwrap_or_default()))
     }
 
@@ -266,6 +299,7 @@ impl GasData {
         inputs: &[BuildInput<'_>],
         keep_tree: bool,
         width: NodeWidth,
+        splits: Option<SpatialSplits>,
     ) -> Result<(GasData, Option<Bvh2>), BuildError> {
         if options.operation == BuildOperation::Update {
             return Err(BuildError::InvalidUpdate(UpdateRule::NoStructure));
@@ -368,7 +402,17 @@ impl GasData {
                     .enumerate()
                     .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
                     .unzip();
-                let bvh2 = build_bvh2(&bounds, &config);
+                let splittable = splits.and_then(|_| gas.splittable(&ids));
+                let bvh2 = match (splits, splittable) {
+                    (Some(splits), Some(splittable)) => {
+                        let active: Vec<[Vec3; 3]> =
+                            ids.par_iter().map(|&g| tris[g as usize]).collect();
+                        let all = splittable.iter().all(|&s| s);
+                        let only = (!all).then_some(&splittable[..]);
+                        build_sbvh2(&active, &bounds, only, &config, &splits)
+                    }
+                    _ => build_bvh2(&bounds, &config),
+                };
                 gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
                 gas.bvh = Bvh4::from(&bvh2);
                 let global: Vec<u32> = bvh2
@@ -487,11 +531,56 @@ impl GasData {
         self.num_primitives
     }
 
-    /// Primitives that can be hit.
+    /// Primitives that can be hit (each once, however many leaf slots hold it).
     pub fn num_active_primitives(&self) -> u32 {
+        let mut seen = vec![false; self.num_primitives as usize];
+        let mut count = 0;
+        for s in 0..self.slot_prim.len() {
+            if self.slot_is_active(s) {
+                let g = self.slot_prim[s] as usize;
+                // Loaded bytes are checked to name primitives below the count; stay safe anyway.
+                if let Some(seen) = seen.get_mut(g) {
+                    count += u32::from(!*seen);
+                    *seen = true;
+                }
+            }
+        }
+        count
+    }
+
+    /// Leaf slots that hold a primitive that can be hit: more than
+    /// [`num_active_primitives`](Self::num_active_primitives) where spatial splits referenced
+    /// a primitive from several leaves.
+    pub fn num_references(&self) -> u32 {
         (0..self.slot_prim.len())
             .filter(|&s| self.slot_is_active(s))
             .count() as u32
+    }
+
+    /// Per active primitive (`ids[k]` the global id of the builder's primitive `k`), whether
+    /// spatial splits may split it: not when its SBT record has `REQUIRE_SINGLE_ANYHIT_CALL`
+    /// (guide §5.1: the any-hit program is then called once per primitive, and a primitive
+    /// referenced from two leaves would be reported twice; §9.2 says the same of OptiX's
+    /// curve splitting). `None` when no primitive may be split.
+    fn splittable(&self, ids: &[u32]) -> Option<Vec<bool>> {
+        let single = |record: usize| {
+            self.record_flags
+                .get(record)
+                .is_some_and(|f| f.contains(GeometryFlags::REQUIRE_SINGLE_ANYHIT_CALL))
+        };
+        if !(0..self.record_flags.len()).any(single) {
+            return Some(vec![true; ids.len()]);
+        }
+        let out: Vec<bool> = ids
+            .iter()
+            .map(|&g| {
+                let (input, _) = self.locate(g);
+                let record = self.inputs[input].sbt_base
+                    + self.sbt_offsets.get(g as usize).copied().unwrap_or(0);
+                !single(record as usize)
+            })
+            .collect();
+        out.iter().any(|&s| s).then_some(out)
     }
 
     /// Whether leaf slot `slot` holds a primitive that can be hit (an updatable structure keeps
@@ -658,6 +747,17 @@ impl GasData {
         let sbt = rec.sbt_base + self.sbt_offsets.get(global as usize).copied().unwrap_or(0);
         (local + rec.primitive_index_offset, sbt, input as u32)
     }
+}
+
+/// The spatial splits a build uses (see [`crate::sbvh`]): those of
+/// [`SpatialSplits::FAST_TRACE`] for `PREFER_FAST_TRACE` without `ALLOW_UPDATE` (an update
+/// refits one leaf slot per primitive, and rebuilding the clipped boxes would need the
+/// splits again), none otherwise. Only triangles are split, and never those whose SBT record
+/// has `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1).
+pub fn spatial_splits(options: &BuildOptions) -> Option<SpatialSplits> {
+    (options.flags.contains(BuildFlags::PREFER_FAST_TRACE)
+        && !options.flags.contains(BuildFlags::ALLOW_UPDATE))
+    .then_some(SpatialSplits::FAST_TRACE)
 }
 
 /// Gives every inactive primitive of an updatable build a box to be placed by (`fallback`'s

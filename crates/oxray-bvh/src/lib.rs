@@ -36,6 +36,7 @@ pub mod gas;
 pub mod ias;
 pub mod memory;
 mod refit;
+pub mod sbvh;
 pub mod serialize;
 mod stats;
 pub mod triangle;
@@ -48,10 +49,12 @@ pub use bvh4::{Bvh4, Bvh4Node};
 pub use bvh8::{Bvh8, Bvh8Node};
 pub use export::{ExportedTriangle, GasExport};
 pub use gas::{
-    GasData, GasInfo, GasKind, GasMemory, InputRecord, InputShape, NodeWidth, NO_PRIMITIVE,
+    spatial_splits, GasData, GasInfo, GasKind, GasMemory, InputRecord, InputShape, NodeWidth,
+    NO_PRIMITIVE,
 };
 pub use ias::{IasData, InstanceData};
 pub use memory::{compute_memory_usage, AccelBufferSizes};
+pub use sbvh::{build_sbvh2, SpatialSplits};
 pub use stats::BvhStats;
 pub use triangle4::Triangle4;
 pub use wide::WideNode;

@@ -37,6 +37,19 @@ pub fn compute_memory_usage(
 ) -> Result<AccelBufferSizes, BuildError> {
     let summary = validate_structure(options, inputs)?;
     let mut sizes = sizes_for(&summary, inputs.len());
+    if summary.kind == oxray_core::BuildInputKind::Triangles {
+        if let Some(splits) = crate::gas::spatial_splits(options) {
+            // Spatial splits reference a triangle from several leaves: more leaf slots and
+            // nodes, bounded by the split budget; and the builder's copy of the triangles and
+            // its per-node reference lists.
+            let n = summary.num_primitives as usize;
+            let refs = splits.max_references(n);
+            sizes.output_size_in_bytes = output_bound(&summary, inputs.len(), refs);
+            sizes.temp_size_in_bytes += n * std::mem::size_of::<[[f32; 3]; 3]>()
+                + 3 * refs * std::mem::size_of::<Aabb>()
+                + crate::build::temp_bytes(refs);
+        }
+    }
     if options.flags.contains(oxray_core::BuildFlags::ALLOW_UPDATE) {
         // A refit works in place: the table of input starts and the thread pool's jobs.
         sizes.temp_update_size_in_bytes = inputs.len() * 4 + FIXED_TEMP;
@@ -47,7 +60,7 @@ pub fn compute_memory_usage(
 /// The sizes for validated inputs of `num_inputs` build inputs.
 pub fn sizes_for(s: &InputSummary, num_inputs: usize) -> AccelBufferSizes {
     let n = s.num_primitives as usize;
-    let output = output_bound(s, num_inputs);
+    let output = output_bound(s, num_inputs, n);
     // Decoded primitives (bounds and vertices) + the binary tree and its working set + the map
     // from active primitives to global ids.
     let temp = n * (std::mem::size_of::<Aabb>() + std::mem::size_of::<[[f32; 3]; 3]>() + 4)
@@ -61,8 +74,10 @@ pub fn sizes_for(s: &InputSummary, num_inputs: usize) -> AccelBufferSizes {
     }
 }
 
-fn output_bound(s: &InputSummary, num_inputs: usize) -> usize {
-    let n = s.num_primitives as usize;
+/// The output bound for `refs` leaf references (one per primitive; more with spatial splits).
+fn output_bound(s: &InputSummary, num_inputs: usize, refs: usize) -> usize {
+    let n = refs;
+    let per_input_prims = s.num_primitives as usize;
     // A 4-wide (or 8-wide) node absorbs at least one binary inner node, and a binary tree over n
     // leaves has n - 1 inner nodes, so n - 1 nodes (and the root) always suffice; the CPU
     // backend may keep both layouts.
@@ -76,7 +91,7 @@ fn output_bound(s: &InputSummary, num_inputs: usize) -> usize {
     };
     // Slot-to-primitive map, and per-primitive SBT offsets (kept only when some input has more
     // than one record, but bounded here by counts alone).
-    let ids = n * 4 * (slots + 1);
+    let ids = n * 4 * slots + per_input_prims * 4;
     let inputs = num_inputs
         * (std::mem::size_of::<InputRecord>() + std::mem::size_of::<crate::InputShape>())
         + s.num_sbt_records as usize * 4;

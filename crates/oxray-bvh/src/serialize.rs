@@ -465,7 +465,7 @@ impl GasData {
             shapes.push(shape);
         }
 
-        Ok(GasData {
+        let gas = GasData {
             kind,
             build_flags,
             bvh: Bvh4 { nodes },
@@ -480,7 +480,49 @@ impl GasData {
             num_primitives,
             shapes,
             lineage: crate::next_lineage(),
-        })
+        };
+        if let Some(slot) = gas.repeated_reference() {
+            return Err(invalid("primitive referenced from two leaf slots", slot));
+        }
+        Ok(gas)
+    }
+
+    /// A leaf slot that names a primitive an earlier slot names too, where the structure must
+    /// reference it once: every primitive of an updatable structure (a refit fills one slot
+    /// per primitive) or of custom primitives (never split), and the primitives of SBT records
+    /// with `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1: one any-hit call per primitive). Spatial
+    /// splits make the others repeat.
+    fn repeated_reference(&self) -> Option<usize> {
+        let all = self.build_flags.contains(BuildFlags::ALLOW_UPDATE)
+            || self.kind == GasKind::CustomPrimitives;
+        let single = self
+            .record_flags
+            .iter()
+            .any(|f| f.contains(GeometryFlags::REQUIRE_SINGLE_ANYHIT_CALL));
+        if !all && !single {
+            return None;
+        }
+        let mut seen = vec![false; self.num_primitives as usize];
+        for (slot, &g) in self.slot_prim.iter().enumerate() {
+            // Indices were checked against the primitive count.
+            let Some(mark) = seen.get_mut(g as usize) else {
+                continue;
+            };
+            if !all {
+                let (input, _) = self.locate(g);
+                let record = self.inputs[input].sbt_base
+                    + self.sbt_offsets.get(g as usize).copied().unwrap_or(0);
+                let flags = self.record_flags.get(record as usize).copied();
+                if !flags.is_some_and(|f| f.contains(GeometryFlags::REQUIRE_SINGLE_ANYHIT_CALL)) {
+                    continue;
+                }
+            }
+            if *mark {
+                return Some(slot);
+            }
+            *mark = true;
+        }
+        None
     }
 }
 

@@ -15,6 +15,9 @@ pub struct BvhStats {
     pub max_depth: usize,
     /// Mean primitives per leaf.
     pub mean_leaf_size: f64,
+    /// Primitive references in the leaves: the primitives, plus the repeats that spatial
+    /// splits make (a primitive held by several leaves counts once per leaf).
+    pub references: usize,
     /// Surface-area-heuristic cost: expected node visits plus primitive tests for a random ray
     /// that hits the root box (node cost 1, primitive cost 1).
     pub sah_cost: f64,
@@ -74,6 +77,7 @@ fn stats_of<N: WideNode>(nodes: &[N]) -> BvhStats {
             }
         }
     }
+    s.references = prims;
     s.mean_leaf_size = if s.leaves > 0 {
         prims as f64 / s.leaves as f64
     } else {

@@ -71,15 +71,17 @@ pub struct BenchResult {
     pub name: String,
     /// Triangles.
     pub triangles: usize,
-    /// Median build time (ms) with default flags, then fast-build, then fast-trace.
-    pub build_ms: [f64; 3],
-    /// SAH cost of the three builds.
-    pub sah: [f64; 3],
+    /// Median build time (ms) of each of the [`PRESETS`].
+    pub build_ms: [f64; 4],
+    /// SAH cost of each preset's build.
+    pub sah: [f64; 4],
+    /// Leaf references per triangle of each preset's build (above 1 with spatial splits).
+    pub refs_per_tri: [f64; 4],
     /// Mrays/s (median) for primary closest, primary any, diffuse closest, diffuse any and
     /// shadow (any hit, bounded by the light's distance).
     pub mrays: [f64; 5],
-    /// Mrays/s of incoherent closest hit on the three builds.
-    pub mrays_by_flags: [f64; 3],
+    /// Mrays/s of incoherent closest hit on each preset's build.
+    pub mrays_by_flags: [f64; 4],
     /// Fraction of primary, diffuse and shadow rays that hit (are blocked, for shadow rays).
     pub hit_rate: [f64; 3],
     /// Mrays/s of the coherent rays traced through the programmable pipeline (trivial
@@ -87,39 +89,76 @@ pub struct BenchResult {
     pub pipeline_mrays: (f64, f64),
 }
 
-/// Runs the benchmark on a mesh with `runs` repetitions of each measurement.
+/// The build presets the benchmark compares, in its columns' order, by the names `--build`
+/// takes: the build flags, and whether the build may use spatial splits where the flags choose
+/// them (`fast-trace-binned` is `PREFER_FAST_TRACE` without them, the binned SAH build that
+/// preset was before, for comparison).
+pub const PRESETS: [(&str, BuildFlags, bool); 4] = [
+    ("default", BuildFlags::empty(), true),
+    ("fast-build", BuildFlags::PREFER_FAST_BUILD, true),
+    ("fast-trace", BuildFlags::PREFER_FAST_TRACE, true),
+    ("fast-trace-binned", BuildFlags::PREFER_FAST_TRACE, false),
+];
+
+/// Builds a GAS over a mesh on the CPU with preset `k` of [`PRESETS`].
+pub fn build_preset(mesh: &Mesh, k: usize) -> Result<Gas, oxray::BuildError> {
+    let (_, flags, splits) = PRESETS[k];
+    if splits {
+        return build_gas(mesh, flags);
+    }
+    let isa = oxray::cpu::Isa::selected();
+    let data = oxray::bvh::GasData::build_with_spatial_splits(
+        &BuildOptions::new(flags),
+        &[mesh_input(mesh)],
+        isa.width(),
+        None,
+    )?;
+    Ok(Gas::from_data_with_isa(data, isa))
+}
+
+/// The index in [`PRESETS`] of a preset's name.
+pub fn preset_index(name: &str) -> Result<usize, String> {
+    PRESETS
+        .iter()
+        .position(|(n, ..)| *n == name)
+        .ok_or_else(|| {
+            let names: Vec<&str> = PRESETS.iter().map(|(n, ..)| *n).collect();
+            format!("unknown build preset {name:?}; one of {}", names.join(", "))
+        })
+}
+
+/// Runs the benchmark on a mesh with `runs` repetitions of each measurement; the ray columns
+/// trace the build of preset `traced` (an index in [`PRESETS`]).
 pub fn run(
     name: &str,
     mesh: &Mesh,
     runs: usize,
     rays: &BenchRays,
+    traced: usize,
 ) -> Result<BenchResult, Box<dyn std::error::Error>> {
     let mut res = BenchResult {
         name: name.to_string(),
         triangles: mesh.triangles.len(),
         ..Default::default()
     };
-    let flag_sets = [
-        BuildFlags::empty(),
-        BuildFlags::PREFER_FAST_BUILD,
-        BuildFlags::PREFER_FAST_TRACE,
-    ];
     let mut gases = Vec::new();
-    for (k, flags) in flag_sets.into_iter().enumerate() {
+    for k in 0..PRESETS.len() {
         let mut times = Vec::new();
         let mut gas = None;
         for _ in 0..runs {
             let t = Instant::now();
-            let g = build_gas(mesh, flags)?;
+            let g = build_preset(mesh, k)?;
             times.push(t.elapsed().as_secs_f64() * 1e3);
             gas = Some(g);
         }
         let gas = gas.expect("runs >= 1");
         res.build_ms[k] = median(times);
         res.sah[k] = gas.stats().sah_cost;
+        res.refs_per_tri[k] =
+            gas.data().num_references() as f64 / gas.data().num_active_primitives().max(1) as f64;
         gases.push(gas);
     }
-    let gas = &gases[0];
+    let gas = gases.get(traced).ok_or("no such build preset")?;
     let longest = rays
         .coherent
         .len()
@@ -154,7 +193,7 @@ pub fn run(
     let s = time(&mut || gas.occluded_batch(&rays.shadow, o).expect("lengths match"));
     res.mrays[4] = n as f64 / s / 1e6;
     res.hit_rate[2] = o.iter().filter(|&&x| x).count() as f64 / n.max(1) as f64;
-    let shared = std::sync::Arc::new(gases[0].clone());
+    let shared = std::sync::Arc::new(gas.clone());
     res.pipeline_mrays = pipeline_mrays(&shared, &rays.coherent, runs)?;
     for (k, g) in gases.iter().enumerate() {
         let n = rays.incoherent.len();
@@ -177,10 +216,10 @@ pub fn bench_rays(mesh: &Mesh, side: u32) -> BenchRays {
     BenchRays::new(&mesh.positions, &mesh.triangles, side)
 }
 
-/// Writes a mesh and its rays for the side-by-side script (`scripts/bench_embree.py`):
-/// `NAME.mesh` (u32 vertex count, u32 triangle count, f32x3 vertices, u32x3 triangles),
-/// `NAME.coherent.rays` and `NAME.incoherent.rays` (`f32[8]` per ray), all little endian. Each
-/// file is written atomically.
+/// Writes a mesh and its rays for the side-by-side scripts (`scripts/bench_embree.py`,
+/// `scripts/embree3_bench.c`): `NAME.mesh` (u32 vertex count, u32 triangle count, f32x3
+/// vertices, u32x3 triangles), `NAME.coherent.rays`, `NAME.incoherent.rays` and
+/// `NAME.shadow.rays` (`f32[8]` per ray), all little endian. Each file is written atomically.
 pub fn export(
     dir: &std::path::Path,
     name: &str,
@@ -194,15 +233,22 @@ pub fn export(
     m.extend_from_slice(bytemuck::cast_slice(&mesh.positions));
     m.extend_from_slice(bytemuck::cast_slice(&mesh.triangles));
     write_bytes_atomic(&dir.join(format!("{name}.mesh")), &m)?;
-    write_bytes_atomic(
-        &dir.join(format!("{name}.coherent.rays")),
-        &ray_file_bytes(&rays.coherent),
-    )?;
-    write_bytes_atomic(
-        &dir.join(format!("{name}.incoherent.rays")),
-        &ray_file_bytes(&rays.incoherent),
-    )?;
+    for (set, rays) in export_sets(rays) {
+        write_bytes_atomic(
+            &dir.join(format!("{name}.{set}.rays")),
+            &ray_file_bytes(rays),
+        )?;
+    }
     Ok(())
+}
+
+/// The exported ray sets by file name.
+fn export_sets(rays: &BenchRays) -> [(&'static str, &[Ray]); 3] {
+    [
+        ("coherent", &rays.coherent),
+        ("incoherent", &rays.incoherent),
+        ("shadow", &rays.shadow),
+    ]
 }
 
 /// Rays in the ray-file format: one 32-byte [`RayRecord`] per ray (the time is not stored).
@@ -211,29 +257,43 @@ pub fn ray_file_bytes(rays: &[Ray]) -> Vec<u8> {
     bytemuck::cast_slice(&records).to_vec()
 }
 
-/// Writes oxray's closest-hit distances for the exported rays (`NAME.coherent.oxray-hits` and
-/// `NAME.incoherent.oxray-hits`: one f32 per ray, +inf for a miss), so that the side-by-side
-/// script can check that both engines agree.
+/// Writes oxray's answers for the exported rays, so that the side-by-side scripts can check
+/// that the engines agree: for the coherent and incoherent sets, the closest hit's distance
+/// (`NAME.SET.oxray-hits`: one f32 per ray, +inf for a miss) and primitive index
+/// (`NAME.SET.oxray-prims`: one u32 per ray, `u32::MAX` for a miss); for every set, whether
+/// the ray is blocked (`NAME.SET.oxray-occluded`: one byte per ray, 0 or 1).
 pub fn export_hits(
     dir: &std::path::Path,
     name: &str,
     gas: &Gas,
     rays: &BenchRays,
 ) -> std::io::Result<()> {
-    for (set, rays) in [
-        ("coherent", &rays.coherent),
-        ("incoherent", &rays.incoherent),
-    ] {
-        let mut hits = vec![None; rays.len()];
-        gas.intersect_batch(rays, &mut hits).expect("lengths match");
-        let t: Vec<f32> = hits
-            .iter()
-            .map(|h| h.map_or(f32::INFINITY, |h| h.t))
-            .collect();
-        write_bytes_atomic(
-            &dir.join(format!("{name}.{set}.oxray-hits")),
-            bytemuck::cast_slice(&t),
-        )?;
+    for (set, rays) in export_sets(rays) {
+        if set != "shadow" {
+            let mut hits = vec![None; rays.len()];
+            gas.intersect_batch(rays, &mut hits).expect("lengths match");
+            let t: Vec<f32> = hits
+                .iter()
+                .map(|h| h.map_or(f32::INFINITY, |h| h.t))
+                .collect();
+            let prims: Vec<u32> = hits
+                .iter()
+                .map(|h| h.map_or(u32::MAX, |h| h.primitive_index))
+                .collect();
+            write_bytes_atomic(
+                &dir.join(format!("{name}.{set}.oxray-hits")),
+                bytemuck::cast_slice(&t),
+            )?;
+            write_bytes_atomic(
+                &dir.join(format!("{name}.{set}.oxray-prims")),
+                bytemuck::cast_slice(&prims),
+            )?;
+        }
+        let mut blocked = vec![false; rays.len()];
+        gas.occluded_batch(rays, &mut blocked)
+            .expect("lengths match");
+        let bytes: Vec<u8> = blocked.iter().map(|&b| b as u8).collect();
+        write_bytes_atomic(&dir.join(format!("{name}.{set}.oxray-occluded")), &bytes)?;
     }
     Ok(())
 }

@@ -121,9 +121,15 @@ enum Command {
         /// Repetitions of each measurement (the median is reported).
         #[arg(long, default_value_t = 5)]
         runs: usize,
-        /// Also write each mesh and its rays here, for scripts/bench_embree.py.
+        /// Also write each mesh, its rays and oxray's answers here, for
+        /// scripts/bench_embree.py and scripts/embree3_bench.c.
         #[arg(long)]
         export: Option<PathBuf>,
+        /// The build whose structure the ray columns trace (and --export answers with):
+        /// default, fast-build (PREFER_FAST_BUILD), fast-trace (PREFER_FAST_TRACE, with
+        /// spatial splits) or fast-trace-binned (PREFER_FAST_TRACE without spatial splits).
+        #[arg(long, default_value = "default")]
+        build: String,
         /// Also build an IAS of this many instances of the first mesh and trace through it, on
         /// the device of --backend.
         #[arg(long)]
@@ -394,10 +400,12 @@ fn run(cli: Cli) -> Result<()> {
             side,
             runs,
             export,
+            build,
             instances,
             subdivide,
             backend,
         } => {
+            let traced = bench::preset_index(&build).map_err(anyhow::Error::msg)?;
             if side == 0 || side > 16384 {
                 bail!("--side must be in 1..=16384, got {side}");
             }
@@ -444,7 +452,7 @@ fn run(cli: Cli) -> Result<()> {
                 }
             }
             say(format_args!(
-                "threads: {}, rays per set: {}, median of {runs} runs",
+                "threads: {}, rays per set: {}, median of {runs} runs, rays traced on the {build} build",
                 pool.current_num_threads(),
                 side * side
             ))?;
@@ -453,7 +461,7 @@ fn run(cli: Cli) -> Result<()> {
                 say(format_args!("{}", oxray_cli::device::BENCH_HEADER))?;
             } else {
                 say(format_args!(
-                    "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace) | pipeline primary closest vs the same rays as queries, alternated |"
+                    "| mesh | tris | build ms (default / fast-build / fast-trace / fast-trace-binned) | SAH (default / fast-build / fast-trace / fast-trace-binned) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace / fast-trace-binned) | pipeline primary closest vs the same rays as queries, alternated |"
                 ))?;
                 say(format_args!(
                     "|---|---:|---|---|---:|---:|---:|---:|---:|---|---:|"
@@ -462,7 +470,7 @@ fn run(cli: Cli) -> Result<()> {
             for (name, mesh) in &sets {
                 let rays = bench::bench_rays(mesh, side);
                 if let Some(dir) = &export {
-                    let gas = bench::build_gas(mesh, oxray::BuildFlags::empty())?;
+                    let gas = bench::build_preset(mesh, traced)?;
                     bench::export(dir, name, mesh, &rays)
                         .and_then(|_| bench::export_hits(dir, name, &gas, &rays))
                         .with_context(|| format!("cannot write to {}", dir.display()))?;
@@ -477,22 +485,25 @@ fn run(cli: Cli) -> Result<()> {
                     continue;
                 }
                 let r = pool
-                    .install(|| bench::run(name, mesh, runs, &rays).map_err(|e| e.to_string()))
+                    .install(|| {
+                        bench::run(name, mesh, runs, &rays, traced).map_err(|e| e.to_string())
+                    })
                     .map_err(anyhow::Error::msg)?;
                 say(format_args!(
-                    "| {} | {} | {:.1} / {:.1} / {:.1} | {:.1} / {:.1} / {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) |",
-                    r.name, r.triangles, r.build_ms[0], r.build_ms[1], r.build_ms[2],
-                    r.sah[0], r.sah[1], r.sah[2],
+                    "| {} | {} | {:.1} / {:.1} / {:.1} / {:.1} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) |",
+                    r.name, r.triangles, r.build_ms[0], r.build_ms[1], r.build_ms[2], r.build_ms[3],
+                    r.sah[0], r.sah[1], r.sah[2], r.sah[3],
                     r.mrays[0], r.mrays[1], r.mrays[2], r.mrays[3], r.mrays[4],
-                    r.mrays_by_flags[0], r.mrays_by_flags[1], r.mrays_by_flags[2],
+                    r.mrays_by_flags[0], r.mrays_by_flags[1], r.mrays_by_flags[2], r.mrays_by_flags[3],
                     r.pipeline_mrays.0,
                     r.pipeline_mrays.1,
                     100.0 * r.pipeline_mrays.0 / r.pipeline_mrays.1,
                 ))?;
                 eprintln!(
-                    "  {}: {:.1} Mtris/s build, hit rate primary {:.1}%, diffuse {:.1}%, shadow rays blocked {:.1}%",
+                    "  {}: {:.1} Mtris/s build, fast-trace leaf references {:.3} per triangle, hit rate primary {:.1}%, diffuse {:.1}%, shadow rays blocked {:.1}%",
                     r.name,
                     r.triangles as f64 / r.build_ms[0] / 1e3,
+                    r.refs_per_tri[2],
                     100.0 * r.hit_rate[0],
                     100.0 * r.hit_rate[1],
                     100.0 * r.hit_rate[2]

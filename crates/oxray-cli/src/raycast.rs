@@ -256,7 +256,7 @@ pub fn info(mesh_path: &Path) -> Result<String, RaycastError> {
     let b = gas.bounds();
     let per = |bytes: usize| bytes as f64 / (gas.num_primitives().max(1)) as f64;
     Ok(format!(
-        "file: {}\nvertices: {}\ntriangles: {} ({} active)\ninstances: 1\nbounds: [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\nBVH: {} nodes (4-wide), {} leaves, depth {}, mean leaf {:.2} triangles, SAH cost {:.2}\nbytes: {} total ({} nodes, {} triangles)\nmemory: {:.1} B/triangle as built with ALLOW_COMPACTION ({} bytes), {:.1} B/triangle compacted\nbuild: {:.1} ms (PREFER_FAST_TRACE)",
+        "file: {}\nvertices: {}\ntriangles: {} ({} active)\ninstances: 1\nbounds: [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]\nBVH: {} nodes (4-wide), {} leaves, depth {}, mean leaf {:.2} triangles, SAH cost {:.2}, {} leaf references ({:.3} per active triangle: spatial splits repeat some)\nbytes: {} total ({} nodes, {} triangles)\nmemory: {:.1} B/triangle as built with ALLOW_COMPACTION ({} bytes), {:.1} B/triangle compacted\nbuild: {:.1} ms (PREFER_FAST_TRACE)",
         mesh_path.display(),
         mesh.positions.len(),
         gas.num_primitives(),
@@ -267,6 +267,8 @@ pub fn info(mesh_path: &Path) -> Result<String, RaycastError> {
         s.max_depth,
         s.mean_leaf_size,
         s.sah_cost,
+        s.references,
+        s.references as f64 / gas.num_active_primitives().max(1) as f64,
         m.output_bytes,
         m.node_bytes,
         m.primitive_bytes,

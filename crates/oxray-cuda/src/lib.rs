@@ -175,6 +175,36 @@ mod tests {
     }
 
     #[test]
+    fn layouts_of_a_structure_with_spatial_splits_match_the_cpu_backend() {
+        // Long slivers among small triangles: PREFER_FAST_TRACE splits some, so that leaves
+        // share triangles (each leaf its own slot); the layouts derived from the canonical
+        // tree must still find the CPU's hits, and every slot is reached once.
+        let mut rng = oxray_testkit::rng::Rng::new(4);
+        let mut tris = oxray_testkit::mesh::random_soup(&mut rng, 1500, 10.0, 0.5);
+        for _ in 0..1500 {
+            let a = rng.vec3(-10.0, 10.0);
+            let b = rng.vec3(-10.0, 10.0);
+            tris.push([
+                a.to_array(),
+                b.to_array(),
+                (a + rng.vec3(-0.3, 0.3)).to_array(),
+            ]);
+        }
+        let mesh = Mesh {
+            positions: tris.iter().flatten().copied().collect(),
+            triangles: (0..tris.len() as u32)
+                .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+                .collect(),
+        };
+        let (gas, tree) = build_gas_with_tree(&mesh, BuildFlags::PREFER_FAST_TRACE).unwrap();
+        assert!(gas.data().num_references() > gas.data().num_active_primitives());
+        let mut rays = all_rays(&mesh, &gas, 48);
+        rays.extend((0..3000).map(|_| Ray::new(rng.vec3(-12.0, 12.0), rng.dir())));
+        check(&gas, &tree, NodeLayout::Bvh4, &rays, true);
+        check(&gas, &tree, NodeLayout::Bvh2, &rays, false);
+    }
+
+    #[test]
     fn tiny_and_empty_gases_lay_out() {
         // One triangle: the root is a leaf lane.
         let mesh = Mesh {
