@@ -136,6 +136,11 @@ enum Command {
         /// the CPU, with hit agreement (asking for CUDA without one is an error).
         #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
         backend: String,
+        /// With --backend cuda: instead of the query table, time GAS builds on the device
+        /// against the host's builder (per preset: kernel and end-to-end ms, SAH cost, and
+        /// closest-hit Mrays/s through each tree).
+        #[arg(long)]
+        gas_builds: bool,
     },
 }
 
@@ -397,6 +402,7 @@ fn run(cli: Cli) -> Result<()> {
             instances,
             subdivide,
             backend,
+            gas_builds,
         } => {
             if side == 0 || side > 16384 {
                 bail!("--side must be in 1..=16384, got {side}");
@@ -448,9 +454,19 @@ fn run(cli: Cli) -> Result<()> {
                 pool.current_num_threads(),
                 side * side
             ))?;
+            if gas_builds && device.is_none() {
+                bail!("--gas-builds needs --backend cuda");
+            }
             if let Some(device) = &device {
                 say(format_args!("device: {}", device.describe()))?;
-                say(format_args!("{}", oxray_cli::device::BENCH_HEADER))?;
+                say(format_args!(
+                    "{}",
+                    if gas_builds {
+                        oxray_cli::device::BUILD_BENCH_HEADER
+                    } else {
+                        oxray_cli::device::BENCH_HEADER
+                    }
+                ))?;
             } else {
                 say(format_args!(
                     "| mesh | tris | build ms (default / fast-build / fast-trace) | SAH (default / fast-build / fast-trace) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace) | pipeline primary closest vs the same rays as queries, alternated |"
@@ -466,6 +482,15 @@ fn run(cli: Cli) -> Result<()> {
                     bench::export(dir, name, mesh, &rays)
                         .and_then(|_| bench::export_hits(dir, name, &gas, &rays))
                         .with_context(|| format!("cannot write to {}", dir.display()))?;
+                }
+                if let (Some(device), true) = (&device, gas_builds) {
+                    let rows = pool.install(|| {
+                        oxray_cli::device::bench_builds(device, name, mesh, &rays, runs)
+                    })?;
+                    for row in rows {
+                        say(format_args!("{row}"))?;
+                    }
+                    continue;
                 }
                 if let Some(device) = &device {
                     let rows = pool.install(|| {
