@@ -294,21 +294,33 @@ impl GasData {
         Ok((gas, tree.unwrap_or_default()))
     }
 
-    fn build_impl(
+    /// Validates a build (every rule of guide §5, §5.1, §5.5, §12, the SBT index offsets and the
+    /// triangles' indices) and makes the structure's tables without building anything: the
+    /// inputs' records, the SBT records' flags, the per-primitive SBT offsets, the counts. Its
+    /// tree, primitives and slot table are empty and its bounds [`Aabb::EMPTY`]; a builder that
+    /// keeps the structure elsewhere (a GPU's) fills its own and resolves hits with
+    /// [`resolve_global`](Self::resolve_global).
+    ///
+    /// ```
+    /// use oxray_bvh::GasData;
+    /// use oxray_core::{BuildOptions, IndexBuffer, TriangleInput, VertexBuffer};
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let bad = [[0u32, 1, 3]];
+    /// let input = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u32x3(&bad));
+    /// assert!(GasData::prepare(&BuildOptions::default(), &[input.into()]).is_err());
+    /// let good = TriangleInput::new(VertexBuffer::f32x3(&v));
+    /// let gas = GasData::prepare(&BuildOptions::default(), &[good.into()])?;
+    /// assert_eq!((gas.num_primitives, gas.slot_prim.len()), (1, 0));
+    /// # Ok::<(), oxray_core::BuildError>(())
+    /// ```
+    pub fn prepare(
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
-        keep_tree: bool,
-        width: NodeWidth,
-        splits: Option<SpatialSplits>,
-    ) -> Result<(GasData, Option<Bvh2>), BuildError> {
+    ) -> Result<GasData, BuildError> {
         if options.operation == BuildOperation::Update {
             return Err(BuildError::InvalidUpdate(UpdateRule::NoStructure));
         }
         let summary = validate_structure(options, inputs)?;
-        // An updatable structure keeps a slot for every primitive, inactive ones included, so
-        // that an update can make them active (and inactive ones never hit).
-        let keep_inactive = options.flags.contains(BuildFlags::ALLOW_UPDATE);
-
         let mut records = Vec::with_capacity(inputs.len());
         let mut record_flags = Vec::with_capacity(summary.num_sbt_records as usize);
         let mut first = 0u32;
@@ -343,15 +355,7 @@ impl GasData {
             Vec::new()
         };
 
-        let config = if options.flags.contains(BuildFlags::PREFER_FAST_TRACE) {
-            BuildConfig::FAST_TRACE
-        } else if options.flags.contains(BuildFlags::PREFER_FAST_BUILD) {
-            BuildConfig::FAST_BUILD
-        } else {
-            BuildConfig::BALANCED
-        };
-
-        let mut gas = GasData {
+        Ok(GasData {
             kind: match summary.kind {
                 BuildInputKind::Triangles => GasKind::Triangles,
                 _ => GasKind::CustomPrimitives,
@@ -369,6 +373,26 @@ impl GasData {
             num_primitives: summary.num_primitives,
             shapes: inputs.iter().filter_map(InputShape::of).collect(),
             lineage: crate::next_lineage(),
+        })
+    }
+
+    fn build_impl(
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+        keep_tree: bool,
+        width: NodeWidth,
+        splits: Option<SpatialSplits>,
+    ) -> Result<(GasData, Option<Bvh2>), BuildError> {
+        let mut gas = Self::prepare(options, inputs)?;
+        // An updatable structure keeps a slot for every primitive, inactive ones included, so
+        // that an update can make them active (and inactive ones never hit).
+        let keep_inactive = options.flags.contains(BuildFlags::ALLOW_UPDATE);
+        let config = if options.flags.contains(BuildFlags::PREFER_FAST_TRACE) {
+            BuildConfig::FAST_TRACE
+        } else if options.flags.contains(BuildFlags::PREFER_FAST_BUILD) {
+            BuildConfig::FAST_BUILD
+        } else {
+            BuildConfig::BALANCED
         };
 
         let mut tree = None;
@@ -741,7 +765,13 @@ impl GasData {
     /// Primitive index (with the input's offset), SBT-GAS index and build input of a leaf slot.
     #[inline]
     pub fn resolve(&self, slot: u32) -> (u32, u32, u32) {
-        let global = self.slot_prim[slot as usize];
+        self.resolve_global(self.slot_prim[slot as usize])
+    }
+
+    /// Primitive index (with the input's offset), SBT-GAS index and build input of a global
+    /// primitive id (ids count over all inputs, in order; `global < num_primitives`).
+    #[inline]
+    pub fn resolve_global(&self, global: u32) -> (u32, u32, u32) {
         let (input, local) = self.locate(global);
         let rec = &self.inputs[input];
         let sbt = rec.sbt_base + self.sbt_offsets.get(global as usize).copied().unwrap_or(0);
@@ -894,8 +924,9 @@ pub(crate) fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<
     Ok(())
 }
 
-/// Decodes (and pre-transforms) every triangle of a validated input.
-fn decode_triangles(t: &TriangleInput<'_>) -> Vec<[Vec3; 3]> {
+/// Decodes (and pre-transforms) every triangle of a validated input (one whose indices are in
+/// range: [`GasData::prepare`] checks them), in parallel.
+pub fn decode_triangles(t: &TriangleInput<'_>) -> Vec<[Vec3; 3]> {
     let n = t.num_primitives() as usize;
     (0..n)
         .into_par_iter()

@@ -398,6 +398,198 @@ pub fn bench_mesh(
     Ok(rows)
 }
 
+/// One row of `oxray bench --backend cuda --gas-builds`: one mesh and build preset, built by
+/// the device's kernels and by the host's SAH builder (then uploaded), each tree traced on the
+/// device with the same resident rays.
+#[derive(Clone, Debug)]
+pub struct BuildBenchRow {
+    /// Mesh name.
+    pub name: String,
+    /// Triangles.
+    pub triangles: usize,
+    /// `fast-build`, `default` or `fast-trace`.
+    pub preset: &'static str,
+    /// Device build, median ms: the kernels with the inputs resident (CUDA events), and the
+    /// whole call (validation, upload, kernels, slot table). `None` where the device does not
+    /// build the preset.
+    pub device_ms: Option<(f64, f64)>,
+    /// Of the whole call, the host's validation and preparation, and the upload of the inputs
+    /// (median ms).
+    pub device_host_ms: Option<(f64, f64)>,
+    /// Host build and upload, median ms.
+    pub host_ms: f64,
+    /// Runs of the host build the median is of.
+    pub host_runs: usize,
+    /// SAH cost of the device-built and the host-built tree (the device's binary tree; the
+    /// host's 4-wide statistics).
+    pub sah: (Option<f64>, f64),
+    /// Coherent closest-hit Mrays/s through the device-built and the host-built tree.
+    pub coherent: (Option<f64>, f64),
+    /// Incoherent closest-hit Mrays/s through both.
+    pub incoherent: (Option<f64>, f64),
+    /// Percentage of incoherent rays whose distance is the same bit for bit on both trees.
+    pub same_t_pct: Option<f64>,
+}
+
+/// The header of the `--gas-builds` table (markdown, two lines).
+pub const BUILD_BENCH_HEADER: &str = "| mesh | tris | preset | device build ms: kernels / end-to-end | host build + upload ms | SAH device / host | coherent closest Mrays/s device-built / host-built | incoherent closest Mrays/s device-built / host-built (ratio) | same t |\n|---|---:|---|---:|---:|---:|---:|---:|---:|";
+
+impl fmt::Display for BuildBenchRow {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let opt = |v: Option<f64>, digits: usize| match v {
+            Some(v) => format!("{v:.digits$}"),
+            None => "host".into(),
+        };
+        write!(
+            f,
+            "| {} | {} | {} | {} | {:.1}{} | {} / {:.1} | {} / {:.1} | {} / {:.1}{} | {} |",
+            self.name,
+            self.triangles,
+            self.preset,
+            match (self.device_ms, self.device_host_ms) {
+                (Some((k, t)), Some((p, u))) => {
+                    format!("{k:.2} / {t:.1} (prepare {p:.1}, upload {u:.1})")
+                }
+                _ => "- (built on the host)".into(),
+            },
+            self.host_ms,
+            if self.host_runs == 1 { " (1 run)" } else { "" },
+            opt(self.sah.0, 1),
+            self.sah.1,
+            opt(self.coherent.0, 1),
+            self.coherent.1,
+            opt(self.incoherent.0, 1),
+            self.incoherent.1,
+            match self.incoherent.0 {
+                Some(d) => format!(" ({:.0}%)", 100.0 * d / self.incoherent.1.max(1e-12)),
+                None => String::new(),
+            },
+            match self.same_t_pct {
+                Some(p) => format!("{p:.3}%"),
+                None => "-".into(),
+            }
+        )
+    }
+}
+
+/// `oxray bench --backend cuda --gas-builds` on one mesh: for each preset (fast build, default,
+/// fast trace), the device build timed `runs` times after a warm-up, the host build (and
+/// upload) timed as often (once for meshes over 4 M triangles, whose host builds take seconds),
+/// and both trees traced with the coherent and incoherent ray sets resident on the device.
+pub fn bench_builds(
+    device: &Device,
+    name: &str,
+    mesh: &Mesh,
+    rays: &BenchRays,
+    runs: usize,
+) -> Result<Vec<BuildBenchRow>, DeviceCommandError> {
+    use oxray::cuda::device_build::{build_triangles, DeviceBuildConfig};
+    use oxray::cuda::{CudaGas, DeviceHits, DeviceRays};
+    use oxray::{BuildOptions, IndexBuffer, TriangleInput, VertexBuffer};
+    let Some(cuda) = device.as_cuda() else {
+        return Err(DeviceCommandError::Pipeline(
+            "--gas-builds compares the CUDA device's builder with the host's: use --backend cuda"
+                .into(),
+        ));
+    };
+    let ctx = cuda.context();
+    let gpu = |e: &dyn fmt::Display| DeviceCommandError::Pipeline(e.to_string());
+    let inputs = [TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles))
+        .into()];
+    let coherent = DeviceRays::upload(ctx, &rays.coherent).map_err(|e| gpu(&e))?;
+    let incoherent = DeviceRays::upload(ctx, &rays.incoherent).map_err(|e| gpu(&e))?;
+    let mut hits_c = DeviceHits::new(ctx, coherent.len()).map_err(|e| gpu(&e))?;
+    let mut hits_i = DeviceHits::new(ctx, incoherent.len()).map_err(|e| gpu(&e))?;
+    // Median Mrays/s of both sets through a tree, and the incoherent distances.
+    let mut trace = |gas: &CudaGas| -> Result<(f64, f64, Vec<u32>), DeviceCommandError> {
+        let c = time(runs, || gas.intersect_device(&coherent, &mut hits_c)).map_err(|e| gpu(&e))?;
+        let i =
+            time(runs, || gas.intersect_device(&incoherent, &mut hits_i)).map_err(|e| gpu(&e))?;
+        let t = hits_i.download(ctx).map_err(|e| gpu(&e))?;
+        Ok((
+            mrays(coherent.len(), c),
+            mrays(incoherent.len(), i),
+            t.iter().map(|h| h.t.to_bits()).collect(),
+        ))
+    };
+    let host_runs = if mesh.triangles.len() > 4 << 20 {
+        1
+    } else {
+        runs
+    };
+    let mut rows = Vec::new();
+    for (preset, flags) in [
+        ("fast-build", BuildFlags::PREFER_FAST_BUILD),
+        ("default", BuildFlags::empty()),
+        ("fast-trace", BuildFlags::PREFER_FAST_TRACE),
+    ] {
+        let options = BuildOptions::new(flags);
+        let mut host_times = Vec::new();
+        let mut host_gas = None;
+        for _ in 0..host_runs {
+            drop(host_gas.take());
+            let t = Instant::now();
+            let (data, tree) = oxray::bvh::GasData::build_with_tree(&options, &inputs)?;
+            let gas = CudaGas::upload(ctx, &data, &tree).map_err(|e| gpu(&e))?;
+            host_times.push(t.elapsed().as_secs_f64() * 1e3);
+            host_gas = Some((gas, data.stats().sah_cost));
+        }
+        let Some((host_gas, host_sah)) = host_gas else {
+            continue;
+        };
+        let (hc, hi, ht) = trace(&host_gas)?;
+        drop(host_gas);
+        let mut device = None;
+        if let Some(config) = DeviceBuildConfig::for_options(&options, mesh.triangles.len() as u32)
+        {
+            let mut kernels = Vec::new();
+            let mut total = Vec::new();
+            let mut prepare = Vec::new();
+            let mut upload = Vec::new();
+            let mut last = None;
+            for k in 0..=runs {
+                drop(last.take());
+                let (gas, times) =
+                    build_triangles(ctx, &options, &inputs, &config).map_err(|e| gpu(&e))?;
+                if k > 0 {
+                    kernels.push(times.kernels_ms);
+                    total.push(times.total_ms);
+                    prepare.push(times.prepare_ms);
+                    upload.push(times.upload_ms);
+                }
+                last = Some(gas);
+            }
+            if let Some(gas) = last {
+                let (dc, di, dt) = trace(&gas)?;
+                let same = dt.iter().zip(&ht).filter(|(a, b)| a == b).count();
+                device = Some((
+                    (median(kernels), median(total)),
+                    (median(prepare), median(upload)),
+                    gas.info().stats.sah_cost,
+                    dc,
+                    di,
+                    100.0 * same as f64 / ht.len().max(1) as f64,
+                ));
+            }
+        }
+        rows.push(BuildBenchRow {
+            name: name.to_string(),
+            triangles: mesh.triangles.len(),
+            preset,
+            device_ms: device.as_ref().map(|d| d.0),
+            device_host_ms: device.as_ref().map(|d| d.1),
+            host_ms: median(host_times),
+            host_runs,
+            sah: (device.as_ref().map(|d| d.2), host_sah),
+            coherent: (device.as_ref().map(|d| d.3), hc),
+            incoherent: (device.as_ref().map(|d| d.4), hi),
+            same_t_pct: device.as_ref().map(|d| d.5),
+        });
+    }
+    Ok(rows)
+}
+
 /// The pipeline's timing and distances, or `None` with the reason on stderr.
 fn traced_or_warn(r: Result<(f64, Vec<f32>), DeviceCommandError>) -> Option<(f64, Vec<f32>)> {
     r.map_err(|e| eprintln!("warning: no pipeline column: {e}"))

@@ -142,6 +142,11 @@ enum Command {
         /// the CPU, with hit agreement (asking for CUDA without one is an error).
         #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
         backend: String,
+        /// With --backend cuda: instead of the query table, time GAS builds on the device
+        /// against the host's builder (per preset: kernel and end-to-end ms, SAH cost, and
+        /// closest-hit Mrays/s through each tree).
+        #[arg(long)]
+        gas_builds: bool,
     },
 }
 
@@ -404,6 +409,7 @@ fn run(cli: Cli) -> Result<()> {
             instances,
             subdivide,
             backend,
+            gas_builds,
         } => {
             let traced = bench::preset_index(&build).map_err(anyhow::Error::msg)?;
             if side == 0 || side > 16384 {
@@ -456,9 +462,19 @@ fn run(cli: Cli) -> Result<()> {
                 pool.current_num_threads(),
                 side * side
             ))?;
+            if gas_builds && device.is_none() {
+                bail!("--gas-builds needs --backend cuda");
+            }
             if let Some(device) = &device {
                 say(format_args!("device: {}", device.describe()))?;
-                say(format_args!("{}", oxray_cli::device::BENCH_HEADER))?;
+                say(format_args!(
+                    "{}",
+                    if gas_builds {
+                        oxray_cli::device::BUILD_BENCH_HEADER
+                    } else {
+                        oxray_cli::device::BENCH_HEADER
+                    }
+                ))?;
             } else {
                 say(format_args!(
                     "| mesh | tris | build ms (default / fast-build / fast-trace / fast-trace-binned) | SAH (default / fast-build / fast-trace / fast-trace-binned) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace / fast-trace-binned) | pipeline primary closest vs the same rays as queries, alternated |"
@@ -474,6 +490,15 @@ fn run(cli: Cli) -> Result<()> {
                     bench::export(dir, name, mesh, &rays)
                         .and_then(|_| bench::export_hits(dir, name, &gas, &rays))
                         .with_context(|| format!("cannot write to {}", dir.display()))?;
+                }
+                if let (Some(device), true) = (&device, gas_builds) {
+                    let rows = pool.install(|| {
+                        oxray_cli::device::bench_builds(device, name, mesh, &rays, runs)
+                    })?;
+                    for row in rows {
+                        say(format_args!("{row}"))?;
+                    }
+                    continue;
                 }
                 if let Some(device) = &device {
                     let rows = pool.install(|| {

@@ -1,8 +1,9 @@
-//! The CUDA backend behind the facade's `Device`: GASes built on the host by the shared
-//! builders of `oxray-bvh`, uploaded in the kernels' node layout, and traced by the batch
-//! kernels.
+//! The CUDA backend behind the facade's `Device`: triangle GASes built on the device
+//! (`device_build`) or on the host by the shared builders of `oxray-bvh` and uploaded in the
+//! kernels' node layout (see [`GasBuilder`]), traced by the batch kernels.
 
 use crate::context::CudaContext;
+use crate::device_build::{self, DeviceBuildConfig, DeviceBuildError, GasBuilder};
 use crate::error::CudaError;
 use crate::gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays};
 use crate::ias::CudaIas;
@@ -14,29 +15,42 @@ use oxray_core::{
     Ray, TraversableHandle,
 };
 
-/// The CUDA backend: one device, its compiled kernels and a node layout for the GASes it
-/// builds.
+/// The CUDA backend: one device, its compiled kernels, a node layout for the GASes it builds
+/// and where it builds them.
+///
+/// Triangle GASes are built on the device ([`GasBuilder::Device`], as OptiX builds them) unless
+/// `OXRAY_CUDA_GAS_BUILDER=host` is set when the backend is opened or
+/// [`with_builder`](Self::with_builder) says otherwise. The device builds in the binary layout
+/// ([`NodeLayout::Bvh2`]) the presets [`DeviceBuildConfig::for_options`] accepts; the rest
+/// (`PREFER_FAST_TRACE`, `ALLOW_UPDATE`, the BVH4 layout, custom primitives, and the rare tree
+/// too deep for the traversal stacks) is built on the host and uploaded.
 #[derive(Clone, Debug)]
 pub struct Cuda {
     ctx: CudaContext,
     layout: NodeLayout,
+    builder: GasBuilder,
 }
 
 impl Cuda {
     /// Opens device `ordinal` and compiles the kernels; an error for which
-    /// [`CudaError::is_unavailable`] holds where this machine has no CUDA.
+    /// [`CudaError::is_unavailable`] holds where this machine has no CUDA, and
+    /// [`CudaError::Config`] where `OXRAY_CUDA_GAS_BUILDER` has an unknown value.
     pub fn new(ordinal: usize) -> Result<Cuda, CudaError> {
+        let builder = GasBuilder::from_env()?;
         Ok(Cuda {
             ctx: CudaContext::with_device(ordinal)?,
             layout: NodeLayout::default(),
+            builder,
         })
     }
 
-    /// The backend of an open context (the GASes it builds use the default layout).
+    /// The backend of an open context (the GASes it builds use the default layout and are
+    /// built on the device).
     pub fn from_context(ctx: CudaContext) -> Cuda {
         Cuda {
             ctx,
             layout: NodeLayout::default(),
+            builder: GasBuilder::Device,
         }
     }
 
@@ -44,6 +58,48 @@ impl Cuda {
     pub fn with_layout(mut self, layout: NodeLayout) -> Self {
         self.layout = layout;
         self
+    }
+
+    /// The same device, building triangle GASes with `builder` from now on.
+    pub fn with_builder(mut self, builder: GasBuilder) -> Self {
+        self.builder = builder;
+        self
+    }
+
+    /// Where triangle GASes are built.
+    pub fn builder(&self) -> GasBuilder {
+        self.builder
+    }
+
+    /// How the device would build a GAS of these inputs, or `None` where the host builds it.
+    pub fn device_build_config(
+        &self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Option<DeviceBuildConfig> {
+        let triangles = matches!(inputs.first(), Some(BuildInput::Triangles(_)));
+        if self.builder != GasBuilder::Device || self.layout != NodeLayout::Bvh2 || !triangles {
+            return None;
+        }
+        // Saturating: a count past u32 fails validation whichever builder runs.
+        let n = inputs
+            .iter()
+            .fold(0u32, |n, i| n.saturating_add(i.num_primitives()));
+        DeviceBuildConfig::for_options(options, n)
+    }
+
+    /// The memory query (`optixAccelComputeMemoryUsage`) for a GAS build on this backend: the
+    /// device builder's sizes where it would build the inputs, else the host builder's
+    /// ([`oxray_bvh::compute_memory_usage`]).
+    pub fn compute_memory_usage(
+        &self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<oxray_bvh::AccelBufferSizes, BuildError> {
+        match self.device_build_config(options, inputs) {
+            Some(config) => device_build::memory_usage(options, inputs, &config),
+            None => oxray_bvh::compute_memory_usage(options, inputs),
+        }
     }
 
     /// The device context.
@@ -136,6 +192,15 @@ impl AccelBackend for Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaGas, BuildError> {
+        if let Some(config) = self.device_build_config(options, inputs) {
+            match device_build::build_triangles(&self.ctx, options, inputs, &config) {
+                Ok((gas, _)) => return Ok(gas),
+                Err(DeviceBuildError::Invalid(e)) => return Err(e),
+                // Too deep for the traversal stacks: the host's builder bounds the depth.
+                Err(DeviceBuildError::Device(CudaError::TreeTooDeep { .. })) => {}
+                Err(DeviceBuildError::Device(e)) => return Err(build_error(e)),
+            }
+        }
         // A GAS of custom primitives is uploaded for pipelines, which run its intersection
         // programs; the batched queries refuse it.
         let (data, tree) = GasData::build_with_tree(options, inputs)?;

@@ -5,7 +5,7 @@ use crate::error::{driver, CudaError};
 use cudarc::driver::{CudaFunction, CudaStream};
 use cudarc::nvrtc::CompileOptions;
 use std::panic::{catch_unwind, AssertUnwindSafe};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// The CUDA C++ source of the trace kernels, compiled at run time by NVRTC.
 pub const KERNEL_SOURCE: &str = include_str!("kernels/trace.cu");
@@ -74,6 +74,8 @@ pub(crate) struct Kernels {
 pub struct CudaContext {
     pub(crate) stream: Arc<CudaStream>,
     pub(crate) kernels: Arc<Kernels>,
+    /// The GAS builder's kernels, compiled on the first device build.
+    build: Arc<OnceLock<Result<crate::device_build::BuildKernels, CudaError>>>,
     info: DeviceInfo,
 }
 
@@ -182,6 +184,7 @@ impl CudaContext {
         Ok(CudaContext {
             stream,
             kernels: Arc::new(kernels),
+            build: Arc::new(OnceLock::new()),
             info: DeviceInfo {
                 ordinal,
                 name,
@@ -226,6 +229,15 @@ impl CudaContext {
             })
         })
         .collect()
+    }
+
+    /// The GAS builder's kernels, compiled by NVRTC on first use (a failure is kept and
+    /// returned again).
+    pub(crate) fn build_kernels(&self) -> Result<&crate::device_build::BuildKernels, CudaError> {
+        self.build
+            .get_or_init(|| crate::device_build::BuildKernels::load(self))
+            .as_ref()
+            .map_err(Clone::clone)
     }
 
     /// Waits until all work queued on the context's stream is done.

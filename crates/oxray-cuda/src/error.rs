@@ -47,6 +47,18 @@ pub enum CudaError {
     /// The launch parameters do not fit the pipeline's parameter variable.
     #[error("launch parameters: {0}")]
     Launch(String),
+    /// A device-built tree is deeper than the traversal stacks allow ([`Cuda`](crate::Cuda)
+    /// then builds on the host).
+    #[error("the device-built tree is {depth} levels deep; traversal supports {max}")]
+    TreeTooDeep {
+        /// Depth of the tree made.
+        depth: u32,
+        /// The deepest accepted.
+        max: u32,
+    },
+    /// A setting (an environment variable) has a value this crate does not know.
+    #[error("{0}")]
+    Config(String),
     /// Something this slice of the CUDA backend does not do yet.
     #[error("not supported on the CUDA backend yet: {0}")]
     Unsupported(&'static str),

@@ -1,6 +1,7 @@
 //! A GAS on the device, and batches of rays and results on the device.
 
 use crate::context::CudaContext;
+use crate::device_build::GasBuilder;
 use crate::error::{driver, CudaError};
 use crate::layout::{bvh2_words, DeviceLayout, NodeLayout, SlotInfo, MAX_SLOTS};
 use bytemuck::{Pod, Zeroable};
@@ -250,6 +251,8 @@ pub struct CudaGas {
     info: GasInfo,
     num_nodes: usize,
     device_bytes: usize,
+    /// Which builder made the tree.
+    builder: GasBuilder,
     /// Buffers of the one-call queries, kept between calls (grown as batches grow) so that a
     /// call allocates and page-faults nothing once warm.
     scratch: Mutex<Scratch>,
@@ -580,6 +583,7 @@ impl CudaGas {
             layout: host.layout,
             num_nodes: host.nodes.len() / (layout.node_bytes() / 4),
             device_bytes: host.device_bytes(),
+            builder: GasBuilder::Host,
             nodes,
             triangles,
             slots: host.slots,
@@ -616,6 +620,7 @@ impl CudaGas {
             layout: NodeLayout::Bvh2,
             num_nodes: nodes_host.len() / 16,
             device_bytes: 4 * (nodes_host.len() + words.len()),
+            builder: GasBuilder::Host,
             nodes,
             triangles: boxes,
             slots,
@@ -624,6 +629,40 @@ impl CudaGas {
             record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
             program_view: Mutex::new(None),
         })
+    }
+
+    /// A triangle GAS the device built in the binary layout (`device_build`): its nodes and
+    /// triangles already in device memory, the host's slot table and summary.
+    pub(crate) fn from_device_build(
+        ctx: &CudaContext,
+        nodes: CudaSlice<u32>,
+        num_nodes: usize,
+        triangles: CudaSlice<u32>,
+        slots: Vec<SlotInfo>,
+        info: GasInfo,
+        record_flags: Vec<u32>,
+    ) -> CudaGas {
+        CudaGas {
+            ctx: ctx.clone(),
+            kind: GasKind::Triangles,
+            layout: NodeLayout::Bvh2,
+            num_nodes,
+            device_bytes: 64 * num_nodes + 48 * slots.len(),
+            builder: GasBuilder::Device,
+            nodes,
+            triangles,
+            slots,
+            info,
+            scratch: Mutex::new(Scratch::default()),
+            record_flags,
+            program_view: Mutex::new(None),
+        }
+    }
+
+    /// Which builder made the tree: [`GasBuilder::Device`] for a GAS built by the device's
+    /// kernels, [`GasBuilder::Host`] for one built on the host and uploaded.
+    pub fn builder(&self) -> GasBuilder {
+        self.builder
     }
 
     /// Refuses the batched queries on a GAS of custom primitives.

@@ -1,10 +1,13 @@
 //! # oxray-cuda
 //!
 //! The CUDA backend of oxray. [`Cuda`] implements the [`AccelBackend`](oxray_core::AccelBackend)
-//! boundary for the `oxray` facade's `Device`: a triangle GAS is built on the host by the
-//! builders every backend shares (`oxray-bvh`), uploaded in one of the kernels' node layouts
-//! ([`CudaGas`]), and batches of rays are traced there by a CUDA C++ kernel with the results of
-//! the CPU backend's batched queries, bit for bit.
+//! boundary for the `oxray` facade's `Device`: a triangle GAS is built on the device by the
+//! kernels of [`device_build`] (or, for the presets and layouts they do not build and with
+//! [`GasBuilder::Host`], on the host by the builders every backend shares, `oxray-bvh`, and
+//! uploaded) in one of the kernels' node layouts ([`CudaGas`]), and batches of rays are traced
+//! there by a CUDA C++ kernel with the results of the CPU backend's batched queries (the same
+//! distances bit for bit; the same primitives up to ties, and bit for bit on a host-built
+//! tree).
 //!
 //! The CUDA driver and NVRTC are loaded at run time, so this crate builds, and its tests pass,
 //! on machines without CUDA: there [`Cuda::new`] and [`CudaContext::new`] return an error for
@@ -36,6 +39,7 @@
 
 mod backend;
 mod context;
+pub mod device_build;
 mod error;
 mod gas;
 mod ias;
@@ -47,6 +51,7 @@ mod transform;
 
 pub use backend::{Cuda, CudaBatch};
 pub use context::{CudaContext, DeviceInfo, KernelInfo, KERNEL_SOURCE};
+pub use device_build::{BuildTimes, DeviceBuildConfig, DeviceBuildError, GasBuilder};
 pub use error::CudaError;
 pub use gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, HitRecord};
 pub use ias::CudaIas;

@@ -177,6 +177,23 @@ impl Device {
         }
     }
 
+    /// The memory query of a GAS build on this device (`optixAccelComputeMemoryUsage`): the
+    /// CPU's builder's sizes ([`compute_memory_usage`](crate::compute_memory_usage)), or on a
+    /// CUDA device those of the builder that will run (the device's kernels for the inputs and
+    /// presets it builds, see `oxray::cuda::Cuda`). Validates as the build does, short of
+    /// reading the buffers.
+    pub fn compute_memory_usage(
+        &self,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<crate::AccelBufferSizes, BuildError> {
+        match &self.repr {
+            DeviceRepr::Cpu(_) => oxray_bvh::compute_memory_usage(options, inputs),
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda(b) => b.compute_memory_usage(options, inputs),
+        }
+    }
+
     /// Builds a GAS on this device (`optixAccelBuild`); inputs are validated as the guide says,
     /// with the same typed errors on every device.
     pub fn build_gas(

@@ -593,3 +593,38 @@ fn counting_allocator_sees_allocations() {
     assert!(PEAK.load(Ordering::SeqCst) + slack >= before + (1 << 20));
     assert!(LIVE.load(Ordering::SeqCst) < before + slack);
 }
+
+#[test]
+fn each_device_answers_the_memory_query_of_its_own_builder_5() {
+    let _s = serial();
+    let mut rng = Rng::new(5);
+    let tris = random_soup(&mut rng, 500, 10.0, 0.5);
+    let v: Vec<[f32; 3]> = tris.iter().flatten().copied().collect();
+    let inputs = [BuildInput::from(TriangleInput::new(VertexBuffer::f32x3(
+        &v,
+    )))];
+    for flags in [BuildFlags::empty(), BuildFlags::PREFER_FAST_TRACE] {
+        let options = BuildOptions::new(flags);
+        // The CPU builds with the shared builder: the device-neutral query is its own.
+        assert_eq!(
+            oxray::Device::cpu().compute_memory_usage(&options, &inputs),
+            compute_memory_usage(&options, &inputs)
+        );
+        // A CUDA device answers for the builder it will run, and its output bounds what the
+        // structure keeps on the device.
+        if let Ok(device) = oxray::Device::cuda(0) {
+            let sizes = device.compute_memory_usage(&options, &inputs).unwrap();
+            let gas = device.build_gas(&options, &inputs).unwrap();
+            let cuda = gas.as_cuda().expect("a CUDA device builds CUDA GASes");
+            assert!(
+                cuda.device_bytes() <= sizes.output_size_in_bytes,
+                "{sizes:?}"
+            );
+        }
+    }
+    let bad = BuildOptions::new(BuildFlags::PREFER_FAST_BUILD | BuildFlags::PREFER_FAST_TRACE);
+    assert_eq!(
+        oxray::Device::cpu().compute_memory_usage(&bad, &inputs),
+        Err(BuildError::ConflictingBuildFlags)
+    );
+}

@@ -1,0 +1,989 @@
+//! Triangle GASes built on the device: the inputs are validated on the host (the same rules and
+//! typed errors as every backend, [`GasData::prepare`]), their vertices and indices copied to the
+//! device, and the kernels of [`BUILD_SOURCE`] make a linear BVH (Karras 2012) collapsed into
+//! leaves by the SAH, written straight into the binary node layout the trace kernels and
+//! pipelines walk ([`NodeLayout::Bvh2`]). Only the slot table (the sorted triangle ids, 4 bytes a
+//! triangle) comes back to the host, where hits are resolved.
+//!
+//! Which builds run here is [`Cuda`](crate::Cuda)'s choice ([`GasBuilder`]); this module is the
+//! builder itself, with its timings for benchmarks ([`build_triangles`]).
+
+use crate::context::{nvrtc_compile, CudaContext};
+use crate::error::{driver, CudaError};
+use crate::gas::CudaGas;
+use crate::layout::{SlotInfo, MAX_SLOTS};
+use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig, PushKernelArg};
+use oxray_bvh::{AccelBufferSizes, BvhStats, GasData, GasInfo, GasKind, MAX_BVH2_DEPTH};
+use oxray_core::{
+    Aabb, BuildError, BuildFlags, BuildInput, BuildOptions, IndexFormat, TriangleInput,
+    VertexFormat,
+};
+use rayon::prelude::*;
+use std::time::Instant;
+use thiserror::Error;
+
+/// The CUDA C++ source of the builder's kernels, compiled by NVRTC on the first device build.
+pub const BUILD_SOURCE: &str = include_str!("kernels/build.cu");
+
+/// Threads per block of every build kernel (`BUILD_BLOCK`).
+const BLOCK: u32 = 256;
+/// Keys per tile of the radix sort and the prefix sums (`SORT_TILE`).
+const TILE: usize = 2048;
+/// Largest leaf the collapse makes (`OXRAY_MAX_LEAF`), as the CPU builder's presets.
+pub const MAX_LEAF: u32 = 8;
+/// Bytes of one node of the radix tree (`INode`).
+const INODE_BYTES: usize = 64;
+
+/// Where a [`Cuda`](crate::Cuda) backend builds triangle GASes.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum GasBuilder {
+    /// On the device, as OptiX does: the default. Builds the device cannot make (see
+    /// [`DeviceBuildConfig::for_options`]) still run on the host.
+    #[default]
+    Device,
+    /// On the host, with the binned SAH builder every backend shares, then uploaded.
+    Host,
+}
+
+impl GasBuilder {
+    /// The environment variable that overrides the default: `host` or `device`.
+    pub const ENV: &'static str = "OXRAY_CUDA_GAS_BUILDER";
+
+    /// The builder `OXRAY_CUDA_GAS_BUILDER` names (`device` when unset); an error names a value
+    /// it does not know.
+    pub fn from_env() -> Result<GasBuilder, CudaError> {
+        match std::env::var(Self::ENV) {
+            Err(_) => Ok(GasBuilder::Device),
+            Ok(v) => v.parse(),
+        }
+    }
+
+    /// `device` or `host`.
+    pub fn name(self) -> &'static str {
+        match self {
+            GasBuilder::Device => "device",
+            GasBuilder::Host => "host",
+        }
+    }
+}
+
+impl std::str::FromStr for GasBuilder {
+    type Err = CudaError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "device" | "gpu" => Ok(GasBuilder::Device),
+            "host" | "cpu" => Ok(GasBuilder::Host),
+            other => Err(CudaError::Config(format!(
+                "{}={other:?}: expected `device` or `host`",
+                GasBuilder::ENV
+            ))),
+        }
+    }
+}
+
+/// How the device builds one GAS.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DeviceBuildConfig {
+    /// Bits of the Morton codes: 30 (32-bit keys, four sort passes) or 60 (64-bit keys, eight
+    /// passes, finer cells for large meshes).
+    pub morton_bits: u32,
+    /// The deepest tree accepted (root's children at depth 1); a deeper one is refused with
+    /// [`CudaError::TreeTooDeep`] (and [`Cuda`](crate::Cuda) builds on the host instead). The
+    /// traversal stacks hold [`MAX_BVH2_DEPTH`] levels.
+    pub max_depth: u32,
+}
+
+impl DeviceBuildConfig {
+    /// `PREFER_FAST_BUILD`: 30-bit codes. With 32-bit keys whose ties are broken by position, no
+    /// tree is deeper than 31 + 30 levels, within the traversal's bound.
+    pub const FAST_BUILD: DeviceBuildConfig = DeviceBuildConfig {
+        morton_bits: 30,
+        max_depth: MAX_BVH2_DEPTH as u32,
+    };
+    /// No preference: 60-bit codes.
+    pub const DEFAULT: DeviceBuildConfig = DeviceBuildConfig {
+        morton_bits: 60,
+        max_depth: MAX_BVH2_DEPTH as u32,
+    };
+
+    /// Above this many triangles, `PREFER_FAST_BUILD` uses 60-bit codes too: 30-bit cells grow
+    /// too coarse (a 66 M-triangle mesh traced at 63 % of the host-built tree's speed with
+    /// 30-bit codes, 104 % with 60-bit ones; 7.9 M triangles at 92 % with 30-bit codes:
+    /// `docs/BENCHMARKS.md`).
+    pub const FAST_BUILD_30_BIT_MAX: u32 = 1 << 24;
+
+    /// The configuration for a build of `num_primitives` primitives with these options, or
+    /// `None` where the device does not build it yet: `PREFER_FAST_TRACE` (the device has no
+    /// quality step yet, and the host's SAH builder traces faster) and `ALLOW_UPDATE` (the
+    /// device does not refit; an updatable structure keeps slots for inactive primitives, which
+    /// only the host builder places).
+    pub fn for_options(options: &BuildOptions, num_primitives: u32) -> Option<DeviceBuildConfig> {
+        let f = options.flags;
+        if f.intersects(BuildFlags::PREFER_FAST_TRACE | BuildFlags::ALLOW_UPDATE) {
+            None
+        } else if f.contains(BuildFlags::PREFER_FAST_BUILD)
+            && num_primitives <= Self::FAST_BUILD_30_BIT_MAX
+        {
+            Some(Self::FAST_BUILD)
+        } else {
+            Some(Self::DEFAULT)
+        }
+    }
+
+    fn key_bytes(&self) -> usize {
+        if self.morton_bits <= 30 {
+            4
+        } else {
+            8
+        }
+    }
+}
+
+/// Why a device build failed: the inputs (the same errors as every backend's build), or the
+/// device.
+#[derive(Clone, Debug, Error, PartialEq)]
+pub enum DeviceBuildError {
+    /// The inputs break a rule of the guide.
+    #[error(transparent)]
+    Invalid(#[from] BuildError),
+    /// The device failed, or the tree was deeper than the traversal allows.
+    #[error(transparent)]
+    Device(#[from] CudaError),
+}
+
+/// What a device build took.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BuildTimes {
+    /// Host milliseconds validating and preparing the inputs (format conversions).
+    pub prepare_ms: f64,
+    /// Host milliseconds copying the vertices and indices to the device.
+    pub upload_ms: f64,
+    /// Device milliseconds of the build kernels, inputs resident (CUDA events): what OptiX's
+    /// build time measures.
+    pub kernels_ms: f64,
+    /// Host milliseconds from the call to the structure ready, the slot table included.
+    pub total_ms: f64,
+}
+
+/// The builder's kernels in one module.
+#[derive(Debug)]
+pub(crate) struct BuildKernels {
+    bounds: CudaFunction,
+    morton32: CudaFunction,
+    morton64: CudaFunction,
+    hist32: CudaFunction,
+    hist64: CudaFunction,
+    sort_scan: CudaFunction,
+    scatter32: CudaFunction,
+    scatter64: CudaFunction,
+    karras32: CudaFunction,
+    karras64: CudaFunction,
+    bottom_up: CudaFunction,
+    mark: CudaFunction,
+    scan_reduce: CudaFunction,
+    scan_sums: CudaFunction,
+    scan_down: CudaFunction,
+    write_nodes: CudaFunction,
+    write_triangles: CudaFunction,
+}
+
+/// Every kernel entry of [`BUILD_SOURCE`].
+pub const BUILD_ENTRIES: [&str; 17] = [
+    "oxray_build_bounds",
+    "oxray_build_morton32",
+    "oxray_build_morton64",
+    "oxray_sort_hist32",
+    "oxray_sort_hist64",
+    "oxray_sort_scan",
+    "oxray_sort_scatter32",
+    "oxray_sort_scatter64",
+    "oxray_build_karras32",
+    "oxray_build_karras64",
+    "oxray_build_bottom_up",
+    "oxray_build_mark",
+    "oxray_scan_reduce",
+    "oxray_scan_sums",
+    "oxray_scan_down",
+    "oxray_build_write_nodes",
+    "oxray_build_write_triangles",
+];
+
+/// NVRTC options of the builder: the trace kernels' (no FMA contraction, which the degeneracy
+/// test relies on) and the leaf size.
+pub(crate) fn build_options(cc: (i32, i32)) -> Vec<String> {
+    let mut o = crate::context::compile_options(cc);
+    o.push(format!("-DOXRAY_MAX_LEAF={MAX_LEAF}"));
+    o
+}
+
+/// Compiles the builder for compute capability `cc` (PTX).
+pub(crate) fn compile_builder(cc: (i32, i32)) -> Result<cudarc::nvrtc::Ptx, CudaError> {
+    nvrtc_compile(BUILD_SOURCE, build_options(cc), "oxray_build.cu")
+}
+
+impl BuildKernels {
+    pub(crate) fn load(ctx: &CudaContext) -> Result<BuildKernels, CudaError> {
+        use crate::context::guarded;
+        let ptx = compile_builder(ctx.device().compute_capability)?;
+        let cu = ctx.stream.context().clone();
+        let module = guarded("loading the build module", || cu.load_module(ptx))?;
+        let f = |name: &'static str| guarded("loading a kernel", || module.load_function(name));
+        // Freed device memory stays in the stream-ordered pool instead of going back to the
+        // driver at every synchronisation, so that repeated builds do not map and unmap their
+        // scratch memory each time.
+        guarded("keeping freed memory in the pool", || {
+            let mut pool = std::ptr::null_mut();
+            // SAFETY: writes one pool handle through a valid pointer, for the context's device.
+            unsafe { cudarc::driver::sys::cuDeviceGetDefaultMemPool(&mut pool, cu.cu_device()) }
+                .result()?;
+            let mut threshold = u64::MAX;
+            // SAFETY: the release threshold attribute takes a pointer to a u64, which lives
+            // through the call.
+            unsafe {
+                cudarc::driver::sys::cuMemPoolSetAttribute(
+                    pool,
+                    cudarc::driver::sys::CUmemPool_attribute::CU_MEMPOOL_ATTR_RELEASE_THRESHOLD,
+                    (&mut threshold as *mut u64).cast(),
+                )
+            }
+            .result()
+        })?;
+        Ok(BuildKernels {
+            bounds: f("oxray_build_bounds")?,
+            morton32: f("oxray_build_morton32")?,
+            morton64: f("oxray_build_morton64")?,
+            hist32: f("oxray_sort_hist32")?,
+            hist64: f("oxray_sort_hist64")?,
+            sort_scan: f("oxray_sort_scan")?,
+            scatter32: f("oxray_sort_scatter32")?,
+            scatter64: f("oxray_sort_scatter64")?,
+            karras32: f("oxray_build_karras32")?,
+            karras64: f("oxray_build_karras64")?,
+            bottom_up: f("oxray_build_bottom_up")?,
+            mark: f("oxray_build_mark")?,
+            scan_reduce: f("oxray_scan_reduce")?,
+            scan_sums: f("oxray_scan_sums")?,
+            scan_down: f("oxray_scan_down")?,
+            write_nodes: f("oxray_build_write_nodes")?,
+            write_triangles: f("oxray_build_write_triangles")?,
+        })
+    }
+}
+
+/// How one build input reaches the device: its own buffers, or triangles decoded on the host.
+enum Staged<'a> {
+    /// f32 vertices and u32 indices (or none) read in place: bytes of the vertices, their stride
+    /// in floats, bytes of the index triplets and their stride in words.
+    Direct {
+        vertices: &'a [u8],
+        vstride: u32,
+        indices: Option<&'a [u8]>,
+        istride: u32,
+    },
+    /// u16 indices widened to u32 triplets.
+    Widened {
+        vertices: &'a [u8],
+        vstride: u32,
+        indices: Vec<u32>,
+    },
+    /// Other vertex formats, a stride the device cannot read as floats, or a pre-transform:
+    /// the decoded triangles, nine floats each.
+    Soup(Vec<f32>),
+}
+
+/// Bytes of a buffer of `count` elements of `size` bytes `stride` apart.
+fn span(count: u32, stride: usize, size: usize) -> usize {
+    if count == 0 {
+        0
+    } else {
+        (count as usize - 1) * stride + size
+    }
+}
+
+/// Whether the device reads the input's vertices in place.
+fn direct_vertices(t: &TriangleInput<'_>) -> bool {
+    t.vertices.format == VertexFormat::F32x3
+        && t.vertices.effective_stride().is_multiple_of(4)
+        && t.pre_transform.is_none()
+}
+
+/// Device bytes one input takes once staged (from the counts and formats alone).
+fn staged_bytes(t: &TriangleInput<'_>) -> usize {
+    let n = t.num_primitives();
+    if !direct_vertices(t) {
+        return 36 * n as usize;
+    }
+    let v = span(t.vertices.count, t.vertices.effective_stride(), 12);
+    let i = match &t.indices {
+        None => 0,
+        Some(ix) if ix.format == IndexFormat::U32x3 && ix.effective_stride().is_multiple_of(4) => {
+            span(ix.count, ix.effective_stride(), 12)
+        }
+        Some(ix) => 12 * ix.count as usize,
+    };
+    v + i
+}
+
+fn stage<'a>(t: &TriangleInput<'a>) -> Staged<'a> {
+    if !direct_vertices(t) {
+        let tris = oxray_bvh::gas::decode_triangles(t);
+        return Staged::Soup(
+            tris.iter()
+                .flat_map(|t| t.iter().flat_map(|p| p.to_array()))
+                .collect(),
+        );
+    }
+    let vs = t.vertices.effective_stride();
+    let vertices = &t.vertices.data[..span(t.vertices.count, vs, 12)];
+    let vstride = (vs / 4) as u32;
+    match &t.indices {
+        None => Staged::Direct {
+            vertices,
+            vstride,
+            indices: None,
+            istride: 0,
+        },
+        Some(ix) if ix.format == IndexFormat::U32x3 && ix.effective_stride().is_multiple_of(4) => {
+            let is = ix.effective_stride();
+            Staged::Direct {
+                vertices,
+                vstride,
+                indices: Some(&ix.data[..span(ix.count, is, 12)]),
+                istride: (is / 4) as u32,
+            }
+        }
+        Some(ix) => {
+            let is = ix.effective_stride();
+            let indices = (0..ix.count as usize)
+                .into_par_iter()
+                .flat_map_iter(|k| ix.format.decode(&ix.data[k * is..]))
+                .collect();
+            Staged::Widened {
+                vertices,
+                vstride,
+                indices,
+            }
+        }
+    }
+}
+
+/// The device memory a build of `n` triangles takes besides its staged inputs, in bytes: the
+/// boxes, the sort's keys, values and counts, the radix tree, the parents of its leaves, the
+/// kept-node flags and their prefix sum (some are freed before others are allocated: the sum
+/// bounds the peak).
+fn scratch_bytes(n: usize, key_bytes: usize) -> usize {
+    let tiles = n.div_ceil(TILE).max(1);
+    32 * n.max(1)
+        + 2 * key_bytes * n.max(1)
+        + 2 * 4 * n.max(1)
+        + 4 * 256 * tiles
+        + 4 * 256
+        + INODE_BYTES * n.max(2)
+        + 3 * 4 * n.max(1)
+        + 4 * tiles
+        + 4 * 8
+}
+
+/// The memory query of a device build (`optixAccelComputeMemoryUsage` on this device), from the
+/// inputs' counts and formats: the output is the node and triangle arrays at their largest (one
+/// node per triangle, 64 bytes, and 48 bytes of triangle per triangle); the temporary memory is
+/// the staged inputs and the scratch arrays, exactly what [`build_triangles`] allocates.
+/// Validates as the build does, short of reading the buffers.
+pub fn memory_usage(
+    options: &BuildOptions,
+    inputs: &[BuildInput<'_>],
+    config: &DeviceBuildConfig,
+) -> Result<AccelBufferSizes, BuildError> {
+    let summary = oxray_core::validate::validate_structure(options, inputs)?;
+    let n = summary.num_primitives as usize;
+    let staged: usize = inputs
+        .iter()
+        .map(|i| match i {
+            BuildInput::Triangles(t) => staged_bytes(t) + 32,
+            _ => 0,
+        })
+        .sum();
+    Ok(AccelBufferSizes {
+        output_size_in_bytes: 64 * n.max(1) + 48 * n.max(1),
+        temp_size_in_bytes: staged + scratch_bytes(n, config.key_bytes()),
+        temp_update_size_in_bytes: 0,
+    })
+}
+
+fn grid(n: usize) -> LaunchConfig {
+    LaunchConfig {
+        grid_dim: ((n.max(1) as u32).div_ceil(BLOCK), 1, 1),
+        block_dim: (BLOCK, 1, 1),
+        shared_mem_bytes: 0,
+    }
+}
+
+fn blocks(count: usize) -> LaunchConfig {
+    LaunchConfig {
+        grid_dim: (count.max(1) as u32, 1, 1),
+        block_dim: (BLOCK, 1, 1),
+        shared_mem_bytes: 0,
+    }
+}
+
+/// Memory every element of which a kernel writes before any is read.
+fn scratch<T: cudarc::driver::DeviceRepr>(
+    ctx: &CudaContext,
+    len: usize,
+) -> Result<CudaSlice<T>, CudaError> {
+    // SAFETY: the memory is left uninitialised; every caller passes it to kernels that write
+    // each element they (or later kernels) read, in stream order.
+    unsafe { ctx.stream.alloc::<T>(len.max(1)) }.map_err(driver("allocating build memory"))
+}
+
+/// Builds a triangle GAS on the device with `config`. Validation errors are the host builder's;
+/// a tree deeper than `config.max_depth` is [`CudaError::TreeTooDeep`] (nothing is kept).
+pub fn build_triangles(
+    ctx: &CudaContext,
+    options: &BuildOptions,
+    inputs: &[BuildInput<'_>],
+    config: &DeviceBuildConfig,
+) -> Result<(CudaGas, BuildTimes), DeviceBuildError> {
+    let start = Instant::now();
+    let mut prepared = GasData::prepare(options, inputs)?;
+    if prepared.kind != GasKind::Triangles {
+        return Err(CudaError::Unsupported("device builds of custom-primitive GASes").into());
+    }
+    let n = prepared.num_primitives as usize;
+    if n > MAX_SLOTS {
+        return Err(CudaError::TooLarge(format!("{n} triangles; at most {MAX_SLOTS}")).into());
+    }
+    let staged: Vec<Staged<'_>> = inputs
+        .par_iter()
+        .map(|i| match i {
+            BuildInput::Triangles(t) => stage(t),
+            _ => Staged::Soup(Vec::new()),
+        })
+        .collect();
+    let kernels = ctx.build_kernels()?;
+    let prepare_ms = start.elapsed().as_secs_f64() * 1e3;
+
+    // Inputs to the device, and their table.
+    let s = &ctx.stream;
+    let up = || driver("copying build inputs to the device");
+    let mut buffers: Vec<CudaSlice<u8>> = Vec::new();
+    let mut table: Vec<u32> = Vec::with_capacity(8 * inputs.len());
+    for (input, st) in prepared.inputs.iter().zip(&staged) {
+        let (v, vstride, ix, istride): (&[u8], u32, Option<&[u8]>, u32) = match st {
+            Staged::Direct {
+                vertices,
+                vstride,
+                indices,
+                istride,
+            } => (vertices, *vstride, *indices, *istride),
+            Staged::Widened {
+                vertices,
+                vstride,
+                indices,
+            } => (vertices, *vstride, Some(bytemuck::cast_slice(indices)), 3),
+            Staged::Soup(f) => (bytemuck::cast_slice(f), 3, None, 0),
+        };
+        let mut address = |bytes: &[u8]| -> Result<u64, CudaError> {
+            if bytes.is_empty() {
+                return Ok(0);
+            }
+            let b = s.clone_htod(bytes).map_err(up())?;
+            let p = {
+                let (p, _guard) = b.device_ptr(s);
+                p
+            };
+            // Kept until the kernels that read through `p` are done.
+            buffers.push(b);
+            Ok(p)
+        };
+        let va = address(v)?;
+        let ia = match ix {
+            Some(ix) => address(ix)?,
+            None => 0,
+        };
+        table.extend_from_slice(&[
+            va as u32,
+            (va >> 32) as u32,
+            ia as u32,
+            (ia >> 32) as u32,
+            input.first,
+            vstride,
+            istride,
+            0,
+        ]);
+    }
+    let d_inputs = s.clone_htod(&table[..]).map_err(up())?;
+    drop(staged);
+    ctx.synchronize()?;
+    let upload_ms = start.elapsed().as_secs_f64() * 1e3 - prepare_ms;
+
+    let timing = |what| driver(what);
+    let t0 = s.record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT));
+    let t0 = t0.map_err(timing("recording an event"))?;
+    let result = run_kernels(ctx, kernels, &d_inputs, inputs.len() as u32, n, config)?;
+    let t1 = s
+        .record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT))
+        .map_err(timing("recording an event"))?;
+    let kernels_ms = t0.elapsed_ms(&t1).map_err(timing("reading an event"))? as f64;
+    drop(buffers);
+    drop(d_inputs);
+
+    // The slot table: the sorted triangle ids, resolved on the host.
+    let mut ids = vec![0u32; result.active];
+    if result.active > 0 {
+        s.memcpy_dtoh(&result.values.slice(..result.active), &mut ids[..])
+            .map_err(driver("copying the slot table to the host"))?;
+    }
+    ctx.synchronize()?;
+    drop(result.values);
+    let slots: Vec<SlotInfo> = ids
+        .par_iter()
+        .with_min_len(1 << 14)
+        .map(|&g| {
+            let (primitive_index, sbt_gas_index, build_input) = prepared.resolve_global(g);
+            SlotInfo {
+                primitive_index,
+                sbt_gas_index,
+                build_input,
+            }
+        })
+        .collect();
+    prepared.bounds = result.bounds;
+    let info = GasInfo {
+        kind: prepared.kind(),
+        build_flags: prepared.build_flags,
+        num_primitives: prepared.num_primitives,
+        num_active_primitives: result.active as u32,
+        num_build_inputs: prepared.inputs.len(),
+        record_flags: prepared.record_flags.clone(),
+        bounds: result.bounds,
+        stats: result.stats,
+    };
+    let record_flags = prepared.record_flags.iter().map(|f| f.bits()).collect();
+    let gas = CudaGas::from_device_build(
+        ctx,
+        result.nodes,
+        result.num_nodes,
+        result.triangles,
+        slots,
+        info,
+        record_flags,
+    );
+    let total_ms = start.elapsed().as_secs_f64() * 1e3;
+    Ok((
+        gas,
+        BuildTimes {
+            prepare_ms,
+            upload_ms,
+            kernels_ms,
+            total_ms,
+        },
+    ))
+}
+
+/// What the kernels leave: the layout's arrays and what the host keeps of the build.
+struct Built {
+    nodes: CudaSlice<u32>,
+    num_nodes: usize,
+    triangles: CudaSlice<u32>,
+    /// The sorted triangle ids (the first `active` are the slots').
+    values: CudaSlice<u32>,
+    active: usize,
+    bounds: Aabb,
+    stats: BvhStats,
+}
+
+/// Queues the build's kernels over `n` triangles of the inputs described by `d_inputs`.
+fn run_kernels(
+    ctx: &CudaContext,
+    k: &BuildKernels,
+    d_inputs: &CudaSlice<u32>,
+    n_in: u32,
+    n: usize,
+    config: &DeviceBuildConfig,
+) -> Result<Built, CudaError> {
+    let s = &ctx.stream;
+    let n32 = n as u32;
+    let launch = |what| driver(what);
+
+    // Counters: centroid minima start at the largest order-preserving value, the rest at 0.
+    let mut init = [0u32; 8];
+    init[..3].fill(u32::MAX);
+    let mut counters = s
+        .clone_htod(&init[..])
+        .map_err(launch("copying the build counters"))?;
+    let mut boxes: CudaSlice<f32> = scratch(ctx, 8 * n)?;
+    {
+        let mut b = s.launch_builder(&k.bounds);
+        b.arg(d_inputs)
+            .arg(&n_in)
+            .arg(&n32)
+            .arg(&mut boxes)
+            .arg(&mut counters);
+        // SAFETY: oxray_build_bounds(const InputDesc*, u32 n_in, u32 n, float4* boxes,
+        // u32* counters): the table holds n_in descriptors of buffers alive until the kernels are
+        // done, whose triangles 0..n have in-range indices (checked by `GasData::prepare`);
+        // boxes holds 8 floats per triangle, counters 8 words.
+        unsafe { b.launch(grid(n)) }.map_err(launch("launching the bounds kernel"))?;
+    }
+
+    let wide = config.key_bytes() == 8;
+    let passes: u32 = if wide { 8 } else { 4 };
+    let tiles = n.div_ceil(TILE).max(1);
+    let tiles32 = tiles as u32;
+    let mut values: CudaSlice<u32> = scratch(ctx, n)?;
+    let mut values_alt: CudaSlice<u32> = scratch(ctx, n)?;
+    let mut counts: CudaSlice<u32> = scratch(ctx, 256 * tiles)?;
+    let mut totals: CudaSlice<u32> = scratch(ctx, 256)?;
+    let mut inodes: CudaSlice<u32> = scratch(ctx, (INODE_BYTES / 4) * n.max(2))?;
+    let mut leaf_parent: CudaSlice<u32> = scratch(ctx, n)?;
+
+    macro_rules! sort_and_tree {
+        ($key:ty, $morton:expr, $hist:expr, $scatter:expr, $karras:expr) => {{
+            let mut keys: CudaSlice<$key> = scratch(ctx, n)?;
+            let mut keys_alt: CudaSlice<$key> = scratch(ctx, n)?;
+            {
+                let mut b = s.launch_builder($morton);
+                b.arg(&boxes)
+                    .arg(&n32)
+                    .arg(&counters)
+                    .arg(&mut keys)
+                    .arg(&mut values);
+                // SAFETY: oxray_build_morton(const float4* boxes, u32 n, const u32* counters,
+                // K* keys, u32* values): n boxes written above, n keys and values.
+                unsafe { b.launch(grid(n)) }.map_err(launch("launching the Morton kernel"))?;
+            }
+            for pass in 0..passes {
+                let shift = 8 * pass;
+                // Even passes read the primary buffers, odd ones the alternates; an even number
+                // of passes leaves the result in the primary ones.
+                let (kin, vin, kout, vout) = if pass % 2 == 0 {
+                    (&keys, &values, &mut keys_alt, &mut values_alt)
+                } else {
+                    (&keys_alt, &values_alt, &mut keys, &mut values)
+                };
+                let mut b = s.launch_builder($hist);
+                b.arg(kin)
+                    .arg(&n32)
+                    .arg(&shift)
+                    .arg(&mut counts)
+                    .arg(&tiles32);
+                // SAFETY: oxray_sort_hist(const K* keys, u32 n, u32 shift, u32* counts,
+                // u32 tiles): n keys, 256 * tiles counts; one block per tile.
+                unsafe { b.launch(blocks(tiles)) }.map_err(launch("launching the sort"))?;
+                let mut b = s.launch_builder(&k.sort_scan);
+                b.arg(&mut counts).arg(&tiles32).arg(&mut totals);
+                // SAFETY: oxray_sort_scan(u32* counts, u32 tiles, u32* totals): one block per
+                // digit (256), each over its `tiles` counts; 256 totals.
+                unsafe { b.launch(blocks(256)) }.map_err(launch("launching the sort"))?;
+                let mut b = s.launch_builder($scatter);
+                b.arg(kin)
+                    .arg(vin)
+                    .arg(kout)
+                    .arg(vout)
+                    .arg(&n32)
+                    .arg(&shift)
+                    .arg(&counts)
+                    .arg(&tiles32)
+                    .arg(&totals);
+                // SAFETY: oxray_sort_scatter(const K*, const u32*, K*, u32*, u32 n, u32 shift,
+                // const u32* counts, u32 tiles, const u32* totals): n keys and values in and
+                // out (distinct buffers); every destination is below n, as the counts of the
+                // same keys place them.
+                unsafe { b.launch(blocks(tiles)) }.map_err(launch("launching the sort"))?;
+            }
+            let mut b = s.launch_builder($karras);
+            b.arg(&keys)
+                .arg(&counters)
+                .arg(&mut inodes)
+                .arg(&mut leaf_parent);
+            // SAFETY: oxray_build_karras(const K* keys, const u32* counters, INode* nodes,
+            // u32* leaf_parent): threads below n_act - 1 (from the counters, at most n - 1)
+            // write their node and their children's parents: n - 1 nodes and n parents fit.
+            unsafe { b.launch(grid(n)) }.map_err(launch("launching the hierarchy kernel"))?;
+        }};
+    }
+    if wide {
+        sort_and_tree!(u64, &k.morton64, &k.hist64, &k.scatter64, &k.karras64);
+    } else {
+        sort_and_tree!(u32, &k.morton32, &k.hist32, &k.scatter32, &k.karras32);
+    }
+    drop((values_alt, counts, totals));
+
+    {
+        let mut b = s.launch_builder(&k.bottom_up);
+        b.arg(&mut inodes)
+            .arg(&leaf_parent)
+            .arg(&boxes)
+            .arg(&values)
+            .arg(&counters);
+        // SAFETY: oxray_build_bottom_up(INode*, const u32* leaf_parent, const float4* boxes,
+        // const u32* values, const u32* counters): threads below n_act walk from their leaf's
+        // parent to the root through nodes the hierarchy kernel linked.
+        unsafe { b.launch(grid(n)) }.map_err(launch("launching the bottom-up kernel"))?;
+    }
+    let mut kept: CudaSlice<u32> = scratch(ctx, n)?;
+    let mut sums: CudaSlice<u32> = scratch(ctx, tiles)?;
+    {
+        let mut b = s.launch_builder(&k.mark);
+        b.arg(&inodes).arg(&counters).arg(&n32).arg(&mut kept);
+        // SAFETY: oxray_build_mark(const INode*, const u32* counters, u32 cap, u32* kept):
+        // n flags; nodes and parents as linked above.
+        unsafe { b.launch(grid(n)) }.map_err(launch("launching the collapse kernel"))?;
+    }
+    let mut index = s
+        .clone_dtod(&kept)
+        .map_err(launch("copying the kept-node flags"))?;
+    {
+        let mut b = s.launch_builder(&k.scan_reduce);
+        b.arg(&index).arg(&n32).arg(&mut sums);
+        // SAFETY: oxray_scan_reduce(const u32* v, u32 len, u32* sums): n words, one sum per
+        // tile, one block per tile.
+        unsafe { b.launch(blocks(tiles)) }.map_err(launch("launching a prefix sum"))?;
+        let mut total = counters.slice_mut(7..8);
+        let mut b = s.launch_builder(&k.scan_sums);
+        b.arg(&mut sums).arg(&tiles32).arg(&mut total);
+        // SAFETY: oxray_scan_sums(u32* sums, u32 tiles, u32* total): one block over the tile
+        // sums; the total goes to counter 7.
+        unsafe { b.launch(blocks(1)) }.map_err(launch("launching a prefix sum"))?;
+        let mut b = s.launch_builder(&k.scan_down);
+        b.arg(&mut index).arg(&n32).arg(&sums);
+        // SAFETY: oxray_scan_down(u32* v, u32 len, const u32* sums): n words, one block per
+        // tile.
+        unsafe { b.launch(blocks(tiles)) }.map_err(launch("launching a prefix sum"))?;
+    }
+    drop(sums);
+
+    // What the tree came to: active triangles, kept nodes, and the root.
+    let mut c = [0u32; 8];
+    s.memcpy_dtoh(&counters, &mut c[..])
+        .map_err(launch("copying the build counters"))?;
+    let mut root = [0u32; INODE_BYTES / 4];
+    s.memcpy_dtoh(&inodes.slice(..INODE_BYTES / 4), &mut root[..])
+        .map_err(launch("copying the root"))?;
+    ctx.synchronize()?;
+    let active = c[6] as usize;
+    let kept_nodes = c[7] as usize;
+    let f = f32::from_bits;
+    let (height, bounds, stat) = if active >= 2 {
+        (
+            root[6] & 0x7FFF_FFFF,
+            Aabb::new(
+                [f(root[9]), f(root[10]), f(root[11])].into(),
+                [f(root[12]), f(root[13]), f(root[14])].into(),
+            ),
+            f(root[8]) as f64,
+        )
+    } else {
+        (u32::from(active == 1), Aabb::EMPTY, 0.0)
+    };
+    if height > config.max_depth {
+        return Err(CudaError::TreeTooDeep {
+            depth: height,
+            max: config.max_depth,
+        });
+    }
+
+    let num_nodes = kept_nodes.max(1);
+    let mut nodes: CudaSlice<u32> = scratch(ctx, 16 * num_nodes)?;
+    {
+        let mut b = s.launch_builder(&k.write_nodes);
+        b.arg(&inodes)
+            .arg(&kept)
+            .arg(&index)
+            .arg(&boxes)
+            .arg(&values)
+            .arg(&counters)
+            .arg(&mut nodes);
+        // SAFETY: oxray_build_write_nodes(const INode*, const u32* kept, const u32* index,
+        // const float4* boxes, const u32* values, const u32* counters, float4* out): each kept
+        // node writes 16 words at its index, below the kept count `num_nodes` was sized by
+        // (with fewer than two active triangles, thread 0 writes node 0).
+        unsafe { b.launch(grid(active.saturating_sub(1).max(1))) }
+            .map_err(launch("launching the node writer"))?;
+    }
+    let mut triangles: CudaSlice<u32> = scratch(ctx, 12 * active.max(1))?;
+    if active == 0 {
+        s.memset_zeros(&mut triangles)
+            .map_err(launch("clearing the triangle array"))?;
+    } else {
+        let a32 = active as u32;
+        let mut b = s.launch_builder(&k.write_triangles);
+        b.arg(d_inputs)
+            .arg(&n_in)
+            .arg(&values)
+            .arg(&a32)
+            .arg(&mut triangles);
+        // SAFETY: oxray_build_write_triangles(const InputDesc*, u32 n_in, const u32* values,
+        // u32 n_act, float4* out): `active` sorted ids of triangles of the inputs, 12 words each.
+        unsafe { b.launch(grid(active)) }.map_err(launch("launching the triangle writer"))?;
+    }
+    // The single-triangle tree's box: that triangle's.
+    let bounds = if active == 1 {
+        let mut id = [0u32; 1];
+        s.memcpy_dtoh(&values.slice(..1), &mut id[..])
+            .map_err(launch("copying the root"))?;
+        ctx.synchronize()?;
+        let mut b = [0f32; 8];
+        s.memcpy_dtoh(
+            &boxes.slice(8 * id[0] as usize..8 * id[0] as usize + 8),
+            &mut b[..],
+        )
+        .map_err(launch("copying the root"))?;
+        ctx.synchronize()?;
+        Aabb::new([b[0], b[1], b[2]].into(), [b[4], b[5], b[6]].into())
+    } else {
+        bounds
+    };
+    let area = bounds.half_area() as f64;
+    let stats = BvhStats {
+        nodes: num_nodes,
+        leaves: if active == 0 { 0 } else { kept_nodes + 1 },
+        max_depth: height as usize,
+        mean_leaf_size: if active == 0 {
+            0.0
+        } else {
+            active as f64 / (kept_nodes + 1) as f64
+        },
+        sah_cost: if active >= 2 && area > 0.0 {
+            stat / area
+        } else {
+            1.0 + active as f64
+        },
+        node_bytes: 64 * num_nodes,
+        // A device build references each active triangle once (no spatial splits).
+        references: active,
+    };
+    Ok(Built {
+        nodes,
+        num_nodes,
+        triangles,
+        values,
+        active,
+        bounds,
+        stats,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use oxray_core::{IndexBuffer, VertexBuffer};
+
+    #[test]
+    fn the_builder_name_comes_from_the_environment_value() {
+        assert_eq!("device".parse::<GasBuilder>().unwrap(), GasBuilder::Device);
+        assert_eq!(" Host ".parse::<GasBuilder>().unwrap(), GasBuilder::Host);
+        let e = "sah".parse::<GasBuilder>().unwrap_err();
+        assert!(e.to_string().contains(GasBuilder::ENV), "{e}");
+        assert_eq!(GasBuilder::default(), GasBuilder::Device);
+    }
+
+    #[test]
+    fn presets_choose_the_device_build() {
+        let with = |f| DeviceBuildConfig::for_options(&BuildOptions::new(f), 1000);
+        assert_eq!(with(BuildFlags::empty()), Some(DeviceBuildConfig::DEFAULT));
+        assert_eq!(
+            with(BuildFlags::PREFER_FAST_BUILD | BuildFlags::ALLOW_COMPACTION),
+            Some(DeviceBuildConfig::FAST_BUILD)
+        );
+        // Large meshes get the finer codes whatever the preset.
+        let big = DeviceBuildConfig::FAST_BUILD_30_BIT_MAX + 1;
+        let fast = BuildOptions::new(BuildFlags::PREFER_FAST_BUILD);
+        assert_eq!(
+            DeviceBuildConfig::for_options(&fast, big),
+            Some(DeviceBuildConfig::DEFAULT)
+        );
+        assert_eq!(with(BuildFlags::PREFER_FAST_TRACE), None);
+        assert_eq!(with(BuildFlags::ALLOW_UPDATE), None);
+        // 30-bit keys with position tie-breaks: at most 30 + 31 levels, within the traversal's.
+        const { assert!(30 + 31 <= MAX_BVH2_DEPTH) };
+    }
+
+    #[test]
+    fn inputs_the_device_reads_in_place_or_after_conversion() {
+        let v = [
+            [0.0f32, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ];
+        let i32s = [[0u32, 1, 2], [1, 3, 2]];
+        let t = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u32x3(&i32s));
+        match stage(&t) {
+            Staged::Direct {
+                vertices,
+                vstride,
+                indices,
+                istride,
+            } => {
+                assert_eq!((vertices.len(), vstride, istride), (48, 3, 3));
+                assert_eq!(indices.map(<[u8]>::len), Some(24));
+            }
+            _ => panic!("f32 vertices with u32 indices are read in place"),
+        }
+        assert_eq!(staged_bytes(&t), 48 + 24);
+        let i16s = [[0u16, 1, 2], [1, 3, 2]];
+        let t16 = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u16x3(&i16s));
+        match stage(&t16) {
+            Staged::Widened { indices, .. } => assert_eq!(indices, vec![0, 1, 2, 1, 3, 2]),
+            _ => panic!("u16 indices are widened"),
+        }
+        assert_eq!(staged_bytes(&t16), 48 + 24);
+        let moved = t.pre_transform([1.0, 0.0, 0.0, 5.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        match stage(&moved) {
+            Staged::Soup(f) => {
+                assert_eq!(f.len(), 18);
+                // The second triangle's first vertex, vertex 1 moved by 5 along x.
+                assert_eq!(&f[9..12], &[6.0, 0.0, 0.0]);
+            }
+            _ => panic!("a pre-transform is applied on the host"),
+        }
+        assert_eq!(staged_bytes(&moved), 72);
+    }
+
+    #[test]
+    fn the_memory_query_bounds_what_a_build_allocates() {
+        let v = vec![[0.0f32; 3]; 300];
+        let idx: Vec<[u32; 3]> = (0..100).map(|k| [3 * k, 3 * k + 1, 3 * k + 2]).collect();
+        let inputs = [TriangleInput::new(VertexBuffer::f32x3(&v))
+            .indices(IndexBuffer::u32x3(&idx))
+            .into()];
+        let o = BuildOptions::default();
+        let sizes = memory_usage(&o, &inputs, &DeviceBuildConfig::DEFAULT).unwrap();
+        assert_eq!(sizes.output_size_in_bytes, 112 * 100);
+        let tiles = 1;
+        let scratch =
+            32 * 100 + 16 * 100 + 8 * 100 + 1024 * tiles + 1024 + 64 * 100 + 1200 + 4 + 32;
+        assert_eq!(sizes.temp_size_in_bytes, 3600 + 1200 + 32 + scratch);
+        let fast = memory_usage(&o, &inputs, &DeviceBuildConfig::FAST_BUILD).unwrap();
+        assert_eq!(sizes.temp_size_in_bytes - fast.temp_size_in_bytes, 800);
+        // The same validation as the build.
+        let bad = BuildOptions::new(BuildFlags::PREFER_FAST_BUILD | BuildFlags::PREFER_FAST_TRACE);
+        assert_eq!(
+            memory_usage(&bad, &inputs, &DeviceBuildConfig::DEFAULT).unwrap_err(),
+            oxray_bvh::compute_memory_usage(&bad, &inputs).unwrap_err()
+        );
+    }
+
+    #[test]
+    fn the_builder_compiles_with_nvrtc_where_it_is_present() {
+        // SAFETY: only tries to open the library by its usual names (dlopen).
+        if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+            assert!(
+                std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
+                "OXRAY_REQUIRE_NVRTC is set but libnvrtc cannot be loaded"
+            );
+            println!("skipping: libnvrtc not found (set LD_LIBRARY_PATH to compile the kernels)");
+            return;
+        }
+        let ptx = match compile_builder((9, 0)) {
+            Ok(p) => p.to_src(),
+            Err(e) => panic!("{e}"),
+        };
+        for entry in BUILD_ENTRIES {
+            assert!(ptx.contains(&format!(".entry {entry}")), "{entry} missing");
+        }
+    }
+}

@@ -1,0 +1,482 @@
+//! GASes built by the device's kernels (`device_build`) against the brute-force oracle and
+//! against trees the host built. Runs where a CUDA driver and device exist; elsewhere (CI) each
+//! test prints why it skips and passes (`OXRAY_REQUIRE_GPU=1` makes a missing GPU a failure).
+
+mod common;
+
+use common::{bench_rays, find_mesh, icosphere_f32, load_obj, tricky_rays, Mesh};
+use oxray_core::{
+    AccelBackend, BuildFlags, BuildInput, BuildOptions, GeometryFlags, Hit, IndexBuffer, Ray,
+    SbtIndexOffsets, TraversableHandle, TriangleInput, VertexBuffer,
+};
+use oxray_cuda::device_build::{build_triangles, DeviceBuildConfig};
+use oxray_cuda::{Cuda, CudaContext, CudaError, CudaGas, DeviceBuildError, GasBuilder};
+use oxray_testkit::mesh::{grid_cube, random_soup, soup, Tri};
+use oxray_testkit::oracle::{check_closest, reference_hits};
+use oxray_testkit::rng::Rng;
+use std::sync::{Mutex, MutexGuard, OnceLock};
+
+/// The shared context, with a lock that keeps GPU tests from interleaving; `None` where this
+/// machine has no CUDA, unless `OXRAY_REQUIRE_GPU` is set.
+fn gpu() -> Option<(CudaContext, MutexGuard<'static, ()>)> {
+    static CTX: OnceLock<Result<CudaContext, CudaError>> = OnceLock::new();
+    static LOCK: Mutex<()> = Mutex::new(());
+    match CTX.get_or_init(CudaContext::new) {
+        Ok(ctx) => Some((ctx.clone(), LOCK.lock().unwrap_or_else(|e| e.into_inner()))),
+        Err(e) if e.is_unavailable() && std::env::var_os("OXRAY_REQUIRE_GPU").is_none() => {
+            println!("skipping: {e}");
+            None
+        }
+        Err(e) => panic!("CUDA is present but unusable: {e}"),
+    }
+}
+
+const PRESETS: [(&str, BuildFlags, DeviceBuildConfig); 2] = [
+    (
+        "fast build",
+        BuildFlags::PREFER_FAST_BUILD,
+        DeviceBuildConfig::FAST_BUILD,
+    ),
+    ("default", BuildFlags::empty(), DeviceBuildConfig::DEFAULT),
+];
+
+fn soup_input(vertices: &[[f32; 3]]) -> BuildInput<'_> {
+    TriangleInput::new(VertexBuffer::f32x3(vertices)).into()
+}
+
+fn mesh_input(mesh: &Mesh) -> BuildInput<'_> {
+    TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles))
+        .into()
+}
+
+/// Builds on the device, asserting that it did.
+fn device_gas(
+    ctx: &CudaContext,
+    config: &DeviceBuildConfig,
+    flags: BuildFlags,
+    inputs: &[BuildInput<'_>],
+) -> CudaGas {
+    let (gas, times) = build_triangles(ctx, &BuildOptions::new(flags), inputs, config)
+        .unwrap_or_else(|e| panic!("device build failed: {e}"));
+    assert_eq!(gas.builder(), GasBuilder::Device);
+    assert!(
+        times.kernels_ms >= 0.0 && times.total_ms >= times.kernels_ms,
+        "{times:?}"
+    );
+    gas
+}
+
+/// Checks every closest hit and occlusion result of `rays` against the oracle over `tris`.
+fn check_oracle(gas: &CudaGas, tris: &[Tri], rays: &[Ray], what: &str) {
+    let hits = gas.intersect_batch(rays).unwrap();
+    let occluded = gas.occluded_batch(rays).unwrap();
+    let mut failures = Vec::new();
+    for (i, r) in rays.iter().enumerate() {
+        if let Err(e) = check_closest(hits[i], tris, r) {
+            failures.push(format!("ray {i}: {e}"));
+        }
+        let any = !reference_hits(tris, r).is_empty();
+        if occluded[i] != any {
+            failures.push(format!(
+                "ray {i}: occluded {} but the oracle says {any}: {r:?}",
+                occluded[i]
+            ));
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "{what}: {} of {} rays disagree with the oracle; first: {:#?}",
+        failures.len(),
+        rays.len(),
+        &failures[..failures.len().min(5)]
+    );
+}
+
+/// Rays from random points of a box towards random points of it, and some aimed at triangles'
+/// centres (so that most hit).
+fn random_rays(rng: &mut Rng, tris: &[Tri], n: usize, extent: f32) -> Vec<Ray> {
+    (0..n)
+        .map(|k| {
+            let o = rng.vec3(-0.2 * extent, 1.2 * extent);
+            let target = if k % 2 == 0 && !tris.is_empty() {
+                let t = tris[rng.below(tris.len())];
+                (glam::Vec3::from(t[0]) + glam::Vec3::from(t[1]) + glam::Vec3::from(t[2])) / 3.0
+            } else {
+                rng.vec3(0.0, extent)
+            };
+            let d = target - o;
+            let d = if d.length_squared() > 0.0 {
+                d
+            } else {
+                glam::Vec3::Z
+            };
+            let mut r = Ray::new(o, d);
+            if k % 5 == 0 {
+                r.tmax = rng.range(0.2, 1.0);
+            }
+            if k % 7 == 0 {
+                r.tmin = rng.range(0.0, 0.5);
+            }
+            r
+        })
+        .collect()
+}
+
+#[test]
+fn random_soups_with_inactive_triangles_match_the_oracle() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let mut rng = Rng::new(0x6e0b_5eed);
+    for n in [0usize, 1, 2, 3, 9, 100, 5000, 60_000] {
+        let mut tris = random_soup(&mut rng, n, 10.0, 0.6);
+        // Inactive triangles, as the CPU builder makes them: a NaN or infinite coordinate, zero
+        // area (a repeated vertex, collinear vertices).
+        for (k, t) in tris.iter_mut().enumerate() {
+            match k % 17 {
+                3 => t[1][2] = f32::NAN,
+                5 => t[2] = t[0],
+                8 => {
+                    t[2] = [
+                        2.0 * t[1][0] - t[0][0],
+                        2.0 * t[1][1] - t[0][1],
+                        2.0 * t[1][2] - t[0][2],
+                    ]
+                }
+                11 if k % 2 == 1 => t[0][0] = f32::INFINITY,
+                _ => {}
+            }
+        }
+        // Duplicates: many triangles with one centroid share a Morton code.
+        if n >= 100 {
+            for k in 0..n / 10 {
+                tris[k] = tris[0];
+            }
+        }
+        let vertices = soup(&tris);
+        let inputs = [soup_input(&vertices)];
+        let rays = random_rays(&mut rng, &tris, 4000, 10.0);
+        for (name, flags, config) in &PRESETS {
+            let gas = device_gas(&ctx, config, *flags, &inputs);
+            let active = tris
+                .iter()
+                .filter(|t| {
+                    !oxray_bvh::triangle::is_degenerate(t[0].into(), t[1].into(), t[2].into())
+                })
+                .count();
+            assert_eq!(
+                gas.info().num_active_primitives as usize,
+                active,
+                "{n} {name}"
+            );
+            assert_eq!(gas.info().num_primitives as usize, n);
+            assert!(
+                gas.info().stats.max_depth <= oxray_bvh::MAX_BVH2_DEPTH,
+                "{:?}",
+                gas.info().stats
+            );
+            check_oracle(&gas, &tris, &rays, &format!("{n} triangles, {name}"));
+        }
+    }
+}
+
+#[test]
+fn grids_are_watertight() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    // Rays from outside aimed exactly at the grid's shared vertices and edge midpoints inside the
+    // cube's faces (not on its edges, where a ray may only graze the solid): a watertight test on
+    // a closed surface never lets one through, whatever the tree.
+    let mesh = grid_cube(24);
+    let tris = mesh.soup();
+    let on_face_interior =
+        |p: glam::Vec3| p.to_array().iter().filter(|c| c.abs() == 1.0).count() == 1;
+    let mut rng = Rng::new(7);
+    let mut rays = Vec::new();
+    for t in &mesh.triangles {
+        let p = |k: usize| glam::Vec3::from(mesh.positions[t[k] as usize]);
+        for target in [p(0), (p(0) + p(1)) * 0.5, (p(1) + p(2)) * 0.5] {
+            if on_face_interior(target) {
+                let o = rng.dir() * 5.0;
+                rays.push(Ray::new(o, target - o));
+            }
+        }
+    }
+    assert!(rays.len() > 15_000, "{}", rays.len());
+    for (name, flags, config) in &PRESETS {
+        let gas = device_gas(&ctx, config, *flags, &[mesh_input(&mesh)]);
+        let hits = gas.intersect_batch(&rays).unwrap();
+        let missed = hits.iter().filter(|h| h.is_none()).count();
+        assert_eq!(
+            missed,
+            0,
+            "{name}: {missed} of {} rays slipped through",
+            rays.len()
+        );
+        check_oracle(&gas, &tris, &rays, name);
+    }
+}
+
+#[test]
+fn several_inputs_with_sbt_offsets_resolve_as_on_the_host() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    // Input 0: f32 vertices with u32 indices (read in place); input 1: u16 indices and two SBT
+    // records chosen per triangle (widened on the host); input 2: no indices and a
+    // pre-transform (decoded on the host), with a primitive index offset.
+    let a = icosphere_f32(3);
+    let b_mesh = icosphere_f32(2);
+    let b_pos: Vec<[f32; 3]> = b_mesh
+        .positions
+        .iter()
+        .map(|p| [p[0] + 2.5, p[1], p[2]])
+        .collect();
+    let b_idx: Vec<[u16; 3]> = b_mesh
+        .triangles
+        .iter()
+        .map(|t| t.map(|i| i as u16))
+        .collect();
+    let b_offsets: Vec<u8> = (0..b_idx.len()).map(|k| (k % 2) as u8).collect();
+    let c_tris = soup(&icosphere_f32(2).soup());
+    let two = [GeometryFlags::empty(), GeometryFlags::DISABLE_ANYHIT];
+    let inputs: Vec<BuildInput<'_>> = vec![
+        mesh_input(&a),
+        TriangleInput::new(VertexBuffer::f32x3(&b_pos))
+            .indices(IndexBuffer::u16x3(&b_idx))
+            .flags(&two)
+            .sbt_index_offsets(SbtIndexOffsets::u8(&b_offsets))
+            .into(),
+        TriangleInput::new(VertexBuffer::f32x3(&c_tris))
+            .pre_transform([1.0, 0.0, 0.0, -2.5, 0.0, 0.5, 0.0, 0.25, 0.0, 0.0, 1.0, 0.0])
+            .primitive_index_offset(1000)
+            .into(),
+    ];
+    let host = oxray_cpu::Gas::build(&BuildOptions::default(), &inputs).unwrap();
+    let mut rng = Rng::new(11);
+    let rays: Vec<Ray> = (0..20_000)
+        .map(|_| {
+            let o = rng.dir() * 8.0;
+            let target = glam::Vec3::new(
+                rng.range(-3.5, 3.5),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            );
+            Ray::new(o, target - o)
+        })
+        .collect();
+    let mut want = vec![None; rays.len()];
+    host.intersect_batch(&rays, &mut want).unwrap();
+    for (name, flags, config) in &PRESETS {
+        let gas = device_gas(&ctx, config, *flags, &inputs);
+        assert_eq!(gas.info().num_build_inputs, 3);
+        assert_eq!(gas.info().record_flags.len(), 4);
+        let got = gas.intersect_batch(&rays).unwrap();
+        let (mut hits, mut ties) = (0, 0);
+        for i in 0..rays.len() {
+            match (want[i], got[i]) {
+                (None, None) => {}
+                (Some(w), Some(g)) => {
+                    hits += 1;
+                    assert_eq!(w.t.to_bits(), g.t.to_bits(), "{name} ray {i}: {w:?} {g:?}");
+                    if (w.primitive_index, w.build_input) == (g.primitive_index, g.build_input) {
+                        assert_eq!(w, g, "{name} ray {i}");
+                    } else {
+                        ties += 1;
+                    }
+                }
+                (w, g) => panic!("{name} ray {i}: host {w:?}, device {g:?}"),
+            }
+        }
+        println!("{name}: {hits} hits, {ties} ties");
+        assert!(
+            hits > rays.len() / 4 && ties * 100 <= hits,
+            "{hits} hits, {ties} ties"
+        );
+        // Every input and record was hit somewhere.
+        for (input, sbt) in [(0, 0), (1, 1), (1, 2), (2, 3)] {
+            assert!(
+                got.iter()
+                    .flatten()
+                    .any(|h| h.build_input == input && h.sbt_gas_index == sbt),
+                "{name}: no hit on input {input}, SBT record {sbt}"
+            );
+        }
+        assert!(got.iter().flatten().any(|h| h.primitive_index >= 1000));
+    }
+}
+
+/// How a device-built tree's hits compare with a host-built tree's.
+fn compare_with_host(mesh: &Mesh, name: &str, ctx: &CudaContext, side: u32) {
+    let inputs = [mesh_input(mesh)];
+    let (mut rays, incoherent) = bench_rays(mesh, side);
+    rays.extend(incoherent);
+    for (preset, flags, config) in &PRESETS {
+        let host = oxray_cpu::Gas::build(&BuildOptions::new(*flags), &inputs).unwrap();
+        let mut all = rays.clone();
+        all.extend(tricky_rays(mesh, &host, (side * side) as usize, 3));
+        let gas = device_gas(ctx, config, *flags, &inputs);
+        let mut want = vec![None; all.len()];
+        host.intersect_batch(&all, &mut want).unwrap();
+        let mut want_occ = vec![false; all.len()];
+        host.occluded_batch(&all, &mut want_occ).unwrap();
+        let got = gas.intersect_batch(&all).unwrap();
+        let got_occ = gas.occluded_batch(&all).unwrap();
+        let mut ties = Vec::new();
+        let mut bad: Vec<(usize, Option<Hit>, Option<Hit>)> = Vec::new();
+        for i in 0..all.len() {
+            match (want[i], got[i]) {
+                (None, None) => {}
+                (Some(w), Some(g)) if w.t.to_bits() == g.t.to_bits() => {
+                    if w.primitive_index != g.primitive_index {
+                        ties.push(i);
+                    } else if w != g {
+                        bad.push((i, want[i], got[i]));
+                    }
+                }
+                _ => bad.push((i, want[i], got[i])),
+            }
+        }
+        // A tie is another primitive at the same distance (rays aimed exactly at shared vertices
+        // and edges): the oracle must hit the one the device reports there, with the same
+        // barycentrics and facing (a sample of them: each check tests every triangle).
+        let tris = mesh.soup();
+        let step = (ties.len() / 1000).max(1);
+        for &i in ties.iter().step_by(step) {
+            if let Err(e) = check_closest(got[i], &tris, &all[i]) {
+                panic!("{name} {preset}: ray {i} (a tie with the host's tree): {e}");
+            }
+        }
+        let ties = ties.len();
+        let occ_diff = (0..all.len())
+            .filter(|&i| want_occ[i] != got_occ[i])
+            .count();
+        let s = gas.info().stats;
+        println!(
+            "{name} {preset}: {} rays, {ties} ties, {} differ, {occ_diff} occlusion differences; \
+             device tree {} nodes, depth {}, {:.2} triangles a leaf, SAH {:.1}",
+            all.len(),
+            bad.len(),
+            s.nodes,
+            s.max_depth,
+            s.mean_leaf_size,
+            s.sah_cost
+        );
+        assert!(
+            bad.is_empty(),
+            "{name} {preset}: first differences {:?}",
+            &bad[..bad.len().min(5)]
+        );
+        assert_eq!(occ_diff, 0, "{name} {preset}");
+    }
+}
+
+#[test]
+fn icosphere_hits_equal_a_host_built_trees() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    compare_with_host(&icosphere_f32(6), "icosphere-6", &ctx, 256);
+}
+
+#[test]
+fn real_meshes_hit_as_host_built_trees_do() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let mut found = 0;
+    for file in [
+        "stanford-bunny.obj",
+        "teapot.obj",
+        "spot.obj",
+        "nefertiti.obj",
+    ] {
+        let Some(path) = find_mesh(file) else {
+            println!("skipping {file}: not found (set OXRAY_MESH_DIR)");
+            continue;
+        };
+        let mesh = load_obj(&path).unwrap();
+        compare_with_host(&mesh, file, &ctx, 256);
+        found += 1;
+    }
+    println!("{found} meshes compared");
+}
+
+#[test]
+fn a_tree_deeper_than_allowed_is_refused_and_the_backend_builds_on_the_host() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let mesh = icosphere_f32(3);
+    let inputs = [mesh_input(&mesh)];
+    let shallow = DeviceBuildConfig {
+        max_depth: 3,
+        ..DeviceBuildConfig::FAST_BUILD
+    };
+    match build_triangles(&ctx, &BuildOptions::default(), &inputs, &shallow) {
+        Err(DeviceBuildError::Device(CudaError::TreeTooDeep { depth, max: 3 })) => {
+            assert!(depth > 3 && depth as usize <= oxray_bvh::MAX_BVH2_DEPTH)
+        }
+        other => panic!(
+            "expected TreeTooDeep, got {:?}",
+            other.map(|(g, _)| g.info().clone())
+        ),
+    }
+    // Validation errors are the host builder's, before anything reaches the device.
+    let bad = [TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&[[0, 1, 1_000_000]]))
+        .into()];
+    let e = build_triangles(
+        &ctx,
+        &BuildOptions::default(),
+        &bad,
+        &DeviceBuildConfig::DEFAULT,
+    )
+    .map(|_| ())
+    .unwrap_err();
+    assert_eq!(
+        e,
+        DeviceBuildError::Invalid(
+            oxray_bvh::GasData::build(&BuildOptions::default(), &bad).unwrap_err()
+        )
+    );
+}
+
+#[test]
+fn the_backend_builds_on_the_device_by_default_and_on_the_host_when_asked() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let mesh = icosphere_f32(4);
+    let inputs = [mesh_input(&mesh)];
+    let cuda = Cuda::from_context(ctx.clone());
+    let rays = bench_rays(&mesh, 64).1;
+    let mut results = Vec::new();
+    for (flags, builder) in [
+        (BuildFlags::empty(), GasBuilder::Device),
+        (BuildFlags::PREFER_FAST_BUILD, GasBuilder::Device),
+        (BuildFlags::ALLOW_COMPACTION, GasBuilder::Device),
+        (BuildFlags::PREFER_FAST_TRACE, GasBuilder::Host),
+        (BuildFlags::ALLOW_UPDATE, GasBuilder::Host),
+    ] {
+        let options = BuildOptions::new(flags);
+        let gas = cuda.build_gas(&options, &inputs).unwrap();
+        assert_eq!(gas.builder(), builder, "{flags:?}");
+        // The memory query bounds what the build keeps on the device.
+        let sizes = cuda.compute_memory_usage(&options, &inputs).unwrap();
+        assert!(
+            gas.device_bytes() <= sizes.output_size_in_bytes,
+            "{flags:?}: {sizes:?}"
+        );
+        let handle = TraversableHandle::from(gas);
+        let mut hits = vec![None; rays.len()];
+        cuda.intersect_closest(&handle, &rays, &mut hits).unwrap();
+        results.push(
+            hits.iter()
+                .map(|h| h.map(|h| h.t.to_bits()))
+                .collect::<Vec<_>>(),
+        );
+    }
+    assert!(
+        results.windows(2).all(|w| w[0] == w[1]),
+        "every build finds the same distances"
+    );
+    let host = Cuda::from_context(ctx).with_builder(GasBuilder::Host);
+    assert_eq!(
+        host.build_gas(&BuildOptions::default(), &inputs)
+            .unwrap()
+            .builder(),
+        GasBuilder::Host
+    );
+    // Pipelines trace a device-built GAS through its handle.
+    let gas = cuda.build_gas(&BuildOptions::default(), &inputs).unwrap();
+    assert_ne!(gas.optix_handle().unwrap(), 0);
+}
