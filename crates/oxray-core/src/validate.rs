@@ -1,8 +1,8 @@
-//! Validation of build inputs: every rule of guide §5, §5.1, §5.5 and §12 that can be checked
-//! before reading the data, and the data checks (index and SBT offset ranges) the build makes.
+//! Validation of build inputs: every rule of guide §5, §5.1, §5.3, §5.5 and §12 that can be
+//! checked before reading the data, and the data checks (index and SBT offset ranges) the build makes.
 
 use crate::error::{BufferKind, BuildError, InputLocation};
-use crate::input::{BuildInput, BuildInputKind, SbtIndexOffsets};
+use crate::input::{BuildInput, BuildInputKind, SbtIndexOffsets, SphereInput};
 use crate::options::{BuildFlags, BuildOptions};
 
 /// Maximum primitives per GAS, motion keys included (guide §12).
@@ -128,6 +128,7 @@ pub fn validate_structure(
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => {
                 unreachable!("instance inputs were refused above")
             }
+            BuildInput::Spheres(s) => validate_spheres(at, s)?,
             BuildInput::CustomPrimitives(c) => {
                 let a = &c.aabbs;
                 check_stride(at, BufferKind::Aabbs, a.stride, 24, 8)?;
@@ -178,6 +179,55 @@ pub fn validate_structure(
         num_primitives: prims as u32,
         num_sbt_records: records as u32,
     })
+}
+
+/// Motion keys of a build: builds have no motion options yet, so one.
+const MOTION_KEYS: usize = 1;
+
+/// The rules of guide §5.3 (and `OptixBuildInputSphereArray`'s fields): one centre buffer and
+/// one radius buffer per motion key, `float3` centres and `f32` radii with strides that are 0
+/// or a multiple of 4 and at least one element, buffers long enough for `numVertices`
+/// elements (one radius per buffer with `singleRadius`).
+fn validate_spheres(at: InputLocation, s: &SphereInput<'_>) -> Result<(), BuildError> {
+    for (buffer, given) in [
+        (BufferKind::Vertices, s.vertex_buffers.len()),
+        (BufferKind::Radii, s.radius_buffers.len()),
+    ] {
+        if given != MOTION_KEYS {
+            return Err(BuildError::MotionKeyCount {
+                at,
+                buffer,
+                given,
+                expected: MOTION_KEYS,
+            });
+        }
+    }
+    check_stride(at, BufferKind::Vertices, s.vertex_stride, 12, 4)?;
+    check_stride(at, BufferKind::Radii, s.radius_stride, 4, 4)?;
+    let n = s.num_vertices;
+    for centres in s.vertex_buffers {
+        check_len(
+            at,
+            BufferKind::Vertices,
+            centres.len(),
+            n,
+            s.effective_vertex_stride(),
+            12,
+        )?;
+    }
+    // With singleRadius one radius serves every sphere (and none is needed for no sphere).
+    let radii = if s.single_radius { n.min(1) } else { n };
+    for r in s.radius_buffers {
+        check_len(
+            at,
+            BufferKind::Radii,
+            r.len(),
+            radii,
+            s.effective_radius_stride(),
+            4,
+        )?;
+    }
+    Ok(())
 }
 
 /// Checks that every per-primitive SBT index offset of an input is in range.
