@@ -86,6 +86,10 @@ fn query_error(e: CudaError) -> QueryError {
     }
 }
 
+/// Why the CUDA backend refuses a sphere GAS.
+pub(crate) const SPHERES_UNSUPPORTED: &str =
+    "built-in spheres (guide §5.3) on the CUDA backend (the CPU backend traces them)";
+
 fn build_error(e: CudaError) -> BuildError {
     BuildError::Device(e.to_string())
 }
@@ -136,6 +140,13 @@ impl AccelBackend for Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaGas, BuildError> {
+        // Built-in spheres (guide §5.3) are traced by the CPU backend only for now: refused
+        // after validation (so that bad inputs get the same errors on every device) and
+        // before any build work.
+        let summary = oxray_core::validate::validate_structure(options, inputs)?;
+        if summary.kind == oxray_core::BuildInputKind::Spheres {
+            return Err(BuildError::Unsupported(SPHERES_UNSUPPORTED));
+        }
         // A GAS of custom primitives is uploaded for pipelines, which run its intersection
         // programs; the batched queries refuse it.
         let (data, tree) = GasData::build_with_tree(options, inputs)?;
