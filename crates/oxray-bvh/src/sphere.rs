@@ -101,7 +101,8 @@ impl Sphere {
         let perp = f + dir * (b / a);
         let p = perp.length();
         let disc = a * ((r - p) * (r + p));
-        if !(disc >= 0.0) {
+        // A miss, or NaN (an inactive sphere): no entry point.
+        if disc.is_nan() || disc < 0.0 {
             return f32::NAN;
         }
         let cc = f.dot(f) - r * r;

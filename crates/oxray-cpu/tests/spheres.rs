@@ -4,7 +4,7 @@
 //! closest-hit, miss, flags, primitive-type flags), with Rust programs and with a CUDA C++
 //! program compiled by the host compiler.
 
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 use oxray_bvh::{GasData, Sphere};
 use oxray_core::{
     BuildError, BuildFlags, BuildOperation, BuildOptions, DeviceContext, ExceptionCode,
@@ -49,7 +49,7 @@ impl Cloud {
 /// The f64 reference: the entry root of the f32 sphere and ray, evaluated in f64 (every input
 /// is exact in f64), or `None` when the line misses.
 fn entry_f64(s: &Sphere, o: Vec3, d: Vec3) -> Option<f64> {
-    let c = DVec3::from(Vec3::from(s.center).as_dvec3());
+    let c = Vec3::from(s.center).as_dvec3();
     let (o, d, r) = (o.as_dvec3(), d.as_dvec3(), s.radius as f64);
     let f = o - c;
     let a = d.dot(d);
@@ -102,7 +102,7 @@ fn build(cloud: &Cloud, flags: BuildFlags) -> Gas {
 /// or whose entry lies at the interval's ends.
 #[test]
 fn s9_4_hits_match_an_f64_reference_on_random_rays() {
-    let mut rng = Rng::new(0x59_4);
+    let mut rng = Rng::new(0x594);
     let cloud = Cloud::random(&mut rng, 2000, 10.0, 0.05, 0.8);
     let mut rays = Vec::new();
     for k in 0..6000 {
