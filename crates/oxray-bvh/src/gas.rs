@@ -6,6 +6,7 @@ use crate::bvh2::Bvh2;
 use crate::bvh4::Bvh4;
 use crate::bvh8::Bvh8;
 use crate::sbvh::{build_sbvh2, SpatialSplits};
+use crate::sphere::Sphere;
 use crate::stats::BvhStats;
 use crate::triangle::is_degenerate;
 use crate::triangle4::Triangle4;
@@ -15,7 +16,8 @@ use glam::Vec3;
 use oxray_core::validate::{validate_sbt_offsets, validate_structure};
 use oxray_core::{
     Aabb, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOperation, BuildOptions,
-    GeometryFlags, IndexFormat, InputLocation, TriangleInput, UpdateRule, VertexFormat,
+    GeometryFlags, IndexFormat, InputLocation, SphereInput, TriangleInput, UpdateRule,
+    VertexFormat,
 };
 use rayon::prelude::*;
 
@@ -26,6 +28,8 @@ pub enum GasKind {
     Triangles,
     /// Custom primitives (boxes; their shape is decided by an intersection program).
     CustomPrimitives,
+    /// Built-in spheres (guide §5.3), one [`Sphere`] per leaf slot.
+    Spheres,
 }
 
 /// What the structure keeps of each build input.
@@ -123,6 +127,9 @@ pub struct GasData {
     pub triangles: Vec<Triangle4>,
     /// Boxes in leaf-slot order (custom-primitive GAS).
     pub aabbs: Vec<Aabb>,
+    /// Spheres in leaf-slot order (sphere GAS); an updatable structure's inactive spheres are
+    /// [`Sphere::INACTIVE`].
+    pub spheres: Vec<Sphere>,
     /// Leaf slot to global primitive id ([`NO_PRIMITIVE`] for an unused lane).
     pub slot_prim: Vec<u32>,
     /// Per global primitive id, its SBT record within its input; empty when every input has one.
@@ -148,9 +155,9 @@ pub struct GasData {
 /// change.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct InputShape {
-    /// Triangles or custom primitives.
+    /// Triangles, custom primitives or spheres.
     pub kind: GasKind,
-    /// Vertices (triangles) or boxes (custom primitives).
+    /// Vertices (triangles), boxes (custom primitives) or spheres.
     pub num_vertices: u32,
     /// The vertex format (triangles), as [`VertexFormat`]'s declaration order.
     pub vertex_format: u8,
@@ -164,6 +171,8 @@ pub struct InputShape {
     pub sbt_offset_size: u8,
     /// SBT records of the input.
     pub num_sbt_records: u32,
+    /// A sphere input's `singleRadius` (false for the other kinds).
+    pub single_radius: bool,
 }
 
 impl InputShape {
@@ -184,6 +193,7 @@ impl InputShape {
                 pre_transform: t.pre_transform.is_some(),
                 sbt_offset_size,
                 num_sbt_records,
+                single_radius: false,
             }),
             BuildInput::CustomPrimitives(c) => Some(InputShape {
                 kind: GasKind::CustomPrimitives,
@@ -194,6 +204,18 @@ impl InputShape {
                 pre_transform: false,
                 sbt_offset_size,
                 num_sbt_records,
+                single_radius: false,
+            }),
+            BuildInput::Spheres(s) => Some(InputShape {
+                kind: GasKind::Spheres,
+                num_vertices: s.num_vertices,
+                vertex_format: 0,
+                index_format: 0,
+                num_indices: 0,
+                pre_transform: false,
+                sbt_offset_size,
+                num_sbt_records,
+                single_radius: s.single_radius,
             }),
             _ => None,
         }
@@ -214,7 +236,8 @@ fn vertex_format_code(f: VertexFormat) -> u8 {
 impl GasData {
     /// Builds a GAS (`optixAccelBuild`). Inputs must all be of one kind; see [`BuildError`] for
     /// every rule checked. Primitives that can never be hit (a NaN or infinite coordinate, a
-    /// zero-area triangle, an inverted box) are left out: they are inactive.
+    /// zero-area triangle, an inverted box, a sphere whose radius is not positive) are left
+    /// out: they are inactive.
     ///
     /// A triangle build with `PREFER_FAST_TRACE` and without `ALLOW_UPDATE` uses spatial
     /// splits ([`spatial_splits`]): a leaf may then hold a triangle that another leaf holds
@@ -358,6 +381,7 @@ impl GasData {
         Ok(GasData {
             kind: match summary.kind {
                 BuildInputKind::Triangles => GasKind::Triangles,
+                BuildInputKind::Spheres => GasKind::Spheres,
                 _ => GasKind::CustomPrimitives,
             },
             build_flags: options.flags,
@@ -365,6 +389,7 @@ impl GasData {
             bvh8: None,
             triangles: Vec::new(),
             aabbs: Vec::new(),
+            spheres: Vec::new(),
             slot_prim: Vec::new(),
             sbt_offsets,
             inputs: records,
@@ -523,6 +548,57 @@ impl GasData {
                 // Custom primitives are not packed: the tree's slots are the structure's.
                 tree = keep_tree.then_some(bvh2);
             }
+            GasKind::Spheres => {
+                let spheres: Vec<Sphere> = inputs
+                    .iter()
+                    .flat_map(|input| match input {
+                        BuildInput::Spheres(s) => decode_spheres(s),
+                        _ => unreachable!("inputs are homogeneous"),
+                    })
+                    .collect();
+                // Inactive spheres (NaN, zero or negative radius) are left out like degenerate
+                // triangles; an updatable build places them by their centre (or the middle of
+                // the others) so that an update can make them active.
+                let mut boxes: Vec<Option<Aabb>> = spheres
+                    .par_iter()
+                    .map(|s| s.is_active().then(|| s.bounds()))
+                    .collect();
+                if keep_inactive {
+                    place_inactive(&mut boxes, |i| {
+                        let c = Vec3::from(spheres[i].center);
+                        Aabb::new(c, c)
+                    });
+                }
+                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
+                    .unzip();
+                let bvh2 = build_bvh2(&bounds, &config);
+                gas.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+                gas.spheres = gas
+                    .slot_prim
+                    .par_iter()
+                    .map(|&g| {
+                        let s = spheres[g as usize];
+                        if s.is_active() {
+                            s
+                        } else {
+                            Sphere::INACTIVE
+                        }
+                    })
+                    .collect();
+                gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
+                gas.bvh = Bvh4::from(&bvh2);
+                if width == NodeWidth::Eight {
+                    gas.bvh8 = Some(Bvh8::from(&bvh2));
+                }
+                if keep_inactive {
+                    gas.bounds = crate::refit::refit_sphere_boxes(&mut gas);
+                }
+                // Spheres are not packed either: one slot per sphere, in the tree's order.
+                tree = keep_tree.then_some(bvh2);
+            }
         }
         if !keep_inactive {
             // Only an update checks the inputs' shapes.
@@ -542,6 +618,7 @@ impl GasData {
         match self.kind {
             GasKind::Triangles => BuildInputKind::Triangles,
             GasKind::CustomPrimitives => BuildInputKind::CustomPrimitives,
+            GasKind::Spheres => BuildInputKind::Spheres,
         }
     }
 
@@ -617,6 +694,7 @@ impl GasData {
         match self.kind {
             GasKind::Triangles => !self.triangles[slot / 4].v[0][0][slot % 4].is_nan(),
             GasKind::CustomPrimitives => self.aabbs[slot].is_finite_valid(),
+            GasKind::Spheres => self.spheres[slot].is_active(),
         }
     }
 
@@ -656,7 +734,7 @@ impl GasData {
             v.capacity() * std::mem::size_of::<T>()
         }
         let node_bytes = bytes(&self.bvh.nodes) + self.bvh8.as_ref().map_or(0, |b| bytes(&b.nodes));
-        let primitive_bytes = bytes(&self.triangles) + bytes(&self.aabbs);
+        let primitive_bytes = bytes(&self.triangles) + bytes(&self.aabbs) + bytes(&self.spheres);
         GasMemory {
             output_bytes: node_bytes
                 + primitive_bytes
@@ -677,6 +755,7 @@ impl GasData {
         }
         self.triangles.shrink_to_fit();
         self.aabbs.shrink_to_fit();
+        self.spheres.shrink_to_fit();
         self.slot_prim.shrink_to_fit();
         self.sbt_offsets.shrink_to_fit();
         self.inputs.shrink_to_fit();
@@ -700,6 +779,7 @@ impl GasData {
                 + self.bvh8.as_ref().map_or(0, |b| bytes(&b.nodes))
                 + bytes(&self.triangles)
                 + bytes(&self.aabbs)
+                + bytes(&self.spheres)
                 + bytes(&self.slot_prim)
                 + bytes(&self.sbt_offsets)
                 + bytes(&self.inputs)
@@ -922,6 +1002,19 @@ pub(crate) fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<
         }
     }
     Ok(())
+}
+
+/// Decodes every sphere of a validated input (its one motion key).
+fn decode_spheres<'a>(s: &'a SphereInput<'_>) -> impl Iterator<Item = Sphere> + 'a {
+    (0..s.num_vertices as usize).map(move |i| decode_sphere(s, i))
+}
+
+/// Sphere `i` of a validated input.
+pub(crate) fn decode_sphere(s: &SphereInput<'_>, i: usize) -> Sphere {
+    Sphere::new(
+        s.centre(s.vertex_buffers[0], i),
+        s.radius(s.radius_buffers[0], i),
+    )
 }
 
 /// Decodes (and pre-transforms) every triangle of a validated input (one whose indices are in

@@ -4,7 +4,8 @@
 //! BVH ([`Bvh2`]); traversal layouts are derived from it ([`Bvh4`], the 4-wide layout of the
 //! CPU backend's SSE and portable kernels, from which the CUDA backend's node layouts are
 //! derived in turn; [`Bvh8`], the 8-wide layout of its AVX2 and AVX-512 kernels). Leaf blocks
-//! ([`Triangle4`]) and the watertight triangle test live here too, so that every backend
+//! ([`Triangle4`]), sphere records ([`Sphere`]) and the watertight triangle and robust sphere
+//! tests live here too, so that every backend
 //! intersects primitives with the same arithmetic and finds bit-identical hits.
 //!
 //! [`GasData`] is a built geometry acceleration structure as data: the layout, the primitives
@@ -38,6 +39,7 @@ pub mod memory;
 mod refit;
 pub mod sbvh;
 pub mod serialize;
+pub mod sphere;
 mod stats;
 pub mod triangle;
 pub mod triangle4;
@@ -55,6 +57,7 @@ pub use gas::{
 pub use ias::{IasData, InstanceData};
 pub use memory::{compute_memory_usage, AccelBufferSizes};
 pub use sbvh::{build_sbvh2, SpatialSplits};
+pub use sphere::Sphere;
 pub use stats::BvhStats;
 pub use triangle4::Triangle4;
 pub use wide::WideNode;

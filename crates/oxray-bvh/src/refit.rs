@@ -8,7 +8,10 @@
 //! them, and traversal visits more nodes. The SAH cost ([`crate::BvhStats::sah_cost`]) of the
 //! refit tree against a rebuild measures that; rebuild when it has grown too much.
 
-use crate::gas::{check_indices, decode_triangle, GasData, GasKind, InputShape, NO_PRIMITIVE};
+use crate::gas::{
+    check_indices, decode_sphere, decode_triangle, GasData, GasKind, InputShape, NO_PRIMITIVE,
+};
+use crate::sphere::Sphere;
 use crate::triangle::is_degenerate;
 use crate::triangle4::Triangle4;
 use crate::wide::WideNode;
@@ -103,6 +106,21 @@ pub(crate) fn refit_aabb_boxes(gas: &mut GasData) -> Aabb {
     refit_nodes(&mut gas.bvh.nodes, leaf)
 }
 
+/// Refits the node boxes of a sphere GAS from its spheres; returns the new bounds.
+pub(crate) fn refit_sphere_boxes(gas: &mut GasData) -> Aabb {
+    let spheres = &gas.spheres;
+    let leaf = |first: u32, count: u32| {
+        spheres[first as usize..(first + count) as usize]
+            .iter()
+            .filter(|s| s.is_active())
+            .fold(Aabb::EMPTY, |a, s| a.union(&s.bounds()))
+    };
+    if let Some(b8) = &mut gas.bvh8 {
+        refit_nodes(&mut b8.nodes, leaf);
+    }
+    refit_nodes(&mut gas.bvh.nodes, leaf)
+}
+
 /// Box `i` of a validated custom-primitive input.
 pub(crate) fn read_aabb(c: &CustomPrimitiveInput<'_>, i: usize) -> Aabb {
     let a = c.aabbs;
@@ -177,6 +195,7 @@ impl GasData {
             let vertices = match shape.kind {
                 GasKind::Triangles => "vertices",
                 GasKind::CustomPrimitives => "AABBs",
+                GasKind::Spheres => "spheres",
             };
             count(vertices, built.num_vertices, shape.num_vertices)?;
             count("index triplets", built.num_indices, shape.num_indices)?;
@@ -193,6 +212,9 @@ impl GasData {
             }
             if shape.pre_transform != built.pre_transform {
                 return describe("the presence of a pre-transform");
+            }
+            if shape.single_radius != built.single_radius {
+                return describe("singleRadius");
             }
             if shape.sbt_offset_size != built.sbt_offset_size {
                 return describe("the SBT index offset buffer (presence or size)");
@@ -221,7 +243,8 @@ impl GasData {
     /// index offsets, the pre-transform matrix). Every rule is checked first
     /// ([`check_update`](Self::check_update)); on an error nothing has changed.
     ///
-    /// Primitives are re-read into their leaf slots, inactive ones (degenerate now) are masked
+    /// Primitives are re-read into their leaf slots, inactive ones (degenerate triangles,
+    /// spheres whose radius is not positive) are masked
     /// and ones inactive at the build may become active; then leaf and node boxes are refit
     /// bottom-up. The hits are those of the new data; the tree's quality is that of the old.
     ///
@@ -294,6 +317,24 @@ impl GasData {
                     *a = if b.is_finite_valid() { b } else { Aabb::EMPTY };
                 });
                 self.bounds = refit_aabb_boxes(self);
+            }
+            GasKind::Spheres => {
+                self.spheres
+                    .par_iter_mut()
+                    .enumerate()
+                    .for_each(|(slot, s)| {
+                        let (i, k) = locate(slot_prim[slot]);
+                        let BuildInput::Spheres(input) = &inputs[i] else {
+                            unreachable!("checked: the inputs are spheres")
+                        };
+                        let new = decode_sphere(input, k);
+                        *s = if new.is_active() {
+                            new
+                        } else {
+                            Sphere::INACTIVE
+                        };
+                    });
+                self.bounds = refit_sphere_boxes(self);
             }
         }
         if !self.sbt_offsets.is_empty() {

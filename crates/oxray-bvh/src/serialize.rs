@@ -15,12 +15,15 @@
 //! Layout (little-endian): magic `OXRAYAS\0`, version (`u32`), kind (`u32`: 1 GAS, 2 IAS),
 //! payload length (`u64`), checksum of the payload (`u64`), then the payload: a fixed header
 //! of scalars and array lengths, then the arrays. Version 2 added a GAS's 8-wide layout (an
-//! array that may be empty), checked as strictly as the 4-wide one; version 1 is still read.
+//! array that may be empty), checked as strictly as the 4-wide one; version 3 added sphere
+//! structures (a primitive kind, an array of spheres after the boxes, and a sphere input's
+//! `singleRadius` in its shape). Versions 1 and 2 are still read.
 
 use crate::bvh4::{Bvh4, Bvh4Node};
 use crate::bvh8::{Bvh8, Bvh8Node};
 use crate::gas::{GasData, GasKind, InputRecord, InputShape, NO_PRIMITIVE};
 use crate::ias::{validate_instance, IasData, InstanceData};
+use crate::sphere::Sphere;
 use crate::triangle4::Triangle4;
 use crate::wide::WideNode;
 use crate::MAX_BVH2_DEPTH;
@@ -33,9 +36,11 @@ use oxray_core::{
 /// The first bytes of every saved structure.
 pub const MAGIC: [u8; 8] = *b"OXRAYAS\0";
 /// The version this build writes. It reads it and every earlier version.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// The first version with a GAS's optional 8-wide layout (version 1 has none).
 const VERSION_BVH8: u32 = 2;
+/// The first version with spheres (earlier ones have no sphere array).
+const VERSION_SPHERES: u32 = 3;
 const KIND_GAS: u32 = 1;
 const KIND_IAS: u32 = 2;
 const HEADER: usize = 8 + 4 + 4 + 8 + 8;
@@ -230,6 +235,25 @@ fn check_nodes<N: WideNode>(
     Ok(())
 }
 
+/// The code of a primitive kind in the format.
+fn kind_code(kind: GasKind) -> u32 {
+    match kind {
+        GasKind::Triangles => 0,
+        GasKind::CustomPrimitives => 1,
+        GasKind::Spheres => 2,
+    }
+}
+
+/// The primitive kind of a code, in a format of `version`.
+fn kind_of(code: u32, version: u32) -> Option<GasKind> {
+    match code {
+        0 => Some(GasKind::Triangles),
+        1 => Some(GasKind::CustomPrimitives),
+        2 if version >= VERSION_SPHERES => Some(GasKind::Spheres),
+        _ => None,
+    }
+}
+
 impl GasData {
     /// Saves the structure as bytes that [`GasData::from_bytes`] loads back, on this machine
     /// or another, into a structure with bit-identical hits.
@@ -247,10 +271,7 @@ impl GasData {
     /// ```
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut w = Writer(Vec::new());
-        w.u32(match self.kind {
-            GasKind::Triangles => 0,
-            GasKind::CustomPrimitives => 1,
-        });
+        w.u32(kind_code(self.kind));
         w.u32(self.build_flags.bits());
         w.u32(self.num_primitives);
         w.aabb(&self.bounds);
@@ -260,6 +281,7 @@ impl GasData {
             bvh8.len(),
             self.triangles.len(),
             self.aabbs.len(),
+            self.spheres.len(),
             self.slot_prim.len(),
             self.sbt_offsets.len(),
             self.inputs.len(),
@@ -272,6 +294,7 @@ impl GasData {
         w.pod(bvh8);
         w.pod(&self.triangles);
         w.pod(&self.aabbs);
+        w.pod(&self.spheres);
         w.pod(&self.slot_prim);
         w.pod(&self.sbt_offsets);
         for r in &self.inputs {
@@ -284,15 +307,12 @@ impl GasData {
         }
         for s in &self.shapes {
             w.0.extend_from_slice(&[
-                match s.kind {
-                    GasKind::Triangles => 0,
-                    GasKind::CustomPrimitives => 1,
-                },
+                kind_code(s.kind) as u8,
                 s.vertex_format,
                 s.index_format,
                 s.pre_transform as u8,
                 s.sbt_offset_size,
-                0,
+                s.single_radius as u8,
                 0,
                 0,
             ]);
@@ -308,11 +328,8 @@ impl GasData {
     pub fn from_bytes(bytes: &[u8]) -> Result<GasData, LoadError> {
         let (version, payload) = unframe(bytes, KIND_GAS)?;
         let mut r = Reader { bytes: payload };
-        let kind = match r.u32("the primitive kind")? {
-            0 => GasKind::Triangles,
-            1 => GasKind::CustomPrimitives,
-            _ => return Err(invalid("primitive kind", 0)),
-        };
+        let kind =
+            kind_of(r.u32("the primitive kind")?, version).ok_or(invalid("primitive kind", 0))?;
         let build_flags =
             BuildFlags::from_bits(r.u32("the build flags")?).ok_or(invalid("build flags", 0))?;
         let num_primitives = r.u32("the primitive count")?;
@@ -320,18 +337,19 @@ impl GasData {
             return Err(invalid("primitive count", 0));
         }
         let bounds = r.aabb("the bounds")?;
-        let mut counts = [0u64; 9];
+        let mut counts = [0u64; 10];
         for (i, c) in counts.iter_mut().enumerate() {
-            // Version 1 has no 8-wide layout.
-            if i != 1 || version >= VERSION_BVH8 {
+            // Version 1 has no 8-wide layout, versions before 3 no spheres.
+            if (i != 1 || version >= VERSION_BVH8) && (i != 4 || version >= VERSION_SPHERES) {
                 *c = r.u64("the array lengths")?;
             }
         }
-        let [nn, n8, nt, na, ns, no, ni, nr, nsh] = counts;
+        let [nn, n8, nt, na, nsp, ns, no, ni, nr, nsh] = counts;
         let nodes: Vec<Bvh4Node> = r.array(nn, "the nodes")?;
         let nodes8: Vec<Bvh8Node> = r.array(n8, "the 8-wide nodes")?;
         let triangles: Vec<Triangle4> = r.array(nt, "the triangles")?;
         let aabbs: Vec<Aabb> = r.array(na, "the boxes")?;
+        let spheres: Vec<Sphere> = r.array(nsp, "the spheres")?;
         let slot_prim: Vec<u32> = r.array(ns, "the slot table")?;
         let sbt_offsets: Vec<u32> = r.array(no, "the SBT index offsets")?;
         let raw_inputs: Vec<[u32; 3]> = r.array(ni, "the build inputs")?;
@@ -342,14 +360,13 @@ impl GasData {
         }
 
         // Primitive arrays and the slot table.
-        match kind {
-            GasKind::Triangles if !aabbs.is_empty() || ns != 4 * nt => {
-                return Err(invalid("slot table length", 0))
-            }
-            GasKind::CustomPrimitives if !triangles.is_empty() || ns != na => {
-                return Err(invalid("slot table length", 0))
-            }
-            _ => {}
+        let slots_ok = match kind {
+            GasKind::Triangles => aabbs.is_empty() && spheres.is_empty() && ns == 4 * nt,
+            GasKind::CustomPrimitives => triangles.is_empty() && spheres.is_empty() && ns == na,
+            GasKind::Spheres => triangles.is_empty() && aabbs.is_empty() && ns == nsp,
+        };
+        if !slots_ok {
+            return Err(invalid("slot table length", 0));
         }
         if let Some(s) = slot_prim
             .iter()
@@ -433,11 +450,7 @@ impl GasData {
         for (i, (raw, &(count, records))) in raw_shapes.iter().zip(&spans).enumerate() {
             let b = raw[0].to_le_bytes();
             let shape = InputShape {
-                kind: match b[0] {
-                    0 => GasKind::Triangles,
-                    1 => GasKind::CustomPrimitives,
-                    _ => return Err(invalid("input shape", i)),
-                },
+                kind: kind_of(b[0] as u32, version).ok_or(invalid("input shape", i))?,
                 vertex_format: b[1],
                 index_format: b[2],
                 pre_transform: b[3] != 0,
@@ -445,18 +458,24 @@ impl GasData {
                 num_vertices: raw[2],
                 num_indices: raw[3],
                 num_sbt_records: raw[4],
+                single_radius: raw[1].to_le_bytes()[1] != 0,
             };
             let primitives = match (shape.kind, shape.index_format) {
-                (GasKind::CustomPrimitives, _) => shape.num_vertices,
+                (GasKind::CustomPrimitives | GasKind::Spheres, _) => shape.num_vertices,
                 (GasKind::Triangles, 0) => shape.num_vertices / 3,
                 (GasKind::Triangles, _) => shape.num_indices,
             };
+            // Only a sphere input has singleRadius (byte 5, padding before version 3, which
+            // the loader already required to be 0); bytes 6 and 7 are padding.
+            let single = raw[1].to_le_bytes()[1];
+            let single_ok = single == 0 || (single == 1 && kind == GasKind::Spheres);
             let ok = shape.kind == kind
+                && single_ok
                 && b[3] <= 1
                 && shape.vertex_format <= 5
                 && shape.index_format <= 2
                 && matches!(shape.sbt_offset_size, 0 | 1 | 2 | 4)
-                && raw[1] >> 8 == 0
+                && raw[1] >> 16 == 0
                 && shape.num_sbt_records == records
                 && primitives == count;
             if !ok {
@@ -472,6 +491,7 @@ impl GasData {
             bvh8,
             triangles,
             aabbs,
+            spheres,
             slot_prim,
             sbt_offsets,
             inputs,
@@ -490,11 +510,12 @@ impl GasData {
     /// A leaf slot that names a primitive an earlier slot names too, where the structure must
     /// reference it once: every primitive of an updatable structure (a refit fills one slot
     /// per primitive) or of custom primitives (never split), and the primitives of SBT records
-    /// with `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1: one any-hit call per primitive). Spatial
+    /// with `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1: one any-hit call per primitive); spheres
+    /// are never split either. Spatial
     /// splits make the others repeat.
     fn repeated_reference(&self) -> Option<usize> {
         let all = self.build_flags.contains(BuildFlags::ALLOW_UPDATE)
-            || self.kind == GasKind::CustomPrimitives;
+            || matches!(self.kind, GasKind::CustomPrimitives | GasKind::Spheres);
         let single = self
             .record_flags
             .iter()

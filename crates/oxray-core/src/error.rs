@@ -43,6 +43,8 @@ pub enum BufferKind {
     Aabbs,
     /// The SBT index offset buffer.
     SbtIndexOffsets,
+    /// A sphere input's radius buffer.
+    Radii,
 }
 
 impl std::fmt::Display for BufferKind {
@@ -52,6 +54,7 @@ impl std::fmt::Display for BufferKind {
             BufferKind::Indices => "index buffer",
             BufferKind::Aabbs => "AABB buffer",
             BufferKind::SbtIndexOffsets => "SBT index offset buffer",
+            BufferKind::Radii => "radius buffer",
         })
     }
 }
@@ -248,6 +251,21 @@ pub enum BuildError {
     /// Compaction (guide §5.8) of a structure built without `ALLOW_COMPACTION`.
     #[error("compaction needs a structure built with ALLOW_COMPACTION (guide §5.8)")]
     CompactionNotAllowed,
+    /// A sphere input gives one vertex buffer and one radius buffer per motion key (guide §5.3,
+    /// §5.10.2). Builds have no motion yet: one key, one buffer of each.
+    #[error(
+        "{at}: {given} {buffer}s, but the build has {expected} motion key(s) and takes one per key"
+    )]
+    MotionKeyCount {
+        /// The input.
+        at: InputLocation,
+        /// Which buffers.
+        buffer: BufferKind,
+        /// Buffers given.
+        given: usize,
+        /// Motion keys of the build.
+        expected: usize,
+    },
     /// `primitiveIndexOffset + numPrimitives` must fit in 32 bits.
     #[error("{at}: primitive index offset {offset} + {count} primitives overflows 32 bits")]
     PrimitiveIndexOffsetOverflow {
@@ -278,6 +296,7 @@ impl BuildError {
             BuildError::NoBuildInputs
             | BuildError::ConflictingBuildFlags
             | BuildError::CompactionNotAllowed
+            | BuildError::MotionKeyCount { .. }
             | BuildError::InvalidUpdate(
                 UpdateRule::NoStructure | UpdateRule::NotAnUpdate | UpdateRule::NotAllowed,
             ) => ErrorCode::InvalidValue,

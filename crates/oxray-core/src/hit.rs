@@ -3,11 +3,72 @@
 use crate::aabb::Aabb;
 
 /// The kind of a hit (`optixGetHitKind`, guide §13.7): `0xFE`/`0xFF` for the front/back face of a
-/// triangle, `0..=127` as reported for a custom primitive.
+/// triangle, `0x8C`/`0x8D` for a sphere, `0..=127` as reported for a custom primitive.
+///
+/// The guide leaves the values of built-in hit kinds other than the triangles' to the
+/// implementation (they are read through `optixGetPrimitiveType`, `optixIsFrontFaceHit` and
+/// `optixIsBackFaceHit`, §13.7); oxray's built-in kinds are `0x80 | (low byte of the
+/// OptixPrimitiveType) << 1 | back face`, so that a sphere's are `0x8C` and `0x8D`.
+///
+/// ```
+/// use oxray_core::{HitKind, PrimitiveType};
+/// assert_eq!(HitKind::SPHERE_FRONT_FACE.primitive_type(), PrimitiveType::Sphere);
+/// assert!(HitKind::SPHERE_FRONT_FACE.is_front_face());
+/// assert_eq!(HitKind::custom(3).primitive_type(), PrimitiveType::Custom);
+/// assert!(!HitKind::custom(3).is_front_face() && !HitKind::custom(3).is_back_face());
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct HitKind(pub u8);
 
+/// The primitive type of a hit (`OptixPrimitiveType`, guide §13.7), for the kinds oxray builds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PrimitiveType {
+    /// `OPTIX_PRIMITIVE_TYPE_CUSTOM`.
+    Custom,
+    /// `OPTIX_PRIMITIVE_TYPE_SPHERE`.
+    Sphere,
+    /// `OPTIX_PRIMITIVE_TYPE_TRIANGLE`.
+    Triangle,
+}
+
+impl PrimitiveType {
+    /// The `OptixPrimitiveType` value.
+    pub const fn code(self) -> u32 {
+        match self {
+            PrimitiveType::Custom => 0x2500,
+            PrimitiveType::Sphere => 0x2506,
+            PrimitiveType::Triangle => 0x2531,
+        }
+    }
+}
+
 impl HitKind {
+    /// The front face of a sphere: the only sphere hit kind traversal reports, since a ray
+    /// starting inside a sphere does not hit it (guide §9.4, §9.6).
+    pub const SPHERE_FRONT_FACE: HitKind = HitKind(0x8C);
+    /// The back face of a sphere: never reported (spheres are hollow and their back faces
+    /// culled, guide §9.6), but `optixIsBackFaceHit` and `optixGetPrimitiveType` read it.
+    pub const SPHERE_BACK_FACE: HitKind = HitKind(0x8D);
+
+    /// `optixGetPrimitiveType(hitKind)`: which primitive type the kind belongs to.
+    pub const fn primitive_type(self) -> PrimitiveType {
+        match self.0 {
+            0xFE | 0xFF => PrimitiveType::Triangle,
+            0x8C | 0x8D => PrimitiveType::Sphere,
+            _ => PrimitiveType::Custom,
+        }
+    }
+
+    /// `optixIsFrontFaceHit(hitKind)`: a built-in primitive's front face (never a custom kind).
+    pub const fn is_front_face(self) -> bool {
+        self.0 >= 0x80 && self.0 & 1 == 0
+    }
+
+    /// `optixIsBackFaceHit(hitKind)`: a built-in primitive's back face (never a custom kind).
+    pub const fn is_back_face(self) -> bool {
+        self.0 >= 0x80 && self.0 & 1 == 1
+    }
+
     /// `OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE`.
     pub const TRIANGLE_FRONT_FACE: HitKind = HitKind(0xFE);
     /// `OPTIX_HIT_KIND_TRIANGLE_BACK_FACE`.

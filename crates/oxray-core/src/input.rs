@@ -1,12 +1,12 @@
-//! Build inputs of geometry acceleration structures (guide §5.1): triangle arrays and custom
-//! primitive (AABB) arrays, described by borrowed byte buffers and formats so that nothing here
+//! Build inputs of geometry acceleration structures (guide §5.1, §5.3): triangle arrays, custom
+//! primitive (AABB) arrays and sphere arrays, described by borrowed byte buffers and formats so that nothing here
 //! assumes where the data lives or how the backend lays it out.
 
 use crate::options::GeometryFlags;
 use crate::vertex::{IndexFormat, VertexFormat};
 use glam::Vec3;
 
-/// The one-record default for [`TriangleInput::flags`] and [`CustomPrimitiveInput::flags`].
+/// The one-record default for the `flags` of every GAS input.
 const ONE_RECORD: &[GeometryFlags] = &[GeometryFlags::empty()];
 
 /// A vertex buffer: `count` vertices of `format`, `stride` bytes apart (0 = tightly packed).
@@ -357,6 +357,157 @@ impl<'a> CustomPrimitiveInput<'a> {
     }
 }
 
+/// A sphere build input (`OptixBuildInputSphereArray`, guide §5.3, §9): a centre and a radius
+/// per sphere.
+///
+/// As in OptiX, the centres and radii are given per motion key: `vertex_buffers[k]` holds the
+/// centres (`float3`, `vertex_stride` bytes apart) and `radius_buffers[k]` the radii (`f32`,
+/// `radius_stride` bytes apart) at key `k`. Builds have no motion yet, so there is exactly one
+/// key: both slices must have length 1 ([`BuildError::MotionKeyCount`](crate::BuildError)
+/// otherwise). With [`single_radius`](Self::single_radius), each radius buffer holds one radius
+/// for every sphere. There is no index buffer and no pre-transform (§9.1): a non-uniform scale
+/// belongs in an instance transform. Spheres take per-primitive SBT index offsets like
+/// triangles (§9.1).
+///
+/// ```
+/// use oxray_core::{GeometryFlags, SphereInput};
+/// let centres = [[0.0f32, 0.0, 0.0], [3.0, 0.0, 0.0]];
+/// let radii = [1.0f32, 0.5];
+/// let c = [bytemuck::cast_slice::<_, u8>(&centres)];
+/// let r = [bytemuck::cast_slice::<_, u8>(&radii)];
+/// let input = SphereInput::new(&c, 2, &r).flags(&[GeometryFlags::DISABLE_ANYHIT]);
+/// assert_eq!(input.num_primitives(), 2);
+/// // One radius for every sphere.
+/// let one = [bytemuck::cast_slice::<_, u8>(&radii[..1])];
+/// let input = SphereInput::new(&c, 2, &one).single_radius(true);
+/// assert_eq!(input.radius(&one[0], 1), 1.0);
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct SphereInput<'a> {
+    /// Centres (`float3`, little-endian), one buffer per motion key (`vertexBuffers`).
+    pub vertex_buffers: &'a [&'a [u8]],
+    /// Bytes from one centre to the next; 0 means 12 (`vertexStrideInBytes`, a multiple of 4).
+    pub vertex_stride: u32,
+    /// Spheres (centres) per buffer (`numVertices`).
+    pub num_vertices: u32,
+    /// Radii (`f32`, little-endian), one buffer per motion key (`radiusBuffers`).
+    pub radius_buffers: &'a [&'a [u8]],
+    /// Bytes from one radius to the next; 0 means 4 (`radiusStrideInBytes`, a multiple of 4).
+    pub radius_stride: u32,
+    /// One radius per radius buffer for every sphere (`singleRadius`).
+    pub single_radius: bool,
+    /// Geometry flags, one per SBT record: its length is `numSbtRecords` (at least 1).
+    pub flags: &'a [GeometryFlags],
+    /// Which of this input's SBT records each sphere uses; required with more than one record.
+    pub sbt_index_offsets: Option<SbtIndexOffsets<'a>>,
+    /// Added to the primitive index that hits report.
+    pub primitive_index_offset: u32,
+}
+
+impl<'a> SphereInput<'a> {
+    /// `num_vertices` spheres, tightly packed, one radius each, one SBT record and no flags.
+    pub fn new(
+        vertex_buffers: &'a [&'a [u8]],
+        num_vertices: u32,
+        radius_buffers: &'a [&'a [u8]],
+    ) -> Self {
+        SphereInput {
+            vertex_buffers,
+            vertex_stride: 0,
+            num_vertices,
+            radius_buffers,
+            radius_stride: 0,
+            single_radius: false,
+            flags: ONE_RECORD,
+            sbt_index_offsets: None,
+            primitive_index_offset: 0,
+        }
+    }
+
+    /// Sets the centre stride in bytes.
+    pub fn vertex_stride(mut self, stride: u32) -> Self {
+        self.vertex_stride = stride;
+        self
+    }
+
+    /// Sets the radius stride in bytes.
+    pub fn radius_stride(mut self, stride: u32) -> Self {
+        self.radius_stride = stride;
+        self
+    }
+
+    /// Sets `singleRadius`: one radius per buffer for every sphere.
+    pub fn single_radius(mut self, single: bool) -> Self {
+        self.single_radius = single;
+        self
+    }
+
+    /// Sets the per-record geometry flags (and so the number of SBT records).
+    pub fn flags(mut self, flags: &'a [GeometryFlags]) -> Self {
+        self.flags = flags;
+        self
+    }
+
+    /// Sets the per-primitive SBT index offsets.
+    pub fn sbt_index_offsets(mut self, offsets: SbtIndexOffsets<'a>) -> Self {
+        self.sbt_index_offsets = Some(offsets);
+        self
+    }
+
+    /// Sets the primitive index offset.
+    pub fn primitive_index_offset(mut self, offset: u32) -> Self {
+        self.primitive_index_offset = offset;
+        self
+    }
+
+    /// Number of spheres this input declares.
+    pub fn num_primitives(&self) -> u32 {
+        self.num_vertices
+    }
+
+    /// The centre stride in bytes, resolving 0.
+    pub fn effective_vertex_stride(&self) -> usize {
+        if self.vertex_stride == 0 {
+            12
+        } else {
+            self.vertex_stride as usize
+        }
+    }
+
+    /// The radius stride in bytes, resolving 0.
+    pub fn effective_radius_stride(&self) -> usize {
+        if self.radius_stride == 0 {
+            4
+        } else {
+            self.radius_stride as usize
+        }
+    }
+
+    /// Centre `i` of a validated key buffer.
+    #[inline]
+    pub fn centre(&self, buffer: &[u8], i: usize) -> Vec3 {
+        let at = i * self.effective_vertex_stride();
+        let f = |k: usize| {
+            let b = &buffer[at + 4 * k..at + 4 * k + 4];
+            f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        };
+        Vec3::new(f(0), f(1), f(2))
+    }
+
+    /// Radius of sphere `i` in a validated key buffer (the single radius with
+    /// [`single_radius`](Self::single_radius)).
+    #[inline]
+    pub fn radius(&self, buffer: &[u8], i: usize) -> f32 {
+        let at = if self.single_radius {
+            0
+        } else {
+            i * self.effective_radius_stride()
+        };
+        let b = &buffer[at..at + 4];
+        f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+    }
+}
+
 /// One build input of an acceleration structure (`OptixBuildInput`). All inputs of one GAS
 /// build must be of the same kind.
 #[derive(Clone, Copy, Debug)]
@@ -365,6 +516,8 @@ pub enum BuildInput<'a> {
     Triangles(TriangleInput<'a>),
     /// Custom primitives bounded by AABBs.
     CustomPrimitives(CustomPrimitiveInput<'a>),
+    /// Built-in spheres (guide §5.3).
+    Spheres(SphereInput<'a>),
     /// Instances, for an IAS (`OPTIX_BUILD_INPUT_TYPE_INSTANCES`).
     Instances(&'a [crate::Instance]),
     /// Instances by reference, for an IAS (`OPTIX_BUILD_INPUT_TYPE_INSTANCE_POINTERS`).
@@ -374,6 +527,12 @@ pub enum BuildInput<'a> {
 impl<'a> From<TriangleInput<'a>> for BuildInput<'a> {
     fn from(t: TriangleInput<'a>) -> Self {
         BuildInput::Triangles(t)
+    }
+}
+
+impl<'a> From<SphereInput<'a>> for BuildInput<'a> {
+    fn from(s: SphereInput<'a>) -> Self {
+        BuildInput::Spheres(s)
     }
 }
 
@@ -390,6 +549,8 @@ pub enum BuildInputKind {
     Triangles,
     /// Custom primitives.
     CustomPrimitives,
+    /// Built-in spheres.
+    Spheres,
     /// Instances.
     Instances,
     /// Instance pointers.
@@ -401,6 +562,7 @@ impl std::fmt::Display for BuildInputKind {
         f.write_str(match self {
             BuildInputKind::Triangles => "triangles",
             BuildInputKind::CustomPrimitives => "custom primitives",
+            BuildInputKind::Spheres => "spheres",
             BuildInputKind::Instances => "instances",
             BuildInputKind::InstancePointers => "instance pointers",
         })
@@ -413,6 +575,7 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(_) => BuildInputKind::Triangles,
             BuildInput::CustomPrimitives(_) => BuildInputKind::CustomPrimitives,
+            BuildInput::Spheres(_) => BuildInputKind::Spheres,
             BuildInput::Instances(_) => BuildInputKind::Instances,
             BuildInput::InstancePointers(_) => BuildInputKind::InstancePointers,
         }
@@ -423,6 +586,7 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(t) => t.num_primitives(),
             BuildInput::CustomPrimitives(c) => c.aabbs.count,
+            BuildInput::Spheres(s) => s.num_primitives(),
             BuildInput::Instances(i) => i.len().min(u32::MAX as usize) as u32,
             BuildInput::InstancePointers(i) => i.len().min(u32::MAX as usize) as u32,
         }
@@ -433,6 +597,7 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(t) => t.flags,
             BuildInput::CustomPrimitives(c) => c.flags,
+            BuildInput::Spheres(s) => s.flags,
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => &[],
         }
     }
@@ -442,6 +607,7 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(t) => t.sbt_index_offsets.as_ref(),
             BuildInput::CustomPrimitives(c) => c.sbt_index_offsets.as_ref(),
+            BuildInput::Spheres(s) => s.sbt_index_offsets.as_ref(),
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => None,
         }
     }
@@ -451,6 +617,7 @@ impl BuildInput<'_> {
         match self {
             BuildInput::Triangles(t) => t.primitive_index_offset,
             BuildInput::CustomPrimitives(c) => c.primitive_index_offset,
+            BuildInput::Spheres(s) => s.primitive_index_offset,
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => 0,
         }
     }

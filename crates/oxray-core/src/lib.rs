@@ -50,10 +50,10 @@ pub use exception::{Exception, ExceptionCode, ExceptionFlags};
 pub use handle::{
     BackendKind, Traversable, TraversableHandle, TraversableKind, WeakTraversableHandle,
 };
-pub use hit::{CandidateAction, CustomHit, CustomPrimitive, Hit, HitKind};
+pub use hit::{CandidateAction, CustomHit, CustomPrimitive, Hit, HitKind, PrimitiveType};
 pub use input::{
     AabbBuffer, BuildInput, BuildInputKind, CustomPrimitiveInput, IndexBuffer, SbtIndexOffsets,
-    SbtIndexSize, TriangleInput, VertexBuffer,
+    SbtIndexSize, SphereInput, TriangleInput, VertexBuffer,
 };
 pub use instance::{
     Instance, InstanceFlags, StaticTransform, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,

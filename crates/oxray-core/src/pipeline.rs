@@ -98,13 +98,41 @@ bitflags! {
 
 bitflags! {
     /// Which primitive types a pipeline may intersect (`OptixPrimitiveTypeFlags`); empty means
-    /// triangles and custom primitives.
+    /// triangles and custom primitives. Spheres (and curves) must be enabled explicitly (guide
+    /// §9.1): an empty set does not include them.
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
     pub struct PrimitiveTypeFlags: u32 {
         /// Custom primitives.
         const CUSTOM = 1 << 0;
+        /// Built-in spheres (`OPTIX_PRIMITIVE_TYPE_FLAGS_SPHERE`).
+        const SPHERE = 1 << 6;
         /// Triangles.
         const TRIANGLE = 1 << 31;
+    }
+}
+
+impl PrimitiveTypeFlags {
+    /// Whether a pipeline with these flags intersects primitives of type `ty` (guide §9.1):
+    /// the empty set means triangles and custom primitives; spheres need [`Self::SPHERE`].
+    ///
+    /// ```
+    /// use oxray_core::{PrimitiveType, PrimitiveTypeFlags};
+    /// assert!(PrimitiveTypeFlags::empty().allows(PrimitiveType::Triangle));
+    /// assert!(!PrimitiveTypeFlags::empty().allows(PrimitiveType::Sphere));
+    /// assert!(PrimitiveTypeFlags::SPHERE.allows(PrimitiveType::Sphere));
+    /// assert!(!PrimitiveTypeFlags::SPHERE.allows(PrimitiveType::Triangle));
+    /// ```
+    pub fn allows(self, ty: crate::PrimitiveType) -> bool {
+        let set = if self.is_empty() {
+            PrimitiveTypeFlags::TRIANGLE | PrimitiveTypeFlags::CUSTOM
+        } else {
+            self
+        };
+        set.contains(match ty {
+            crate::PrimitiveType::Custom => PrimitiveTypeFlags::CUSTOM,
+            crate::PrimitiveType::Sphere => PrimitiveTypeFlags::SPHERE,
+            crate::PrimitiveType::Triangle => PrimitiveTypeFlags::TRIANGLE,
+        })
     }
 }
 

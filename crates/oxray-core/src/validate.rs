@@ -1,8 +1,8 @@
-//! Validation of build inputs: every rule of guide §5, §5.1, §5.5 and §12 that can be checked
-//! before reading the data, and the data checks (index and SBT offset ranges) the build makes.
+//! Validation of build inputs: every rule of guide §5, §5.1, §5.3, §5.5 and §12 that can be
+//! checked before reading the data, and the data checks (index and SBT offset ranges) the build makes.
 
 use crate::error::{BufferKind, BuildError, InputLocation};
-use crate::input::{BuildInput, BuildInputKind, SbtIndexOffsets};
+use crate::input::{BuildInput, BuildInputKind, SbtIndexOffsets, SphereInput};
 use crate::options::{BuildFlags, BuildOptions};
 
 /// Maximum primitives per GAS, motion keys included (guide §12).
@@ -128,6 +128,7 @@ pub fn validate_structure(
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => {
                 unreachable!("instance inputs were refused above")
             }
+            BuildInput::Spheres(s) => validate_spheres(at, s)?,
             BuildInput::CustomPrimitives(c) => {
                 let a = &c.aabbs;
                 check_stride(at, BufferKind::Aabbs, a.stride, 24, 8)?;
@@ -178,6 +179,55 @@ pub fn validate_structure(
         num_primitives: prims as u32,
         num_sbt_records: records as u32,
     })
+}
+
+/// Motion keys of a build: builds have no motion options yet, so one.
+const MOTION_KEYS: usize = 1;
+
+/// The rules of guide §5.3 (and `OptixBuildInputSphereArray`'s fields): one centre buffer and
+/// one radius buffer per motion key, `float3` centres and `f32` radii with strides that are 0
+/// or a multiple of 4 and at least one element, buffers long enough for `numVertices`
+/// elements (one radius per buffer with `singleRadius`).
+fn validate_spheres(at: InputLocation, s: &SphereInput<'_>) -> Result<(), BuildError> {
+    for (buffer, given) in [
+        (BufferKind::Vertices, s.vertex_buffers.len()),
+        (BufferKind::Radii, s.radius_buffers.len()),
+    ] {
+        if given != MOTION_KEYS {
+            return Err(BuildError::MotionKeyCount {
+                at,
+                buffer,
+                given,
+                expected: MOTION_KEYS,
+            });
+        }
+    }
+    check_stride(at, BufferKind::Vertices, s.vertex_stride, 12, 4)?;
+    check_stride(at, BufferKind::Radii, s.radius_stride, 4, 4)?;
+    let n = s.num_vertices;
+    for centres in s.vertex_buffers {
+        check_len(
+            at,
+            BufferKind::Vertices,
+            centres.len(),
+            n,
+            s.effective_vertex_stride(),
+            12,
+        )?;
+    }
+    // With singleRadius one radius serves every sphere (and none is needed for no sphere).
+    let radii = if s.single_radius { n.min(1) } else { n };
+    for r in s.radius_buffers {
+        check_len(
+            at,
+            BufferKind::Radii,
+            r.len(),
+            radii,
+            s.effective_radius_stride(),
+            4,
+        )?;
+    }
+    Ok(())
 }
 
 /// Checks that every per-primitive SBT index offset of an input is in range.
@@ -250,4 +300,125 @@ fn check_len(
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{ErrorCode, GeometryFlags, SphereInput};
+
+    const CENTRES: [[f32; 3]; 3] = [[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]];
+    const RADII: [f32; 3] = [0.5; 3];
+
+    fn check(input: SphereInput<'_>) -> Result<InputSummary, BuildError> {
+        validate_structure(&BuildOptions::default(), &[input.into()])
+    }
+
+    #[test]
+    fn s5_3_a_sphere_input_is_counted_like_the_others() {
+        let c = [bytemuck::cast_slice::<_, u8>(&CENTRES)];
+        let r = [bytemuck::cast_slice::<_, u8>(&RADII)];
+        let flags = [GeometryFlags::empty(); 2];
+        let s = check(
+            SphereInput::new(&c, 3, &r)
+                .flags(&flags)
+                .sbt_index_offsets(SbtIndexOffsets::u8(&[0, 1, 1])),
+        )
+        .unwrap();
+        assert_eq!(
+            (s.kind, s.num_primitives, s.num_sbt_records),
+            (BuildInputKind::Spheres, 3, 2)
+        );
+        // §5.1's rules hold for spheres: more than one record needs offsets.
+        let err = check(SphereInput::new(&c, 3, &r).flags(&flags)).unwrap_err();
+        assert!(matches!(err, BuildError::MissingSbtIndexOffsets { .. }));
+        // And all inputs of a GAS have one type (§5).
+        let v = [[0.0f32; 3]; 3];
+        let tri = crate::TriangleInput::new(crate::VertexBuffer::f32x3(&v));
+        let err = validate_structure(
+            &BuildOptions::default(),
+            &[SphereInput::new(&c, 3, &r).into(), tri.into()],
+        )
+        .unwrap_err();
+        assert!(matches!(err, BuildError::MixedInputTypes { .. }));
+    }
+
+    #[test]
+    fn s5_3_one_centre_and_one_radius_buffer_per_motion_key() {
+        let c = bytemuck::cast_slice::<_, u8>(&CENTRES);
+        let r = bytemuck::cast_slice::<_, u8>(&RADII);
+        for (cs, rs, buffer, given) in [
+            (&[c, c][..], &[r][..], BufferKind::Vertices, 2),
+            (&[][..], &[r][..], BufferKind::Vertices, 0),
+            (&[c][..], &[r, r][..], BufferKind::Radii, 2),
+        ] {
+            let err = check(SphereInput::new(cs, 3, rs)).unwrap_err();
+            assert_eq!(
+                err,
+                BuildError::MotionKeyCount {
+                    at: InputLocation { input: 0 },
+                    buffer,
+                    given,
+                    expected: 1
+                }
+            );
+            assert_eq!(err.code(), ErrorCode::InvalidValue);
+        }
+    }
+
+    #[test]
+    fn s5_3_strides_and_buffer_sizes() {
+        let c = [bytemuck::cast_slice::<_, u8>(&CENTRES)];
+        let r = [bytemuck::cast_slice::<_, u8>(&RADII)];
+        // Strides: a multiple of 4, at least one element.
+        for (input, buffer) in [
+            (
+                SphereInput::new(&c, 3, &r).vertex_stride(8),
+                BufferKind::Vertices,
+            ),
+            (
+                SphereInput::new(&c, 3, &r).vertex_stride(14),
+                BufferKind::Vertices,
+            ),
+            (
+                SphereInput::new(&c, 3, &r).radius_stride(6),
+                BufferKind::Radii,
+            ),
+        ] {
+            match check(input).unwrap_err() {
+                BuildError::InvalidStride { buffer: b, .. } => assert_eq!(b, buffer),
+                e => panic!("{e}"),
+            }
+        }
+        // Too short: 4 centres, or 3 radii 8 bytes apart.
+        for (input, buffer) in [
+            (
+                SphereInput::new(&c, 4, &r).single_radius(true),
+                BufferKind::Vertices,
+            ),
+            (
+                SphereInput::new(&c, 3, &r).radius_stride(8),
+                BufferKind::Radii,
+            ),
+        ] {
+            let err = check(input).unwrap_err();
+            assert!(
+                matches!(err, BuildError::BufferTooSmall { buffer: b, .. } if b == buffer),
+                "{err}"
+            );
+            assert_eq!(err.code(), ErrorCode::InvalidInput);
+        }
+        // singleRadius needs one radius; interleaved centres and radii share one buffer.
+        let one = [bytemuck::cast_slice::<_, u8>(&RADII[..1])];
+        check(SphereInput::new(&c, 3, &one).single_radius(true)).unwrap();
+        let packed: Vec<[f32; 4]> = CENTRES.iter().map(|p| [p[0], p[1], p[2], 0.5]).collect();
+        let bytes = bytemuck::cast_slice::<_, u8>(&packed);
+        let (pc, pr) = ([bytes], [&bytes[12..]]);
+        let input = SphereInput::new(&pc, 3, &pr)
+            .vertex_stride(16)
+            .radius_stride(16);
+        check(input).unwrap();
+        assert_eq!(input.radius(pr[0], 2), 0.5);
+        assert_eq!(input.centre(pc[0], 2).x, 2.0);
+    }
 }

@@ -114,6 +114,27 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
         })
     }
 
+    #[inline(always)]
+    fn sphere(&mut self, slot: u32, t: f32) -> Decision {
+        let Some(gas) = self.gas else {
+            return Decision::Ignore;
+        };
+        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
+        let (instance_id, instance_index) = self.instance();
+        // Spheres have no attributes (guide §9.4, §13.4) and only a front face.
+        self.offer(Hit {
+            t,
+            u: 0.0,
+            v: 0.0,
+            primitive_index,
+            sbt_gas_index,
+            build_input,
+            hit_kind: HitKind::SPHERE_FRONT_FACE,
+            instance_id,
+            instance_index,
+        })
+    }
+
     fn custom(&mut self, slot: u32, tmin: f32, tmax: f32, _: &mut [Entry]) -> (Option<f32>, bool) {
         let Some(gas) = self.gas else {
             return (None, false);

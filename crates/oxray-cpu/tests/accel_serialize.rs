@@ -9,7 +9,7 @@ use oxray_bvh::{GasData, IasData};
 use oxray_core::{
     Aabb, AabbBuffer, BuildFlags, BuildInput, BuildOptions, CustomHit, CustomPrimitive,
     CustomPrimitiveInput, GeometryFlags, IndexBuffer, Instance, LoadError, Ray, SbtIndexOffsets,
-    Transform, TraversableHandle, TriangleInput, VertexBuffer,
+    SphereInput, Transform, TraversableHandle, TriangleInput, VertexBuffer,
 };
 use oxray_cpu::{Gas, Ias};
 use oxray_testkit::mesh::icosphere;
@@ -165,8 +165,23 @@ fn saved_structures_load_back_with_identical_hits_and_damaged_bytes_are_refused(
     )
     .unwrap();
 
+    // A sphere GAS (guide §5.3), updatable, with an inactive sphere and SBT index offsets.
+    let centres: Vec<[f32; 3]> = (0..300).map(|_| rng.vec3(-1.0, 1.0).to_array()).collect();
+    let mut radii: Vec<f32> = (0..300).map(|_| rng.range(0.02, 0.1)).collect();
+    radii[7] = 0.0;
+    let sphere_offsets: Vec<u8> = (0..300).map(|i| (i % 2) as u8).collect();
+    let (sc, sr) = (
+        [bytemuck::cast_slice::<_, u8>(&centres)],
+        [bytemuck::cast_slice::<_, u8>(&radii)],
+    );
+    let sphere_inputs: [BuildInput<'_>; 1] = [SphereInput::new(&sc, 300, &sr)
+        .flags(&flags3[..2])
+        .sbt_index_offsets(SbtIndexOffsets::u8(&sphere_offsets))
+        .into()];
+    let spheres = Gas::build(&options, &sphere_inputs).unwrap();
+
     let test_rays = rays(&mut rng, 2000, 1.5);
-    for gas in [&tri, &custom] {
+    for gas in [&tri, &custom, &spheres] {
         let bytes = gas.data().to_bytes();
         let loaded = Gas::from(GasData::from_bytes(&bytes).unwrap());
         assert_eq!(loaded.bvh.nodes, gas.bvh.nodes);
@@ -289,6 +304,7 @@ fn saved_structures_load_back_with_identical_hits_and_damaged_bytes_are_refused(
     for (name, bytes) in [
         ("triangle GAS", &tri_bytes),
         ("custom GAS", &custom.data().to_bytes()),
+        ("sphere GAS", &spheres.data().to_bytes()),
         ("IAS", &ias_bytes),
     ] {
         for k in 0..rounds {
@@ -324,6 +340,7 @@ fn saved_structures_load_back_with_identical_hits_and_damaged_bytes_are_refused(
                     }
                     // An update of whatever loaded: refused or done, never a panic.
                     let _ = gas.update(&up, &inputs);
+                    let _ = gas.update(&up, &sphere_inputs);
                     let _ = gas.intersect(&probe[0]);
                 }
             }
@@ -333,6 +350,6 @@ fn saved_structures_load_back_with_identical_hits_and_damaged_bytes_are_refused(
     assert!(accepted > 0);
     println!(
         "{accepted} of {} mutations loaded (data changes), the rest refused",
-        3 * rounds
+        4 * rounds
     );
 }

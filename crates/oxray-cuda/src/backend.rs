@@ -142,6 +142,10 @@ fn query_error(e: CudaError) -> QueryError {
     }
 }
 
+/// Why the CUDA backend refuses a sphere GAS.
+pub(crate) const SPHERES_UNSUPPORTED: &str =
+    "built-in spheres (guide §5.3) on the CUDA backend (the CPU backend traces them)";
+
 fn build_error(e: CudaError) -> BuildError {
     BuildError::Device(e.to_string())
 }
@@ -192,6 +196,13 @@ impl AccelBackend for Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaGas, BuildError> {
+        // Built-in spheres (guide §5.3) are traced by the CPU backend only for now: refused
+        // after validation (so that bad inputs get the same errors on every device) and
+        // before any build work.
+        let summary = oxray_core::validate::validate_structure(options, inputs)?;
+        if summary.kind == oxray_core::BuildInputKind::Spheres {
+            return Err(BuildError::Unsupported(SPHERES_UNSUPPORTED));
+        }
         if let Some(config) = self.device_build_config(options, inputs) {
             match device_build::build_triangles(&self.ctx, options, inputs, &config) {
                 Ok((gas, _)) => return Ok(gas),

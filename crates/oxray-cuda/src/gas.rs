@@ -558,8 +558,12 @@ impl CudaGas {
         tree: &Bvh2,
         layout: NodeLayout,
     ) -> Result<CudaGas, CudaError> {
-        if gas.kind == GasKind::CustomPrimitives {
-            return Self::upload_custom(ctx, gas, tree);
+        match gas.kind {
+            GasKind::CustomPrimitives => return Self::upload_custom(ctx, gas, tree),
+            GasKind::Spheres => {
+                return Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED))
+            }
+            GasKind::Triangles => {}
         }
         let export = gas.export_triangles().ok_or(CudaError::CustomPrimitives)?;
         let host = DeviceLayout::new(&export, tree, layout).map_err(CudaError::TooLarge)?;
@@ -670,6 +674,8 @@ impl CudaGas {
         match self.kind {
             GasKind::Triangles => Ok(()),
             GasKind::CustomPrimitives => Err(CudaError::CustomPrimitives),
+            // Never uploaded (`upload_with_layout` refuses them).
+            GasKind::Spheres => Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED)),
         }
     }
 
@@ -697,6 +703,10 @@ impl CudaGas {
         let kind = match self.kind {
             GasKind::Triangles => DESCRIPTOR_GAS,
             GasKind::CustomPrimitives => DESCRIPTOR_CUSTOM_GAS,
+            // Never uploaded (`upload_with_layout` refuses them).
+            GasKind::Spheres => {
+                return Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED))
+            }
         };
         let v = ProgramView::upload(
             &self.ctx,
@@ -1003,6 +1013,7 @@ impl Traversable for CudaGas {
             match self.kind {
                 GasKind::Triangles => "triangles",
                 GasKind::CustomPrimitives => "custom primitives",
+                GasKind::Spheres => "spheres",
             },
             self.layout
         )

@@ -93,16 +93,17 @@ pub use oxray_core::{
     CustomPrimitive, CustomPrimitiveInput, DeviceContext, EmittedProperty, ErrorCode, Exception,
     ExceptionCode, ExceptionFlags, GeometryFlags, Hit, HitKind, IndexBuffer, IndexFormat,
     InputLocation, Instance, InstanceFlags, LaunchError, LaunchReport, LoadError, LogLevel,
-    PipelineCompileOptions, PipelineError, PipelineLinkOptions, PrimitiveTypeFlags, QueryError,
-    Ray, RayError, RayFlags, RayRecord, SbtHeader, SbtIndexOffsets, SbtIndexSize, SbtRegion,
-    ShaderBindingTable, StaticTransform, Transform, Traversable, TraversableGraphFlags,
-    TraversableHandle, TraversableKind, TriangleInput, UpdateRule, VertexBuffer, VertexFormat,
-    MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID, MAX_PRIMITIVES_PER_GAS, MAX_SBT_OFFSET,
-    MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
+    PipelineCompileOptions, PipelineError, PipelineLinkOptions, PrimitiveType, PrimitiveTypeFlags,
+    QueryError, Ray, RayError, RayFlags, RayRecord, SbtHeader, SbtIndexOffsets, SbtIndexSize,
+    SbtRegion, ShaderBindingTable, SphereInput, StaticTransform, Transform, Traversable,
+    TraversableGraphFlags, TraversableHandle, TraversableKind, TriangleInput, UpdateRule,
+    VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID, MAX_PRIMITIVES_PER_GAS,
+    MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
 
 pub use oxray_bvh::{
     compute_memory_usage, AccelBufferSizes, BvhStats, ExportedTriangle, GasExport, GasMemory,
+    Sphere,
 };
 pub use oxray_cpu::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, CustomIntersector, DirectCallableCtx,

@@ -41,7 +41,7 @@ const PENDING_MISUSE: u32 = 6;
 
 /// The device functions a program kind may not call, by the index the header gives them (the
 /// detail of the exception that ends such a launch index).
-pub const MISUSED_FUNCTIONS: [&str; 16] = [
+pub const MISUSED_FUNCTIONS: [&str; 17] = [
     "optixGetWorldRayOrigin",
     "optixGetWorldRayDirection",
     "optixGetObjectRayOrigin",
@@ -58,6 +58,7 @@ pub const MISUSED_FUNCTIONS: [&str; 16] = [
     "optixGetTransformListSize",
     "optixGetTransformListHandle",
     "optixGetGASTraversableHandle",
+    "optixGetSphereData",
 ];
 
 /// The user exception that ends a launch index whose C++ program misbehaved in a way OptiX
@@ -139,6 +140,7 @@ pub(crate) struct CApi {
         unsafe extern "C" fn(*mut CFrame, u32, *mut u32, *mut u32, *mut f32, *mut f32) -> u32,
     vertex_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
     gas_handle: unsafe extern "C" fn(*mut CFrame) -> u64,
+    sphere_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
 }
 
 static API: CApi = CApi {
@@ -149,6 +151,7 @@ static API: CApi = CApi {
     transform_list: api_transform_list,
     vertex_data: api_vertex_data,
     gas_handle: api_gas_handle,
+    sphere_data: api_sphere_data,
 };
 
 /// A wrapped program: `__oxray_entry_<name>(frame)`, 0 when it returned, 1 when it unwound.
@@ -736,6 +739,21 @@ unsafe extern "C" fn api_vertex_data(f: *mut CFrame, out: *mut f32) {
     ];
     // SAFETY: the header passes 9 floats.
     unsafe { std::ptr::copy_nonoverlapping(flat.as_ptr(), out, 9) };
+}
+
+unsafe extern "C" fn api_sphere_data(f: *mut CFrame, out: *mut f32) {
+    // SAFETY: the header passes the running program's frame.
+    let f = unsafe { &mut *f };
+    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
+    let s = unsafe {
+        match f.kind {
+            KIND_CH => ctx_of::<Ch>(f).sphere_data(),
+            KIND_AH => ctx_of::<Ah>(f).sphere_data(),
+            _ => [0.0; 4],
+        }
+    };
+    // SAFETY: the header passes 4 floats.
+    unsafe { std::ptr::copy_nonoverlapping(s.as_ptr(), out, 4) };
 }
 
 unsafe extern "C" fn api_gas_handle(f: *mut CFrame) -> u64 {

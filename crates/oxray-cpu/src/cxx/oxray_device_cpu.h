@@ -221,6 +221,9 @@ struct __oxray_Api {
     void (*vertex_data)(__oxray_Frame* f, float* v);
     // The handle of the hit's GAS (its address, as `optix_handle` gives it; 0 if unknown).
     unsigned long long (*gas_handle)(__oxray_Frame* f);
+    // The object-space centre and radius of the hit sphere (4 floats; zeros for another
+    // primitive type).
+    void (*sphere_data)(__oxray_Frame* f, float* v);
 };
 
 // Program kinds, as the runtime numbers them.
@@ -346,15 +349,24 @@ static inline unsigned int optixGetSbtGASIndex() { return __oxray_frame->sbt_gas
 static inline unsigned int optixGetInstanceId() { return __oxray_frame->instance_id; }
 static inline unsigned int optixGetInstanceIndex() { return __oxray_frame->instance_index; }
 static inline unsigned int optixGetHitKind() { return __oxray_frame->hit_kind; }
+// Built-in hit kinds (128..255): a triangle's 0xFE/0xFF, a sphere's 0x8C/0x8D (oxray's choice;
+// see oxray_core::HitKind). Everything else is a custom primitive's kind.
 static inline OptixPrimitiveType optixGetPrimitiveType(unsigned int hitKind) {
-    return hitKind >= 0xFEu ? OPTIX_PRIMITIVE_TYPE_TRIANGLE : OPTIX_PRIMITIVE_TYPE_CUSTOM;
+    return hitKind >= 0xFEu ? OPTIX_PRIMITIVE_TYPE_TRIANGLE
+           : (hitKind == 0x8Cu || hitKind == 0x8Du) ? OPTIX_PRIMITIVE_TYPE_SPHERE
+                                                    : OPTIX_PRIMITIVE_TYPE_CUSTOM;
 }
 static inline OptixPrimitiveType optixGetPrimitiveType() {
     return optixGetPrimitiveType(optixGetHitKind());
 }
-static inline bool optixIsFrontFaceHit(unsigned int hitKind) { return (hitKind & 1u) == 0u; }
+// Facing is defined for built-in primitives only (hit kinds 128..255), as on the GPU.
+static inline bool optixIsFrontFaceHit(unsigned int hitKind) {
+    return hitKind >= 0x80u && (hitKind & 1u) == 0u;
+}
 static inline bool optixIsFrontFaceHit() { return optixIsFrontFaceHit(optixGetHitKind()); }
-static inline bool optixIsBackFaceHit(unsigned int hitKind) { return (hitKind & 1u) == 1u; }
+static inline bool optixIsBackFaceHit(unsigned int hitKind) {
+    return hitKind >= 0x80u && (hitKind & 1u) == 1u;
+}
 static inline bool optixIsBackFaceHit() { return optixIsBackFaceHit(optixGetHitKind()); }
 static inline bool optixIsTriangleFrontFaceHit() {
     return optixGetHitKind() == OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE;
@@ -380,6 +392,15 @@ static inline void optixGetTriangleVertexData(float3 data[3]) {
     float v[9];
     __oxray_frame->api->vertex_data(__oxray_frame, v);
     for (int k = 0; k < 3; ++k) data[k] = make_float3(v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+}
+
+// Guide §9.4: the centre (xyz) and radius (w) of the hit sphere, in object space; no build flag
+// is needed. Zeros when the hit is not a sphere.
+static inline void optixGetSphereData(float4 data[1]) {
+    __oxray_allow(__OXRAY_K(AH) | __OXRAY_K(CH), 16);
+    float v[4];
+    __oxray_frame->api->sphere_data(__oxray_frame, v);
+    data[0] = make_float4(v[0], v[1], v[2], v[3]);
 }
 
 static inline OptixTraversableHandle optixGetGASTraversableHandle() {

@@ -8,7 +8,7 @@ use crate::traversal::{Level, Path};
 use bytemuck::Pod;
 use glam::Vec3;
 use oxray_core::sbt::{ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
-use oxray_core::{Exception, ExceptionCode, HitKind};
+use oxray_core::{Exception, ExceptionCode, HitKind, PrimitiveType};
 use std::cell::Cell;
 
 /// What a transform-list entry is (`OptixTransformType`, with the instance's ids).
@@ -380,13 +380,30 @@ macro_rules! hit_queries {
         pub fn hit_kind(&self) -> HitKind {
             self.$hit.hit_kind
         }
-        /// `optixIsFrontFaceHit`: a triangle's front face.
+        /// `optixIsFrontFaceHit`: the front face of a built-in primitive (a triangle, or a
+        /// sphere, whose hits are always front-face hits: guide §9.4); false for a custom one.
         pub fn is_front_face_hit(&self) -> bool {
-            self.$hit.hit_kind.is_triangle_front_face()
+            self.$hit.hit_kind.is_front_face()
         }
-        /// `optixIsBackFaceHit`: a triangle's back face.
+        /// `optixIsBackFaceHit`: the back face of a built-in primitive (only triangles have
+        /// back-face hits); false for a custom one.
         pub fn is_back_face_hit(&self) -> bool {
-            self.$hit.hit_kind.is_triangle_back_face()
+            self.$hit.hit_kind.is_back_face()
+        }
+        /// `optixGetPrimitiveType`: triangle, sphere or custom (guide §13.7).
+        pub fn primitive_type(&self) -> PrimitiveType {
+            self.$hit.hit_kind.primitive_type()
+        }
+        /// `optixGetSphereData`: the object-space centre and radius `(x, y, z, r)` of the hit
+        /// sphere (guide §9.4; no build flag needed). Zeros for another primitive type.
+        pub fn sphere_data(&self) -> [f32; 4] {
+            match self
+                .gas
+                .and_then(|g| g.spheres.get(self.$hit.slot as usize))
+            {
+                Some(s) => s.to_array(),
+                None => [0.0; 4],
+            }
         }
         /// `optixIsTriangleHit`.
         pub fn is_triangle_hit(&self) -> bool {

@@ -17,7 +17,7 @@ use oxray_bvh::GasKind;
 use oxray_bvh::InstanceData as InstanceRecord;
 use oxray_core::sbt::hit_group_index;
 use oxray_core::{
-    Exception, ExceptionCode, GeometryFlags, PrimitiveTypeFlags, Ray, RayFlags, TraversableHandle,
+    Exception, ExceptionCode, GeometryFlags, PrimitiveType, Ray, RayFlags, TraversableHandle,
 };
 use oxray_core::{HitKind, InstanceFlags};
 
@@ -321,11 +321,14 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
     fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
         // The pipeline's primitive types (§6.3), wherever in the graph the GAS sits.
         let kinds = self.frame.launch.pipeline.compile.uses_primitive_type_flags;
+        // An empty set means triangles and custom primitives; spheres must be enabled
+        // explicitly (§9.1), else the GAS raises UNSUPPORTED_PRIMITIVE_TYPE.
         let needed = match gas.kind {
-            GasKind::Triangles => PrimitiveTypeFlags::TRIANGLE,
-            GasKind::CustomPrimitives => PrimitiveTypeFlags::CUSTOM,
+            GasKind::Triangles => PrimitiveType::Triangle,
+            GasKind::CustomPrimitives => PrimitiveType::Custom,
+            GasKind::Spheres => PrimitiveType::Sphere,
         };
-        if !kinds.is_empty() && !kinds.contains(needed) {
+        if !kinds.allows(needed) {
             self.pending = Some(Interrupt::exception(
                 ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE,
                 &[],
@@ -414,6 +417,35 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
                 HitKind::TRIANGLE_BACK_FACE
             },
             attributes,
+            record,
+            slot,
+        };
+        self.candidate(hit, gflags)
+    }
+
+    fn sphere(&mut self, slot: u32, t: f32) -> Decision {
+        let Some(gas) = self.gas else {
+            return if self.pending.is_some() {
+                Decision::Abort
+            } else {
+                Decision::Ignore
+            };
+        };
+        let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
+        let gflags = gas.record_flags[sbt_gas_index as usize];
+        let Some(record) = self.record(sbt_gas_index) else {
+            return Decision::Abort;
+        };
+        // The triangle culling flags do not apply (§13.2 names triangles): a sphere's only hit
+        // is its front face (§9.4, §9.6). The any-hit rules and CULL_*_ANYHIT do apply, in
+        // `candidate`. A hit group's intersection program is not run: spheres use the
+        // built-in intersector (§9.1), as triangles do.
+        let hit = HitState {
+            t,
+            primitive_index,
+            sbt_gas_index,
+            hit_kind: HitKind::SPHERE_FRONT_FACE,
+            attributes: [0; 8],
             record,
             slot,
         };

@@ -1,11 +1,13 @@
 //! Leaf intersectors: how the primitives of one leaf are tested against a ray and offered to
-//! the visitor. One per primitive kind (triangle blocks, custom-primitive boxes) and one for
+//! the visitor. One per primitive kind (triangle blocks, custom-primitive boxes, spheres) and
+//! one for
 //! the instances of an IAS ([`super::scene::InstanceLeaves`]); a new built-in primitive kind is
 //! a new implementation of [`LeafIntersector`].
 
 use super::kernel::{Decision, Entry, GasVisitor};
 use super::ray::PreparedRay;
-use oxray_bvh::Triangle4;
+use glam::Vec3;
+use oxray_bvh::{Sphere, Triangle4};
 use oxray_core::ray::min_ignore_nan;
 use oxray_core::Aabb;
 
@@ -109,6 +111,44 @@ impl<V: GasVisitor> LeafIntersector<V> for AabbLeaves<'_> {
                 if stop {
                     return LeafEnd::Stop;
                 }
+            }
+        }
+        LeafEnd::Continue
+    }
+}
+
+/// Built-in spheres in leaf-slot order (guide §5.3), each tested with the robust ray/sphere
+/// test of [`Sphere::intersect`]: only the front face is a hit (§9.4, §9.6), so a ray whose
+/// interval starts inside a sphere does not hit it.
+pub(crate) struct SphereLeaves<'a>(pub &'a [Sphere]);
+
+impl<V: GasVisitor> LeafIntersector<V> for SphereLeaves<'_> {
+    #[inline(always)]
+    fn leaf(
+        &self,
+        start: u32,
+        count: u32,
+        ray: &PreparedRay,
+        tmin: f32,
+        tmax: &mut f32,
+        visitor: &mut V,
+        _spare: &mut [Entry],
+    ) -> LeafEnd {
+        let start = start as usize;
+        let org = Vec3::from(ray.org);
+        for (k, s) in self.0[start..start + count as usize].iter().enumerate() {
+            // The interval shrinks with every accepted hit of the leaf.
+            let Some(t) = s.intersect(org, ray.dir, tmin, *tmax) else {
+                continue;
+            };
+            match visitor.sphere((start + k) as u32, t) {
+                Decision::Ignore => {}
+                Decision::Accept => *tmax = t,
+                Decision::AcceptAndTerminate => {
+                    *tmax = t;
+                    return LeafEnd::Stop;
+                }
+                Decision::Abort => return LeafEnd::Stop,
             }
         }
         LeafEnd::Continue

@@ -7,6 +7,8 @@ use oxray_core::ray::{max_ignore_nan, min_ignore_nan, Ray, ROBUST_FAR, TMAX_SLAC
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PreparedRay {
     pub org: [f32; 3],
+    /// The direction as given (not normalised: t is in its units), for the sphere test.
+    pub dir: glam::Vec3,
     /// `1 / d`, with `+inf` for a zero component (of either sign).
     pub inv: [f32; 3],
     /// Index into `Bvh4Node::bounds` of each axis' near plane (the far plane is the other one).
@@ -51,6 +53,7 @@ impl PreparedRay {
         }
         Some(PreparedRay {
             org: ray.origin.to_array(),
+            dir: ray.direction,
             inv,
             near,
             far,

@@ -4,7 +4,7 @@
 //! interval shrinks across instances.
 
 use super::kernel::{traverse, Entry, GasVisitor};
-use super::leaf::{AabbLeaves, LeafEnd, LeafIntersector, TriangleLeaves};
+use super::leaf::{AabbLeaves, LeafEnd, LeafIntersector, SphereLeaves, TriangleLeaves};
 use super::node::{Bvh4, Bvh8Scalar};
 use super::ray::PreparedRay;
 use crate::gas::CpuNode;
@@ -154,6 +154,10 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
                 }
                 GasKind::CustomPrimitives => {
                     let leaves = AabbLeaves(&gas.aabbs);
+                    traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
+                }
+                GasKind::Spheres => {
+                    let leaves = SphereLeaves(&gas.spheres);
                     traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
                 }
             }

@@ -321,12 +321,15 @@ static __forceinline__ __device__ bool optixIsTriangleBackFaceHit() {
 static __forceinline__ __device__ bool optixIsTriangleHit() {
     return optixIsTriangleFrontFaceHit() || optixIsTriangleBackFaceHit();
 }
-// Triangles are the only built-in primitive oxray has; every other hit kind is a custom one.
+// Built-in hit kinds: a triangle's 0xFE/0xFF and a sphere's 0x8C/0x8D (oxray's choice, the
+// same on both devices: see oxray_core::HitKind; spheres are traced on the CPU only for now).
+// Every other hit kind is a custom one.
 static __forceinline__ __device__ OptixPrimitiveType optixGetPrimitiveType(unsigned int hitKind) {
     return (hitKind == OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE ||
             hitKind == OPTIX_HIT_KIND_TRIANGLE_BACK_FACE)
                ? OPTIX_PRIMITIVE_TYPE_TRIANGLE
-               : OPTIX_PRIMITIVE_TYPE_CUSTOM;
+           : (hitKind == 0x8Cu || hitKind == 0x8Du) ? OPTIX_PRIMITIVE_TYPE_SPHERE
+                                                    : OPTIX_PRIMITIVE_TYPE_CUSTOM;
 }
 static __forceinline__ __device__ OptixPrimitiveType optixGetPrimitiveType() {
     return optixGetPrimitiveType(optixGetHitKind());
@@ -536,6 +539,14 @@ static __forceinline__ __device__ void optixGetTriangleVertexData(float3 data[3]
         float4 q = tris[k];
         data[k] = make_float3(q.x, q.y, q.z);
     }
+}
+
+// Guide §9.4: the centre and radius of the hit sphere. The CUDA backend refuses to build sphere
+// structures (they are traced on the CPU backend only, for now), so no hit on this device is a
+// sphere: the function exists so that one program compiles for both devices, and gives zeros
+// as it does on the CPU for a hit that is not a sphere.
+static __forceinline__ __device__ void optixGetSphereData(float4 data[1]) {
+    data[0] = make_float4(0.0f, 0.0f, 0.0f, 0.0f);
 }
 
 // ---------------------------------------------------------------------------------------------
