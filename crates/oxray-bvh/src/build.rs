@@ -136,6 +136,11 @@ impl Box4 {
 
 /// The builder's view of one primitive: its box, with the primitive's id in the bits of the
 /// unused fourth lane of `hi` (ids are below 2^29, so those bits are a small finite float).
+///
+/// Below 2^23 those bits are a subnormal float, and x86 processors take a microcode assist of
+/// a hundred cycles or more for every add or multiply with a subnormal operand: no arithmetic
+/// may ever read the fourth lanes (min and max may, they take no assist). Reading them made
+/// every binning and partition step ten times slower than it is.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PrimRef(pub(crate) Box4);
 
@@ -152,11 +157,12 @@ impl PrimRef {
         self.0.hi[3].to_bits()
     }
 
-    /// The centroid; binning and partitioning both use this, so they agree bit for bit.
+    /// The centroid; binning and partitioning both use this, so they agree bit for bit. The
+    /// fourth lane is 0 (never the id's subnormal arithmetic, see the type's note).
     #[inline(always)]
     pub(crate) fn centroid(&self) -> [f32; 4] {
         let b = &self.0;
-        std::array::from_fn(|i| b.lo[i] * 0.5 + b.hi[i] * 0.5)
+        std::array::from_fn(|i| if i < 3 { b.lo[i] * 0.5 + b.hi[i] * 0.5 } else { 0.0 })
     }
 }
 
@@ -271,10 +277,14 @@ fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -
     // SAFETY: SSE2 is part of the x86_64 baseline; all pointers come from `[f32; 4]`/`[i32; 4]`
     // arrays (the `Box4` rows are 16-byte aligned; the others are loaded unaligned).
     unsafe {
-        let half = _mm_set1_ps(0.5);
+        // Lane 3 of `half` is 0 and of `xyz` all ones: the fourth lanes (the id's subnormal
+        // bits) are masked off before any arithmetic, which would otherwise take a microcode
+        // assist (see `PrimRef`).
+        let half = _mm_set_ps(0.0, 0.5, 0.5, 0.5);
+        let xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
         let c = _mm_add_ps(
-            _mm_mul_ps(_mm_load_ps(r.0.lo.as_ptr()), half),
-            _mm_mul_ps(_mm_load_ps(r.0.hi.as_ptr()), half),
+            _mm_mul_ps(_mm_and_ps(_mm_load_ps(r.0.lo.as_ptr()), xyz), half),
+            _mm_mul_ps(_mm_and_ps(_mm_load_ps(r.0.hi.as_ptr()), xyz), half),
         );
         let f = _mm_mul_ps(
             _mm_sub_ps(c, _mm_loadu_ps(cmin.as_ptr())),
