@@ -1,3 +1,11 @@
+//! The binned builder's cost per primitive and per level of the tree (`log2(n / 4)` levels) on
+//! random boxes, one thread, from 1,024 to 524,288 primitives: flat where the work is in the
+//! binning and partitioning, rising where memory or per-node overheads take over.
+//!
+//! ```sh
+//! cargo run --release -p oxray-bvh --example scaling
+//! ```
+
 use glam::Vec3;
 use oxray_bvh::{build_bvh2, BuildConfig};
 use oxray_core::Aabb;
