@@ -93,7 +93,7 @@ fn main() {
                 };
                 let options = BuildOptions::new(flags);
                 let build = || {
-                    GasData::build_with_width(&options, &[input.clone().into()], NodeWidth::Eight)
+                    GasData::build_with_width(&options, &[input.into()], NodeWidth::Eight)
                         .expect("a valid input")
                 };
                 let sah = build().stats().sah_cost;
