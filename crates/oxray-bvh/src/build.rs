@@ -114,6 +114,26 @@ impl Box4 {
         }
     }
 
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn grow_point(&mut self, p: &[f32; 4]) {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE is part of the x86_64 baseline; `Box4` is `align(16)`, `p` is loaded
+        // unaligned. As in `grow`, a NaN in `p` keeps `self` (as the portable form does).
+        unsafe {
+            let q = _mm_loadu_ps(p.as_ptr());
+            _mm_store_ps(
+                self.lo.as_mut_ptr(),
+                _mm_min_ps(q, _mm_load_ps(self.lo.as_ptr())),
+            );
+            _mm_store_ps(
+                self.hi.as_mut_ptr(),
+                _mm_max_ps(q, _mm_load_ps(self.hi.as_ptr())),
+            );
+        }
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
     #[inline(always)]
     pub(crate) fn grow_point(&mut self, p: &[f32; 4]) {
         for i in 0..4 {
@@ -129,13 +149,56 @@ impl Box4 {
         )
     }
 
+    /// [`Aabb::half_area`] of the box (0 for an empty one), computed as that does.
     pub(crate) fn half_area(&self) -> f32 {
-        self.aabb().half_area()
+        if (0..3).any(|i| self.hi[i] - self.lo[i] < 0.0) {
+            return 0.0;
+        }
+        self.half_area_nonempty()
+    }
+
+    /// [`half_area`](Self::half_area) of a box known not to be empty, without the emptiness
+    /// test or the conversion: the same operations in the same order, so the same bits. (Of an
+    /// empty box it returns a meaningless value: callers only use it where a count says the
+    /// box holds something.)
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    fn half_area_nonempty(&self) -> f32 {
+        use std::arch::x86_64::*;
+        // SAFETY: SSE is part of the x86_64 baseline; `Box4` is `align(16)`. The fourth lanes
+        // (a bin's box carries the largest id's subnormal bits there) are masked off before
+        // the subtraction: the compiler widened the portable form's three subtractions to four
+        // lanes, and the subnormal operand's microcode assist made the SAH sweeps a third of
+        // the build time.
+        unsafe {
+            let xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
+            let e = _mm_sub_ps(
+                _mm_and_ps(_mm_load_ps(self.hi.as_ptr()), xyz),
+                _mm_and_ps(_mm_load_ps(self.lo.as_ptr()), xyz),
+            );
+            // (x y, y z, z x, 0), summed in the portable form's order.
+            let p = _mm_mul_ps(e, _mm_shuffle_ps::<0b11_00_10_01>(e, e));
+            let mut q = [0.0f32; 4];
+            _mm_storeu_ps(q.as_mut_ptr(), p);
+            q[0] + q[1] + q[2]
+        }
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    #[inline(always)]
+    fn half_area_nonempty(&self) -> f32 {
+        let e: [f32; 3] = std::array::from_fn(|i| self.hi[i] - self.lo[i]);
+        e[0] * e[1] + e[1] * e[2] + e[2] * e[0]
     }
 }
 
 /// The builder's view of one primitive: its box, with the primitive's id in the bits of the
 /// unused fourth lane of `hi` (ids are below 2^29, so those bits are a small finite float).
+///
+/// Below 2^23 those bits are a subnormal float, and x86 processors take a microcode assist of
+/// a hundred cycles or more for every add or multiply with a subnormal operand: no arithmetic
+/// may ever read the fourth lanes (min and max may, they take no assist). Reading them made
+/// every binning and partition step ten times slower than it is.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct PrimRef(pub(crate) Box4);
 
@@ -152,17 +215,31 @@ impl PrimRef {
         self.0.hi[3].to_bits()
     }
 
-    /// The centroid; binning and partitioning both use this, so they agree bit for bit.
+    /// Coordinate `axis` of [`centroid`](Self::centroid), alone (for sorts).
+    #[inline(always)]
+    pub(crate) fn centroid_on(&self, axis: usize) -> f32 {
+        self.0.lo[axis] * 0.5 + self.0.hi[axis] * 0.5
+    }
+
+    /// The centroid; binning and partitioning both use this, so they agree bit for bit. The
+    /// fourth lane is 0 (never the id's subnormal arithmetic, see the type's note).
     #[inline(always)]
     pub(crate) fn centroid(&self) -> [f32; 4] {
         let b = &self.0;
-        std::array::from_fn(|i| b.lo[i] * 0.5 + b.hi[i] * 0.5)
+        std::array::from_fn(|i| {
+            if i < 3 {
+                b.lo[i] * 0.5 + b.hi[i] * 0.5
+            } else {
+                0.0
+            }
+        })
     }
 }
 
 /// Bytes of working memory [`build_bvh2`] allocates for `n` primitives, at most.
 pub fn temp_bytes(n: usize) -> usize {
-    n * std::mem::size_of::<PrimRef>()
+    // Two reference arrays: binned splits partition from one into the other.
+    2 * n * std::mem::size_of::<PrimRef>()
         + 2 * n.max(1) * std::mem::size_of::<Bvh2Node>()
         + n * std::mem::size_of::<u32>()
 }
@@ -198,9 +275,16 @@ pub(crate) fn build_bvh2_at(bounds: &[Aabb], config: &BuildConfig, depth: usize)
     // Node slots: the root, then the interior of its subtree (see `build_node`).
     // Zeroed memory from the allocator: pages under leaves are never even touched.
     let mut nodes: Vec<Bvh2Node> = bytemuck::allocation::zeroed_vec(2 * refs.len() - 1);
+    // The other half of the ping-pong buffer of binned partitions; only its slots under
+    // interior nodes are written before they are read.
+    let mut scratch: Vec<PrimRef> = vec![PrimRef(Box4::EMPTY); refs.len()];
     let (root, interior) = nodes.split_at_mut(1);
     root[0] = build_node(
-        &mut refs,
+        Refs {
+            cur: &mut refs,
+            other: &mut scratch,
+            flipped: false,
+        },
         0,
         interior,
         1,
@@ -271,10 +355,14 @@ fn bin_indices<const B: usize>(r: &PrimRef, cmin: &[f32; 4], scale: &[f32; 4]) -
     // SAFETY: SSE2 is part of the x86_64 baseline; all pointers come from `[f32; 4]`/`[i32; 4]`
     // arrays (the `Box4` rows are 16-byte aligned; the others are loaded unaligned).
     unsafe {
-        let half = _mm_set1_ps(0.5);
+        // Lane 3 of `half` is 0 and of `xyz` all ones: the fourth lanes (the id's subnormal
+        // bits) are masked off before any arithmetic, which would otherwise take a microcode
+        // assist (see `PrimRef`).
+        let half = _mm_set_ps(0.0, 0.5, 0.5, 0.5);
+        let xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
         let c = _mm_add_ps(
-            _mm_mul_ps(_mm_load_ps(r.0.lo.as_ptr()), half),
-            _mm_mul_ps(_mm_load_ps(r.0.hi.as_ptr()), half),
+            _mm_mul_ps(_mm_and_ps(_mm_load_ps(r.0.lo.as_ptr()), xyz), half),
+            _mm_mul_ps(_mm_and_ps(_mm_load_ps(r.0.hi.as_ptr()), xyz), half),
         );
         let f = _mm_mul_ps(
             _mm_sub_ps(c, _mm_loadu_ps(cmin.as_ptr())),
@@ -326,12 +414,12 @@ impl<const B: usize> Bins<B> {
         self
     }
 
-    /// Bins every primitive on the three axes at once. Even and odd primitives go to separate
-    /// bin sets, merged at the end, so that consecutive primitives falling in the same bin do
-    /// not wait on each other's stores.
+    /// Bins every primitive on the searched axes at once. In large nodes, even and odd
+    /// primitives go to separate bin sets, merged at the end, so that consecutive primitives
+    /// falling in the same bin do not wait on each other's stores; small nodes are not worth
+    /// a second set. (Boxes merge by min and max and counts by integer sums, so the bins are
+    /// the same either way.)
     fn fill(refs: &[PrimRef], cmin: &[f32; 4], scale: &[f32; 4]) -> Self {
-        let mut even = Self::new();
-        let mut odd = Self::new();
         let active: [bool; 3] = std::array::from_fn(|a| scale[a] != 0.0);
         let add = |bins: &mut Self, r: &PrimRef| {
             let idx = bin_indices::<B>(r, cmin, scale);
@@ -344,6 +432,14 @@ impl<const B: usize> Bins<B> {
                 }
             }
         };
+        let mut even = Self::new();
+        if refs.len() < TWO_BIN_SETS {
+            for r in refs {
+                add(&mut even, r);
+            }
+            return even;
+        }
+        let mut odd = Self::new();
         let mut pairs = refs.chunks_exact(2);
         for pair in &mut pairs {
             add(&mut even, &pair[0]);
@@ -355,6 +451,9 @@ impl<const B: usize> Bins<B> {
         even.merge(&odd)
     }
 }
+
+/// Nodes with at least this many primitives bin into two sets of bins (see [`Bins::fill`]).
+const TWO_BIN_SETS: usize = 256;
 
 /// The boxes of the two sides of a split.
 #[derive(Clone, Copy)]
@@ -372,6 +471,17 @@ pub(crate) fn best_binned_split<const B: usize>(
     block: usize,
     widest_axis_only: bool,
 ) -> Option<(Split, f32, [Box4; 2])> {
+    best_binned_split_counted::<B>(refs, cb, block, widest_axis_only)
+        .map(|(split, cost, sides, _)| (split, cost, sides))
+}
+
+/// [`best_binned_split`], also returning how many primitives go left (always some, never all).
+fn best_binned_split_counted<const B: usize>(
+    refs: &[PrimRef],
+    cb: &Box4,
+    block: usize,
+    widest_axis_only: bool,
+) -> Option<(Split, f32, [Box4; 2], usize)> {
     let mut scale = [0.0f32; 4];
     let widest = widest_axis(cb);
     for axis in 0..3 {
@@ -400,6 +510,7 @@ pub(crate) fn best_binned_split<const B: usize>(
             continue;
         }
         // Sweep from the right for right-side areas and counts, then from the left.
+        // Areas are taken only of sides that hold primitives (`half_area_nonempty`).
         let mut right_area = [0.0f32; B];
         let mut right_count = [0u32; B];
         let mut acc = Box4::EMPTY;
@@ -407,7 +518,7 @@ pub(crate) fn best_binned_split<const B: usize>(
         for i in (1..B).rev() {
             acc.grow(&bins.boxes[axis][i]);
             n += bins.counts[axis][i];
-            right_area[i] = acc.half_area();
+            right_area[i] = acc.half_area_nonempty();
             right_count[i] = n;
         }
         let mut acc = Box4::EMPTY;
@@ -418,7 +529,7 @@ pub(crate) fn best_binned_split<const B: usize>(
             if n == 0 || right_count[i] == 0 {
                 continue;
             }
-            let cost = acc.half_area() * n.div_ceil(block as u32) as f32
+            let cost = acc.half_area_nonempty() * n.div_ceil(block as u32) as f32
                 + right_area[i] * right_count[i].div_ceil(block as u32) as f32;
             if cost.is_finite() && best.is_none_or(|(_, _, c)| cost < c) {
                 best = Some((axis, i, cost));
@@ -438,7 +549,8 @@ pub(crate) fn best_binned_split<const B: usize>(
         cmin: cb.lo[axis],
         scale: scale[axis],
     };
-    Some((split, cost, [side(0..bin), side(bin..B)]))
+    let left = bins.counts[axis][..bin].iter().sum::<u32>() as usize;
+    Some((split, cost, [side(0..bin), side(bin..B)], left))
 }
 
 /// The axis along which a box is widest.
@@ -476,8 +588,8 @@ pub(crate) fn small_split(refs: &mut [PrimRef], cb: &Box4, block: usize) -> Opti
         })
     };
     let n = refs.len();
-    let cost = side(&refs[..block]).half_area()
-        + side(&refs[block..]).half_area() * (n - block).div_ceil(block) as f32;
+    let cost = side(&refs[..block]).half_area_nonempty()
+        + side(&refs[block..]).half_area_nonempty() * (n - block).div_ceil(block) as f32;
     cost.is_finite()
         .then_some((Split::Sorted { axis, count: block }, cost))
 }
@@ -492,12 +604,12 @@ pub(crate) fn best_sweep_split(refs: &mut [PrimRef], block: usize) -> Option<(Sp
         let mut acc = Box4::EMPTY;
         for i in (1..n).rev() {
             acc.grow(&refs[i].0);
-            right_area[i] = acc.half_area();
+            right_area[i] = acc.half_area_nonempty();
         }
         let mut acc = Box4::EMPTY;
         for i in 1..n {
             acc.grow(&refs[i - 1].0);
-            let cost = acc.half_area() * i.div_ceil(block) as f32
+            let cost = acc.half_area_nonempty() * i.div_ceil(block) as f32
                 + right_area[i] * (n - i).div_ceil(block) as f32;
             if cost.is_finite() && best.is_none_or(|(_, c)| cost < c) {
                 best = Some((Split::Sorted { axis, count: i }, cost));
@@ -510,8 +622,8 @@ pub(crate) fn best_sweep_split(refs: &mut [PrimRef], block: usize) -> Option<(Sp
 fn sort_by_centroid(refs: &mut [PrimRef], axis: usize) {
     // Ties are broken by id so that the order (and the tree) is fully determined.
     refs.sort_unstable_by(|a, b| {
-        a.centroid()[axis]
-            .total_cmp(&b.centroid()[axis])
+        a.centroid_on(axis)
+            .total_cmp(&b.centroid_on(axis))
             .then(a.id().cmp(&b.id()))
     });
 }
@@ -554,12 +666,143 @@ pub(crate) fn partition<const B: usize>(
             let mid = refs.len() / 2;
             if axis < 3 {
                 refs.select_nth_unstable_by(mid, |a, b| {
-                    a.centroid()[axis]
-                        .total_cmp(&b.centroid()[axis])
+                    a.centroid_on(axis)
+                        .total_cmp(&b.centroid_on(axis))
                         .then(a.id().cmp(&b.id()))
                 });
             }
             (mid, None)
+        }
+    }
+}
+
+/// Chunks of at most this many primitives are partitioned in parallel (nodes larger than
+/// [`PARALLEL_BINNING`]); fixed, so the result does not depend on the thread count.
+const PARTITION_CHUNK: usize = PARALLEL_BINNING;
+
+/// Moves `src` into `left` (centroids in bins below `bin` along `axis`) and `right` (the rest),
+/// each in `src`'s order, and returns the boxes of the two sides' centroids. The lengths of
+/// `left` and `right` must be the two sides' counts.
+///
+/// Without a branch on the side: a sorted or clustered mesh sends long, irregular runs of
+/// primitives to either side, which a branch predictor guesses badly.
+fn scatter<const B: usize>(
+    src: &[PrimRef],
+    left: &mut [PrimRef],
+    right: &mut [PrimRef],
+    axis: usize,
+    bin: usize,
+    cmin: f32,
+    scale: f32,
+) -> [Box4; 2] {
+    let out = [left, right];
+    let mut at = [0usize; 2];
+    let mut cb = [Box4::EMPTY; 2];
+    for r in src {
+        let c = r.centroid();
+        let side = (bin_of::<B>(c[axis], cmin, scale) >= bin) as usize;
+        out[side][at[side]] = *r;
+        at[side] += 1;
+        cb[side].grow_point(&c);
+    }
+    debug_assert_eq!([at[0], at[1]], [out[0].len(), out[1].len()]);
+    cb
+}
+
+/// Applies a binned split by moving `src` into `dst`, left side first, `left` primitives on it
+/// (as the bins counted); each side keeps `src`'s order, so the result is the same however
+/// the work is divided. Returns the boxes of the sides' centroids. Large nodes are partitioned
+/// in parallel chunks: each chunk counts its left side, and the counts' prefix sums give each
+/// chunk its own ranges of `dst`.
+fn partition_into<const B: usize>(
+    src: &[PrimRef],
+    dst: &mut [PrimRef],
+    left: usize,
+    split: Split,
+) -> [Box4; 2] {
+    let Split::Binned {
+        axis,
+        bin,
+        cmin,
+        scale,
+    } = split
+    else {
+        unreachable!("only binned splits partition into the other buffer")
+    };
+    let (dl, dr) = dst.split_at_mut(left);
+    if src.len() <= PARALLEL_BINNING {
+        return scatter::<B>(src, dl, dr, axis, bin, cmin, scale);
+    }
+    let lefts: Vec<usize> = src
+        .par_chunks(PARTITION_CHUNK)
+        .map(|c| {
+            c.iter()
+                .filter(|r| bin_of::<B>(r.centroid_on(axis), cmin, scale) < bin)
+                .count()
+        })
+        .collect();
+    // One (source, left range, right range) per chunk: one small vector per large node.
+    let mut jobs = Vec::with_capacity(lefts.len());
+    let (mut dl, mut dr) = (dl, dr);
+    for (c, &l) in src.chunks(PARTITION_CHUNK).zip(&lefts) {
+        let (a, rest_l) = std::mem::take(&mut dl).split_at_mut(l);
+        let (b, rest_r) = std::mem::take(&mut dr).split_at_mut(c.len() - l);
+        dl = rest_l;
+        dr = rest_r;
+        jobs.push((c, a, b));
+    }
+    jobs.into_par_iter()
+        .map(|(c, a, b)| scatter::<B>(c, a, b, axis, bin, cmin, scale))
+        .collect::<Vec<_>>()
+        .iter()
+        .fold([Box4::EMPTY; 2], |mut acc, s| {
+            acc[0].grow(&s[0]);
+            acc[1].grow(&s[1]);
+            acc
+        })
+}
+
+/// A node's primitive references: `cur` holds them, `other` is the same range of the other
+/// half of the ping-pong buffer (`flipped`: `cur` is in the scratch half, whose contents the
+/// tree's leaves must copy back to the main half).
+struct Refs<'a> {
+    cur: &'a mut [PrimRef],
+    other: &'a mut [PrimRef],
+    flipped: bool,
+}
+
+impl<'a> Refs<'a> {
+    /// The references of the first `mid` and of the remaining primitives.
+    fn split_at(self, mid: usize) -> (Refs<'a>, Refs<'a>) {
+        let (cl, cr) = self.cur.split_at_mut(mid);
+        let (ol, or) = self.other.split_at_mut(mid);
+        (
+            Refs {
+                cur: cl,
+                other: ol,
+                flipped: self.flipped,
+            },
+            Refs {
+                cur: cr,
+                other: or,
+                flipped: self.flipped,
+            },
+        )
+    }
+
+    /// The same references after a partition from `cur` into `other`.
+    fn swapped(self) -> Refs<'a> {
+        Refs {
+            cur: self.other,
+            other: self.cur,
+            flipped: !self.flipped,
+        }
+    }
+
+    /// Puts the references of a leaf where the tree's primitive order is read from.
+    fn settle(self) {
+        if self.flipped {
+            self.other.copy_from_slice(self.cur);
         }
     }
 }
@@ -574,7 +817,7 @@ pub(crate) fn partition<const B: usize>(
 /// under leaves stay unused.
 #[allow(clippy::too_many_arguments)]
 fn build_node(
-    refs: &mut [PrimRef],
+    refs: Refs<'_>,
     offset: usize,
     interior: &mut [Bvh2Node],
     base: usize,
@@ -584,7 +827,7 @@ fn build_node(
     config: &BuildConfig,
 ) -> Bvh2Node {
     // Small nodes bin coarsely: their few primitives cannot use many bins, and each bin costs.
-    let bins = if refs.len() < SMALL_NODE {
+    let bins = if refs.cur.len() < SMALL_NODE {
         8
     } else {
         config.bins
@@ -598,7 +841,7 @@ fn build_node(
 
 #[allow(clippy::too_many_arguments)]
 fn build_node_b<const B: usize>(
-    refs: &mut [PrimRef],
+    refs: Refs<'_>,
     offset: usize,
     interior: &mut [Bvh2Node],
     base: usize,
@@ -607,7 +850,7 @@ fn build_node_b<const B: usize>(
     depth: usize,
     config: &BuildConfig,
 ) -> Bvh2Node {
-    let n = refs.len();
+    let n = refs.cur.len();
     let aabb = bounds.aabb();
     let leaf = Bvh2Node {
         min: aabb.min.to_array(),
@@ -615,10 +858,8 @@ fn build_node_b<const B: usize>(
         max: aabb.max.to_array(),
         count: n as u32,
     };
-    if n <= config.block_size.max(1) && depth < FORCE_MEDIAN_DEPTH {
-        return leaf;
-    }
-    if n <= 1 {
+    if (n <= config.block_size.max(1) && depth < FORCE_MEDIAN_DEPTH) || n <= 1 {
+        refs.settle();
         return leaf;
     }
     let blocks = |k: usize| k.div_ceil(config.block_size.max(1)) as f32;
@@ -628,13 +869,13 @@ fn build_node_b<const B: usize>(
         None
     } else if n <= 2 * block && n <= config.max_leaf_size && n > config.sweep_threshold {
         // At most two blocks: the only split worth a node puts one full block on one side.
-        small_split(refs, &cb, block)
+        small_split(refs.cur, &cb, block)
     } else if n <= config.sweep_threshold {
-        best_sweep_split(refs, config.block_size.max(1))
+        best_sweep_split(refs.cur, config.block_size.max(1))
     } else {
-        best_binned_split::<B>(refs, &cb, block, n < config.widest_axis_below).map(
-            |(split, cost, sides)| {
-                side_bounds = Some(sides);
+        best_binned_split_counted::<B>(refs.cur, &cb, block, n < config.widest_axis_below).map(
+            |(split, cost, sides, left)| {
+                side_bounds = Some((sides, left));
                 (split, cost)
             },
         )
@@ -645,12 +886,14 @@ fn build_node_b<const B: usize>(
             let split_cost = config.traversal_cost + cost / bounds.half_area();
             let leaf_cost = blocks(n);
             if n <= config.max_leaf_size && (leaf_cost <= split_cost || !split_cost.is_finite()) {
+                refs.settle();
                 return leaf;
             }
             split
         }
         None => {
             if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH {
+                refs.settle();
                 return leaf;
             }
             let axis = widest_axis(&cb);
@@ -663,23 +906,30 @@ fn build_node_b<const B: usize>(
             }
         }
     };
-    let (mut mid, side_centroids) = partition::<B>(refs, split);
-    let mut sides = match (side_bounds, side_centroids) {
-        (Some(bounds), Some(centroids)) => Some(Sides { bounds, centroids }),
-        _ => None,
+    // A binned split moves the references into the other buffer (its bins counted the left
+    // side, which is never empty nor everything); the others sort in place.
+    let (refs, mut mid, mut sides) = match side_bounds {
+        Some((bounds, left)) => {
+            let centroids = partition_into::<B>(refs.cur, refs.other, left, split);
+            (refs.swapped(), left, Some(Sides { bounds, centroids }))
+        }
+        None => {
+            let mid = partition::<B>(refs.cur, split).0;
+            (refs, mid, None)
+        }
     };
     if mid == 0 || mid == n {
         // Only reachable with non-finite arithmetic; any split keeps the tree correct.
         mid = n / 2;
         sides = None;
     }
-    let (l, r) = refs.split_at_mut(mid);
+    let (l, r) = refs.split_at(mid);
     let parallel = n > PARALLEL_SUBTREE;
     let sides = sides.unwrap_or_else(|| {
         let ((lb, lc), (rb, rc)) = if parallel {
-            rayon::join(|| reduce(l), || reduce(r))
+            rayon::join(|| reduce(l.cur), || reduce(r.cur))
         } else {
-            (reduce(l), reduce(r))
+            (reduce(l.cur), reduce(r.cur))
         };
         Sides {
             bounds: [lb, rb],
@@ -731,5 +981,138 @@ fn build_node_b<const B: usize>(
         count: 0,
         left_first: pair_index as u32,
         ..leaf
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    /// Boxes of a clustered scene: dense clumps (many equal bins and long runs to one side
+    /// of a split), long slivers and some exact duplicates (ties broken by id).
+    fn clustered_boxes(n: usize) -> Vec<Aabb> {
+        let mut s = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|i| {
+                let clump = Vec3::new((i % 7) as f32 * 10.0, (i % 3) as f32 * 10.0, 0.0);
+                let p = clump + Vec3::new(next(), next(), next()) * 2.0;
+                let size = if i % 11 == 0 {
+                    Vec3::new(5.0 * next(), 0.01, 0.01)
+                } else {
+                    Vec3::splat(0.05 * next())
+                };
+                if i % 97 == 0 {
+                    Aabb::new(Vec3::ONE, Vec3::splat(1.5))
+                } else {
+                    Aabb::new(p, p + size)
+                }
+            })
+            .collect()
+    }
+
+    /// Checks that the tree holds every primitive once, that every box holds what is below it
+    /// and that the depth is within the bound; returns the depth.
+    fn check_tree(t: &Bvh2, bounds: &[Aabb]) -> usize {
+        let mut seen = vec![false; bounds.len()];
+        for &p in &t.prim_order {
+            assert!(!std::mem::replace(&mut seen[p as usize], true), "{p} twice");
+        }
+        assert!(seen.iter().all(|&s| s), "a primitive is missing");
+        let mut deepest = 0;
+        let mut stack = vec![(0usize, 0usize)];
+        while let Some((i, depth)) = stack.pop() {
+            deepest = deepest.max(depth);
+            let n = &t.nodes[i];
+            let b = n.bounds();
+            let inside = |c: &Aabb| b.union(c) == b;
+            if n.is_leaf() {
+                let slots = n.left_first as usize..(n.left_first + n.count) as usize;
+                for s in slots {
+                    assert!(inside(&bounds[t.prim_order[s] as usize]), "leaf {i}");
+                }
+            } else {
+                for c in [n.left_first as usize, n.left_first as usize + 1] {
+                    // (Children may sit before their parent: see `build_node`'s slots.)
+                    assert!(inside(&t.nodes[c].bounds()), "node {i}");
+                    stack.push((c, depth + 1));
+                }
+            }
+        }
+        assert!(deepest <= crate::MAX_BVH2_DEPTH);
+        deepest
+    }
+
+    #[test]
+    fn binned_builds_are_valid_and_the_same_whatever_the_thread_count() {
+        // Over 8,192 primitives: the top nodes bin and partition in parallel chunks, and
+        // subtrees over 1,024 are built as parallel tasks.
+        let bounds = clustered_boxes(40_000);
+        for config in [
+            BuildConfig::FAST_BUILD,
+            BuildConfig::BALANCED,
+            BuildConfig::FAST_TRACE,
+        ] {
+            let build = |threads: usize| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap()
+                    .install(|| build_bvh2(&bounds, &config))
+            };
+            let one = build(1);
+            check_tree(&one, &bounds);
+            for threads in [2, 3, 8] {
+                let other = build(threads);
+                assert!(one.nodes == other.nodes, "{config:?}, {threads} threads");
+                assert_eq!(one.prim_order, other.prim_order, "{config:?}, {threads}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_parallel_partition_matches_a_sequential_one() {
+        // One split of a large node, partitioned in parallel chunks and in one piece: the same
+        // order (each side keeps the input order) and the same centroid boxes.
+        let bounds = clustered_boxes(3 * PARTITION_CHUNK + 123);
+        let refs: Vec<PrimRef> = bounds
+            .iter()
+            .enumerate()
+            .map(|(i, b)| PrimRef::new(b, i as u32))
+            .collect();
+        let (_, cb) = reduce(&refs);
+        let (split, _, _, left) = best_binned_split_counted::<16>(&refs, &cb, 4, false).unwrap();
+        let mut parallel = vec![PrimRef(Box4::EMPTY); refs.len()];
+        let pc = partition_into::<16>(&refs, &mut parallel, left, split);
+        let mut sequential = vec![PrimRef(Box4::EMPTY); refs.len()];
+        let Split::Binned {
+            axis,
+            bin,
+            cmin,
+            scale,
+        } = split
+        else {
+            panic!("a binned split")
+        };
+        let (l, r) = sequential.split_at_mut(left);
+        let sc = scatter::<16>(&refs, l, r, axis, bin, cmin, scale);
+        let ids = |v: &[PrimRef]| v.iter().map(PrimRef::id).collect::<Vec<_>>();
+        assert_eq!(ids(&parallel), ids(&sequential));
+        let expected: Vec<u32> = {
+            let side = |r: &PrimRef| bin_of::<16>(r.centroid()[axis], cmin, scale) >= bin;
+            let mut v: Vec<u32> = refs.iter().filter(|r| !side(r)).map(PrimRef::id).collect();
+            v.extend(refs.iter().filter(|r| side(r)).map(PrimRef::id));
+            v
+        };
+        assert_eq!(ids(&sequential), expected);
+        for k in 0..2 {
+            assert_eq!((pc[k].lo, pc[k].hi), (sc[k].lo, sc[k].hi));
+        }
     }
 }
