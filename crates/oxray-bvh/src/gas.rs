@@ -401,6 +401,30 @@ impl GasData {
         })
     }
 
+    /// The tree over the boxes of the active primitives (`Some`), for a structure that keeps
+    /// one primitive per leaf slot in the tree's order (custom primitives, spheres): the slot
+    /// table, the bounds and the node layouts. The caller stores the primitives by slot.
+    fn build_slots(
+        &mut self,
+        boxes: &[Option<Aabb>],
+        config: &BuildConfig,
+        width: NodeWidth,
+    ) -> Bvh2 {
+        let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
+            .iter()
+            .enumerate()
+            .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
+            .unzip();
+        let bvh2 = build_bvh2(&bounds, config);
+        self.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+        self.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
+        self.bvh = Bvh4::from(&bvh2);
+        if width == NodeWidth::Eight {
+            self.bvh8 = Some(Bvh8::from(&bvh2));
+        }
+        bvh2
+    }
+
     fn build_impl(
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
@@ -518,13 +542,7 @@ impl GasData {
                         Aabb::from_points(&[b.min, b.max])
                     });
                 }
-                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = valid
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
-                    .unzip();
-                let bvh2 = build_bvh2(&bounds, &config);
-                gas.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+                let bvh2 = gas.build_slots(&valid, &config, width);
                 gas.aabbs = gas
                     .slot_prim
                     .iter()
@@ -537,11 +555,6 @@ impl GasData {
                         }
                     })
                     .collect();
-                gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
-                gas.bvh = Bvh4::from(&bvh2);
-                if width == NodeWidth::Eight {
-                    gas.bvh8 = Some(Bvh8::from(&bvh2));
-                }
                 if keep_inactive {
                     gas.bounds = crate::refit::refit_aabb_boxes(&mut gas);
                 }
@@ -569,13 +582,7 @@ impl GasData {
                         Aabb::new(c, c)
                     });
                 }
-                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
-                    .unzip();
-                let bvh2 = build_bvh2(&bounds, &config);
-                gas.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
+                let bvh2 = gas.build_slots(&boxes, &config, width);
                 gas.spheres = gas
                     .slot_prim
                     .par_iter()
@@ -588,11 +595,6 @@ impl GasData {
                         }
                     })
                     .collect();
-                gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
-                gas.bvh = Bvh4::from(&bvh2);
-                if width == NodeWidth::Eight {
-                    gas.bvh8 = Some(Bvh8::from(&bvh2));
-                }
                 if keep_inactive {
                     gas.bounds = crate::refit::refit_sphere_boxes(&mut gas);
                 }

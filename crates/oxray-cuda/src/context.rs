@@ -269,8 +269,6 @@ fn compile(cc: (i32, i32)) -> Result<cudarc::nvrtc::Ptx, CudaError> {
     nvrtc_compile(KERNEL_SOURCE, compile_options(cc), "oxray_trace.cu")
 }
 
-/// Compiles CUDA C++ to PTX with NVRTC, turning a missing library or a compile error into a
-/// [`CudaError`] (with NVRTC's log).
 /// NVRTC's version, `major.minor`, if the library can be loaded.
 pub(crate) fn nvrtc_version() -> Option<String> {
     // SAFETY: only tries to open the library by its usual names (dlopen).
@@ -287,6 +285,8 @@ pub(crate) fn nvrtc_version() -> Option<String> {
     (r == cudarc::nvrtc::sys::nvrtcResult::NVRTC_SUCCESS).then(|| format!("{major}.{minor}"))
 }
 
+/// Compiles CUDA C++ to PTX with NVRTC, turning a missing library or a compile error into a
+/// [`CudaError`] (with NVRTC's log).
 pub(crate) fn nvrtc_compile(
     source: &str,
     options: Vec<String>,
@@ -319,6 +319,27 @@ pub(crate) fn nvrtc_compile(
     })
 }
 
+/// For the NVRTC compile tests: the PTX `compile` makes, or `None` (with a message) where
+/// libnvrtc cannot be loaded, which `OXRAY_REQUIRE_NVRTC` turns into a failure (CI sets it).
+#[cfg(test)]
+pub(crate) fn ptx_or_skip(
+    compile: impl FnOnce() -> Result<cudarc::nvrtc::Ptx, CudaError>,
+) -> Option<String> {
+    // SAFETY: only tries to open the library by its usual names (dlopen).
+    if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+        assert!(
+            std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
+            "OXRAY_REQUIRE_NVRTC is set but libnvrtc cannot be loaded"
+        );
+        println!("skipping: libnvrtc not found (set LD_LIBRARY_PATH to compile the kernels)");
+        return None;
+    }
+    match compile() {
+        Ok(p) => Some(p.to_src()),
+        Err(e) => panic!("{e}"),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -341,18 +362,8 @@ mod tests {
 
     #[test]
     fn the_kernels_compile_with_nvrtc_where_it_is_present() {
-        // SAFETY: only tries to open the library by its usual names (dlopen).
-        if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
-            assert!(
-                std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
-                "OXRAY_REQUIRE_NVRTC is set but libnvrtc cannot be loaded"
-            );
-            println!("skipping: libnvrtc not found (set LD_LIBRARY_PATH to compile the kernels)");
+        let Some(ptx) = ptx_or_skip(|| compile((9, 0))) else {
             return;
-        }
-        let ptx = match compile((9, 0)) {
-            Ok(p) => p.to_src(),
-            Err(e) => panic!("{e}"),
         };
         for entry in [
             "oxray_closest_bvh4",
