@@ -17,32 +17,8 @@ use oxray_testkit::rays::{camera_rays, hemisphere_rays, shadow_rays, tricky_rays
 use oxray_testkit::rng::Rng;
 use oxray_testkit::Tri;
 
-/// The kernels this processor runs; says which are skipped.
-fn kernels() -> Vec<Isa> {
-    for isa in Isa::ALL {
-        if !isa.is_available() {
-            eprintln!("skipping the {isa} kernel: this processor lacks it");
-        }
-    }
-    Isa::available()
-}
-
-fn mesh_gas(isa: Isa, m: &Mesh, flags: BuildFlags) -> Gas {
-    let input = TriangleInput::new(VertexBuffer::f32x3(&m.positions))
-        .indices(IndexBuffer::u32x3(&m.triangles));
-    let gas = Gas::build_with_isa(isa, &BuildOptions::new(flags), &[input.into()]).unwrap();
-    assert_eq!(gas.isa(), isa);
-    gas
-}
-
-fn soup_mesh(tris: &[Tri]) -> Mesh {
-    Mesh {
-        positions: tris.iter().flatten().copied().collect(),
-        triangles: (0..tris.len() as u32)
-            .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
-            .collect(),
-    }
-}
+mod common;
+use common::{kernels, mesh_gas, soup_mesh};
 
 /// The scenes: a random soup, a grid cube (exact ties on shared edges), an icosphere, the
 /// bunny where it is found.

@@ -16,36 +16,16 @@ use oxray_testkit::mesh::{find_mesh, grid_cube, icosphere, load_obj, random_soup
 use oxray_testkit::oracle::check_closest;
 use oxray_testkit::rays::{camera_rays, hemisphere_rays, shadow_rays, tricky_rays};
 use oxray_testkit::rng::Rng;
-use oxray_testkit::Tri;
+
+mod common;
+use common::{kernels, mesh_gas, soup_mesh};
 
 const FAST_TRACE: BuildFlags = BuildFlags::PREFER_FAST_TRACE;
-
-fn kernels() -> Vec<Isa> {
-    for isa in Isa::ALL {
-        if !isa.is_available() {
-            eprintln!("skipping the {isa} kernel: this processor lacks it");
-        }
-    }
-    Isa::available()
-}
 
 fn input(m: &Mesh) -> BuildInput<'_> {
     TriangleInput::new(VertexBuffer::f32x3(&m.positions))
         .indices(IndexBuffer::u32x3(&m.triangles))
         .into()
-}
-
-fn gas(isa: Isa, m: &Mesh, flags: BuildFlags) -> Gas {
-    Gas::build_with_isa(isa, &BuildOptions::new(flags), &[input(m)]).unwrap()
-}
-
-fn soup_mesh(tris: &[Tri]) -> Mesh {
-    Mesh {
-        positions: tris.iter().flatten().copied().collect(),
-        triangles: (0..tris.len() as u32)
-            .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
-            .collect(),
-    }
 }
 
 /// Long thin triangles crossing a box in every direction, among small ones: the case spatial
@@ -76,7 +56,7 @@ fn rays_for(m: &Mesh, rng: &mut Rng) -> Vec<Ray> {
     let mut rays = camera_rays(&m.positions, 40, 40);
     rays.extend(hemisphere_rays(&m.positions, &m.triangles, 1500, 3));
     rays.extend(shadow_rays(&m.positions, &m.triangles, 800, 4));
-    let plain = gas(Isa::Sse, m, BuildFlags::empty());
+    let plain = mesh_gas(Isa::Sse, m, BuildFlags::empty());
     rays.extend(tricky_rays(&m.positions, &m.triangles, 1500, 5, |r| {
         plain.intersect(r).map(|h| h.t)
     }));
@@ -97,7 +77,7 @@ fn rays_for(m: &Mesh, rng: &mut Rng) -> Vec<Ray> {
 fn check_against_reference(name: &str, m: &Mesh, rays: &[Ray], step: usize) {
     let tris = m.soup();
     for isa in kernels() {
-        let g = gas(isa, m, FAST_TRACE);
+        let g = mesh_gas(isa, m, FAST_TRACE);
         let mut hits = vec![None; rays.len()];
         g.intersect_batch(rays, &mut hits).unwrap();
         let mut occ = vec![false; rays.len()];
@@ -178,13 +158,13 @@ fn closed_meshes_stay_watertight_on_their_edges_and_vertices() {
     // of the triangle it crosses was clipped into.
     let mut rng = Rng::new(8);
     for (name, m) in [("grid cube", grid_cube(16)), ("icosphere", icosphere(4))] {
-        let g = gas(Isa::selected(), &m, FAST_TRACE);
+        let g = mesh_gas(Isa::selected(), &m, FAST_TRACE);
         assert!(
             g.data().num_references() >= g.data().num_active_primitives(),
             "{name}"
         );
         let rays = tricky_rays(&m.positions, &m.triangles, 4000, 9, |r| {
-            gas(Isa::Sse, &m, BuildFlags::empty())
+            mesh_gas(Isa::Sse, &m, BuildFlags::empty())
                 .intersect(r)
                 .map(|h| h.t)
         });
@@ -193,7 +173,7 @@ fn closed_meshes_stay_watertight_on_their_edges_and_vertices() {
         let (lo, hi) = m.bounds();
         let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
         for isa in kernels() {
-            let g = gas(isa, &m, FAST_TRACE);
+            let g = mesh_gas(isa, &m, FAST_TRACE);
             for i in 0..20_000 {
                 let target = m.v(m.triangles[i % m.triangles.len()][i % 3]);
                 let d = if i % 2 == 0 {

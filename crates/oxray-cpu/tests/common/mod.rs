@@ -1,0 +1,35 @@
+//! Helpers of the kernel and layout tests (each test file declares `mod common;`).
+
+use oxray_core::{BuildFlags, BuildOptions, IndexBuffer, TriangleInput, VertexBuffer};
+use oxray_cpu::{Gas, Isa};
+use oxray_testkit::mesh::Mesh;
+use oxray_testkit::Tri;
+
+/// The kernels this processor runs; says which are skipped.
+pub fn kernels() -> Vec<Isa> {
+    for isa in Isa::ALL {
+        if !isa.is_available() {
+            eprintln!("skipping the {isa} kernel: this processor lacks it");
+        }
+    }
+    Isa::available()
+}
+
+/// A GAS over the indexed mesh `m`, traced by kernel `isa`.
+pub fn mesh_gas(isa: Isa, m: &Mesh, flags: BuildFlags) -> Gas {
+    let input = TriangleInput::new(VertexBuffer::f32x3(&m.positions))
+        .indices(IndexBuffer::u32x3(&m.triangles));
+    let gas = Gas::build_with_isa(isa, &BuildOptions::new(flags), &[input.into()]).unwrap();
+    assert_eq!(gas.isa(), isa);
+    gas
+}
+
+/// A triangle soup as an indexed mesh (no shared vertices).
+pub fn soup_mesh(tris: &[Tri]) -> Mesh {
+    Mesh {
+        positions: tris.iter().flatten().copied().collect(),
+        triangles: (0..tris.len() as u32)
+            .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+            .collect(),
+    }
+}
