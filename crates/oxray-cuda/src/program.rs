@@ -308,6 +308,16 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
         "#define OXRAY_PIPELINE_HAS_ANYHIT {}\n",
         any_hit as u32
     ));
+    // What the programs may read of the ray and the hit (an NVRTC option may say otherwise).
+    s.push_str(&format!(
+        "#ifndef OXRAY_READS\n#define OXRAY_READS {}u\n#endif\n",
+        reads(
+            groups
+                .iter()
+                .flat_map(|g| g.inner.entries())
+                .map(|e| e.module.source())
+        )
+    ));
     s.push_str(crate::KERNEL_SOURCE);
     s.push_str("\n#line 1 \"optix_types.h\"\n");
     s.push_str(oxray_core::source::OPTIX_TYPES_HEADER);
@@ -418,15 +428,81 @@ __oxray_pipeline() {
     __oxray_states[threadIdx.x] = &state;
     __oxray_ThreadState& s = __oxray_state();
     s.depth = 0u;
-    s.calls = 0u;
-    s.report = nullptr;
-    s.ray.path = nullptr;
+    if (__OXRAY_STORES(true, __OXRAY_READS_CALLS)) s.calls = 0u;
+    if (__OXRAY_STORES(true, __OXRAY_READS_REPORT)) s.report = nullptr;
+    if (__OXRAY_STORES(true, __OXRAY_READS_PATH)) s.ray.path = nullptr;
     s.record = reinterpret_cast<const char*>(__oxray_launch.raygen);
     __oxray_call_raygen(__oxray_group_of(s.record));
 }
 "#,
     );
     s
+}
+
+/// The values of the ray and the hit that a trace on the device header's fast path stores only
+/// when a program may read them (its `OXRAY_READS` bits), with the device functions that return
+/// each.
+const READS: [(u32, &[&str]); 13] = [
+    (1, &["optixGetWorldRayOrigin", "optixGetObjectRayOrigin"]),
+    (
+        2,
+        &["optixGetWorldRayDirection", "optixGetObjectRayDirection"],
+    ),
+    (4, &["optixGetRayTmin"]),
+    (8, &["optixGetRayTime"]),
+    (16, &["optixGetRayVisibilityMask"]),
+    (32, &["optixGetPrimitiveIndex"]),
+    (64, &["optixGetSbtGASIndex"]),
+    (
+        128,
+        &[
+            "optixGetHitKind",
+            "optixIsFrontFaceHit",
+            "optixIsBackFaceHit",
+            "optixIsTriangleFrontFaceHit",
+            "optixIsTriangleBackFaceHit",
+            "optixIsTriangleHit",
+            "optixGetPrimitiveType",
+        ],
+    ),
+    (256, &["optixGetTriangleBarycentrics", "optixGetAttribute_"]),
+    (
+        512,
+        &["optixGetTriangleVertexData", "optixGetGASTraversableHandle"],
+    ),
+    (1024, &["optixReportIntersection"]),
+    (2048, &["optixDirectCall", "optixContinuationCall"]),
+    (
+        4096,
+        &[
+            "optixGetInstanceId",
+            "optixGetInstanceIndex",
+            "optixGetObjectRay",
+            "optixGetTransformList",
+            "optixGetObjectToWorldTransformMatrix",
+            "optixGetWorldToObjectTransformMatrix",
+            "optixTransform",
+            "optixGetGASTraversableHandle",
+            "optixGetTriangleVertexData",
+        ],
+    ),
+];
+
+/// Which of the ray's and the hit's values the programs of `sources` may read: a value whose
+/// device functions no source names is never asked for, so a fast-path trace need not write it
+/// into the thread's state (local memory, which a launch of a million short rays pays for in
+/// DRAM writes). A name anywhere in a source (a comment too) counts, so the set errs on the
+/// side of storing.
+fn reads<'a>(sources: impl Iterator<Item = &'a str>) -> u32 {
+    let sources: Vec<&str> = sources.collect();
+    READS
+        .iter()
+        .filter(|(_, names)| {
+            names
+                .iter()
+                .any(|name| sources.iter().any(|src| src.contains(name)))
+        })
+        .fold(0, |bits, (bit, _)| bits | bit)
 }
 
 /// The NVRTC options of a pipeline for a device of compute capability `cc`: those of the query
@@ -1129,6 +1205,27 @@ mod tests {
     const SRC: &str = "#include <optix.h>\n  #  include \"optix_device.h\"\n#include <cuda_fp16.h>\n\
         extern \"C\" __global__ void __raygen__a() {}\nextern \"C\" __global__ void __miss__m() {}\n\
         extern \"C\" __global__ void __closesthit__c () {}\nvoid x__raygen__b() {}\n";
+
+    #[test]
+    fn reads_name_each_value_the_programs_may_read() {
+        let reads = |srcs: &[&str]| reads(srcs.iter().copied());
+        assert_eq!(reads(&["optixSetPayload_0(optixGetRayTmax());"]), 0);
+        assert_eq!(reads(&["float3 o = optixGetWorldRayOrigin();"]), 1);
+        assert_eq!(reads(&["optixGetObjectRayOrigin()"]), 1 | 4096);
+        assert_eq!(
+            reads(&["optixGetObjectRayDirection()", "// optixGetRayTime\n"]),
+            2 | 8 | 4096
+        );
+        assert_eq!(
+            reads(&["optixIsTriangleHit() ? optixGetAttribute_3() : 0"]),
+            128 | 256
+        );
+        let every: Vec<&str> = READS.iter().flat_map(|(_, n)| n.iter().copied()).collect();
+        assert_eq!(reads(&[&every.join(" ")]), 8191);
+        // The pipeline's unit says what its programs read: SRC reads none of the values.
+        let (_m, g) = groups();
+        assert!(pipeline_source(&g).contains("#ifndef OXRAY_READS\n#define OXRAY_READS 0u\n"));
+    }
 
     fn groups() -> (CudaModule, Vec<CudaProgramGroup>) {
         let m = CudaModule::from_source(SRC);

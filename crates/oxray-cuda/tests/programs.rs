@@ -1013,3 +1013,155 @@ fn nested_instances_and_static_transforms_give_the_transform_list() {
     let (_, report) = s.run(handle, &sbt, dims, 0, [0, 0]);
     assert_eq!(report.exceptions, 128);
 }
+
+/// Programs that read a few of the ray's and the hit's values: each is the closest-hit (and
+/// miss) program of its own pipeline, whose fast-path traces store only what the sources name.
+const READERS: [&str; 5] = [
+    "o[0] = optixGetPrimitiveIndex(); const float2 b = optixGetTriangleBarycentrics(); \
+     o[1] = __float_as_uint(b.x); o[2] = __float_as_uint(b.y); o[3] = optixGetAttribute_2();",
+    "o[0] = optixGetHitKind(); o[1] = optixIsFrontFaceHit(); o[2] = optixGetSbtGASIndex(); \
+     o[3] = optixGetPrimitiveType() ^ optixGetInstanceId();",
+    "const float3 a = optixGetWorldRayOrigin(); const float3 d = optixGetObjectRayDirection(); \
+     o[0] = __float_as_uint(a.x + 3.0f * a.y); o[1] = __float_as_uint(d.z); \
+     o[2] = __float_as_uint(optixGetRayTmin()); o[3] = __float_as_uint(optixGetRayTime()) ^ \
+     optixGetRayVisibilityMask();",
+    "float3 v[3]; optixGetTriangleVertexData(v); o[0] = __float_as_uint(v[0].x + v[1].y); \
+     o[1] = __float_as_uint(v[2].x); o[2] = optixGetGASTraversableHandle() != 0ull; \
+     o[3] = optixGetRayFlags();",
+    "o[0] = __float_as_uint(optixGetRayTmax());",
+];
+
+/// A pipeline over the quads whose programs write four words per launch index from `reader`,
+/// and a fifth from the ray-generation record's data.
+fn reader_source(reader: &str, all_named: bool) -> String {
+    let names = if all_named {
+        "// Every value is read, as far as the pipeline can tell: optixGetWorldRayOrigin \
+         optixGetWorldRayDirection optixGetRayTmin optixGetRayTime optixGetRayVisibilityMask \
+         optixGetPrimitiveIndex optixGetSbtGASIndex optixGetHitKind optixGetAttribute_0 \
+         optixGetTriangleVertexData\n"
+    } else {
+        ""
+    };
+    format!(
+        "#include <optix.h>\n{names}\
+         struct Params {{ unsigned int* out; OptixTraversableHandle handle; unsigned int w; }};\n\
+         extern \"C\" __constant__ Params params;\n\
+         static __device__ void write(unsigned int* o) {{ {reader} }}\n\
+         extern \"C\" __global__ void __raygen__grid() {{\n\
+           const uint3 i = optixGetLaunchIndex();\n\
+           const float x = -1.2f + 2.4f * (i.x + 0.5f) / params.w;\n\
+           const float y = -1.2f + 2.4f * (i.y + 0.5f) / params.w;\n\
+           unsigned int p0 = 7u, p1 = 7u, p2 = 7u, p3 = 7u;\n\
+           optixTrace(params.handle, make_float3(x, y, 1.0f), make_float3(0.1f * x, 0.0f, -1.0f),\n\
+                      0.25f, 10.0f, 0.5f, OptixVisibilityMask(0x35), 0u, 0u, 1u, 0u,\n\
+                      p0, p1, p2, p3);\n\
+           unsigned int* o = params.out + 5 * (i.y * params.w + i.x);\n\
+           o[0] = p0; o[1] = p1; o[2] = p2; o[3] = p3;\n\
+           o[4] = *reinterpret_cast<const unsigned int*>(optixGetSbtDataPointer());\n\
+         }}\n\
+         static __device__ void put() {{\n\
+           unsigned int o[4] = {{0u, 0u, 0u, 0u}}; write(o);\n\
+           optixSetPayload_0(o[0]); optixSetPayload_1(o[1]); optixSetPayload_2(o[2]);\n\
+           optixSetPayload_3(o[3]);\n\
+         }}\n\
+         extern \"C\" __global__ void __closesthit__read() {{ put(); }}\n\
+         extern \"C\" __global__ void __miss__read() {{ optixSetPayload_0(0xdeadu); }}\n"
+    )
+}
+
+fn reader_groups(src: &str) -> Vec<CudaProgramGroup> {
+    let m = CudaModule::from_source(src);
+    vec![
+        CudaProgramGroup::raygen(&m, "__raygen__grid").unwrap(),
+        CudaProgramGroup::miss(Some((&m, "__miss__read"))).unwrap(),
+        CudaProgramGroup::hit_group(CudaHitGroupDesc {
+            closest_hit: Some((&m, "__closesthit__read")),
+            ..Default::default()
+        })
+        .unwrap(),
+    ]
+}
+
+/// A trace on the fast path stores only the values its pipeline's programs name (the reads of
+/// `OXRAY_READS`), and what the programs read is the same as when every value is stored: the
+/// origin, direction, tmin, time and mask (§13.3), the primitive, SBT-GAS index, instance id,
+/// hit kind and facing (§13.7), barycentrics and attributes (§13.4), vertex data and the GAS
+/// (§13.9); and the ray-generation program's record after its trace (§7).
+#[test]
+fn fast_path_traces_store_what_the_programs_read() {
+    if !nvrtc() {
+        return;
+    }
+    let link = PipelineLinkOptions::default();
+    for reader in READERS {
+        for all in [false, true] {
+            compile_pipeline_ptx(
+                (9, 0),
+                &compile_options(4),
+                &link,
+                &reader_groups(&reader_source(reader, all)),
+            )
+            .unwrap_or_else(|e| panic!("{reader}: {e}"));
+        }
+    }
+    let Some((ctx, _lock)) = gpu() else { return };
+    let cuda = Cuda::from_context(ctx.clone());
+    // The quads (two build inputs, so SBT-GAS indices 0 and 1), and the left one alone (one
+    // SBT record: its hits need not look the SBT-GAS index up).
+    let quads = quads(&cuda);
+    let left = [
+        [-1.0f32, -1.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [-1.0, 1.0, 0.0],
+    ];
+    let idx = [[0u32, 1, 2], [0, 2, 3]];
+    let one = TriangleInput::new(VertexBuffer::f32x3(&left)).indices(IndexBuffer::u32x3(&idx));
+    let single = cuda
+        .build_gas(&BuildOptions::default(), &[one.into()])
+        .unwrap();
+    let w = 24u32;
+    #[repr(C)]
+    #[derive(Clone, Copy, Pod, Zeroable)]
+    struct Params {
+        out: u64,
+        handle: u64,
+        w: u32,
+        pad: u32,
+    }
+    for (reader, gas) in READERS.iter().flat_map(|r| [(r, &quads), (r, &single)]) {
+        let handle = gas.optix_handle().unwrap();
+        let run = |all: bool| {
+            let groups = reader_groups(&reader_source(reader, all));
+            let pipeline =
+                CudaPipeline::new(&ctx, &compile_options(4), &link, Some("params"), &groups)
+                    .unwrap();
+            let sbt = ShaderBindingTable {
+                // After its trace, the ray-generation program sees its own record again.
+                raygen: SbtRegion::from_records(&[(groups[0].pack_header(), 0xC0FFEEu32)]),
+                miss: SbtRegion::from_headers(&[groups[1].pack_header()]),
+                // One record per build input of the quads.
+                hitgroup: SbtRegion::from_headers(&[groups[2].pack_header(); 2]),
+                ..Default::default()
+            };
+            let out = CudaBuffer::<u32>::zeroed(&ctx, (5 * w * w) as usize).unwrap();
+            let params = Params {
+                out: out.device_ptr(),
+                handle,
+                w,
+                pad: 0,
+            };
+            let report = pipeline.launch_with(&params, &sbt, w, w, 1).unwrap();
+            assert_eq!(report.exceptions, 0, "{reader}: {report:?}");
+            out.download().unwrap()
+        };
+        let (some, every) = (run(false), run(true));
+        let hits = some.chunks(5).filter(|o| o[0] != 0xdead).count();
+        assert!(some.chunks(5).all(|o| o[4] == 0xC0FFEE), "{reader}");
+        assert!(
+            hits > 100 && hits < (w * w) as usize,
+            "{reader}: {hits} hits"
+        );
+        assert_eq!(some, every, "{reader}");
+    }
+}

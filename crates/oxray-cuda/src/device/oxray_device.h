@@ -207,7 +207,10 @@ static __forceinline__ __device__ __oxray_ThreadState& __oxray_state() {
 static __forceinline__ __device__ uint3 __oxray_launch_index() {
     const u32 i = blockIdx.x * blockDim.x + threadIdx.x;
     const uint3 d = __oxray_launch.dims;
-    return make_uint3(i % d.x, (i / d.x) % d.y, i / (d.x * d.y));
+    // A 1-D launch needs no division (the same branch for every thread of the launch).
+    if (d.y == 1u && d.z == 1u) return make_uint3(i, 0u, 0u);
+    const u32 row = i / d.x;
+    return make_uint3(i - row * d.x, row % d.y, row / d.y);
 }
 
 // Generated with the pipeline: calls the program of the given kind of the group whose index the
@@ -1097,14 +1100,47 @@ struct __oxray_Frame {
     __oxray_RayState ray;
 };
 
+// Which of the ray's and the hit's values the pipeline's programs may read: those whose device
+// functions appear in their sources (`pipeline_source` writes the set; all by default). A trace
+// on the fast path stores only these in the thread's state: every word stored there is local
+// memory that the device writes back to DRAM, which a launch of a million short rays feels.
+#define __OXRAY_READS_ORIGIN 1u      // optixGetWorldRayOrigin, optixGetObjectRayOrigin
+#define __OXRAY_READS_DIRECTION 2u   // optixGetWorldRayDirection, optixGetObjectRayDirection
+#define __OXRAY_READS_TMIN 4u        // optixGetRayTmin
+#define __OXRAY_READS_TIME 8u        // optixGetRayTime
+#define __OXRAY_READS_MASK 16u       // optixGetRayVisibilityMask
+#define __OXRAY_READS_PRIMITIVE 32u  // optixGetPrimitiveIndex
+#define __OXRAY_READS_SBT_GAS 64u    // optixGetSbtGASIndex
+#define __OXRAY_READS_HIT_KIND 128u  // optixGetHitKind and the facing and type functions
+#define __OXRAY_READS_ATTRIBUTES 256u  // optixGetTriangleBarycentrics, the attribute functions
+#define __OXRAY_READS_VERTICES 512u  // optixGetTriangleVertexData, optixGetGASTraversableHandle
+#define __OXRAY_READS_REPORT 1024u   // optixReportIntersection (the kernel clears the report)
+#define __OXRAY_READS_CALLS 2048u    // optixDirectCall, optixContinuationCall (the call depth)
+#define __OXRAY_READS_PATH 4096u     // the instance, object-space, transform and GAS functions
+#ifndef OXRAY_READS
+#define OXRAY_READS 0xffffffffu
+#endif
+#define __OXRAY_STORES(fast, bit) (!(fast) || (OXRAY_READS & (bit)) != 0u)
+
+// Whether a trace (not yet entered, or left) returns to the ray-generation program: one at
+// depth 0 when no callable can be running (no program calls one). Its record is then the
+// launch's, which the trace need not save.
+#ifndef OXRAY_SAVE_RECORD_ALWAYS
+#define OXRAY_SAVE_RECORD_ALWAYS 0
+#endif
+static __forceinline__ __device__ bool __oxray_from_raygen(const __oxray_ThreadState& st) {
+    return !OXRAY_SAVE_RECORD_ALWAYS && (OXRAY_READS & __OXRAY_READS_CALLS) == 0u &&
+           st.depth == 0u;
+}
+
 // What every trace does first: the checks of the guide's limits (payload count, trace depth)
 // and, in validation mode, of the ray; then the caller's state goes into `frame`, and the ray
-// and payload into the state.
-static __forceinline__ __device__ void __oxray_enter(__oxray_ThreadState& st, float3 org,
-                                                     float3 dir, float tmin, float tmax,
-                                                     float time, OptixVisibilityMask mask,
-                                                     unsigned int flags, unsigned int n,
-                                                     const unsigned int* payload,
+// and payload into the state. `fast`: the trace takes the fast path (a constant at each call).
+static __forceinline__ __device__ void __oxray_enter(bool fast, __oxray_ThreadState& st,
+                                                     float3 org, float3 dir, float tmin,
+                                                     float tmax, float time,
+                                                     OptixVisibilityMask mask, unsigned int flags,
+                                                     unsigned int n, const unsigned int* payload,
                                                      __oxray_Frame& frame) {
     if (n > OXRAY_NUM_PAYLOAD_VALUES) {
         u32 d[2] = {n, (u32)OXRAY_NUM_PAYLOAD_VALUES};
@@ -1127,17 +1163,19 @@ static __forceinline__ __device__ void __oxray_enter(__oxray_ThreadState& st, fl
             __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_RAY, 8, d);
         }
     }
-    frame.record = st.record;
+    if (!__oxray_from_raygen(st)) frame.record = st.record;
     if (st.depth > 0u) frame.ray = st.ray;
     st.depth += 1u;
     for (u32 i = 0; i < n; ++i) st.ray.payload[i] = payload[i];
-    st.ray.org = org;
-    st.ray.dir = dir;
-    st.ray.tmin = tmin;
+    // On the fast path only the programs read the ray's origin, direction, tmin, time and
+    // mask (the general traversal reads tmin and mask too).
+    if (__OXRAY_STORES(fast, __OXRAY_READS_ORIGIN)) st.ray.org = org;
+    if (__OXRAY_STORES(fast, __OXRAY_READS_DIRECTION)) st.ray.dir = dir;
+    if (__OXRAY_STORES(fast, __OXRAY_READS_TMIN)) st.ray.tmin = tmin;
     st.ray.tmax = tmax;
-    st.ray.time = time;
+    if (__OXRAY_STORES(fast, __OXRAY_READS_TIME)) st.ray.time = time;
     st.ray.flags = flags;
-    st.ray.mask = mask & 0xFFu;
+    if (__OXRAY_STORES(fast, __OXRAY_READS_MASK)) st.ray.mask = mask & 0xFFu;
 }
 
 // The miss program `miss_index` (raises INVALID_MISS_SBT beyond the region), with the world
@@ -1149,8 +1187,8 @@ static __forceinline__ __device__ void __oxray_miss(__oxray_ThreadState& st,
         u32 d[1] = {miss_index};
         __oxray_throw(OPTIX_EXCEPTION_CODE_INVALID_MISS_SBT, 1, d);
     }
-    st.ray.path = root;
-    st.ray.gas = nullptr;
+    if (__OXRAY_STORES(true, __OXRAY_READS_PATH)) st.ray.path = root;
+    if (__OXRAY_STORES(true, __OXRAY_READS_VERTICES)) st.ray.gas = nullptr;
     st.record = reinterpret_cast<const char*>(__oxray_launch.miss) +
                 (unsigned long long)miss_index * __oxray_launch.miss_stride;
     __oxray_call_miss(__oxray_group_of(st.record));
@@ -1162,7 +1200,8 @@ static __forceinline__ __device__ void __oxray_leave(__oxray_ThreadState& st, un
                                                      const __oxray_Frame& frame) {
     for (u32 i = 0; i < n; ++i) payload[i] = st.ray.payload[i];
     st.depth -= 1u;
-    st.record = frame.record;
+    st.record = __oxray_from_raygen(st) ? reinterpret_cast<const char*>(__oxray_launch.raygen)
+                                        : frame.record;
     if (st.depth > 0u) st.ray = frame.ray;
 }
 
@@ -1179,7 +1218,7 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
                                                   unsigned int* payload) {
     __oxray_ThreadState& st = __oxray_state();
     __oxray_Frame frame;
-    __oxray_enter(st, org, dir, tmin, tmax, time, mask, flags, n, payload, frame);
+    __oxray_enter(false, st, org, dir, tmin, tmax, time, mask, flags, n, payload, frame);
 
     // The path of the root: no transforms, the world ray.
     __oxray_Path root;
@@ -1232,7 +1271,9 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
 // and `__oxray_fast_walk`): the closest hit `fast` of the triangle GAS `g`, written straight
 // into the state (no intermediate hit record, no path of its own: the shared root path), then
 // the closest-hit or miss program. The ray's flags are read back from the state, so that the
-// call site keeps as few values alive across its walk as the query kernels do.
+// call site keeps as few values alive across its walk as the query kernels do. (Copying the
+// payload out at the call site instead, to keep it in registers there, measured slower: the
+// call then has more live values to save.)
 static __noinline__ __device__ void __oxray_trace_fast(const __oxray_Traversable* g, Best fast,
                                                        unsigned int sbt_offset,
                                                        unsigned int sbt_stride,
@@ -1244,22 +1285,34 @@ static __noinline__ __device__ void __oxray_trace_fast(const __oxray_Traversable
         const u32 flags = st.ray.flags;
         if ((flags & OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT) == 0u) {
             const u32 s = fast.slot & ~BACK_FACE_BIT;
-            const uint2 info = reinterpret_cast<const uint2*>(g->info)[s];
+            // With one SBT record the SBT-GAS index is 0: the slot's entry is needed only
+            // when a program reads the primitive or that index.
+            uint2 info = make_uint2(0u, 0u);
+            if (__OXRAY_STORES(true, __OXRAY_READS_PRIMITIVE | __OXRAY_READS_SBT_GAS) ||
+                g->count != 1u) {
+                info = reinterpret_cast<const uint2*>(g->info)[s];
+            }
             __oxray_TraceArgs a;
             a.flags = flags;
             a.sbt_offset = sbt_offset;
             a.sbt_stride = sbt_stride;
             const char* record = __oxray_hit_record(a, __oxray_root_path, info.y);
             st.ray.tmax = fast.t;
-            st.ray.prim = info.x;
-            st.ray.sbt_gas_index = info.y;
-            st.ray.hit_kind = (fast.slot & BACK_FACE_BIT) ? OPTIX_HIT_KIND_TRIANGLE_BACK_FACE
-                                                          : OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE;
-            st.ray.slot = s;
-            st.ray.attr[0] = __float_as_uint(fast.u);
-            st.ray.attr[1] = __float_as_uint(fast.v);
-            st.ray.path = &__oxray_root_path;
-            st.ray.gas = g;
+            if (__OXRAY_STORES(true, __OXRAY_READS_PRIMITIVE)) st.ray.prim = info.x;
+            if (__OXRAY_STORES(true, __OXRAY_READS_SBT_GAS)) st.ray.sbt_gas_index = info.y;
+            if (__OXRAY_STORES(true, __OXRAY_READS_HIT_KIND)) {
+                st.ray.hit_kind = (fast.slot & BACK_FACE_BIT) ? OPTIX_HIT_KIND_TRIANGLE_BACK_FACE
+                                                              : OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE;
+            }
+            if (__OXRAY_STORES(true, __OXRAY_READS_ATTRIBUTES | __OXRAY_READS_VERTICES)) {
+                st.ray.slot = s;
+            }
+            if (__OXRAY_STORES(true, __OXRAY_READS_ATTRIBUTES)) {
+                st.ray.attr[0] = __float_as_uint(fast.u);
+                st.ray.attr[1] = __float_as_uint(fast.v);
+            }
+            if (__OXRAY_STORES(true, __OXRAY_READS_PATH)) st.ray.path = &__oxray_root_path;
+            if (__OXRAY_STORES(true, __OXRAY_READS_VERTICES)) st.ray.gas = g;
             st.record = record;
             __oxray_call_closesthit(__oxray_group_of(record));
         }
@@ -1293,7 +1346,7 @@ static __forceinline__ __device__ void optixTrace(OptixTraversableHandle handle,
             // The ray and payload go into the state before the walk, so that only the walk's
             // own values are alive during it.
             __oxray_Frame frame;
-            __oxray_enter(__oxray_state(), rayOrigin, rayDirection, tmin, tmax, rayTime,
+            __oxray_enter(true, __oxray_state(), rayOrigin, rayDirection, tmin, tmax, rayTime,
                           visibilityMask, rayFlags, n, p, frame);
             const __oxray_Traversable* g = reinterpret_cast<const __oxray_Traversable*>(handle);
             const bool first = (rayFlags & OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT) != 0u;
