@@ -32,10 +32,12 @@ mod build;
 mod bvh2;
 mod bvh4;
 mod bvh8;
+pub mod curve;
 pub mod export;
 pub mod gas;
 pub mod ias;
 pub mod memory;
+mod poly;
 mod refit;
 pub mod sbvh;
 pub mod serialize;
@@ -49,6 +51,7 @@ pub use build::{build_bvh2, temp_bytes, BuildConfig};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh4::{Bvh4, Bvh4Node};
 pub use bvh8::{Bvh8, Bvh8Node};
+pub use curve::{CurveHit, CurveSegment};
 pub use export::{ExportedTriangle, GasExport};
 pub use gas::{
     spatial_splits, GasData, GasInfo, GasKind, GasMemory, InputRecord, InputShape, NodeWidth,

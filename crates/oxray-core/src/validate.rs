@@ -1,6 +1,7 @@
 //! Validation of build inputs: every rule of guide §5, §5.1, §5.3, §5.5 and §12 that can be
 //! checked before reading the data, and the data checks (index and SBT offset ranges) the build makes.
 
+use crate::curve::{CurveEndcaps, CurveInput, CurveType};
 use crate::error::{BufferKind, BuildError, InputLocation};
 use crate::input::{BuildInput, BuildInputKind, SbtIndexOffsets, SphereInput};
 use crate::options::{BuildFlags, BuildOptions};
@@ -129,6 +130,7 @@ pub fn validate_structure(
                 unreachable!("instance inputs were refused above")
             }
             BuildInput::Spheres(s) => validate_spheres(at, s)?,
+            BuildInput::Curves(c) => validate_curves(at, c)?,
             BuildInput::CustomPrimitives(c) => {
                 let a = &c.aabbs;
                 check_stride(at, BufferKind::Aabbs, a.stride, 24, 8)?;
@@ -226,6 +228,107 @@ fn validate_spheres(at: InputLocation, s: &SphereInput<'_>) -> Result<(), BuildE
             s.effective_radius_stride(),
             4,
         )?;
+    }
+    Ok(())
+}
+
+/// The rules of guide §5.2 and §9.1 (and `OptixBuildInputCurveArray`'s fields): one vertex
+/// and one width buffer per motion key, normals (per key) only for ribbons, `float3` points,
+/// `f32` radii, `u32` indices with strides that are 0 or a multiple of 4, buffers long enough,
+/// no flat end caps on linear curves, and every segment's control points inside the vertex
+/// buffer.
+fn validate_curves(at: InputLocation, c: &CurveInput<'_>) -> Result<(), BuildError> {
+    for (buffer, given) in [
+        (BufferKind::Vertices, c.vertex_buffers.len()),
+        (BufferKind::Radii, c.width_buffers.len()),
+    ] {
+        if given != MOTION_KEYS {
+            return Err(BuildError::MotionKeyCount {
+                at,
+                buffer,
+                given,
+                expected: MOTION_KEYS,
+            });
+        }
+    }
+    if !c.normal_buffers.is_empty() {
+        if !c.curve_type.is_ribbon() {
+            return Err(BuildError::InvalidCurveInput {
+                at,
+                reason: "normals are given but only ribbons (flat quadratic B-splines) take them",
+            });
+        }
+        if c.normal_buffers.len() != MOTION_KEYS {
+            return Err(BuildError::MotionKeyCount {
+                at,
+                buffer: BufferKind::Normals,
+                given: c.normal_buffers.len(),
+                expected: MOTION_KEYS,
+            });
+        }
+    }
+    if c.curve_type == CurveType::RoundLinear && c.endcaps == CurveEndcaps::On {
+        return Err(BuildError::InvalidCurveInput {
+            at,
+            reason:
+                "OPTIX_CURVE_ENDCAP_ON is not valid for linear curves, which always have round caps",
+        });
+    }
+    check_stride(at, BufferKind::Vertices, c.vertex_stride, 12, 4)?;
+    check_stride(at, BufferKind::Radii, c.width_stride, 4, 4)?;
+    check_stride(at, BufferKind::Normals, c.normal_stride, 12, 4)?;
+    check_stride(at, BufferKind::Indices, c.index_stride, 4, 4)?;
+    let n = c.num_vertices;
+    for v in c.vertex_buffers {
+        check_len(
+            at,
+            BufferKind::Vertices,
+            v.len(),
+            n,
+            c.effective_vertex_stride(),
+            12,
+        )?;
+    }
+    for w in c.width_buffers {
+        check_len(
+            at,
+            BufferKind::Radii,
+            w.len(),
+            n,
+            c.effective_width_stride(),
+            4,
+        )?;
+    }
+    for nb in c.normal_buffers {
+        check_len(
+            at,
+            BufferKind::Normals,
+            nb.len(),
+            n,
+            c.effective_normal_stride(),
+            12,
+        )?;
+    }
+    check_len(
+        at,
+        BufferKind::Indices,
+        c.index_buffer.len(),
+        c.num_primitives,
+        c.effective_index_stride(),
+        4,
+    )?;
+    let control_points = c.curve_type.control_points() as u32;
+    for segment in 0..c.num_primitives {
+        let index = c.segment_start(c.index_buffer, segment as usize);
+        if index as u64 + control_points as u64 > n as u64 {
+            return Err(BuildError::CurveIndexOutOfRange {
+                at,
+                segment,
+                index,
+                control_points,
+                num_vertices: n,
+            });
+        }
     }
     Ok(())
 }

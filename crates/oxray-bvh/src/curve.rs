@@ -1,0 +1,542 @@
+//! Built-in curves (guide §5.2, §9.3, §9.6, §9.7): the record a GAS keeps per curve segment, its
+//! bounds, and the ray/segment tests every backend uses.
+//!
+//! **Round curves** (every type but the ribbon). A segment's position `c(u)` and radius `r(u)`
+//! are cubic (or lower) polynomials of `u ∈ [0, 1]`. oxray intersects the swept-sphere surface,
+//! the boundary of the union of the spheres `S(u)` of centre `c(u)` and radius `r(u)`: the
+//! ray's entry into that union is `min_u t₀(u)`, where `t₀(u)` is the entry into `S(u)`. This
+//! is the Rocaps surface (§9.7) and the phantom (swept-circle) surface wherever the radius is
+//! constant; where it varies the two differ slightly, which the guide allows for hair-like
+//! curves (§9.7). The minimum is found exactly, without subdivision or a starting guess:
+//!
+//! 1. In a frame whose z axis is the ray, `c(u) - o = (X, Y, Z)`, and the ray meets `S(u)`
+//!    where `D(u) = r² - X² - Y² >= 0` (a polynomial of degree ≤ 6), entering at
+//!    `t₀(u) = Z - √D`. The roots of `D` split `[0, 1]` into the intervals where it does.
+//! 2. Inside an interval, `t₀` is smallest at a root of `t₀'`, i.e. of
+//!    `P = 4 Z'² D - D'²` (degree ≤ 10) where `Z'` and `D'` share a sign, or at `u = 0` or `1`.
+//!    Every real root comes from [`crate::poly`] (isolation by the derivative's roots, then
+//!    safeguarded Newton), in `f64`.
+//! 3. Ends: linear curves have round caps and elbows (the spheres `S(0)`, `S(1)` are part of
+//!    the segment, so a minimum at `u = 0` or `1` is a hit). Other types are open by default:
+//!    a first entry through `S(0)` or `S(1)` is not a hit (the ray enters the tube's open end);
+//!    with `OPTIX_CURVE_ENDCAP_ON` the ends of strands are flat discs, hit with `u` exactly 0 or
+//!    1 (§9.3).
+//! 4. Tubes are hollow and back faces culled (§9.6): only entries are hits, and a ray whose
+//!    interval starts inside the segment's tube does not hit it.
+//!
+//! **Ribbons** (flat quadratic B-splines, §5.2, §9.3) are ruled surfaces
+//! `c(u) + v r(u) w(u)`, `v ∈ [-1, 1]`. With normals, `w = n(u) × c'(u)` (normalised) for the
+//! linearly interpolated normal `n(u)`: the ray meets the line of `u` where
+//! `(c(u) - o) · (w × d) = 0` (a quartic). Without normals a ribbon faces the ray
+//! (`w ⊥ d`, oxray's reading of "computed automatically", §9.8): the ray meets it at the roots of
+//! `X X' + Y Y'` where `D >= 0`. Ribbons have two faces; the front face is the one their normal
+//! `c' × w` points out of.
+
+use crate::poly::{Poly, MAX_COEFFS};
+use bytemuck::{Pod, Zeroable};
+use glam::{DVec3, Vec3};
+use oxray_core::{Aabb, CurveType};
+
+/// A flat cap at the start of the segment (`u = 0`: it starts a strand, caps on).
+pub const CAP_START: u32 = 1;
+/// A flat cap at the end of the segment (`u = 1`: it ends a strand, caps on).
+pub const CAP_END: u32 = 2;
+/// The segment has ribbon normals.
+pub const HAS_NORMALS: u32 = 4;
+
+/// One curve segment as a GAS keeps it: its control points and radii (what
+/// `optixGet*VertexData` returns, guide §9.3), its type, and its end caps.
+///
+/// ```
+/// use oxray_bvh::curve::CurveSegment;
+/// use oxray_core::CurveType;
+/// use glam::Vec3;
+/// // A straight linear segment of radius 0.5 along x, from 0 to 4.
+/// let s = CurveSegment::new(CurveType::RoundLinear, &[[0.0, 0.0, 0.0, 0.5], [4.0, 0.0, 0.0, 0.5]], 0, None);
+/// let hit = s.intersect(Vec3::new(2.0, 0.0, -5.0), Vec3::Z, 0.0, f32::INFINITY).unwrap();
+/// assert!((hit.t - 4.5).abs() < 1e-5 && (hit.u - 0.5).abs() < 1e-5);
+/// // From inside the tube it is not hit (guide §9.6).
+/// assert!(s.intersect(Vec3::new(2.0, 0.0, 0.0), Vec3::Z, 0.0, f32::INFINITY).is_none());
+/// ```
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+pub struct CurveSegment {
+    /// Control points `(x, y, z, radius)`; those past the type's count are zero.
+    pub points: [[f32; 4]; 4],
+    /// Ribbon normals at `u = 0` and `u = 1` (zero without normals).
+    pub normals: [[f32; 3]; 2],
+    /// The `OptixPrimitiveType` code of the curve type.
+    pub curve_type: u32,
+    /// [`CAP_START`], [`CAP_END`], [`HAS_NORMALS`].
+    pub flags: u32,
+}
+
+/// A hit on a curve segment.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CurveHit {
+    /// Distance along the ray, in the units of its direction.
+    pub t: f32,
+    /// The curve parameter in the segment (exactly 0 or 1 on a flat end cap, §9.3).
+    pub u: f32,
+    /// A ribbon's `v ∈ [-1, 1]` (0 for round curves).
+    pub v: f32,
+    /// Whether the hit is on the back face (only ribbons have one).
+    pub back_face: bool,
+}
+
+impl CurveSegment {
+    /// The record of an updatable structure's slot whose segment is inactive: NaN control
+    /// points, which no ray hits and no bound includes. It keeps its curve type, which a
+    /// pipeline's primitive-type check reads.
+    pub fn deactivated(self) -> CurveSegment {
+        CurveSegment {
+            points: [[f32::NAN; 4]; 4],
+            ..self
+        }
+    }
+
+    /// A segment of `ty` with control points `points` (`x, y, z, radius`; as many as the type
+    /// has), cap `flags` ([`CAP_START`], [`CAP_END`]) and ribbon normals.
+    pub fn new(
+        ty: CurveType,
+        points: &[[f32; 4]],
+        flags: u32,
+        normals: Option<[Vec3; 2]>,
+    ) -> CurveSegment {
+        let mut p = [[0.0; 4]; 4];
+        p[..points.len()].copy_from_slice(points);
+        let (normals, has) = match normals {
+            Some([a, b]) => ([a.to_array(), b.to_array()], HAS_NORMALS),
+            None => ([[0.0; 3]; 2], 0),
+        };
+        CurveSegment {
+            points: p,
+            normals,
+            curve_type: ty.code(),
+            flags: (flags & (CAP_START | CAP_END)) | has,
+        }
+    }
+
+    /// The curve type (round linear for an inactive record).
+    pub fn curve_type(&self) -> CurveType {
+        CurveType::from_code(self.curve_type).unwrap_or(CurveType::RoundLinear)
+    }
+
+    /// The control points as `float4`s, as many as the type has.
+    pub fn control_points(&self) -> &[[f32; 4]] {
+        &self.points[..self.curve_type().control_points()]
+    }
+
+    /// Whether a ray can hit it: finite control points, a known type, and a radius that is
+    /// positive somewhere (the guide skips negative radii, §9.8).
+    pub fn is_active(&self) -> bool {
+        CurveType::from_code(self.curve_type).is_some()
+            && self
+                .control_points()
+                .iter()
+                .all(|p| p.iter().all(|c| c.is_finite()))
+            && self.control_points().iter().any(|p| p[3] > 0.0)
+            && self.normals.iter().all(|n| n.iter().all(|c| c.is_finite()))
+    }
+
+    /// Power-basis coefficients of `(x, y, z, r)`: `c(u) = Σ a[k] u^k`.
+    fn power_basis(&self) -> [[f64; 4]; 4] {
+        let p = |i: usize| self.points[i].map(f64::from);
+        let mut a = [[0.0; 4]; 4];
+        for d in 0..4 {
+            let q = |i: usize| p(i)[d];
+            let c = match self.curve_type() {
+                CurveType::RoundLinear => [q(0), q(1) - q(0), 0.0, 0.0],
+                CurveType::RoundQuadraticBSpline
+                | CurveType::FlatQuadraticBSpline
+                | CurveType::RoundQuadraticBSplineRocaps => [
+                    0.5 * (q(0) + q(1)),
+                    q(1) - q(0),
+                    0.5 * (q(0) - 2.0 * q(1) + q(2)),
+                    0.0,
+                ],
+                CurveType::RoundCubicBSpline | CurveType::RoundCubicBSplineRocaps => [
+                    (q(0) + 4.0 * q(1) + q(2)) / 6.0,
+                    (q(2) - q(0)) / 2.0,
+                    (q(0) - 2.0 * q(1) + q(2)) / 2.0,
+                    (-q(0) + 3.0 * q(1) - 3.0 * q(2) + q(3)) / 6.0,
+                ],
+                CurveType::RoundCatmullRom | CurveType::RoundCatmullRomRocaps => [
+                    q(1),
+                    0.5 * (q(2) - q(0)),
+                    0.5 * (2.0 * q(0) - 5.0 * q(1) + 4.0 * q(2) - q(3)),
+                    0.5 * (-q(0) + 3.0 * q(1) - 3.0 * q(2) + q(3)),
+                ],
+                CurveType::RoundCubicBezier | CurveType::RoundCubicBezierRocaps => [
+                    q(0),
+                    3.0 * (q(1) - q(0)),
+                    3.0 * (q(0) - 2.0 * q(1) + q(2)),
+                    -q(0) + 3.0 * q(1) - 3.0 * q(2) + q(3),
+                ],
+            };
+            for k in 0..4 {
+                a[k][d] = c[k];
+            }
+        }
+        a
+    }
+
+    /// The centre and radius at `u`, in `f64` (the reference tests use it too).
+    pub fn eval(&self, u: f64) -> (DVec3, f64) {
+        let a = self.power_basis();
+        let mut v = [0.0; 4];
+        for d in 0..4 {
+            v[d] = ((a[3][d] * u + a[2][d]) * u + a[1][d]) * u + a[0][d];
+        }
+        (DVec3::new(v[0], v[1], v[2]), v[3])
+    }
+
+    /// The tangent `c'(u)`, in `f64`.
+    pub fn tangent(&self, u: f64) -> DVec3 {
+        let a = self.power_basis();
+        let mut v = [0.0; 3];
+        for d in 0..3 {
+            v[d] = (3.0 * a[3][d] * u + 2.0 * a[2][d]) * u + a[1][d];
+        }
+        DVec3::from_array(v)
+    }
+
+    /// Bézier control points of the segment (degree 3, elevated where lower): their convex
+    /// hull holds the centre line and their largest radius bounds the radius.
+    fn bezier_points(&self) -> [[f64; 4]; 4] {
+        let a = self.power_basis();
+        let mut b = [[0.0; 4]; 4];
+        for d in 0..4 {
+            b[0][d] = a[0][d];
+            b[1][d] = a[0][d] + a[1][d] / 3.0;
+            b[2][d] = a[0][d] + 2.0 * a[1][d] / 3.0 + a[2][d] / 3.0;
+            b[3][d] = a[0][d] + a[1][d] + a[2][d] + a[3][d];
+        }
+        b
+    }
+
+    /// The box around the segment: the Bézier hull of the centre line grown by the largest
+    /// radius coefficient, rounded outwards. Empty for an inactive segment.
+    pub fn bounds(&self) -> Aabb {
+        if !self.is_active() {
+            return Aabb::EMPTY;
+        }
+        let b = self.bezier_points();
+        let r = b.iter().fold(0.0f64, |m, p| m.max(p[3]));
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for p in &b {
+            let c = DVec3::new(p[0], p[1], p[2]);
+            lo = lo.min(c - r);
+            hi = hi.max(c + r);
+        }
+        let pad = |v: DVec3| v.abs() * 1e-6 + DVec3::splat(r * 1e-6);
+        let (lo, hi) = (lo - pad(lo), hi + pad(hi));
+        Aabb::new(lo.as_vec3(), hi.as_vec3())
+    }
+
+    /// The nearest front-face hit (or ribbon hit) of the ray `org + t dir` in `[tmin, tmax]`;
+    /// `dir` need not be normalised.
+    pub fn intersect(&self, org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<CurveHit> {
+        let len = dir.as_dvec3().length();
+        if !(len > 0.0) || !self.is_active() {
+            return None;
+        }
+        let frame = RayFrame::new(org.as_dvec3(), dir.as_dvec3() / len);
+        // Distances along the ray in world units.
+        let (zmin, zmax) = (tmin as f64 * len, tmax as f64 * len);
+        let a = self.power_basis();
+        let mut x = [0.0; 4];
+        let mut y = [0.0; 4];
+        let mut z = [0.0; 4];
+        let mut r = [0.0; 4];
+        for k in 0..4 {
+            let q = DVec3::new(a[k][0], a[k][1], a[k][2]);
+            let q = if k == 0 { q - frame.o } else { q };
+            x[k] = q.dot(frame.e1);
+            y[k] = q.dot(frame.e2);
+            z[k] = q.dot(frame.d);
+            r[k] = a[k][3];
+        }
+        // Cheap rejection on the Bézier hull in the ray's frame.
+        let rmax = self
+            .bezier_points()
+            .iter()
+            .fold(0.0f64, |m, p| m.max(p[3].abs()));
+        let hull = |c: &[f64; 4]| {
+            let b = [
+                c[0],
+                c[0] + c[1] / 3.0,
+                c[0] + 2.0 * c[1] / 3.0 + c[2] / 3.0,
+                c[0] + c[1] + c[2] + c[3],
+            ];
+            b.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+                    (l.min(v), h.max(v))
+                })
+        };
+        let (hx, hy, hz) = (hull(&x), hull(&y), hull(&z));
+        if hx.0 - rmax > 0.0
+            || hx.1 + rmax < 0.0
+            || hy.0 - rmax > 0.0
+            || hy.1 + rmax < 0.0
+            || hz.1 + rmax < zmin
+            || hz.0 - rmax > zmax
+        {
+            return None;
+        }
+        let (px, py, pz, pr) = (Poly::new(&x), Poly::new(&y), Poly::new(&z), Poly::new(&r));
+        // D(u) = r² - x² - y²: the ray's line meets S(u) where D >= 0.
+        let dd = pr
+            .mul(&pr)
+            .add_scaled(&px.mul(&px), -1.0)
+            .add_scaled(&py.mul(&py), -1.0);
+        let (t, hit) = if self.curve_type().is_ribbon() {
+            self.ribbon(&frame, &a, (&px, &py, &pz, &pr), &dd, zmin, zmax)
+        } else {
+            self.round(&frame, &pz, &dd, zmin, zmax)
+        }?;
+        let t = (t / len) as f32;
+        // Rounding to f32 must not carry the hit out of the interval.
+        (t >= tmin && t <= tmax).then_some(CurveHit { t, ..hit })
+    }
+
+    /// The round-curve test in the ray's frame; `t` of the result is in world units.
+    fn round(
+        &self,
+        frame: &RayFrame,
+        pz: &Poly,
+        dd: &Poly,
+        zmin: f64,
+        zmax: f64,
+    ) -> Option<(f64, CurveHit)> {
+        let linear = self.curve_type() == CurveType::RoundLinear;
+        // A ray whose interval starts inside the tube does not hit it (§9.6):
+        // E(u) = (Z - zmin)² - D(u) < 0 somewhere (at an end only where the end is a sphere).
+        let zs = pz.add_scaled(&Poly::new(&[1.0]), -zmin);
+        let e = zs.mul(&zs).add_scaled(dd, -1.0);
+        let mut crit = [0.0; MAX_COEFFS];
+        let nc = e.derivative().roots(0.0, 1.0, &mut crit);
+        if crit[..nc]
+            .iter()
+            .any(|&u| u > 0.0 && u < 1.0 && e.eval(u) < 0.0)
+            || (linear && (e.eval(0.0) < 0.0 || e.eval(1.0) < 0.0))
+        {
+            return None;
+        }
+
+        let t0 = |u: f64| {
+            let d = dd.eval(u);
+            if d >= 0.0 {
+                pz.eval(u) - d.sqrt()
+            } else {
+                f64::INFINITY
+            }
+        };
+        let mut best: Option<(f64, f64)> = None;
+        let mut offer = |t: f64, u: f64| {
+            if t >= zmin && t <= zmax && best.is_none_or(|(bt, _)| t < bt) {
+                best = Some((t, u));
+            }
+        };
+        // Intervals of [0, 1] where D >= 0, between D's roots.
+        let mut roots = [0.0; MAX_COEFFS];
+        let nr = dd.roots(0.0, 1.0, &mut roots);
+        let mut bounds = [0.0; MAX_COEFFS + 2];
+        bounds[0] = 0.0;
+        bounds[1..=nr].copy_from_slice(&roots[..nr]);
+        bounds[nr + 1] = 1.0;
+        // Critical points of t₀: roots of P = 4 Z'² D - D'² where Z' D' >= 0.
+        let dz = pz.derivative();
+        let dd1 = dd.derivative();
+        let p = dz.mul(&dz).mul(dd).add_scaled(&dd1.mul(&dd1), -0.25);
+        let mut cp = [0.0; MAX_COEFFS];
+        let ncp = p.roots(0.0, 1.0, &mut cp);
+        for w in bounds[..nr + 2].windows(2) {
+            let (lo, hi) = (w[0], w[1]);
+            if hi <= lo || dd.eval(0.5 * (lo + hi)) < 0.0 {
+                continue;
+            }
+            let mut found = false;
+            for &u in cp[..ncp].iter().filter(|&&u| u > lo && u < hi) {
+                if dz.eval(u) * dd1.eval(u) < 0.0 {
+                    continue;
+                }
+                let h = 1e-7 * (hi - lo).max(1e-9);
+                let tu = t0(u);
+                let at_min = tu <= t0((u - h).max(lo)) && tu <= t0((u + h).min(hi));
+                if at_min {
+                    found = true;
+                    offer(tu, u);
+                }
+            }
+            // The ends of [0, 1]: spheres of a linear segment; open or flat otherwise.
+            for end in [0.0, 1.0] {
+                if (lo == end || hi == end) && linear {
+                    found = true;
+                    offer(t0(end), end);
+                }
+            }
+            if !found && lo > 0.0 && hi < 1.0 {
+                // D >= 0 on a sliver too thin for P's roots to separate (a grazing ray): t₀ has a
+                // minimum inside, where D peaks.
+                let u = golden_min(&t0, lo, hi);
+                offer(t0(u), u);
+            }
+        }
+        // Flat caps at the strand's ends (§5.2): discs facing out of the tube.
+        for (flag, u) in [(CAP_START, 0.0), (CAP_END, 1.0)] {
+            if self.flags & flag == 0 {
+                continue;
+            }
+            let (c, rad) = self.eval(u);
+            let n = self.tangent(u);
+            let dn = frame.d.dot(n);
+            // Entering the tube: along the tangent at the start, against it at the end.
+            if (u == 0.0 && dn <= 0.0) || (u == 1.0 && dn >= 0.0) {
+                continue;
+            }
+            let t = (c - frame.o).dot(n) / dn;
+            let p = frame.o + frame.d * t;
+            if (p - c).length_squared() <= rad * rad {
+                offer(t, u);
+            }
+        }
+        best.map(|(t, u)| {
+            let hit = CurveHit {
+                t: 0.0,
+                u: u as f32,
+                v: 0.0,
+                back_face: false,
+            };
+            (t, hit)
+        })
+    }
+
+    /// The ribbon test in the ray's frame; `t` of the result is in world units.
+    fn ribbon(
+        &self,
+        frame: &RayFrame,
+        a: &[[f64; 4]; 4],
+        (px, py, pz, pr): (&Poly, &Poly, &Poly, &Poly),
+        dd: &Poly,
+        zmin: f64,
+        zmax: f64,
+    ) -> Option<(f64, CurveHit)> {
+        let mut best: Option<(f64, CurveHit)> = None;
+        let mut roots = [0.0; MAX_COEFFS];
+        let tangent_frame = |k: usize| {
+            let q = DVec3::new(a[k][0], a[k][1], a[k][2]) * k as f64;
+            [q.dot(frame.e1), q.dot(frame.e2), q.dot(frame.d)]
+        };
+        // c'(u) in the ray's frame: linear for a quadratic.
+        let (t1, t2) = (tangent_frame(1), tangent_frame(2));
+        let tan = |u: f64| DVec3::new(t1[0] + t2[0] * u, t1[1] + t2[1] * u, t1[2] + t2[2] * u);
+        let mut consider = |u: f64, w: DVec3| {
+            // The ray meets the line c(u) + s w: solve in the frame's xy plane.
+            let (xu, yu, zu, ru) = (px.eval(u), py.eval(u), pz.eval(u), pr.eval(u));
+            let ww = w.x * w.x + w.y * w.y;
+            if !(ww > 0.0) || !(ru > 0.0) {
+                return;
+            }
+            let s = -(xu * w.x + yu * w.y) / ww;
+            let t = zu + s * w.z;
+            let v = s * w.length() / ru;
+            if !(-1.0..=1.0).contains(&v) || t < zmin || t > zmax {
+                return;
+            }
+            if best.is_some_and(|(bt, _)| bt <= t) {
+                return;
+            }
+            // The ribbon's normal c' × w; facing the ray is the front face.
+            let n = tan(u).cross(w);
+            let hit = CurveHit {
+                t: 0.0,
+                u: u as f32,
+                v: v as f32,
+                back_face: n.z > 0.0,
+            };
+            best = Some((t, hit));
+        };
+        if self.flags & HAS_NORMALS != 0 {
+            let n0 = DVec3::from(self.normals[0].map(f64::from));
+            let n1 = DVec3::from(self.normals[1].map(f64::from));
+            let to_frame = |v: DVec3| DVec3::new(v.dot(frame.e1), v.dot(frame.e2), v.dot(frame.d));
+            let (n0, n1) = (to_frame(n0), to_frame(n1));
+            // W(u) = n(u) × c'(u) (degree 2); the ray meets the line of u where
+            // (c(u) - o) · (W × d) = 0, d = z: (W × z) = (W.y, -W.x, 0), so X W.y - Y W.x = 0.
+            let nn = |u: f64| n0 + (n1 - n0) * u;
+            // Components of W as polynomials: sample at 3 points and interpolate exactly.
+            let wpoly = |f: &dyn Fn(DVec3) -> f64| {
+                let (w0, wh, w1) = (
+                    f(nn(0.0).cross(tan(0.0))),
+                    f(nn(0.5).cross(tan(0.5))),
+                    f(nn(1.0).cross(tan(1.0))),
+                );
+                Poly::new(&[w0, 4.0 * wh - 3.0 * w0 - w1, 2.0 * w0 + 2.0 * w1 - 4.0 * wh])
+            };
+            let (wx, wy) = (wpoly(&|v| v.x), wpoly(&|v| v.y));
+            let g = px.mul(&wy).add_scaled(&py.mul(&wx), -1.0);
+            let n = g.roots(0.0, 1.0, &mut roots);
+            for &u in &roots[..n] {
+                consider(u, nn(u).cross(tan(u)));
+            }
+        } else {
+            // Facing the ray: w ⊥ d and ⊥ c', so the ray's point is at the foot of the
+            // projected curve's normal: X X' + Y Y' = 0, within the radius (D >= 0).
+            let f = px
+                .mul(&px.derivative())
+                .add_scaled(&py.mul(&py.derivative()), 1.0);
+            let n = f.roots(0.0, 1.0, &mut roots);
+            for &u in &roots[..n] {
+                if dd.eval(u) >= 0.0 {
+                    let tu = tan(u);
+                    consider(u, DVec3::new(-tu.y, tu.x, 0.0));
+                }
+            }
+        }
+        best
+    }
+}
+
+/// An orthonormal frame whose z axis is the ray's direction.
+struct RayFrame {
+    o: DVec3,
+    d: DVec3,
+    e1: DVec3,
+    e2: DVec3,
+}
+
+impl RayFrame {
+    fn new(o: DVec3, d: DVec3) -> RayFrame {
+        let (e1, e2) = d.any_orthonormal_pair();
+        RayFrame { o, d, e1, e2 }
+    }
+}
+
+/// The minimum of a unimodal `f` on `[lo, hi]` (golden-section search).
+fn golden_min(f: &dyn Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
+    const G: f64 = 0.618_033_988_749_894_8;
+    let mut a = hi - G * (hi - lo);
+    let mut b = lo + G * (hi - lo);
+    let (mut fa, mut fb) = (f(a), f(b));
+    for _ in 0..80 {
+        if fa < fb {
+            hi = b;
+            b = a;
+            fb = fa;
+            a = hi - G * (hi - lo);
+            fa = f(a);
+        } else {
+            lo = a;
+            a = b;
+            fa = fb;
+            b = lo + G * (hi - lo);
+            fb = f(b);
+        }
+        if hi - lo < 1e-15 {
+            break;
+        }
+    }
+    0.5 * (lo + hi)
+}
