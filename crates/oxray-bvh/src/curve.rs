@@ -362,12 +362,14 @@ impl CurveSegment {
                 if dz.eval(u) * dd1.eval(u) < 0.0 {
                     continue;
                 }
-                let h = 1e-7 * (hi - lo).max(1e-9);
-                let tu = t0(u);
-                let at_min = tu <= t0((u - h).max(lo)) && tu <= t0((u + h).min(hi));
-                if at_min {
+                // A minimum, not a maximum: t₀' = Z' - D' / (2 √D) goes from negative to
+                // positive. Its sign a little way off the root is robust where t₀'s values
+                // differ by less than their rounding.
+                let slope = |v: f64| dz.eval(v) - dd1.eval(v) / (2.0 * dd.eval(v).max(0.0).sqrt());
+                let h = 1e-6 * (hi - lo);
+                if slope((u - h).max(lo)) <= 0.0 && slope((u + h).min(hi)) >= 0.0 {
                     found = true;
-                    offer(tu, u);
+                    offer(t0(u), u);
                 }
             }
             // The ends of [0, 1]: spheres of a linear segment; open or flat otherwise.
@@ -491,7 +493,8 @@ impl CurveSegment {
             for &u in &roots[..n] {
                 if dd.eval(u) >= 0.0 {
                     let tu = tan(u);
-                    consider(u, DVec3::new(-tu.y, tu.x, 0.0));
+                    // Oriented so that its normal c' × w points back at the ray: the front.
+                    consider(u, DVec3::new(tu.y, -tu.x, 0.0));
                 }
             }
         }
@@ -539,4 +542,90 @@ fn golden_min(f: &dyn Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
         }
     }
     0.5 * (lo + hi)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn random_segment(seed: &mut u64, ty: CurveType) -> CurveSegment {
+        let mut next = || {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((*seed >> 40) as f32) / (1u64 << 24) as f32
+        };
+        let pts: Vec<[f32; 4]> = (0..ty.control_points())
+            .map(|_| {
+                [
+                    next() * 2.0 - 1.0,
+                    next() * 2.0 - 1.0,
+                    next() * 2.0 - 1.0,
+                    0.01 + next() * 0.2,
+                ]
+            })
+            .collect();
+        CurveSegment::new(ty, &pts, 0, None)
+    }
+
+    /// §5.2: the box of a segment holds every sphere S(u) of its swept surface, for every
+    /// curve type (the BVH may then never cull a hit).
+    #[test]
+    fn s5_2_bounds_hold_the_swept_surface() {
+        let mut seed = 7u64;
+        for ty in CurveType::ALL {
+            for _ in 0..50 {
+                let s = random_segment(&mut seed, ty);
+                let b = s.bounds();
+                for k in 0..=200 {
+                    let (c, r) = s.eval(k as f64 / 200.0);
+                    let (lo, hi) = ((c - r).as_vec3(), (c + r).as_vec3());
+                    assert!(
+                        b.min.cmple(lo).all() && b.max.cmpge(hi).all(),
+                        "{ty}: {b:?} {c} {r}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// §9.3: across a straight constant-radius segment of every round type, the hit is at the
+    /// radius and u where the ray crosses; a ray that passes by misses.
+    #[test]
+    fn s9_3_a_ray_across_a_straight_segment_hits_at_its_radius() {
+        // Each type's control points for the centre line x ∈ [0, 4] (u = x / 4), radius 0.25.
+        for ty in CurveType::ALL.into_iter().filter(|t| !t.is_ribbon()) {
+            let xs: &[f32] = match ty.control_points() {
+                2 => &[0.0, 4.0],
+                3 => &[-2.0, 2.0, 6.0],
+                _ if matches!(
+                    ty,
+                    CurveType::RoundCubicBezier | CurveType::RoundCubicBezierRocaps
+                ) =>
+                {
+                    &[0.0, 4.0 / 3.0, 8.0 / 3.0, 4.0]
+                }
+                _ => &[-4.0, 0.0, 4.0, 8.0],
+            };
+            let pts: Vec<[f32; 4]> = xs.iter().map(|&x| [x, 0.0, 0.0, 0.25]).collect();
+            let s = CurveSegment::new(ty, &pts, 0, None);
+            for x in [0.5f32, 1.0, 2.0, 3.5] {
+                let h = s
+                    .intersect(Vec3::new(x, 0.0, 3.0), -Vec3::Z, 0.0, 10.0)
+                    .unwrap();
+                assert!(
+                    (h.t - 2.75).abs() < 1e-5 && (h.u - x / 4.0).abs() < 1e-5,
+                    "{ty}: {h:?}"
+                );
+                assert!(!h.back_face);
+                assert!(s
+                    .intersect(Vec3::new(x, 0.3, 3.0), -Vec3::Z, 0.0, 10.0)
+                    .is_none());
+                // The interval ends before the tube: no hit.
+                assert!(s
+                    .intersect(Vec3::new(x, 0.0, 3.0), -Vec3::Z, 0.0, 2.7)
+                    .is_none());
+            }
+        }
+    }
 }
