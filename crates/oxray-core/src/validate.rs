@@ -524,4 +524,127 @@ mod tests {
         assert_eq!(input.radius(pr[0], 2), 0.5);
         assert_eq!(input.centre(pc[0], 2).x, 2.0);
     }
+
+    fn check_curve(input: CurveInput<'_>) -> Result<InputSummary, BuildError> {
+        validate_structure(&BuildOptions::default(), &[input.into()])
+    }
+
+    /// §5.2, §9.1: one SBT record per curve input (one flag), one primitive per segment; the
+    /// buffers' strides and sizes, the motion keys, the end caps of linear curves, normals on
+    /// non-ribbons and segments past the vertices are refused with typed errors.
+    #[test]
+    fn s5_2_curve_inputs_are_checked() {
+        // Two cubic strands of one segment each, interleaved point + radius (stride 16).
+        let packed: Vec<[f32; 4]> = (0..8).map(|i| [i as f32, 0.0, 0.0, 0.1]).collect();
+        let bytes = bytemuck::cast_slice::<_, u8>(&packed);
+        let (v, w) = ([bytes], [&bytes[12..]]);
+        let index = [0u32, 4];
+        let ix = bytemuck::cast_slice::<_, u8>(&index);
+        let input = CurveInput::new(CurveType::RoundCubicBSpline, &v, 8, &w, ix, 2)
+            .vertex_stride(16)
+            .width_stride(16)
+            .flag(GeometryFlags::DISABLE_ANYHIT);
+        let s = check_curve(input).unwrap();
+        assert_eq!(
+            (s.kind, s.num_primitives, s.num_sbt_records),
+            (BuildInputKind::Curves, 2, 1)
+        );
+        assert_eq!(input.radius(w[0], 7), 0.1);
+        assert_eq!(input.point(v[0], 5).x, 5.0);
+        assert!(input.starts_strand(1) && input.ends_strand(0));
+        // Strides: not a multiple of 4, or smaller than an element.
+        for (bad, buffer) in [
+            (input.vertex_stride(14), BufferKind::Vertices),
+            (input.width_stride(2), BufferKind::Radii),
+            (input.index_stride(6), BufferKind::Indices),
+            (input.normals(&v, 8), BufferKind::Normals),
+        ] {
+            let err = check_curve(bad).unwrap_err();
+            let ok = matches!(err, BuildError::InvalidStride { buffer: b, .. } if b == buffer)
+                || matches!(err, BuildError::InvalidCurveInput { .. });
+            assert!(ok, "{err}");
+        }
+        // Sizes: more vertices or segments than the buffers hold.
+        for (bad, buffer) in [
+            (
+                CurveInput {
+                    num_vertices: 9,
+                    ..input
+                },
+                BufferKind::Vertices,
+            ),
+            (
+                CurveInput {
+                    num_primitives: 3,
+                    ..input
+                },
+                BufferKind::Indices,
+            ),
+        ] {
+            let err = check_curve(bad).unwrap_err();
+            assert!(
+                matches!(err, BuildError::BufferTooSmall { buffer: b, .. } if b == buffer),
+                "{err}"
+            );
+            assert_eq!(err.code(), ErrorCode::InvalidInput);
+        }
+        // Motion keys (§5.10.2): one buffer of each per key, and builds have one key.
+        let two = [bytes, bytes];
+        let err = check_curve(CurveInput {
+            width_buffers: &two,
+            ..input
+        })
+        .unwrap_err();
+        assert!(matches!(
+            err,
+            BuildError::MotionKeyCount {
+                buffer: BufferKind::Radii,
+                given: 2,
+                expected: 1,
+                ..
+            }
+        ));
+        assert_eq!(err.code(), ErrorCode::InvalidValue);
+        // A segment whose control points run past the vertices.
+        let past = [0u32, 5];
+        let err = check_curve(CurveInput {
+            index_buffer: bytemuck::cast_slice(&past),
+            ..input
+        })
+        .unwrap_err();
+        assert!(matches!(
+            err,
+            BuildError::CurveIndexOutOfRange {
+                segment: 1,
+                index: 5,
+                control_points: 4,
+                ..
+            }
+        ));
+        // Flat caps are for the splines; linear curves always have round ones.
+        let linear = CurveInput {
+            curve_type: CurveType::RoundLinear,
+            ..input
+        };
+        check_curve(linear).unwrap();
+        let err = check_curve(linear.endcaps(CurveEndcaps::On)).unwrap_err();
+        assert!(matches!(err, BuildError::InvalidCurveInput { .. }), "{err}");
+        check_curve(input.endcaps(CurveEndcaps::On)).unwrap();
+        // Normals only for ribbons (one buffer per key).
+        let ribbon = CurveInput {
+            curve_type: CurveType::FlatQuadraticBSpline,
+            ..input
+        };
+        check_curve(ribbon.normals(&v, 16)).unwrap();
+        let err = check_curve(input.normals(&v, 16)).unwrap_err();
+        assert!(matches!(err, BuildError::InvalidCurveInput { .. }), "{err}");
+        let err = check_curve(ribbon.normals(&two, 16)).unwrap_err();
+        assert!(matches!(
+            err,
+            BuildError::MotionKeyCount {
+                buffer: BufferKind::Normals,
+                ..
+            }
+        ));
+    }
 }
