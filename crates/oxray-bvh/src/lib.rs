@@ -4,8 +4,8 @@
 //! BVH ([`Bvh2`]); traversal layouts are derived from it ([`Bvh4`], the 4-wide layout of the
 //! CPU backend's SSE and portable kernels, from which the CUDA backend's node layouts are
 //! derived in turn; [`Bvh8`], the 8-wide layout of its AVX2 and AVX-512 kernels). Leaf blocks
-//! ([`Triangle4`]), sphere records ([`Sphere`]) and the watertight triangle and robust sphere
-//! tests live here too, so that every backend
+//! ([`Triangle4`]), sphere records ([`Sphere`]), curve segments ([`CurveSegment`]) and the
+//! watertight triangle, robust sphere and exact curve tests live here too, so that every backend
 //! intersects primitives with the same arithmetic and finds bit-identical hits.
 //!
 //! [`GasData`] is a built geometry acceleration structure as data: the layout, the primitives
