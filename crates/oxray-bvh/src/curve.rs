@@ -285,6 +285,12 @@ impl CurveSegment {
         {
             return None;
         }
+        // The ray's line runs along z through the frame's origin: it misses when the origin
+        // is farther than the largest radius from the Bézier hull of the centre line projected
+        // on the xy plane (most of the segments whose boxes a ray enters in a head of hair).
+        if hull_distance_2d(&bezier_xy(&x, &y)) > rmax {
+            return None;
+        }
         let (px, py, pz, pr) = (Poly::new(&x), Poly::new(&y), Poly::new(&z), Poly::new(&r));
         // D(u) = r² - x² - y²: the ray's line meets S(u) where D >= 0.
         let dd = pr
@@ -294,7 +300,7 @@ impl CurveSegment {
         let (t, hit) = if self.curve_type().is_ribbon() {
             self.ribbon(&frame, &a, (&px, &py, &pz, &pr), &dd, zmin, zmax)
         } else {
-            self.round(&frame, &pz, &dd, zmin, zmax)
+            self.round(&frame, &pz, &dd, (zmin, zmax), (hz, rmax))
         }?;
         let t = (t / len) as f32;
         // Rounding to f32 must not carry the hit out of the interval.
@@ -307,22 +313,31 @@ impl CurveSegment {
         frame: &RayFrame,
         pz: &Poly,
         dd: &Poly,
-        zmin: f64,
-        zmax: f64,
+        (zmin, zmax): (f64, f64),
+        (hz, rmax): ((f64, f64), f64),
     ) -> Option<(f64, CurveHit)> {
         let linear = self.curve_type() == CurveType::RoundLinear;
+        // Intervals of [0, 1] where D >= 0, between D's roots; none: the line misses.
+        let mut roots = [0.0; MAX_COEFFS];
+        let nr = dd.roots(0.0, 1.0, &mut roots);
+        if nr == 0 && dd.eval(0.5) < 0.0 {
+            return None;
+        }
         // A ray whose interval starts inside the tube does not hit it (§9.6):
         // E(u) = (Z - zmin)² - D(u) < 0 somewhere (at an end only where the end is a sphere).
-        let zs = pz.add_scaled(&Poly::new(&[1.0]), -zmin);
-        let e = zs.mul(&zs).add_scaled(dd, -1.0);
-        let mut crit = [0.0; MAX_COEFFS];
-        let nc = e.derivative().roots(0.0, 1.0, &mut crit);
-        if crit[..nc]
-            .iter()
-            .any(|&u| u > 0.0 && u < 1.0 && e.eval(u) < 0.0)
-            || (linear && (e.eval(0.0) < 0.0 || e.eval(1.0) < 0.0))
-        {
-            return None;
+        // Only a start within the largest radius of the hull can be inside.
+        if zmin >= hz.0 - rmax && zmin <= hz.1 + rmax {
+            let zs = pz.add_scaled(&Poly::new(&[1.0]), -zmin);
+            let e = zs.mul(&zs).add_scaled(dd, -1.0);
+            let mut crit = [0.0; MAX_COEFFS];
+            let nc = e.derivative().roots(0.0, 1.0, &mut crit);
+            if crit[..nc]
+                .iter()
+                .any(|&u| u > 0.0 && u < 1.0 && e.eval(u) < 0.0)
+                || (linear && (e.eval(0.0) < 0.0 || e.eval(1.0) < 0.0))
+            {
+                return None;
+            }
         }
 
         let t0 = |u: f64| {
@@ -339,9 +354,6 @@ impl CurveSegment {
                 best = Some((t, u));
             }
         };
-        // Intervals of [0, 1] where D >= 0, between D's roots.
-        let mut roots = [0.0; MAX_COEFFS];
-        let nr = dd.roots(0.0, 1.0, &mut roots);
         let mut bounds = [0.0; MAX_COEFFS + 2];
         bounds[0] = 0.0;
         bounds[1..=nr].copy_from_slice(&roots[..nr]);
@@ -500,6 +512,56 @@ impl CurveSegment {
         }
         best
     }
+}
+
+/// The Bézier control points in the xy plane of power-basis coefficients `x`, `y`.
+fn bezier_xy(x: &[f64; 4], y: &[f64; 4]) -> [[f64; 2]; 4] {
+    let b = |c: &[f64; 4]| {
+        [
+            c[0],
+            c[0] + c[1] / 3.0,
+            c[0] + 2.0 * c[1] / 3.0 + c[2] / 3.0,
+            c[0] + c[1] + c[2] + c[3],
+        ]
+    };
+    let (bx, by) = (b(x), b(y));
+    std::array::from_fn(|k| [bx[k], by[k]])
+}
+
+/// The distance from the origin to the convex hull of four points in the plane: 0 inside
+/// (inside one of the triangles of three of them), else the distance to the nearest of the six
+/// segments between them (the hull's edges are among them, and all lie in the hull).
+fn hull_distance_2d(p: &[[f64; 2]; 4]) -> f64 {
+    let cross = |a: [f64; 2], b: [f64; 2]| a[0] * b[1] - a[1] * b[0];
+    let inside = |a: [f64; 2], b: [f64; 2], c: [f64; 2]| {
+        let (s1, s2, s3) = (cross(a, b), cross(b, c), cross(c, a));
+        (s1 >= 0.0 && s2 >= 0.0 && s3 >= 0.0) || (s1 <= 0.0 && s2 <= 0.0 && s3 <= 0.0)
+    };
+    if inside(p[0], p[1], p[2])
+        || inside(p[0], p[1], p[3])
+        || inside(p[0], p[2], p[3])
+        || inside(p[1], p[2], p[3])
+    {
+        return 0.0;
+    }
+    let seg = |a: [f64; 2], b: [f64; 2]| {
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        let len2 = ab[0] * ab[0] + ab[1] * ab[1];
+        let t = if len2 > 0.0 {
+            (-(a[0] * ab[0] + a[1] * ab[1]) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let q = [a[0] + ab[0] * t, a[1] + ab[1] * t];
+        (q[0] * q[0] + q[1] * q[1]).sqrt()
+    };
+    let mut d = f64::INFINITY;
+    for i in 0..4 {
+        for j in i + 1..4 {
+            d = d.min(seg(p[i], p[j]));
+        }
+    }
+    d
 }
 
 /// An orthonormal frame whose z axis is the ray's direction.

@@ -93,7 +93,8 @@ impl Poly {
             return 0;
         }
         let mut crit = [0.0; MAX_COEFFS];
-        let nc = self.derivative().roots(lo, hi, &mut crit);
+        let derivative = self.derivative();
+        let nc = derivative.roots(lo, hi, &mut crit);
         let mut count = 0;
         let mut a = lo;
         let mut fa = self.eval(a);
@@ -105,7 +106,7 @@ impl Poly {
             if fa == 0.0 {
                 push(out, &mut count, a);
             } else if (fa < 0.0) != (fb < 0.0) && fb != 0.0 {
-                push(out, &mut count, self.bracketed(a, b, fa));
+                push(out, &mut count, self.bracketed(&derivative, a, b, fa));
             } else if k < nc && fb.abs() <= tiny {
                 // A double root at a critical point: the polynomial touches zero there.
                 push(out, &mut count, b);
@@ -120,9 +121,9 @@ impl Poly {
     }
 
     /// The root in `[a, b]`, where the polynomial is monotonic and changes sign (`fa` its
-    /// value at `a`): Newton steps kept inside the bracket, bisection where they leave it.
-    fn bracketed(&self, mut a: f64, mut b: f64, fa: f64) -> f64 {
-        let d = self.derivative();
+    /// value at `a`, `d` its derivative): Newton steps kept inside the bracket, bisection where
+    /// they leave it.
+    fn bracketed(&self, d: &Poly, mut a: f64, mut b: f64, fa: f64) -> f64 {
         let neg_at_a = fa < 0.0;
         let mut u = 0.5 * (a + b);
         for _ in 0..100 {
