@@ -239,7 +239,8 @@ impl CurveSegment {
     /// `dir` need not be normalised.
     pub fn intersect(&self, org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<CurveHit> {
         let len = dir.as_dvec3().length();
-        if !(len > 0.0) || !self.is_active() {
+        // NaN (a NaN direction) fails the compare: no hit.
+        if len.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !self.is_active() {
             return None;
         }
         let frame = RayFrame::new(org.as_dvec3(), dir.as_dvec3() / len);
@@ -450,7 +451,8 @@ impl CurveSegment {
             // The ray meets the line c(u) + s w: solve in the frame's xy plane.
             let (xu, yu, zu, ru) = (px.eval(u), py.eval(u), pz.eval(u), pr.eval(u));
             let ww = w.x * w.x + w.y * w.y;
-            if !(ww > 0.0) || !(ru > 0.0) {
+            // A width direction along the ray (edge-on), or no width: no hit (NaN included).
+            if ww.is_nan() || ww <= 0.0 || ru.is_nan() || ru <= 0.0 {
                 return;
             }
             let s = -(xu * w.x + yu * w.y) / ww;

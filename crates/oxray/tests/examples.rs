@@ -176,9 +176,8 @@ fn hair_shows_shaded_strands_around_the_scalp() {
     shades.sort_unstable();
     shades.dedup();
     assert!(shades.len() > 20, "{} shades of hair", shades.len());
-    assert_eq!(
+    assert!(
         at(&px, 0, 0)[2] > at(&px, 0, 0)[0],
-        true,
         "background in the corner"
     );
 }
