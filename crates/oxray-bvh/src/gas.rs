@@ -5,6 +5,7 @@ use crate::build::{build_bvh2, BuildConfig};
 use crate::bvh2::Bvh2;
 use crate::bvh4::Bvh4;
 use crate::bvh8::Bvh8;
+use crate::curve::{CurveSegment, CAP_END, CAP_START};
 use crate::sbvh::{build_sbvh2, SpatialSplits};
 use crate::sphere::Sphere;
 use crate::stats::BvhStats;
@@ -16,8 +17,8 @@ use glam::Vec3;
 use oxray_core::validate::{validate_sbt_offsets, validate_structure};
 use oxray_core::{
     Aabb, BuildError, BuildFlags, BuildInput, BuildInputKind, BuildOperation, BuildOptions,
-    GeometryFlags, IndexFormat, InputLocation, SphereInput, TriangleInput, UpdateRule,
-    VertexFormat,
+    CurveEndcaps, CurveInput, GeometryFlags, IndexFormat, InputLocation, SphereInput,
+    TriangleInput, UpdateRule, VertexFormat,
 };
 use rayon::prelude::*;
 
@@ -30,6 +31,8 @@ pub enum GasKind {
     CustomPrimitives,
     /// Built-in spheres (guide §5.3), one [`Sphere`] per leaf slot.
     Spheres,
+    /// Built-in curves (guide §5.2), one [`CurveSegment`] per leaf slot.
+    Curves,
 }
 
 /// What the structure keeps of each build input.
@@ -130,6 +133,9 @@ pub struct GasData {
     /// Spheres in leaf-slot order (sphere GAS); an updatable structure's inactive spheres are
     /// [`Sphere::INACTIVE`].
     pub spheres: Vec<Sphere>,
+    /// Curve segments in leaf-slot order (curve GAS); an updatable structure's inactive
+    /// segments are [`CurveSegment::deactivated`].
+    pub curves: Vec<CurveSegment>,
     /// Leaf slot to global primitive id ([`NO_PRIMITIVE`] for an unused lane).
     pub slot_prim: Vec<u32>,
     /// Per global primitive id, its SBT record within its input; empty when every input has one.
@@ -171,7 +177,9 @@ pub struct InputShape {
     pub sbt_offset_size: u8,
     /// SBT records of the input.
     pub num_sbt_records: u32,
-    /// A sphere input's `singleRadius` (false for the other kinds).
+    /// A sphere input's `singleRadius`; whether a curve input has normals (false for the
+    /// other kinds). A curve input keeps its curve type's code's low byte in `vertex_format`
+    /// and its end caps in `index_format` (1: default, 2: on).
     pub single_radius: bool,
 }
 
@@ -216,6 +224,20 @@ impl InputShape {
                 sbt_offset_size,
                 num_sbt_records,
                 single_radius: s.single_radius,
+            }),
+            BuildInput::Curves(c) => Some(InputShape {
+                kind: GasKind::Curves,
+                num_vertices: c.num_vertices,
+                vertex_format: (c.curve_type.code() & 0xFF) as u8,
+                index_format: match c.endcaps {
+                    CurveEndcaps::Default => 1,
+                    CurveEndcaps::On => 2,
+                },
+                num_indices: c.num_primitives,
+                pre_transform: false,
+                sbt_offset_size,
+                num_sbt_records,
+                single_radius: !c.normal_buffers.is_empty(),
             }),
             _ => None,
         }
@@ -382,6 +404,7 @@ impl GasData {
             kind: match summary.kind {
                 BuildInputKind::Triangles => GasKind::Triangles,
                 BuildInputKind::Spheres => GasKind::Spheres,
+                BuildInputKind::Curves => GasKind::Curves,
                 _ => GasKind::CustomPrimitives,
             },
             build_flags: options.flags,
@@ -390,6 +413,7 @@ impl GasData {
             triangles: Vec::new(),
             aabbs: Vec::new(),
             spheres: Vec::new(),
+            curves: Vec::new(),
             slot_prim: Vec::new(),
             sbt_offsets,
             inputs: records,
@@ -601,6 +625,47 @@ impl GasData {
                 // Spheres are not packed either: one slot per sphere, in the tree's order.
                 tree = keep_tree.then_some(bvh2);
             }
+            GasKind::Curves => {
+                let segments: Vec<CurveSegment> = inputs
+                    .iter()
+                    .flat_map(|input| match input {
+                        BuildInput::Curves(c) => decode_curves(c),
+                        _ => unreachable!("inputs are homogeneous"),
+                    })
+                    .collect();
+                // Segments without a positive radius or with non-finite data are inactive
+                // (the guide skips negative radii, §9.8); an updatable build places them at
+                // their first control point.
+                let mut boxes: Vec<Option<Aabb>> = segments
+                    .par_iter()
+                    .map(|s| s.is_active().then(|| s.bounds()))
+                    .collect();
+                if keep_inactive {
+                    place_inactive(&mut boxes, |i| {
+                        let p = segments[i].points[0];
+                        let c = Vec3::new(p[0], p[1], p[2]);
+                        Aabb::new(c, c)
+                    });
+                }
+                let bvh2 = gas.build_slots(&boxes, &config, width);
+                gas.curves = gas
+                    .slot_prim
+                    .par_iter()
+                    .map(|&g| {
+                        let s = segments[g as usize];
+                        if s.is_active() {
+                            s
+                        } else {
+                            s.deactivated()
+                        }
+                    })
+                    .collect();
+                if keep_inactive {
+                    gas.bounds = crate::refit::refit_curve_boxes(&mut gas);
+                }
+                // One slot per segment, in the tree's order (no splitting yet).
+                tree = keep_tree.then_some(bvh2);
+            }
         }
         if !keep_inactive {
             // Only an update checks the inputs' shapes.
@@ -621,6 +686,7 @@ impl GasData {
             GasKind::Triangles => BuildInputKind::Triangles,
             GasKind::CustomPrimitives => BuildInputKind::CustomPrimitives,
             GasKind::Spheres => BuildInputKind::Spheres,
+            GasKind::Curves => BuildInputKind::Curves,
         }
     }
 
@@ -697,6 +763,7 @@ impl GasData {
             GasKind::Triangles => !self.triangles[slot / 4].v[0][0][slot % 4].is_nan(),
             GasKind::CustomPrimitives => self.aabbs[slot].is_finite_valid(),
             GasKind::Spheres => self.spheres[slot].is_active(),
+            GasKind::Curves => self.curves[slot].is_active(),
         }
     }
 
@@ -736,7 +803,10 @@ impl GasData {
             v.capacity() * std::mem::size_of::<T>()
         }
         let node_bytes = bytes(&self.bvh.nodes) + self.bvh8.as_ref().map_or(0, |b| bytes(&b.nodes));
-        let primitive_bytes = bytes(&self.triangles) + bytes(&self.aabbs) + bytes(&self.spheres);
+        let primitive_bytes = bytes(&self.triangles)
+            + bytes(&self.aabbs)
+            + bytes(&self.spheres)
+            + bytes(&self.curves);
         GasMemory {
             output_bytes: node_bytes
                 + primitive_bytes
@@ -758,6 +828,7 @@ impl GasData {
         self.triangles.shrink_to_fit();
         self.aabbs.shrink_to_fit();
         self.spheres.shrink_to_fit();
+        self.curves.shrink_to_fit();
         self.slot_prim.shrink_to_fit();
         self.sbt_offsets.shrink_to_fit();
         self.inputs.shrink_to_fit();
@@ -782,6 +853,7 @@ impl GasData {
                 + bytes(&self.triangles)
                 + bytes(&self.aabbs)
                 + bytes(&self.spheres)
+                + bytes(&self.curves)
                 + bytes(&self.slot_prim)
                 + bytes(&self.sbt_offsets)
                 + bytes(&self.inputs)
@@ -1004,6 +1076,45 @@ pub(crate) fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<
         }
     }
     Ok(())
+}
+
+/// Decodes every segment of a validated curve input (its one motion key).
+fn decode_curves<'a>(c: &'a CurveInput<'_>) -> impl Iterator<Item = CurveSegment> + 'a {
+    (0..c.num_primitives as usize).map(move |i| decode_curve(c, i))
+}
+
+/// Segment `i` of a validated curve input: its control points and radii, its flat caps where
+/// it starts or ends a strand (guide §5.2), and a ribbon's normals `n[start]`, `n[start + 1]`.
+pub(crate) fn decode_curve(c: &CurveInput<'_>, i: usize) -> CurveSegment {
+    let start = c.segment_start(c.index_buffer, i) as usize;
+    let mut points = [[0.0f32; 4]; 4];
+    for (k, p) in points
+        .iter_mut()
+        .enumerate()
+        .take(c.curve_type.control_points())
+    {
+        let v = c.point(c.vertex_buffers[0], start + k);
+        *p = [v.x, v.y, v.z, c.radius(c.width_buffers[0], start + k)];
+    }
+    let mut flags = 0;
+    if c.endcaps == CurveEndcaps::On {
+        if c.starts_strand(i) {
+            flags |= CAP_START;
+        }
+        if c.ends_strand(i) {
+            flags |= CAP_END;
+        }
+    }
+    let normals = c
+        .normal_buffers
+        .first()
+        .map(|n| [c.normal(n, start), c.normal(n, start + 1)]);
+    CurveSegment::new(
+        c.curve_type,
+        &points[..c.curve_type.control_points()],
+        flags,
+        normals,
+    )
 }
 
 /// Decodes every sphere of a validated input (its one motion key).

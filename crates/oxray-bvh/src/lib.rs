@@ -4,8 +4,8 @@
 //! BVH ([`Bvh2`]); traversal layouts are derived from it ([`Bvh4`], the 4-wide layout of the
 //! CPU backend's SSE and portable kernels, from which the CUDA backend's node layouts are
 //! derived in turn; [`Bvh8`], the 8-wide layout of its AVX2 and AVX-512 kernels). Leaf blocks
-//! ([`Triangle4`]), sphere records ([`Sphere`]) and the watertight triangle and robust sphere
-//! tests live here too, so that every backend
+//! ([`Triangle4`]), sphere records ([`Sphere`]), curve segments ([`CurveSegment`]) and the
+//! watertight triangle, robust sphere and exact curve tests live here too, so that every backend
 //! intersects primitives with the same arithmetic and finds bit-identical hits.
 //!
 //! [`GasData`] is a built geometry acceleration structure as data: the layout, the primitives
@@ -32,10 +32,12 @@ mod build;
 mod bvh2;
 mod bvh4;
 mod bvh8;
+pub mod curve;
 pub mod export;
 pub mod gas;
 pub mod ias;
 pub mod memory;
+mod poly;
 mod refit;
 pub mod sbvh;
 pub mod serialize;
@@ -49,6 +51,7 @@ pub use build::{build_bvh2, temp_bytes, BuildConfig};
 pub use bvh2::{Bvh2, Bvh2Node};
 pub use bvh4::{Bvh4, Bvh4Node};
 pub use bvh8::{Bvh8, Bvh8Node};
+pub use curve::{CurveHit, CurveSegment};
 pub use export::{ExportedTriangle, GasExport};
 pub use gas::{
     spatial_splits, GasData, GasInfo, GasKind, GasMemory, InputRecord, InputShape, NodeWidth,

@@ -9,7 +9,8 @@
 //! refit tree against a rebuild measures that; rebuild when it has grown too much.
 
 use crate::gas::{
-    check_indices, decode_sphere, decode_triangle, GasData, GasKind, InputShape, NO_PRIMITIVE,
+    check_indices, decode_curve, decode_sphere, decode_triangle, GasData, GasKind, InputShape,
+    NO_PRIMITIVE,
 };
 use crate::sphere::Sphere;
 use crate::triangle::is_degenerate;
@@ -121,6 +122,21 @@ pub(crate) fn refit_sphere_boxes(gas: &mut GasData) -> Aabb {
     refit_nodes(&mut gas.bvh.nodes, leaf)
 }
 
+/// Refits the node boxes of a curve GAS from its segments; returns the new bounds.
+pub(crate) fn refit_curve_boxes(gas: &mut GasData) -> Aabb {
+    let curves = &gas.curves;
+    let leaf = |first: u32, count: u32| {
+        curves[first as usize..(first + count) as usize]
+            .iter()
+            .filter(|s| s.is_active())
+            .fold(Aabb::EMPTY, |a, s| a.union(&s.bounds()))
+    };
+    if let Some(b8) = &mut gas.bvh8 {
+        refit_nodes(&mut b8.nodes, leaf);
+    }
+    refit_nodes(&mut gas.bvh.nodes, leaf)
+}
+
 /// Box `i` of a validated custom-primitive input.
 pub(crate) fn read_aabb(c: &CustomPrimitiveInput<'_>, i: usize) -> Aabb {
     let a = c.aabbs;
@@ -196,6 +212,7 @@ impl GasData {
                 GasKind::Triangles => "vertices",
                 GasKind::CustomPrimitives => "AABBs",
                 GasKind::Spheres => "spheres",
+                GasKind::Curves => "control points",
             };
             count(vertices, built.num_vertices, shape.num_vertices)?;
             count("index triplets", built.num_indices, shape.num_indices)?;
@@ -335,6 +352,24 @@ impl GasData {
                         };
                     });
                 self.bounds = refit_sphere_boxes(self);
+            }
+            GasKind::Curves => {
+                self.curves
+                    .par_iter_mut()
+                    .enumerate()
+                    .for_each(|(slot, s)| {
+                        let (i, k) = locate(slot_prim[slot]);
+                        let BuildInput::Curves(input) = &inputs[i] else {
+                            unreachable!("checked: the inputs are curves")
+                        };
+                        let new = decode_curve(input, k);
+                        *s = if new.is_active() {
+                            new
+                        } else {
+                            new.deactivated()
+                        };
+                    });
+                self.bounds = refit_curve_boxes(self);
             }
         }
         if !self.sbt_offsets.is_empty() {

@@ -17,10 +17,13 @@
 //! of scalars and array lengths, then the arrays. Version 2 added a GAS's 8-wide layout (an
 //! array that may be empty), checked as strictly as the 4-wide one; version 3 added sphere
 //! structures (a primitive kind, an array of spheres after the boxes, and a sphere input's
-//! `singleRadius` in its shape). Versions 1 and 2 are still read.
+//! `singleRadius` in its shape); version 4 added curve structures (a primitive kind, an array
+//! of curve segments after the input shapes, and a curve input's type, end caps and normals in
+//! its shape). Versions 1 to 3 are still read.
 
 use crate::bvh4::{Bvh4, Bvh4Node};
 use crate::bvh8::{Bvh8, Bvh8Node};
+use crate::curve::CurveSegment;
 use crate::gas::{GasData, GasKind, InputRecord, InputShape, NO_PRIMITIVE};
 use crate::ias::{validate_instance, IasData, InstanceData};
 use crate::sphere::Sphere;
@@ -36,11 +39,13 @@ use oxray_core::{
 /// The first bytes of every saved structure.
 pub const MAGIC: [u8; 8] = *b"OXRAYAS\0";
 /// The version this build writes. It reads it and every earlier version.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// The first version with a GAS's optional 8-wide layout (version 1 has none).
 const VERSION_BVH8: u32 = 2;
 /// The first version with spheres (earlier ones have no sphere array).
 const VERSION_SPHERES: u32 = 3;
+/// The first version with curves (earlier ones have no curve array).
+const VERSION_CURVES: u32 = 4;
 const KIND_GAS: u32 = 1;
 const KIND_IAS: u32 = 2;
 const HEADER: usize = 8 + 4 + 4 + 8 + 8;
@@ -241,6 +246,7 @@ fn kind_code(kind: GasKind) -> u32 {
         GasKind::Triangles => 0,
         GasKind::CustomPrimitives => 1,
         GasKind::Spheres => 2,
+        GasKind::Curves => 3,
     }
 }
 
@@ -250,6 +256,7 @@ fn kind_of(code: u32, version: u32) -> Option<GasKind> {
         0 => Some(GasKind::Triangles),
         1 => Some(GasKind::CustomPrimitives),
         2 if version >= VERSION_SPHERES => Some(GasKind::Spheres),
+        3 if version >= VERSION_CURVES => Some(GasKind::Curves),
         _ => None,
     }
 }
@@ -287,6 +294,7 @@ impl GasData {
             self.inputs.len(),
             self.record_flags.len(),
             self.shapes.len(),
+            self.curves.len(),
         ] {
             w.u64(n as u64);
         }
@@ -320,6 +328,7 @@ impl GasData {
             w.u32(s.num_indices);
             w.u32(s.num_sbt_records);
         }
+        w.pod(&self.curves);
         frame(KIND_GAS, w.0)
     }
 
@@ -337,14 +346,17 @@ impl GasData {
             return Err(invalid("primitive count", 0));
         }
         let bounds = r.aabb("the bounds")?;
-        let mut counts = [0u64; 10];
+        let mut counts = [0u64; 11];
         for (i, c) in counts.iter_mut().enumerate() {
-            // Version 1 has no 8-wide layout, versions before 3 no spheres.
-            if (i != 1 || version >= VERSION_BVH8) && (i != 4 || version >= VERSION_SPHERES) {
+            // Version 1 has no 8-wide layout, versions before 3 no spheres, before 4 no curves.
+            if (i != 1 || version >= VERSION_BVH8)
+                && (i != 4 || version >= VERSION_SPHERES)
+                && (i != 10 || version >= VERSION_CURVES)
+            {
                 *c = r.u64("the array lengths")?;
             }
         }
-        let [nn, n8, nt, na, nsp, ns, no, ni, nr, nsh] = counts;
+        let [nn, n8, nt, na, nsp, ns, no, ni, nr, nsh, ncv] = counts;
         let nodes: Vec<Bvh4Node> = r.array(nn, "the nodes")?;
         let nodes8: Vec<Bvh8Node> = r.array(n8, "the 8-wide nodes")?;
         let triangles: Vec<Triangle4> = r.array(nt, "the triangles")?;
@@ -355,15 +367,25 @@ impl GasData {
         let raw_inputs: Vec<[u32; 3]> = r.array(ni, "the build inputs")?;
         let raw_flags: Vec<u32> = r.array(nr, "the geometry flags")?;
         let raw_shapes: Vec<[u32; 5]> = r.array(nsh, "the input shapes")?;
+        let curves: Vec<CurveSegment> = r.array(ncv, "the curve segments")?;
         if !r.bytes.is_empty() {
             return Err(LoadError::TrailingBytes(r.bytes.len() as u64));
         }
 
         // Primitive arrays and the slot table.
         let slots_ok = match kind {
-            GasKind::Triangles => aabbs.is_empty() && spheres.is_empty() && ns == 4 * nt,
-            GasKind::CustomPrimitives => triangles.is_empty() && spheres.is_empty() && ns == na,
-            GasKind::Spheres => triangles.is_empty() && aabbs.is_empty() && ns == nsp,
+            GasKind::Triangles => {
+                aabbs.is_empty() && spheres.is_empty() && curves.is_empty() && ns == 4 * nt
+            }
+            GasKind::CustomPrimitives => {
+                triangles.is_empty() && spheres.is_empty() && curves.is_empty() && ns == na
+            }
+            GasKind::Spheres => {
+                triangles.is_empty() && aabbs.is_empty() && curves.is_empty() && ns == nsp
+            }
+            GasKind::Curves => {
+                triangles.is_empty() && aabbs.is_empty() && spheres.is_empty() && ns == ncv
+            }
         };
         if !slots_ok {
             return Err(invalid("slot table length", 0));
@@ -462,18 +484,27 @@ impl GasData {
             };
             let primitives = match (shape.kind, shape.index_format) {
                 (GasKind::CustomPrimitives | GasKind::Spheres, _) => shape.num_vertices,
+                (GasKind::Curves, _) => shape.num_indices,
                 (GasKind::Triangles, 0) => shape.num_vertices / 3,
                 (GasKind::Triangles, _) => shape.num_indices,
             };
-            // Only a sphere input has singleRadius (byte 5, padding before version 3, which
-            // the loader already required to be 0); bytes 6 and 7 are padding.
+            // Only a sphere input has singleRadius and only a curve input normals (byte 5,
+            // padding before version 3, which the loader already required to be 0); bytes 6
+            // and 7 are padding. A curve input keeps its type's code and its end caps in the
+            // format bytes.
             let single = raw[1].to_le_bytes()[1];
-            let single_ok = single == 0 || (single == 1 && kind == GasKind::Spheres);
+            let single_ok =
+                single == 0 || (single == 1 && matches!(kind, GasKind::Spheres | GasKind::Curves));
+            let formats_ok = if kind == GasKind::Curves {
+                oxray_core::CurveType::from_code(0x2500 | shape.vertex_format as u32).is_some()
+                    && matches!(shape.index_format, 1 | 2)
+            } else {
+                shape.vertex_format <= 5 && shape.index_format <= 2
+            };
             let ok = shape.kind == kind
                 && single_ok
                 && b[3] <= 1
-                && shape.vertex_format <= 5
-                && shape.index_format <= 2
+                && formats_ok
                 && matches!(shape.sbt_offset_size, 0 | 1 | 2 | 4)
                 && raw[1] >> 16 == 0
                 && shape.num_sbt_records == records
@@ -492,6 +523,7 @@ impl GasData {
             triangles,
             aabbs,
             spheres,
+            curves,
             slot_prim,
             sbt_offsets,
             inputs,
@@ -511,11 +543,14 @@ impl GasData {
     /// reference it once: every primitive of an updatable structure (a refit fills one slot
     /// per primitive) or of custom primitives (never split), and the primitives of SBT records
     /// with `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1: one any-hit call per primitive); spheres
-    /// are never split either. Spatial
+    /// and curve segments are never split either. Spatial
     /// splits make the others repeat.
     fn repeated_reference(&self) -> Option<usize> {
         let all = self.build_flags.contains(BuildFlags::ALLOW_UPDATE)
-            || matches!(self.kind, GasKind::CustomPrimitives | GasKind::Spheres);
+            || matches!(
+                self.kind,
+                GasKind::CustomPrimitives | GasKind::Spheres | GasKind::Curves
+            );
         let single = self
             .record_flags
             .iter()

@@ -43,8 +43,10 @@ pub enum BufferKind {
     Aabbs,
     /// The SBT index offset buffer.
     SbtIndexOffsets,
-    /// A sphere input's radius buffer.
+    /// A sphere input's radius buffer, or a curve input's width (radius) buffer.
     Radii,
+    /// A ribbon input's normal buffer.
+    Normals,
 }
 
 impl std::fmt::Display for BufferKind {
@@ -55,6 +57,7 @@ impl std::fmt::Display for BufferKind {
             BufferKind::Aabbs => "AABB buffer",
             BufferKind::SbtIndexOffsets => "SBT index offset buffer",
             BufferKind::Radii => "radius buffer",
+            BufferKind::Normals => "normal buffer",
         })
     }
 }
@@ -266,6 +269,31 @@ pub enum BuildError {
         /// Motion keys of the build.
         expected: usize,
     },
+    /// A curve segment whose control points run past the vertex buffer (guide §5.2: segment
+    /// `i` uses `v[index[i]] ..= v[index[i] + degree]`).
+    #[error("{at}, segment {segment}: first control point {index} + {control_points} control points exceed {num_vertices} vertices")]
+    CurveIndexOutOfRange {
+        /// The input.
+        at: InputLocation,
+        /// The segment.
+        segment: u32,
+        /// Its first control point.
+        index: u32,
+        /// Control points per segment of the curve type.
+        control_points: u32,
+        /// Vertices of the input.
+        num_vertices: u32,
+    },
+    /// `OPTIX_CURVE_ENDCAP_ON` on a linear curve input, which always has round caps (guide
+    /// §5.2), or normals on a curve input that is not a ribbon (only ribbons are oriented,
+    /// §5.2).
+    #[error("{at}: {reason}")]
+    InvalidCurveInput {
+        /// The input.
+        at: InputLocation,
+        /// What is wrong.
+        reason: &'static str,
+    },
     /// `primitiveIndexOffset + numPrimitives` must fit in 32 bits.
     #[error("{at}: primitive index offset {offset} + {count} primitives overflows 32 bits")]
     PrimitiveIndexOffsetOverflow {
@@ -297,6 +325,7 @@ impl BuildError {
             | BuildError::ConflictingBuildFlags
             | BuildError::CompactionNotAllowed
             | BuildError::MotionKeyCount { .. }
+            | BuildError::InvalidCurveInput { .. }
             | BuildError::InvalidUpdate(
                 UpdateRule::NoStructure | UpdateRule::NotAnUpdate | UpdateRule::NotAllowed,
             ) => ErrorCode::InvalidValue,

@@ -3,7 +3,8 @@
 use crate::aabb::Aabb;
 
 /// The kind of a hit (`optixGetHitKind`, guide §13.7): `0xFE`/`0xFF` for the front/back face of a
-/// triangle, `0x8C`/`0x8D` for a sphere, `0..=127` as reported for a custom primitive.
+/// triangle, `0x8C`/`0x8D` for a sphere, `0x82..=0x97` for the curve types, `0..=127` as reported
+/// for a custom primitive.
 ///
 /// The guide leaves the values of built-in hit kinds other than the triangles' to the
 /// implementation (they are read through `optixGetPrimitiveType`, `optixIsFrontFaceHit` and
@@ -29,6 +30,8 @@ pub enum PrimitiveType {
     Sphere,
     /// `OPTIX_PRIMITIVE_TYPE_TRIANGLE`.
     Triangle,
+    /// One of the curve types (`OPTIX_PRIMITIVE_TYPE_ROUND_*`, `_FLAT_QUADRATIC_BSPLINE`).
+    Curve(crate::CurveType),
 }
 
 impl PrimitiveType {
@@ -38,6 +41,7 @@ impl PrimitiveType {
             PrimitiveType::Custom => 0x2500,
             PrimitiveType::Sphere => 0x2506,
             PrimitiveType::Triangle => 0x2531,
+            PrimitiveType::Curve(c) => c.code(),
         }
     }
 }
@@ -50,11 +54,23 @@ impl HitKind {
     /// culled, guide §9.6), but `optixIsBackFaceHit` and `optixGetPrimitiveType` read it.
     pub const SPHERE_BACK_FACE: HitKind = HitKind(0x8D);
 
+    /// The front (`back == false`) or back face of a curve of type `ty` (guide §9.3): round
+    /// curves report front faces only (their tubes are hollow, §9.6); ribbons report either.
+    pub const fn curve(ty: crate::CurveType, back: bool) -> HitKind {
+        HitKind(0x80 | ((ty.code() & 0xFF) as u8) << 1 | back as u8)
+    }
+
     /// `optixGetPrimitiveType(hitKind)`: which primitive type the kind belongs to.
     pub const fn primitive_type(self) -> PrimitiveType {
         match self.0 {
             0xFE | 0xFF => PrimitiveType::Triangle,
             0x8C | 0x8D => PrimitiveType::Sphere,
+            k if k >= 0x80 => {
+                match crate::CurveType::from_code(0x2500 | ((k & 0x7F) >> 1) as u32) {
+                    Some(c) => PrimitiveType::Curve(c),
+                    None => PrimitiveType::Custom,
+                }
+            }
             _ => PrimitiveType::Custom,
         }
     }

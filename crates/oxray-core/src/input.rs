@@ -1,5 +1,5 @@
 //! Build inputs of geometry acceleration structures (guide §5.1, §5.3): triangle arrays, custom
-//! primitive (AABB) arrays and sphere arrays, described by borrowed byte buffers and formats so that nothing here
+//! primitive (AABB) arrays, sphere arrays and curve arrays (see [`crate::curve`]), described by borrowed byte buffers and formats so that nothing here
 //! assumes where the data lives or how the backend lays it out.
 
 use crate::options::GeometryFlags;
@@ -518,6 +518,8 @@ pub enum BuildInput<'a> {
     CustomPrimitives(CustomPrimitiveInput<'a>),
     /// Built-in spheres (guide §5.3).
     Spheres(SphereInput<'a>),
+    /// Built-in curves (guide §5.2).
+    Curves(crate::CurveInput<'a>),
     /// Instances, for an IAS (`OPTIX_BUILD_INPUT_TYPE_INSTANCES`).
     Instances(&'a [crate::Instance]),
     /// Instances by reference, for an IAS (`OPTIX_BUILD_INPUT_TYPE_INSTANCE_POINTERS`).
@@ -536,6 +538,12 @@ impl<'a> From<SphereInput<'a>> for BuildInput<'a> {
     }
 }
 
+impl<'a> From<crate::CurveInput<'a>> for BuildInput<'a> {
+    fn from(c: crate::CurveInput<'a>) -> Self {
+        BuildInput::Curves(c)
+    }
+}
+
 impl<'a> From<CustomPrimitiveInput<'a>> for BuildInput<'a> {
     fn from(c: CustomPrimitiveInput<'a>) -> Self {
         BuildInput::CustomPrimitives(c)
@@ -551,6 +559,8 @@ pub enum BuildInputKind {
     CustomPrimitives,
     /// Built-in spheres.
     Spheres,
+    /// Built-in curves.
+    Curves,
     /// Instances.
     Instances,
     /// Instance pointers.
@@ -563,6 +573,7 @@ impl std::fmt::Display for BuildInputKind {
             BuildInputKind::Triangles => "triangles",
             BuildInputKind::CustomPrimitives => "custom primitives",
             BuildInputKind::Spheres => "spheres",
+            BuildInputKind::Curves => "curves",
             BuildInputKind::Instances => "instances",
             BuildInputKind::InstancePointers => "instance pointers",
         })
@@ -576,6 +587,7 @@ impl BuildInput<'_> {
             BuildInput::Triangles(_) => BuildInputKind::Triangles,
             BuildInput::CustomPrimitives(_) => BuildInputKind::CustomPrimitives,
             BuildInput::Spheres(_) => BuildInputKind::Spheres,
+            BuildInput::Curves(_) => BuildInputKind::Curves,
             BuildInput::Instances(_) => BuildInputKind::Instances,
             BuildInput::InstancePointers(_) => BuildInputKind::InstancePointers,
         }
@@ -587,6 +599,7 @@ impl BuildInput<'_> {
             BuildInput::Triangles(t) => t.num_primitives(),
             BuildInput::CustomPrimitives(c) => c.aabbs.count,
             BuildInput::Spheres(s) => s.num_primitives(),
+            BuildInput::Curves(c) => c.num_primitives(),
             BuildInput::Instances(i) => i.len().min(u32::MAX as usize) as u32,
             BuildInput::InstancePointers(i) => i.len().min(u32::MAX as usize) as u32,
         }
@@ -598,6 +611,8 @@ impl BuildInput<'_> {
             BuildInput::Triangles(t) => t.flags,
             BuildInput::CustomPrimitives(c) => c.flags,
             BuildInput::Spheres(s) => s.flags,
+            // One SBT record per curve input (§9.1).
+            BuildInput::Curves(c) => std::slice::from_ref(&c.flag),
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => &[],
         }
     }
@@ -608,6 +623,7 @@ impl BuildInput<'_> {
             BuildInput::Triangles(t) => t.sbt_index_offsets.as_ref(),
             BuildInput::CustomPrimitives(c) => c.sbt_index_offsets.as_ref(),
             BuildInput::Spheres(s) => s.sbt_index_offsets.as_ref(),
+            BuildInput::Curves(_) => None,
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => None,
         }
     }
@@ -618,6 +634,7 @@ impl BuildInput<'_> {
             BuildInput::Triangles(t) => t.primitive_index_offset,
             BuildInput::CustomPrimitives(c) => c.primitive_index_offset,
             BuildInput::Spheres(s) => s.primitive_index_offset,
+            BuildInput::Curves(c) => c.primitive_index_offset,
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => 0,
         }
     }

@@ -25,6 +25,7 @@
 pub mod aabb;
 pub mod backend;
 pub mod cache;
+pub mod curve;
 pub mod error;
 pub mod exception;
 pub mod handle;
@@ -42,6 +43,7 @@ pub mod vertex;
 
 pub use aabb::Aabb;
 pub use backend::{AccelBackend, BatchKind};
+pub use curve::{CurveEndcaps, CurveInput, CurveType};
 pub use error::{
     BufferKind, BuildError, ErrorCode, InputLocation, LaunchError, LoadError, PipelineError,
     QueryError, UpdateRule,

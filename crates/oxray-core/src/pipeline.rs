@@ -104,8 +104,28 @@ bitflags! {
     pub struct PrimitiveTypeFlags: u32 {
         /// Custom primitives.
         const CUSTOM = 1 << 0;
+        /// Round quadratic B-spline curves (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_QUADRATIC_BSPLINE`).
+        const ROUND_QUADRATIC_BSPLINE = 1 << 1;
+        /// Round cubic B-spline curves (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_CUBIC_BSPLINE`).
+        const ROUND_CUBIC_BSPLINE = 1 << 2;
+        /// Round linear curves (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_LINEAR`).
+        const ROUND_LINEAR = 1 << 3;
+        /// Round Catmull-Rom curves (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_CATMULLROM`).
+        const ROUND_CATMULLROM = 1 << 4;
+        /// Ribbons (`OPTIX_PRIMITIVE_TYPE_FLAGS_FLAT_QUADRATIC_BSPLINE`).
+        const FLAT_QUADRATIC_BSPLINE = 1 << 5;
         /// Built-in spheres (`OPTIX_PRIMITIVE_TYPE_FLAGS_SPHERE`).
         const SPHERE = 1 << 6;
+        /// Round cubic Bézier curves (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_CUBIC_BEZIER`).
+        const ROUND_CUBIC_BEZIER = 1 << 7;
+        /// Rocaps quadratic B-splines (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_QUADRATIC_BSPLINE_ROCAPS`).
+        const ROUND_QUADRATIC_BSPLINE_ROCAPS = 1 << 8;
+        /// Rocaps cubic B-splines (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_CUBIC_BSPLINE_ROCAPS`).
+        const ROUND_CUBIC_BSPLINE_ROCAPS = 1 << 9;
+        /// Rocaps Catmull-Rom curves (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_CATMULLROM_ROCAPS`).
+        const ROUND_CATMULLROM_ROCAPS = 1 << 10;
+        /// Rocaps cubic Béziers (`OPTIX_PRIMITIVE_TYPE_FLAGS_ROUND_CUBIC_BEZIER_ROCAPS`).
+        const ROUND_CUBIC_BEZIER_ROCAPS = 1 << 11;
         /// Triangles.
         const TRIANGLE = 1 << 31;
     }
@@ -113,7 +133,7 @@ bitflags! {
 
 impl PrimitiveTypeFlags {
     /// Whether a pipeline with these flags intersects primitives of type `ty` (guide §9.1):
-    /// the empty set means triangles and custom primitives; spheres need [`Self::SPHERE`].
+    /// the empty set means triangles and custom primitives; spheres need [`Self::SPHERE`], each curve type its own flag.
     ///
     /// ```
     /// use oxray_core::{PrimitiveType, PrimitiveTypeFlags};
@@ -132,6 +152,7 @@ impl PrimitiveTypeFlags {
             crate::PrimitiveType::Custom => PrimitiveTypeFlags::CUSTOM,
             crate::PrimitiveType::Sphere => PrimitiveTypeFlags::SPHERE,
             crate::PrimitiveType::Triangle => PrimitiveTypeFlags::TRIANGLE,
+            crate::PrimitiveType::Curve(c) => c.type_flag(),
         })
     }
 }

@@ -1,6 +1,7 @@
 //! Validation of build inputs: every rule of guide §5, §5.1, §5.3, §5.5 and §12 that can be
 //! checked before reading the data, and the data checks (index and SBT offset ranges) the build makes.
 
+use crate::curve::{CurveEndcaps, CurveInput, CurveType};
 use crate::error::{BufferKind, BuildError, InputLocation};
 use crate::input::{BuildInput, BuildInputKind, SbtIndexOffsets, SphereInput};
 use crate::options::{BuildFlags, BuildOptions};
@@ -129,6 +130,7 @@ pub fn validate_structure(
                 unreachable!("instance inputs were refused above")
             }
             BuildInput::Spheres(s) => validate_spheres(at, s)?,
+            BuildInput::Curves(c) => validate_curves(at, c)?,
             BuildInput::CustomPrimitives(c) => {
                 let a = &c.aabbs;
                 check_stride(at, BufferKind::Aabbs, a.stride, 24, 8)?;
@@ -226,6 +228,107 @@ fn validate_spheres(at: InputLocation, s: &SphereInput<'_>) -> Result<(), BuildE
             s.effective_radius_stride(),
             4,
         )?;
+    }
+    Ok(())
+}
+
+/// The rules of guide §5.2 and §9.1 (and `OptixBuildInputCurveArray`'s fields): one vertex
+/// and one width buffer per motion key, normals (per key) only for ribbons, `float3` points,
+/// `f32` radii, `u32` indices with strides that are 0 or a multiple of 4, buffers long enough,
+/// no flat end caps on linear curves, and every segment's control points inside the vertex
+/// buffer.
+fn validate_curves(at: InputLocation, c: &CurveInput<'_>) -> Result<(), BuildError> {
+    for (buffer, given) in [
+        (BufferKind::Vertices, c.vertex_buffers.len()),
+        (BufferKind::Radii, c.width_buffers.len()),
+    ] {
+        if given != MOTION_KEYS {
+            return Err(BuildError::MotionKeyCount {
+                at,
+                buffer,
+                given,
+                expected: MOTION_KEYS,
+            });
+        }
+    }
+    if !c.normal_buffers.is_empty() {
+        if !c.curve_type.is_ribbon() {
+            return Err(BuildError::InvalidCurveInput {
+                at,
+                reason: "normals are given but only ribbons (flat quadratic B-splines) take them",
+            });
+        }
+        if c.normal_buffers.len() != MOTION_KEYS {
+            return Err(BuildError::MotionKeyCount {
+                at,
+                buffer: BufferKind::Normals,
+                given: c.normal_buffers.len(),
+                expected: MOTION_KEYS,
+            });
+        }
+    }
+    if c.curve_type == CurveType::RoundLinear && c.endcaps == CurveEndcaps::On {
+        return Err(BuildError::InvalidCurveInput {
+            at,
+            reason:
+                "OPTIX_CURVE_ENDCAP_ON is not valid for linear curves, which always have round caps",
+        });
+    }
+    check_stride(at, BufferKind::Vertices, c.vertex_stride, 12, 4)?;
+    check_stride(at, BufferKind::Radii, c.width_stride, 4, 4)?;
+    check_stride(at, BufferKind::Normals, c.normal_stride, 12, 4)?;
+    check_stride(at, BufferKind::Indices, c.index_stride, 4, 4)?;
+    let n = c.num_vertices;
+    for v in c.vertex_buffers {
+        check_len(
+            at,
+            BufferKind::Vertices,
+            v.len(),
+            n,
+            c.effective_vertex_stride(),
+            12,
+        )?;
+    }
+    for w in c.width_buffers {
+        check_len(
+            at,
+            BufferKind::Radii,
+            w.len(),
+            n,
+            c.effective_width_stride(),
+            4,
+        )?;
+    }
+    for nb in c.normal_buffers {
+        check_len(
+            at,
+            BufferKind::Normals,
+            nb.len(),
+            n,
+            c.effective_normal_stride(),
+            12,
+        )?;
+    }
+    check_len(
+        at,
+        BufferKind::Indices,
+        c.index_buffer.len(),
+        c.num_primitives,
+        c.effective_index_stride(),
+        4,
+    )?;
+    let control_points = c.curve_type.control_points() as u32;
+    for segment in 0..c.num_primitives {
+        let index = c.segment_start(c.index_buffer, segment as usize);
+        if index as u64 + control_points as u64 > n as u64 {
+            return Err(BuildError::CurveIndexOutOfRange {
+                at,
+                segment,
+                index,
+                control_points,
+                num_vertices: n,
+            });
+        }
     }
     Ok(())
 }
@@ -420,5 +523,128 @@ mod tests {
         check(input).unwrap();
         assert_eq!(input.radius(pr[0], 2), 0.5);
         assert_eq!(input.centre(pc[0], 2).x, 2.0);
+    }
+
+    fn check_curve(input: CurveInput<'_>) -> Result<InputSummary, BuildError> {
+        validate_structure(&BuildOptions::default(), &[input.into()])
+    }
+
+    /// §5.2, §9.1: one SBT record per curve input (one flag), one primitive per segment; the
+    /// buffers' strides and sizes, the motion keys, the end caps of linear curves, normals on
+    /// non-ribbons and segments past the vertices are refused with typed errors.
+    #[test]
+    fn s5_2_curve_inputs_are_checked() {
+        // Two cubic strands of one segment each, interleaved point + radius (stride 16).
+        let packed: Vec<[f32; 4]> = (0..8).map(|i| [i as f32, 0.0, 0.0, 0.1]).collect();
+        let bytes = bytemuck::cast_slice::<_, u8>(&packed);
+        let (v, w) = ([bytes], [&bytes[12..]]);
+        let index = [0u32, 4];
+        let ix = bytemuck::cast_slice::<_, u8>(&index);
+        let input = CurveInput::new(CurveType::RoundCubicBSpline, &v, 8, &w, ix, 2)
+            .vertex_stride(16)
+            .width_stride(16)
+            .flag(GeometryFlags::DISABLE_ANYHIT);
+        let s = check_curve(input).unwrap();
+        assert_eq!(
+            (s.kind, s.num_primitives, s.num_sbt_records),
+            (BuildInputKind::Curves, 2, 1)
+        );
+        assert_eq!(input.radius(w[0], 7), 0.1);
+        assert_eq!(input.point(v[0], 5).x, 5.0);
+        assert!(input.starts_strand(1) && input.ends_strand(0));
+        // Strides: not a multiple of 4, or smaller than an element.
+        for (bad, buffer) in [
+            (input.vertex_stride(14), BufferKind::Vertices),
+            (input.width_stride(2), BufferKind::Radii),
+            (input.index_stride(6), BufferKind::Indices),
+            (input.normals(&v, 8), BufferKind::Normals),
+        ] {
+            let err = check_curve(bad).unwrap_err();
+            let ok = matches!(err, BuildError::InvalidStride { buffer: b, .. } if b == buffer)
+                || matches!(err, BuildError::InvalidCurveInput { .. });
+            assert!(ok, "{err}");
+        }
+        // Sizes: more vertices or segments than the buffers hold.
+        for (bad, buffer) in [
+            (
+                CurveInput {
+                    num_vertices: 9,
+                    ..input
+                },
+                BufferKind::Vertices,
+            ),
+            (
+                CurveInput {
+                    num_primitives: 3,
+                    ..input
+                },
+                BufferKind::Indices,
+            ),
+        ] {
+            let err = check_curve(bad).unwrap_err();
+            assert!(
+                matches!(err, BuildError::BufferTooSmall { buffer: b, .. } if b == buffer),
+                "{err}"
+            );
+            assert_eq!(err.code(), ErrorCode::InvalidInput);
+        }
+        // Motion keys (§5.10.2): one buffer of each per key, and builds have one key.
+        let two = [bytes, bytes];
+        let err = check_curve(CurveInput {
+            width_buffers: &two,
+            ..input
+        })
+        .unwrap_err();
+        assert!(matches!(
+            err,
+            BuildError::MotionKeyCount {
+                buffer: BufferKind::Radii,
+                given: 2,
+                expected: 1,
+                ..
+            }
+        ));
+        assert_eq!(err.code(), ErrorCode::InvalidValue);
+        // A segment whose control points run past the vertices.
+        let past = [0u32, 5];
+        let err = check_curve(CurveInput {
+            index_buffer: bytemuck::cast_slice(&past),
+            ..input
+        })
+        .unwrap_err();
+        assert!(matches!(
+            err,
+            BuildError::CurveIndexOutOfRange {
+                segment: 1,
+                index: 5,
+                control_points: 4,
+                ..
+            }
+        ));
+        // Flat caps are for the splines; linear curves always have round ones.
+        let linear = CurveInput {
+            curve_type: CurveType::RoundLinear,
+            ..input
+        };
+        check_curve(linear).unwrap();
+        let err = check_curve(linear.endcaps(CurveEndcaps::On)).unwrap_err();
+        assert!(matches!(err, BuildError::InvalidCurveInput { .. }), "{err}");
+        check_curve(input.endcaps(CurveEndcaps::On)).unwrap();
+        // Normals only for ribbons (one buffer per key).
+        let ribbon = CurveInput {
+            curve_type: CurveType::FlatQuadraticBSpline,
+            ..input
+        };
+        check_curve(ribbon.normals(&v, 16)).unwrap();
+        let err = check_curve(input.normals(&v, 16)).unwrap_err();
+        assert!(matches!(err, BuildError::InvalidCurveInput { .. }), "{err}");
+        let err = check_curve(ribbon.normals(&two, 16)).unwrap_err();
+        assert!(matches!(
+            err,
+            BuildError::MotionKeyCount {
+                buffer: BufferKind::Normals,
+                ..
+            }
+        ));
     }
 }

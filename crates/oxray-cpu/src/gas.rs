@@ -4,7 +4,8 @@
 use crate::Isa;
 use oxray_bvh::{GasData, NodeWidth};
 use oxray_core::{
-    Aabb, BackendKind, BuildError, BuildInput, BuildOptions, Traversable, TraversableKind,
+    Aabb, BackendKind, BuildError, BuildInput, BuildOptions, PrimitiveTypeFlags, Traversable,
+    TraversableKind,
 };
 use std::sync::Arc;
 
@@ -33,6 +34,9 @@ pub struct Gas {
     data: GasData,
     /// The kernel that traverses it: one this processor runs, whose layout `data` holds.
     isa: Isa,
+    /// The pipeline flags of the curve types it holds (empty for other kinds), read by every
+    /// trace that enters it (guide §9.1). Updates keep the curve types (§5.6).
+    curve_types: PrimitiveTypeFlags,
 }
 
 impl Gas {
@@ -63,7 +67,23 @@ impl Gas {
     /// the data has no 8-wide layout.
     pub fn from_data_with_isa(data: GasData, isa: Isa) -> Gas {
         let isa = Self::kernel_for(&data, isa);
-        Gas { data, isa }
+        let curve_types = data
+            .curves
+            .iter()
+            .fold(PrimitiveTypeFlags::empty(), |f, s| {
+                f | s.curve_type().type_flag()
+            });
+        Gas {
+            data,
+            isa,
+            curve_types,
+        }
+    }
+
+    /// The pipeline flags (`OptixPrimitiveTypeFlags`) of the curve types it holds; empty for a
+    /// structure that is not made of curves.
+    pub fn curve_types(&self) -> PrimitiveTypeFlags {
+        self.curve_types
     }
 
     /// The kernel that traverses this structure.

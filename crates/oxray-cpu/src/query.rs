@@ -135,6 +135,27 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
         })
     }
 
+    #[inline(always)]
+    fn curve(&mut self, slot: u32, h: &oxray_bvh::CurveHit) -> Decision {
+        let Some(gas) = self.gas else {
+            return Decision::Ignore;
+        };
+        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
+        let (instance_id, instance_index) = self.instance();
+        // A curve's attributes are its u (and a ribbon's v), guide §9.3.
+        self.offer(Hit {
+            t: h.t,
+            u: h.u,
+            v: h.v,
+            primitive_index,
+            sbt_gas_index,
+            build_input,
+            hit_kind: HitKind::curve(gas.curves[slot as usize].curve_type(), h.back_face),
+            instance_id,
+            instance_index,
+        })
+    }
+
     fn custom(&mut self, slot: u32, tmin: f32, tmax: f32, _: &mut [Entry]) -> (Option<f32>, bool) {
         let Some(gas) = self.gas else {
             return (None, false);

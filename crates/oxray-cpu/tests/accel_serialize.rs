@@ -7,9 +7,10 @@ use glam::Vec3;
 use oxray_bvh::serialize::{checksum, FORMAT_VERSION};
 use oxray_bvh::{GasData, IasData};
 use oxray_core::{
-    Aabb, AabbBuffer, BuildFlags, BuildInput, BuildOptions, CustomHit, CustomPrimitive,
-    CustomPrimitiveInput, GeometryFlags, IndexBuffer, Instance, LoadError, Ray, SbtIndexOffsets,
-    SphereInput, Transform, TraversableHandle, TriangleInput, VertexBuffer,
+    Aabb, AabbBuffer, BuildFlags, BuildInput, BuildOptions, CurveEndcaps, CurveInput, CurveType,
+    CustomHit, CustomPrimitive, CustomPrimitiveInput, GeometryFlags, IndexBuffer, Instance,
+    LoadError, Ray, SbtIndexOffsets, SphereInput, Transform, TraversableHandle, TriangleInput,
+    VertexBuffer,
 };
 use oxray_cpu::{Gas, Ias};
 use oxray_testkit::mesh::icosphere;
@@ -180,8 +181,33 @@ fn saved_structures_load_back_with_identical_hits_and_damaged_bytes_are_refused(
         .into()];
     let spheres = Gas::build(&options, &sphere_inputs).unwrap();
 
+    // A curve GAS (guide §5.2), updatable, with flat caps, one strand of three cubic segments
+    // per 6 control points, and an inactive segment (negative radii).
+    let cpoints: Vec<[f32; 3]> = (0..600).map(|_| rng.vec3(-1.0, 1.0).to_array()).collect();
+    let mut cradii: Vec<f32> = (0..600).map(|_| rng.range(0.01, 0.05)).collect();
+    cradii[12..16].fill(-0.1);
+    let cindex: Vec<u32> = (0..100)
+        .flat_map(|s| [6 * s, 6 * s + 1, 6 * s + 2])
+        .collect();
+    let (cv, cw) = (
+        [bytemuck::cast_slice::<_, u8>(&cpoints)],
+        [bytemuck::cast_slice::<_, u8>(&cradii)],
+    );
+    let curve_inputs: [BuildInput<'_>; 1] = [CurveInput::new(
+        CurveType::RoundCubicBSpline,
+        &cv,
+        600,
+        &cw,
+        bytemuck::cast_slice(&cindex),
+        300,
+    )
+    .endcaps(CurveEndcaps::On)
+    .into()];
+    let curves = Gas::build(&options, &curve_inputs).unwrap();
+    assert_eq!(curves.num_active_primitives(), 299);
+
     let test_rays = rays(&mut rng, 2000, 1.5);
-    for gas in [&tri, &custom, &spheres] {
+    for gas in [&tri, &custom, &spheres, &curves] {
         let bytes = gas.data().to_bytes();
         let loaded = Gas::from(GasData::from_bytes(&bytes).unwrap());
         assert_eq!(loaded.bvh.nodes, gas.bvh.nodes);
@@ -305,6 +331,7 @@ fn saved_structures_load_back_with_identical_hits_and_damaged_bytes_are_refused(
         ("triangle GAS", &tri_bytes),
         ("custom GAS", &custom.data().to_bytes()),
         ("sphere GAS", &spheres.data().to_bytes()),
+        ("curve GAS", &curves.data().to_bytes()),
         ("IAS", &ias_bytes),
     ] {
         for k in 0..rounds {
@@ -341,6 +368,7 @@ fn saved_structures_load_back_with_identical_hits_and_damaged_bytes_are_refused(
                     // An update of whatever loaded: refused or done, never a panic.
                     let _ = gas.update(&up, &inputs);
                     let _ = gas.update(&up, &sphere_inputs);
+                    let _ = gas.update(&up, &curve_inputs);
                     let _ = gas.intersect(&probe[0]);
                 }
             }

@@ -146,6 +146,10 @@ fn query_error(e: CudaError) -> QueryError {
 pub(crate) const SPHERES_UNSUPPORTED: &str =
     "built-in spheres (guide §5.3) on the CUDA backend (the CPU backend traces them)";
 
+/// Why the CUDA backend refuses a curve GAS.
+pub(crate) const CURVES_UNSUPPORTED: &str =
+    "built-in curves (guide §5.2) on the CUDA backend (the CPU backend traces them)";
+
 fn build_error(e: CudaError) -> BuildError {
     BuildError::Device(e.to_string())
 }
@@ -202,6 +206,10 @@ impl AccelBackend for Cuda {
         let summary = oxray_core::validate::validate_structure(options, inputs)?;
         if summary.kind == oxray_core::BuildInputKind::Spheres {
             return Err(BuildError::Unsupported(SPHERES_UNSUPPORTED));
+        }
+        // Built-in curves (guide §5.2) likewise.
+        if summary.kind == oxray_core::BuildInputKind::Curves {
+            return Err(BuildError::Unsupported(CURVES_UNSUPPORTED));
         }
         if let Some(config) = self.device_build_config(options, inputs) {
             match device_build::build_triangles(&self.ctx, options, inputs, &config) {

@@ -563,6 +563,9 @@ impl CudaGas {
             GasKind::Spheres => {
                 return Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED))
             }
+            GasKind::Curves => {
+                return Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED))
+            }
             GasKind::Triangles => {}
         }
         let export = gas.export_triangles().ok_or(CudaError::CustomPrimitives)?;
@@ -676,6 +679,7 @@ impl CudaGas {
             GasKind::CustomPrimitives => Err(CudaError::CustomPrimitives),
             // Never uploaded (`upload_with_layout` refuses them).
             GasKind::Spheres => Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED)),
+            GasKind::Curves => Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED)),
         }
     }
 
@@ -706,6 +710,9 @@ impl CudaGas {
             // Never uploaded (`upload_with_layout` refuses them).
             GasKind::Spheres => {
                 return Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED))
+            }
+            GasKind::Curves => {
+                return Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED))
             }
         };
         let v = ProgramView::upload(
@@ -1014,6 +1021,7 @@ impl Traversable for CudaGas {
                 GasKind::Triangles => "triangles",
                 GasKind::CustomPrimitives => "custom primitives",
                 GasKind::Spheres => "spheres",
+                GasKind::Curves => "curves",
             },
             self.layout
         )

@@ -194,6 +194,21 @@ extern "C" __global__ void __closesthit__all() {
         + optixIsBackFaceHit() + optixIsTriangleFrontFaceHit() + optixIsTriangleBackFaceHit()
         + optixIsFrontFaceHit(optixGetHitKind()) + optixGetAttribute_0() + optixGetAttribute_1();
     float2 bc = optixGetTriangleBarycentrics();
+    // Curves (guide §9.3): the CUDA backend builds none, but programs that read them compile.
+    float4 cv[4];
+    optixGetLinearCurveVertexData(cv);
+    optixGetQuadraticBSplineVertexData(cv);
+    optixGetQuadraticBSplineRocapsVertexData(cv);
+    optixGetCubicBSplineVertexData(cv);
+    optixGetCubicBSplineRocapsVertexData(cv);
+    optixGetCatmullRomVertexData(cv);
+    optixGetCatmullRomRocapsVertexData(cv);
+    optixGetCubicBezierVertexData(cv);
+    optixGetCubicBezierRocapsVertexData(cv);
+    optixGetRibbonVertexData(cv);
+    float2 rp = optixGetRibbonParameters();
+    t += optixGetCurveParameter() + rp.y + cv[3].w;
+    u += (unsigned int)optixGetPrimitiveType();
     optixSetPayload_0(optixGetPayload_0() + u + __float_as_uint(t + bc.x));
     optixSetPayload_31(optixGetPayload_31() + optixGetPayload_7());
     optixSetPayload_8(optixGetPayload_15() + optixGetPayload_16() + optixGetPayload_23() + optixGetPayload_24());

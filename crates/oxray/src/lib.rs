@@ -89,21 +89,21 @@ pub use oxray_core::{error, exception, sbt, validate};
 pub use oxray_core::Aabb;
 pub use oxray_core::{
     AabbBuffer, AccelProperty, BackendKind, BatchKind, BufferKind, BuildError, BuildFlags,
-    BuildInput, BuildInputKind, BuildOperation, BuildOptions, CandidateAction, CustomHit,
-    CustomPrimitive, CustomPrimitiveInput, DeviceContext, EmittedProperty, ErrorCode, Exception,
-    ExceptionCode, ExceptionFlags, GeometryFlags, Hit, HitKind, IndexBuffer, IndexFormat,
-    InputLocation, Instance, InstanceFlags, LaunchError, LaunchReport, LoadError, LogLevel,
-    PipelineCompileOptions, PipelineError, PipelineLinkOptions, PrimitiveType, PrimitiveTypeFlags,
-    QueryError, Ray, RayError, RayFlags, RayRecord, SbtHeader, SbtIndexOffsets, SbtIndexSize,
-    SbtRegion, ShaderBindingTable, SphereInput, StaticTransform, Transform, Traversable,
-    TraversableGraphFlags, TraversableHandle, TraversableKind, TriangleInput, UpdateRule,
-    VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID, MAX_PRIMITIVES_PER_GAS,
-    MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
+    BuildInput, BuildInputKind, BuildOperation, BuildOptions, CandidateAction, CurveEndcaps,
+    CurveInput, CurveType, CustomHit, CustomPrimitive, CustomPrimitiveInput, DeviceContext,
+    EmittedProperty, ErrorCode, Exception, ExceptionCode, ExceptionFlags, GeometryFlags, Hit,
+    HitKind, IndexBuffer, IndexFormat, InputLocation, Instance, InstanceFlags, LaunchError,
+    LaunchReport, LoadError, LogLevel, PipelineCompileOptions, PipelineError, PipelineLinkOptions,
+    PrimitiveType, PrimitiveTypeFlags, QueryError, Ray, RayError, RayFlags, RayRecord, SbtHeader,
+    SbtIndexOffsets, SbtIndexSize, SbtRegion, ShaderBindingTable, SphereInput, StaticTransform,
+    Transform, Traversable, TraversableGraphFlags, TraversableHandle, TraversableKind,
+    TriangleInput, UpdateRule, VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
+    MAX_PRIMITIVES_PER_GAS, MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
 
 pub use oxray_bvh::{
-    compute_memory_usage, AccelBufferSizes, BvhStats, ExportedTriangle, GasExport, GasMemory,
-    Sphere,
+    compute_memory_usage, AccelBufferSizes, BvhStats, CurveHit, CurveSegment, ExportedTriangle,
+    GasExport, GasMemory, Sphere,
 };
 pub use oxray_cpu::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, CustomIntersector, DirectCallableCtx,

@@ -8,6 +8,8 @@
 mod custom_sphere;
 #[path = "../examples/cutouts.rs"]
 mod cutouts;
+#[path = "../examples/hair.rs"]
+mod hair;
 #[path = "../examples/hello.rs"]
 mod hello;
 #[path = "../examples/instancing.rs"]
@@ -155,6 +157,28 @@ fn custom_sphere_is_a_disc_shaded_by_its_normals() {
     assert!(
         c[2] < 10 && (c[0] as i32 - 128).abs() < 12 && (c[1] as i32 - 128).abs() < 12,
         "{c:?}"
+    );
+}
+
+/// Guide §9.3: the strands cover part of the image around the scalp in their brown, shaded
+/// from their normals and tangents (not one flat colour), and the background shows around.
+#[test]
+fn hair_shows_shaded_strands_around_the_scalp() {
+    let px = run("hair", hair::render);
+    // Hair is brown (red over green over blue); the background is grey-blue, the scalp pink.
+    let hair: Vec<&[u8; 4]> = px
+        .iter()
+        .filter(|p| p[0] > p[1] + 4 && p[1] > p[2] + 4 && p[0] < 200)
+        .collect();
+    let share = hair.len() as f64 / px.len() as f64;
+    assert!((0.1..0.7).contains(&share), "hair covers {share}");
+    let mut shades: Vec<u8> = hair.iter().map(|p| p[0]).collect();
+    shades.sort_unstable();
+    shades.dedup();
+    assert!(shades.len() > 20, "{} shades of hair", shades.len());
+    assert!(
+        at(&px, 0, 0)[2] > at(&px, 0, 0)[0],
+        "background in the corner"
     );
 }
 

@@ -41,7 +41,7 @@ const PENDING_MISUSE: u32 = 6;
 
 /// The device functions a program kind may not call, by the index the header gives them (the
 /// detail of the exception that ends such a launch index).
-pub const MISUSED_FUNCTIONS: [&str; 17] = [
+pub const MISUSED_FUNCTIONS: [&str; 18] = [
     "optixGetWorldRayOrigin",
     "optixGetWorldRayDirection",
     "optixGetObjectRayOrigin",
@@ -59,6 +59,7 @@ pub const MISUSED_FUNCTIONS: [&str; 17] = [
     "optixGetTransformListHandle",
     "optixGetGASTraversableHandle",
     "optixGetSphereData",
+    "a curve's vertex data (optixGet*VertexData)",
 ];
 
 /// The user exception that ends a launch index whose C++ program misbehaved in a way OptiX
@@ -141,6 +142,7 @@ pub(crate) struct CApi {
     vertex_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
     gas_handle: unsafe extern "C" fn(*mut CFrame) -> u64,
     sphere_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
+    curve_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
 }
 
 static API: CApi = CApi {
@@ -152,6 +154,7 @@ static API: CApi = CApi {
     vertex_data: api_vertex_data,
     gas_handle: api_gas_handle,
     sphere_data: api_sphere_data,
+    curve_data: api_curve_data,
 };
 
 /// A wrapped program: `__oxray_entry_<name>(frame)`, 0 when it returned, 1 when it unwound.
@@ -754,6 +757,22 @@ unsafe extern "C" fn api_sphere_data(f: *mut CFrame, out: *mut f32) {
     };
     // SAFETY: the header passes 4 floats.
     unsafe { std::ptr::copy_nonoverlapping(s.as_ptr(), out, 4) };
+}
+
+unsafe extern "C" fn api_curve_data(f: *mut CFrame, out: *mut f32) {
+    // SAFETY: the header passes the running program's frame.
+    let f = unsafe { &mut *f };
+    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
+    let p = unsafe {
+        match f.kind {
+            KIND_CH => ctx_of::<Ch>(f).curve_vertex_data(),
+            KIND_AH => ctx_of::<Ah>(f).curve_vertex_data(),
+            _ => [[0.0; 4]; 4],
+        }
+    };
+    let flat = p.as_flattened();
+    // SAFETY: the header passes 16 floats.
+    unsafe { std::ptr::copy_nonoverlapping(flat.as_ptr(), out, 16) };
 }
 
 unsafe extern "C" fn api_gas_handle(f: *mut CFrame) -> u64 {

@@ -224,6 +224,9 @@ struct __oxray_Api {
     // The object-space centre and radius of the hit sphere (4 floats; zeros for another
     // primitive type).
     void (*sphere_data)(__oxray_Frame* f, float* v);
+    // The object-space control points and radii of the hit curve segment (16 floats, as many
+    // float4s as the type has, then zeros; zeros for another primitive type).
+    void (*curve_data)(__oxray_Frame* f, float* v);
 };
 
 // Program kinds, as the runtime numbers them.
@@ -349,12 +352,15 @@ static inline unsigned int optixGetSbtGASIndex() { return __oxray_frame->sbt_gas
 static inline unsigned int optixGetInstanceId() { return __oxray_frame->instance_id; }
 static inline unsigned int optixGetInstanceIndex() { return __oxray_frame->instance_index; }
 static inline unsigned int optixGetHitKind() { return __oxray_frame->hit_kind; }
-// Built-in hit kinds (128..255): a triangle's 0xFE/0xFF, a sphere's 0x8C/0x8D (oxray's choice;
-// see oxray_core::HitKind). Everything else is a custom primitive's kind.
+// Built-in hit kinds (128..255): a triangle's 0xFE/0xFF, otherwise 0x80 | (the low byte of the
+// OptixPrimitiveType) << 1 | back face: a sphere's 0x8C/0x8D, a curve's 0x82..0x97 (oxray's
+// choice; see oxray_core::HitKind). Everything else is a custom primitive's kind.
 static inline OptixPrimitiveType optixGetPrimitiveType(unsigned int hitKind) {
-    return hitKind >= 0xFEu ? OPTIX_PRIMITIVE_TYPE_TRIANGLE
-           : (hitKind == 0x8Cu || hitKind == 0x8Du) ? OPTIX_PRIMITIVE_TYPE_SPHERE
-                                                    : OPTIX_PRIMITIVE_TYPE_CUSTOM;
+    if (hitKind >= 0xFEu) return OPTIX_PRIMITIVE_TYPE_TRIANGLE;
+    unsigned int low = (hitKind & 0x7Fu) >> 1;
+    if (hitKind >= 0x80u && low >= 1u && low <= 0x0Bu)
+        return (OptixPrimitiveType)(0x2500u | low);
+    return OPTIX_PRIMITIVE_TYPE_CUSTOM;
 }
 static inline OptixPrimitiveType optixGetPrimitiveType() {
     return optixGetPrimitiveType(optixGetHitKind());
@@ -402,6 +408,43 @@ static inline void optixGetSphereData(float4 data[1]) {
     __oxray_frame->api->sphere_data(__oxray_frame, v);
     data[0] = make_float4(v[0], v[1], v[2], v[3]);
 }
+
+// Guide §9.3: a curve hit's u in its segment (exactly 0 or 1 on a flat end cap), and a ribbon
+// hit's (u, v). They are the hit's attributes.
+static inline float optixGetCurveParameter() { return __uint_as_float(__oxray_frame->attr[0]); }
+static inline float2 optixGetRibbonParameters() {
+    return make_float2(__uint_as_float(__oxray_frame->attr[0]),
+                       __uint_as_float(__oxray_frame->attr[1]));
+}
+// Guide §9.3: the control points (xyz) and radii (w) of the hit curve segment, object space; no
+// build flag is needed. Zeros when the hit is not a curve.
+static inline void __oxray_curve_data(float4* data, int n) {
+    __oxray_allow(__OXRAY_K(AH) | __OXRAY_K(CH), 17);
+    float v[16];
+    __oxray_frame->api->curve_data(__oxray_frame, v);
+    for (int k = 0; k < n; ++k)
+        data[k] = make_float4(v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]);
+}
+static inline void optixGetLinearCurveVertexData(float4 data[2]) { __oxray_curve_data(data, 2); }
+static inline void optixGetQuadraticBSplineVertexData(float4 data[3]) {
+    __oxray_curve_data(data, 3);
+}
+static inline void optixGetQuadraticBSplineRocapsVertexData(float4 data[3]) {
+    __oxray_curve_data(data, 3);
+}
+static inline void optixGetCubicBSplineVertexData(float4 data[4]) { __oxray_curve_data(data, 4); }
+static inline void optixGetCubicBSplineRocapsVertexData(float4 data[4]) {
+    __oxray_curve_data(data, 4);
+}
+static inline void optixGetCatmullRomVertexData(float4 data[4]) { __oxray_curve_data(data, 4); }
+static inline void optixGetCatmullRomRocapsVertexData(float4 data[4]) {
+    __oxray_curve_data(data, 4);
+}
+static inline void optixGetCubicBezierVertexData(float4 data[4]) { __oxray_curve_data(data, 4); }
+static inline void optixGetCubicBezierRocapsVertexData(float4 data[4]) {
+    __oxray_curve_data(data, 4);
+}
+static inline void optixGetRibbonVertexData(float4 data[3]) { __oxray_curve_data(data, 3); }
 
 static inline OptixTraversableHandle optixGetGASTraversableHandle() {
     __oxray_allow(__OXRAY_HIT_KINDS, 15);

@@ -390,7 +390,7 @@ macro_rules! hit_queries {
         pub fn is_back_face_hit(&self) -> bool {
             self.$hit.hit_kind.is_back_face()
         }
-        /// `optixGetPrimitiveType`: triangle, sphere or custom (guide §13.7).
+        /// `optixGetPrimitiveType`: triangle, sphere, a curve type or custom (guide §13.7).
         pub fn primitive_type(&self) -> PrimitiveType {
             self.$hit.hit_kind.primitive_type()
         }
@@ -403,6 +403,37 @@ macro_rules! hit_queries {
             {
                 Some(s) => s.to_array(),
                 None => [0.0; 4],
+            }
+        }
+        /// `optixGetCurveParameter`: the hit's `u` in its curve segment, exactly 0 or 1 on a
+        /// flat end cap (guide §9.3). 0 when the hit is not a curve.
+        pub fn curve_parameter(&self) -> f32 {
+            match self.$hit.hit_kind.primitive_type() {
+                PrimitiveType::Curve(_) => f32::from_bits(self.$hit.attributes[0]),
+                _ => 0.0,
+            }
+        }
+        /// `optixGetRibbonParameters`: a ribbon hit's `(u, v)`, `v ∈ [-1, 1]` across the
+        /// ribbon (guide §9.3). Zeros when the hit is not a ribbon.
+        pub fn ribbon_parameters(&self) -> [f32; 2] {
+            match self.$hit.hit_kind.primitive_type() {
+                PrimitiveType::Curve(c) if c.is_ribbon() => [
+                    f32::from_bits(self.$hit.attributes[0]),
+                    f32::from_bits(self.$hit.attributes[1]),
+                ],
+                _ => [0.0; 2],
+            }
+        }
+        /// The control points `(x, y, z, radius)` of the hit curve segment in object space, as
+        /// `optixGetLinearCurveVertexData`, `optixGetQuadraticBSplineVertexData`,
+        /// `optixGetCubicBSplineVertexData`, `optixGetCatmullRomVertexData`,
+        /// `optixGetCubicBezierVertexData`, their Rocaps variants and
+        /// `optixGetRibbonVertexData` give them (guide §9.3; no build flag needed): as many as
+        /// the type has (2, 3 or 4), then zeros. Zeros when the hit is not a curve.
+        pub fn curve_vertex_data(&self) -> [[f32; 4]; 4] {
+            match self.gas.and_then(|g| g.curves.get(self.$hit.slot as usize)) {
+                Some(s) => s.points,
+                None => [[0.0; 4]; 4],
             }
         }
         /// `optixIsTriangleHit`.

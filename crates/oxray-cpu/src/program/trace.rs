@@ -323,12 +323,14 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
         let kinds = self.frame.launch.pipeline.compile.uses_primitive_type_flags;
         // An empty set means triangles and custom primitives; spheres must be enabled
         // explicitly (§9.1), else the GAS raises UNSUPPORTED_PRIMITIVE_TYPE.
-        let needed = match gas.kind {
-            GasKind::Triangles => PrimitiveType::Triangle,
-            GasKind::CustomPrimitives => PrimitiveType::Custom,
-            GasKind::Spheres => PrimitiveType::Sphere,
+        let allowed = match gas.kind {
+            GasKind::Triangles => kinds.allows(PrimitiveType::Triangle),
+            GasKind::CustomPrimitives => kinds.allows(PrimitiveType::Custom),
+            GasKind::Spheres => kinds.allows(PrimitiveType::Sphere),
+            // Every curve type the structure holds needs its own flag.
+            GasKind::Curves => kinds.contains(gas.curve_types()),
         };
-        if !kinds.allows(needed) {
+        if !allowed {
             self.pending = Some(Interrupt::exception(
                 ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE,
                 &[],
@@ -446,6 +448,36 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             sbt_gas_index,
             hit_kind: HitKind::SPHERE_FRONT_FACE,
             attributes: [0; 8],
+            record,
+            slot,
+        };
+        self.candidate(hit, gflags)
+    }
+
+    fn curve(&mut self, slot: u32, h: &oxray_bvh::CurveHit) -> Decision {
+        let Some(gas) = self.gas else {
+            return if self.pending.is_some() {
+                Decision::Abort
+            } else {
+                Decision::Ignore
+            };
+        };
+        let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
+        let gflags = gas.record_flags[sbt_gas_index as usize];
+        let Some(record) = self.record(sbt_gas_index) else {
+            return Decision::Abort;
+        };
+        // As for spheres: no triangle culling flags, the built-in intersector, the any-hit
+        // rules in `candidate`. Attributes are u (and a ribbon's v), guide §9.3, §13.4.
+        let mut attributes = [0u32; 8];
+        attributes[0] = h.u.to_bits();
+        attributes[1] = h.v.to_bits();
+        let hit = HitState {
+            t: h.t,
+            primitive_index,
+            sbt_gas_index,
+            hit_kind: HitKind::curve(gas.curves[slot as usize].curve_type(), h.back_face),
+            attributes,
             record,
             slot,
         };

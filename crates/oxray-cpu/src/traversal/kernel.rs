@@ -37,6 +37,9 @@ pub(crate) trait GasVisitor {
     /// A sphere's front-face hit at distance `t` within the current interval, at leaf slot
     /// `slot` (guide §9.4: spheres report only their front face).
     fn sphere(&mut self, slot: u32, t: f32) -> Decision;
+    /// A curve segment's hit within the current interval, at leaf slot `slot` (guide §9.3:
+    /// round curves report front faces only, ribbons either face).
+    fn curve(&mut self, slot: u32, hit: &oxray_bvh::CurveHit) -> Decision;
     /// A custom primitive whose box the ray enters within `[tmin, tmax]`. Returns the t of the
     /// closest hit it accepted (the new tmax), and whether traversal must end. `spare` is the
     /// unused part of the traversal stack, for a nested traversal (an instance's child).

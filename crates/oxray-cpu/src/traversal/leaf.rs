@@ -1,5 +1,6 @@
 //! Leaf intersectors: how the primitives of one leaf are tested against a ray and offered to
-//! the visitor. One per primitive kind (triangle blocks, custom-primitive boxes, spheres) and
+//! the visitor. One per primitive kind (triangle blocks, custom-primitive boxes, spheres,
+//! curve segments) and
 //! one for
 //! the instances of an IAS ([`super::scene::InstanceLeaves`]); a new built-in primitive kind is
 //! a new implementation of [`LeafIntersector`].
@@ -7,7 +8,7 @@
 use super::kernel::{Decision, Entry, GasVisitor};
 use super::ray::PreparedRay;
 use glam::Vec3;
-use oxray_bvh::{Sphere, Triangle4};
+use oxray_bvh::{CurveSegment, Sphere, Triangle4};
 use oxray_core::ray::min_ignore_nan;
 use oxray_core::Aabb;
 
@@ -146,6 +147,43 @@ impl<V: GasVisitor> LeafIntersector<V> for SphereLeaves<'_> {
                 Decision::Accept => *tmax = t,
                 Decision::AcceptAndTerminate => {
                     *tmax = t;
+                    return LeafEnd::Stop;
+                }
+                Decision::Abort => return LeafEnd::Stop,
+            }
+        }
+        LeafEnd::Continue
+    }
+}
+
+/// Built-in curve segments in leaf-slot order (guide §5.2), each tested with
+/// [`CurveSegment::intersect`]: the nearest entry into a round curve's tube (§9.6: a ray whose
+/// interval starts inside the tube does not hit it) or a ribbon's nearest hit, with its `u`.
+pub(crate) struct CurveLeaves<'a>(pub &'a [CurveSegment]);
+
+impl<V: GasVisitor> LeafIntersector<V> for CurveLeaves<'_> {
+    #[inline(always)]
+    fn leaf(
+        &self,
+        start: u32,
+        count: u32,
+        ray: &PreparedRay,
+        tmin: f32,
+        tmax: &mut f32,
+        visitor: &mut V,
+        _spare: &mut [Entry],
+    ) -> LeafEnd {
+        let start = start as usize;
+        let org = Vec3::from(ray.org);
+        for (k, s) in self.0[start..start + count as usize].iter().enumerate() {
+            let Some(hit) = s.intersect(org, ray.dir, tmin, *tmax) else {
+                continue;
+            };
+            match visitor.curve((start + k) as u32, &hit) {
+                Decision::Ignore => {}
+                Decision::Accept => *tmax = hit.t,
+                Decision::AcceptAndTerminate => {
+                    *tmax = hit.t;
                     return LeafEnd::Stop;
                 }
                 Decision::Abort => return LeafEnd::Stop,

@@ -4,7 +4,9 @@
 //! interval shrinks across instances.
 
 use super::kernel::{traverse, Entry, GasVisitor};
-use super::leaf::{AabbLeaves, LeafEnd, LeafIntersector, SphereLeaves, TriangleLeaves};
+use super::leaf::{
+    AabbLeaves, CurveLeaves, LeafEnd, LeafIntersector, SphereLeaves, TriangleLeaves,
+};
 use super::node::{Bvh4, Bvh8Scalar};
 use super::ray::PreparedRay;
 use crate::gas::CpuNode;
@@ -158,6 +160,10 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
                 }
                 GasKind::Spheres => {
                     let leaves = SphereLeaves(&gas.spheres);
+                    traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
+                }
+                GasKind::Curves => {
+                    let leaves = CurveLeaves(&gas.curves);
                     traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
                 }
             }

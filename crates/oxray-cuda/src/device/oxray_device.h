@@ -324,15 +324,18 @@ static __forceinline__ __device__ bool optixIsTriangleBackFaceHit() {
 static __forceinline__ __device__ bool optixIsTriangleHit() {
     return optixIsTriangleFrontFaceHit() || optixIsTriangleBackFaceHit();
 }
-// Built-in hit kinds: a triangle's 0xFE/0xFF and a sphere's 0x8C/0x8D (oxray's choice, the
-// same on both devices: see oxray_core::HitKind; spheres are traced on the CPU only for now).
-// Every other hit kind is a custom one.
+// Built-in hit kinds: a triangle's 0xFE/0xFF, otherwise 0x80 | (the low byte of the
+// OptixPrimitiveType) << 1 | back face: a sphere's 0x8C/0x8D, a curve's 0x82..0x97 (oxray's
+// choice, the same on both devices: see oxray_core::HitKind; spheres and curves are traced on
+// the CPU only for now). Every other hit kind is a custom one.
 static __forceinline__ __device__ OptixPrimitiveType optixGetPrimitiveType(unsigned int hitKind) {
-    return (hitKind == OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE ||
-            hitKind == OPTIX_HIT_KIND_TRIANGLE_BACK_FACE)
-               ? OPTIX_PRIMITIVE_TYPE_TRIANGLE
-           : (hitKind == 0x8Cu || hitKind == 0x8Du) ? OPTIX_PRIMITIVE_TYPE_SPHERE
-                                                    : OPTIX_PRIMITIVE_TYPE_CUSTOM;
+    if (hitKind == OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE ||
+        hitKind == OPTIX_HIT_KIND_TRIANGLE_BACK_FACE)
+        return OPTIX_PRIMITIVE_TYPE_TRIANGLE;
+    unsigned int low = (hitKind & 0x7Fu) >> 1;
+    if (hitKind >= 0x80u && low >= 1u && low <= 0x0Bu)
+        return (OptixPrimitiveType)(0x2500u | low);
+    return OPTIX_PRIMITIVE_TYPE_CUSTOM;
 }
 static __forceinline__ __device__ OptixPrimitiveType optixGetPrimitiveType() {
     return optixGetPrimitiveType(optixGetHitKind());
@@ -550,6 +553,51 @@ static __forceinline__ __device__ void optixGetTriangleVertexData(float3 data[3]
 // as it does on the CPU for a hit that is not a sphere.
 static __forceinline__ __device__ void optixGetSphereData(float4 data[1]) {
     data[0] = make_float4(0.0f, 0.0f, 0.0f, 0.0f);
+}
+
+// Guide §9.3: a curve hit's u and a ribbon hit's (u, v) are its attributes. The CUDA backend
+// refuses to build curve structures (they are traced on the CPU backend only, for now), so no
+// hit on this device is a curve: these functions exist so that one program compiles for both
+// devices; the vertex data functions give zeros, as on the CPU for a hit that is not a curve.
+static __forceinline__ __device__ float optixGetCurveParameter() {
+    return __uint_as_float(__oxray_state().ray.attr[0]);
+}
+static __forceinline__ __device__ float2 optixGetRibbonParameters() {
+    __oxray_ThreadState& s = __oxray_state();
+    return make_float2(__uint_as_float(s.ray.attr[0]), __uint_as_float(s.ray.attr[1]));
+}
+static __forceinline__ __device__ void __oxray_curve_zeros(float4* data, int n) {
+    for (int k = 0; k < n; ++k) data[k] = make_float4(0.0f, 0.0f, 0.0f, 0.0f);
+}
+static __forceinline__ __device__ void optixGetLinearCurveVertexData(float4 data[2]) {
+    __oxray_curve_zeros(data, 2);
+}
+static __forceinline__ __device__ void optixGetQuadraticBSplineVertexData(float4 data[3]) {
+    __oxray_curve_zeros(data, 3);
+}
+static __forceinline__ __device__ void optixGetQuadraticBSplineRocapsVertexData(float4 data[3]) {
+    __oxray_curve_zeros(data, 3);
+}
+static __forceinline__ __device__ void optixGetCubicBSplineVertexData(float4 data[4]) {
+    __oxray_curve_zeros(data, 4);
+}
+static __forceinline__ __device__ void optixGetCubicBSplineRocapsVertexData(float4 data[4]) {
+    __oxray_curve_zeros(data, 4);
+}
+static __forceinline__ __device__ void optixGetCatmullRomVertexData(float4 data[4]) {
+    __oxray_curve_zeros(data, 4);
+}
+static __forceinline__ __device__ void optixGetCatmullRomRocapsVertexData(float4 data[4]) {
+    __oxray_curve_zeros(data, 4);
+}
+static __forceinline__ __device__ void optixGetCubicBezierVertexData(float4 data[4]) {
+    __oxray_curve_zeros(data, 4);
+}
+static __forceinline__ __device__ void optixGetCubicBezierRocapsVertexData(float4 data[4]) {
+    __oxray_curve_zeros(data, 4);
+}
+static __forceinline__ __device__ void optixGetRibbonVertexData(float4 data[3]) {
+    __oxray_curve_zeros(data, 3);
 }
 
 // ---------------------------------------------------------------------------------------------
