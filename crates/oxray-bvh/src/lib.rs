@@ -36,6 +36,7 @@ pub mod export;
 pub mod gas;
 pub mod ias;
 pub mod memory;
+pub mod motion;
 mod refit;
 pub mod sbvh;
 pub mod serialize;
@@ -55,6 +56,7 @@ pub use gas::{
     NO_PRIMITIVE,
 };
 pub use ias::{IasData, InstanceData};
+pub use motion::GasMotion;
 pub use memory::{compute_memory_usage, AccelBufferSizes};
 pub use sbvh::{build_sbvh2, SpatialSplits};
 pub use sphere::Sphere;

@@ -712,6 +712,8 @@ unsafe extern "C" fn api_transform_list(
             instance_index,
         } => (4, (instance_id, instance_index)),
         TransformListKind::StaticTransform => (1, (0, 0)),
+        TransformListKind::MatrixMotionTransform => (2, (0, 0)),
+        TransformListKind::SrtMotionTransform => (3, (0, 0)),
     };
     // SAFETY: the header passes two result words and two 12-float matrices.
     unsafe {

@@ -348,10 +348,10 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
         // One level (the common IAS over GASes) needs no composition.
         let (mut o2w, mut w2o) = (crate::Transform::IDENTITY, crate::Transform::IDENTITY);
         if let (1, Some(level)) = (path.len, path.levels().next()) {
-            (o2w, w2o) = (*level.object_to_world(), *level.world_to_object());
+            (o2w, w2o) = (level.object_to_world(), level.world_to_object());
         } else {
             for level in path.levels() {
-                o2w = o2w.then_after(level.object_to_world());
+                o2w = o2w.then_after(&level.object_to_world());
                 w2o = level.world_to_object().then_after(&w2o);
             }
         }
@@ -488,7 +488,8 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             ..self.frame
         };
         let ray = RayState { tmin, ..self.ray };
-        let aabb = gas.aabbs[slot as usize];
+        // With motion, the box at the ray's time (guide §5.10.1).
+        let aabb = gas.aabb_at(slot as usize, self.ray.time).unwrap_or(oxray_core::Aabb::EMPTY);
         // Copies: the context also borrows the visitor, to report to it.
         let path = self.path;
         let place = self.place;
@@ -574,7 +575,8 @@ fn check_graph<P>(
                         .iter()
                         .all(|n| matches!(n, None | Some(crate::gas::CpuNode::Gas(_))))
             }
-            NodeRef::Static(_) => false,
+            // Transforms need ALLOW_ANY (§5.9.1), motion transforms included.
+            NodeRef::Static(_) | NodeRef::MatrixMotion(_) | NodeRef::SrtMotion(_) => false,
         };
         if !allowed {
             let code = if matches!(root, NodeRef::Gas(_)) {
