@@ -56,8 +56,8 @@ pub use gas::{
     NO_PRIMITIVE,
 };
 pub use ias::{IasData, InstanceData};
-pub use motion::GasMotion;
 pub use memory::{compute_memory_usage, AccelBufferSizes};
+pub use motion::GasMotion;
 pub use sbvh::{build_sbvh2, SpatialSplits};
 pub use sphere::Sphere;
 pub use stats::BvhStats;

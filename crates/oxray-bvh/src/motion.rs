@@ -15,8 +15,8 @@ use crate::sphere::Sphere;
 use crate::triangle::is_degenerate;
 use crate::triangle4::Triangle4;
 use glam::Vec3;
-use oxray_core::motion_transform::pad_motion_box;
 use oxray_core::motion::lerp;
+use oxray_core::motion_transform::pad_motion_box;
 use oxray_core::{Aabb, BuildInput, CustomPrimitiveInput, KeySample, MotionOptions, TriangleInput};
 use rayon::prelude::*;
 
@@ -107,7 +107,9 @@ pub(crate) fn build_motion(
                 .into_par_iter()
                 .map(|i| {
                     let finite = per_key.iter().all(|k| k[i].iter().all(|p| p.is_finite()));
-                    let area = per_key.iter().any(|k| !is_degenerate(k[i][0], k[i][1], k[i][2]));
+                    let area = per_key
+                        .iter()
+                        .any(|k| !is_degenerate(k[i][0], k[i][1], k[i][2]));
                     if !(finite && area) {
                         return None;
                     }
@@ -271,7 +273,9 @@ impl GasData {
 
     /// The motion options (the default, no motion, for a static structure).
     pub fn motion_options(&self) -> MotionOptions {
-        self.motion.as_ref().map_or(MotionOptions::NONE, |m| m.options)
+        self.motion
+            .as_ref()
+            .map_or(MotionOptions::NONE, |m| m.options)
     }
 
     /// The triangle blocks of two keys (both key 0 without motion).

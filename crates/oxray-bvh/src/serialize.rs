@@ -32,7 +32,8 @@ use crate::MAX_BVH2_DEPTH;
 use bytemuck::Pod;
 use oxray_core::{
     Aabb, BuildError, BuildFlags, BuildInputKind, GeometryFlags, Instance, InstanceFlags,
-    LoadError, MotionFlags, MotionOptions, Transform, TraversableHandle, MAX_PRIMITIVES_PER_GAS, MAX_SBT_RECORDS_PER_GAS,
+    LoadError, MotionFlags, MotionOptions, Transform, TraversableHandle, MAX_PRIMITIVES_PER_GAS,
+    MAX_SBT_RECORDS_PER_GAS,
 };
 
 /// The first bytes of every saved structure.
@@ -289,14 +290,12 @@ fn read_motion(
     };
     if !options.has_motion() {
         // No motion: nothing else may be set.
-        if num_keys != 0 || flags != 0 || counts != [0; 3] || time_begin != 0.0 || time_end != 0.0
-        {
+        if num_keys != 0 || flags != 0 || counts != [0; 3] || time_begin != 0.0 || time_end != 0.0 {
             return Err(invalid("motion options", 0));
         }
         return Ok(None);
     }
-    if options.validate_for_structure().is_err() || build_flags.contains(BuildFlags::ALLOW_UPDATE)
-    {
+    if options.validate_for_structure().is_err() || build_flags.contains(BuildFlags::ALLOW_UPDATE) {
         return Err(invalid("motion options", 0));
     }
     let later = options.key_count() as u64 - 1;
@@ -681,9 +680,7 @@ impl IasData {
     /// checked as a build checks it, and the tree as [`GasData::from_bytes`] does.
     pub fn from_bytes(bytes: &[u8], children: &[TraversableHandle]) -> Result<IasData, LoadError> {
         let (version, payload) = unframe(bytes, KIND_IAS)?;
-        let mut r = Reader {
-            bytes: payload,
-        };
+        let mut r = Reader { bytes: payload };
         let build_flags =
             BuildFlags::from_bits(r.u32("the build flags")?).ok_or(invalid("build flags", 0))?;
         let input_kind = match r.u32("the input kind")? {

@@ -316,7 +316,10 @@ mod tests {
             (MotionOptions::new(1, 0.0, 1.0), MotionRule::TransformKeys),
             (MotionOptions::new(0, 0.0, 1.0), MotionRule::TransformKeys),
             (MotionOptions::new(2, 1.0, 1.0), MotionRule::TransformTimes),
-            (MotionOptions::new(2, 0.0, f32::NAN), MotionRule::NonFiniteTime),
+            (
+                MotionOptions::new(2, 0.0, f32::NAN),
+                MotionRule::NonFiniteTime,
+            ),
         ] {
             assert_eq!(
                 m.validate_for_transform(),

@@ -93,8 +93,8 @@ impl SrtData {
     /// The object-to-world transform `C = T · R · S`, with the quaternion normalised first
     /// (guide §5.10.5).
     pub fn to_transform(&self) -> Transform {
-        let n = (self.qx * self.qx + self.qy * self.qy + self.qz * self.qz + self.qw * self.qw)
-            .sqrt();
+        let n =
+            (self.qx * self.qx + self.qy * self.qy + self.qz * self.qz + self.qw * self.qw).sqrt();
         let (x, y, z, w) = (self.qx / n, self.qy / n, self.qz / n, self.qw / n);
         let r = [
             [
@@ -185,6 +185,30 @@ fn check_depth(child: &TraversableHandle) -> Result<(), BuildError> {
     Ok(())
 }
 
+/// The bytes of an OptiX motion transform: child handle (0), `OptixMotionOptions` (`u16` keys,
+/// `u16` flags, two `f32` times), three padding words, then the keys' floats; in 8-byte words
+/// so that the handle is aligned.
+fn optix_layout(motion: &MotionOptions, keys: &[f32]) -> Vec<u64> {
+    let mut words: Vec<u32> = vec![
+        0,
+        0,
+        motion.num_keys as u32 | (motion.flags.bits() as u32) << 16,
+        motion.time_begin.to_bits(),
+        motion.time_end.to_bits(),
+        0,
+        0,
+        0,
+    ];
+    words.extend(keys.iter().map(|k| k.to_bits()));
+    if words.len() % 2 == 1 {
+        words.push(0);
+    }
+    words
+        .chunks_exact(2)
+        .map(|w| w[0] as u64 | (w[1] as u64) << 32)
+        .collect()
+}
+
 /// Grows a box by a few ulps of its coordinates: a key interpolated in `f32` may round past
 /// the boxes of its keys by an ulp.
 pub fn pad_motion_box(b: &Aabb) -> Aabb {
@@ -213,6 +237,7 @@ pub struct MatrixMotionTransform {
     child: TraversableHandle,
     motion: MotionOptions,
     keys: Vec<Transform>,
+    layout: Vec<u64>,
 }
 
 impl MatrixMotionTransform {
@@ -241,6 +266,7 @@ impl MatrixMotionTransform {
             child,
             motion,
             keys: keys.to_vec(),
+            layout: optix_layout(&motion, bytemuck::cast_slice(keys)),
         })
     }
 
@@ -268,6 +294,15 @@ impl MatrixMotionTransform {
     /// The object-to-world transform at `time`; `None` where the transform vanishes.
     pub fn object_to_world_at(&self, time: f32) -> Option<Transform> {
         self.motion.sample(time).map(|s| self.interpolate(s))
+    }
+}
+
+impl MatrixMotionTransform {
+    /// The transform as `OptixMatrixMotionTransform` lays it out (guide §5.10.4, §5.10.5: a 32-byte header of
+    /// child handle, motion options and padding, then every key), with a child handle of 0:
+    /// what `optixGet…MotionTransformFromHandle` gives programs compiled for the CPU.
+    pub fn optix_layout(&self) -> &[u8] {
+        bytemuck::cast_slice(&self.layout)
     }
 }
 
@@ -328,6 +363,7 @@ pub struct SrtMotionTransform {
     child: TraversableHandle,
     motion: MotionOptions,
     keys: Vec<SrtData>,
+    layout: Vec<u64>,
 }
 
 impl SrtMotionTransform {
@@ -367,6 +403,7 @@ impl SrtMotionTransform {
             child,
             motion,
             keys: keys.to_vec(),
+            layout: optix_layout(&motion, bytemuck::cast_slice(keys)),
         })
     }
 
@@ -395,6 +432,15 @@ impl SrtMotionTransform {
     /// The object-to-world transform at `time`; `None` where the transform vanishes.
     pub fn object_to_world_at(&self, time: f32) -> Option<Transform> {
         self.motion.sample(time).map(|s| self.interpolate(s))
+    }
+}
+
+impl SrtMotionTransform {
+    /// The transform as `OptixSRTMotionTransform` lays it out (guide §5.10.4, §5.10.5: a 32-byte header of
+    /// child handle, motion options and padding, then every key), with a child handle of 0:
+    /// what `optixGet…MotionTransformFromHandle` gives programs compiled for the CPU.
+    pub fn optix_layout(&self) -> &[u8] {
+        bytemuck::cast_slice(&self.layout)
     }
 }
 
@@ -476,7 +522,9 @@ mod tests {
             a: 0.5,
             ..SrtData::IDENTITY
         };
-        let p = shear.to_transform().transform_point(Vec3::new(0.0, 2.0, 0.0));
+        let p = shear
+            .to_transform()
+            .transform_point(Vec3::new(0.0, 2.0, 0.0));
         assert_eq!(p, Vec3::new(1.0, 2.0, 0.0));
     }
 
@@ -596,7 +644,10 @@ mod tests {
             &keys,
         )
         .unwrap();
-        let at = |t: f32| m.object_to_world_at(t).map(|x| x.transform_point(Vec3::ZERO));
+        let at = |t: f32| {
+            m.object_to_world_at(t)
+                .map(|x| x.transform_point(Vec3::ZERO))
+        };
         assert_eq!(at(0.5), Some(Vec3::new(1.0, 0.0, 0.0)));
         assert_eq!(at(9.0), Some(Vec3::new(4.0, 0.0, 0.0)));
         assert_eq!(at(-0.1), None);

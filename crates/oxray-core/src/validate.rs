@@ -225,11 +225,7 @@ fn check_key_count(
 /// one radius buffer per motion key, `float3` centres and `f32` radii with strides that are 0
 /// or a multiple of 4 and at least one element, buffers long enough for `numVertices`
 /// elements (one radius per buffer with `singleRadius`).
-fn validate_spheres(
-    at: InputLocation,
-    s: &SphereInput<'_>,
-    keys: usize,
-) -> Result<(), BuildError> {
+fn validate_spheres(at: InputLocation, s: &SphereInput<'_>, keys: usize) -> Result<(), BuildError> {
     check_key_count(at, BufferKind::Vertices, s.vertex_buffers.len(), keys)?;
     check_key_count(at, BufferKind::Radii, s.radius_buffers.len(), keys)?;
     check_stride(at, BufferKind::Vertices, s.vertex_stride, 12, 4)?;

@@ -13,10 +13,10 @@ use common::kernels;
 use glam::Vec3;
 use oxray_bvh::{GasData, Sphere};
 use oxray_core::{
-    Aabb, AabbBuffer, BufferKind, BuildError, BuildFlags, BuildOptions, CustomHit,
-    CustomPrimitive, CustomPrimitiveInput, Instance, InstanceFlags, MatrixMotionTransform,
-    MotionFlags, MotionOptions, Ray, SphereInput, SrtData, SrtMotionTransform, Transform,
-    TraversableHandle, TriangleInput, VertexBuffer,
+    Aabb, AabbBuffer, BufferKind, BuildError, BuildFlags, BuildOptions, CustomHit, CustomPrimitive,
+    CustomPrimitiveInput, Instance, InstanceFlags, MatrixMotionTransform, MotionFlags,
+    MotionOptions, Ray, SphereInput, SrtData, SrtMotionTransform, Transform, TraversableHandle,
+    TriangleInput, VertexBuffer,
 };
 use oxray_cpu::{Gas, Ias, Isa};
 use oxray_testkit::mesh::random_soup;
@@ -128,7 +128,10 @@ fn slab_entry(b: &Aabb, ray: &Ray) -> Option<f32> {
     let (mut t0, mut t1) = (ray.tmin, ray.tmax);
     for a in 0..3 {
         let inv = 1.0 / ray.direction[a];
-        let (n, f) = ((b.min[a] - ray.origin[a]) * inv, (b.max[a] - ray.origin[a]) * inv);
+        let (n, f) = (
+            (b.min[a] - ray.origin[a]) * inv,
+            (b.max[a] - ray.origin[a]) * inv,
+        );
         t0 = t0.max(n.min(f));
         t1 = t1.min(n.max(f));
     }
@@ -302,8 +305,11 @@ fn s5_10_2_a_motionless_motion_gas_hits_bit_for_bit_like_the_static_one() {
         [bytemuck::cast_slice::<_, u8>(&r)],
     );
     let (cb2, rb2) = ([cb[0], cb[0]], [rb[0], rb[0]]);
-    let fixed = Gas::build(&BuildOptions::default(), &[SphereInput::new(&cb, 50, &rb).into()])
-        .unwrap();
+    let fixed = Gas::build(
+        &BuildOptions::default(),
+        &[SphereInput::new(&cb, 50, &rb).into()],
+    )
+    .unwrap();
     let m2 = MotionOptions::new(2, 0.0, 1.0);
     let moving = Gas::build(
         &BuildOptions::default().with_motion(m2),
@@ -371,9 +377,8 @@ fn s5_10_1_time_outside_the_range_is_clamped() {
 
 #[test]
 fn s5_10_1_vanish_flags_remove_the_structure_outside_its_range() {
-    let start = sliding_triangle(
-        MotionOptions::new(2, 1.0, 2.0).with_flags(MotionFlags::START_VANISH),
-    );
+    let start =
+        sliding_triangle(MotionOptions::new(2, 1.0, 2.0).with_flags(MotionFlags::START_VANISH));
     assert!(start.intersect(&down_at(0.0, 0.999)).is_none());
     assert!(start.intersect(&down_at(0.0, 1.0)).is_some());
     assert!(start.intersect(&down_at(10.0, 3.0)).is_some(), "end clamps");
@@ -394,7 +399,11 @@ fn s5_10_3_a_motion_ias_with_vanish_flags_hides_even_static_children() {
     .into();
     let inst = [Instance::new(gas)];
     let m = MotionOptions::new(2, 0.0, 1.0).with_flags(MotionFlags::all());
-    let ias = Ias::build(&BuildOptions::default().with_motion(m), &[(&inst[..]).into()]).unwrap();
+    let ias = Ias::build(
+        &BuildOptions::default().with_motion(m),
+        &[(&inst[..]).into()],
+    )
+    .unwrap();
     assert!(ias.intersect(&down_at(0.0, 0.5)).is_some());
     assert!(ias.intersect(&down_at(0.0, -0.1)).is_none());
     assert!(ias.intersect(&down_at(0.0, 1.1)).is_none());
@@ -456,7 +465,9 @@ fn random_chain(rng: &mut Rng) -> Chain {
     if rng.below(2) == 0 {
         Chain::Matrix(
             m,
-            (0..n).map(|_| Transform::from_affine(&rng.affine(4.0))).collect(),
+            (0..n)
+                .map(|_| Transform::from_affine(&rng.affine(4.0)))
+                .collect(),
         )
     } else {
         // Neighbouring quaternions on the same hemisphere (§5.10.6), with shear and pivots.
@@ -509,7 +520,11 @@ fn reference_placed(
     let w2o = o2w.inverse();
     let o = w2o.transform_point3(ray.origin.as_dvec3()).as_vec3();
     let d = w2o.transform_vector3(ray.direction.as_dvec3()).as_vec3();
-    let object_ray = Ray { origin: o, direction: d, ..*ray };
+    let object_ray = Ray {
+        origin: o,
+        direction: d,
+        ..*ray
+    };
     oxray_testkit::oracle::reference_closest(tris, &object_ray).map(|h| (h.hit.t, h.prim))
 }
 
@@ -594,7 +609,11 @@ fn s5_10_1_a_matrix_motion_transform_vanishes_by_its_flags() {
     ];
     let m = MotionOptions::new(2, 0.0, 1.0).with_flags(MotionFlags::START_VANISH);
     let t: TraversableHandle = MatrixMotionTransform::new(gas, m, &keys).unwrap().into();
-    let ias = Ias::build(&BuildOptions::default(), &[(&[Instance::new(t)][..]).into()]).unwrap();
+    let ias = Ias::build(
+        &BuildOptions::default(),
+        &[(&[Instance::new(t)][..]).into()],
+    )
+    .unwrap();
     assert!(ias.intersect(&down_at(5.0, 0.5)).is_some());
     assert!(ias.intersect(&down_at(0.0, -0.5)).is_none(), "vanished");
     assert!(ias.intersect(&down_at(10.0, 3.0)).is_some(), "clamped");
@@ -623,7 +642,14 @@ fn s5_10_2_one_buffer_per_motion_key_of_the_same_shape() {
     );
     // A static build takes no later keys.
     let err = Gas::build(&BuildOptions::default(), &[input.into()]).unwrap_err();
-    assert!(matches!(err, BuildError::MotionKeyCount { given: 2, expected: 1, .. }));
+    assert!(matches!(
+        err,
+        BuildError::MotionKeyCount {
+            given: 2,
+            expected: 1,
+            ..
+        }
+    ));
     // Every key describes the same vertices.
     let later = [VertexBuffer::f32x3(&k1)];
     let input = TriangleInput::new(VertexBuffer::f32x3(&k0)).motion_vertices(&later);
@@ -639,13 +665,29 @@ fn s5_10_2_one_buffer_per_motion_key_of_the_same_shape() {
     );
     // Boxes and spheres likewise.
     let b = [Aabb::new(Vec3::ZERO, Vec3::ONE)];
-    let err = Gas::build(&m2, &[CustomPrimitiveInput::new(AabbBuffer::new(&b)).into()])
-        .unwrap_err();
-    assert!(matches!(err, BuildError::MotionKeyCount { buffer: BufferKind::Aabbs, .. }));
+    let err = Gas::build(
+        &m2,
+        &[CustomPrimitiveInput::new(AabbBuffer::new(&b)).into()],
+    )
+    .unwrap_err();
+    assert!(matches!(
+        err,
+        BuildError::MotionKeyCount {
+            buffer: BufferKind::Aabbs,
+            ..
+        }
+    ));
     let c = [bytemuck::cast_slice::<_, u8>(&k0[..1])];
     let r = [bytemuck::cast_slice::<_, u8>(&[1.0f32][..])];
     let err = Gas::build(&m2, &[SphereInput::new(&c, 1, &r).into()]).unwrap_err();
-    assert!(matches!(err, BuildError::MotionKeyCount { given: 1, expected: 2, .. }));
+    assert!(matches!(
+        err,
+        BuildError::MotionKeyCount {
+            given: 1,
+            expected: 2,
+            ..
+        }
+    ));
     // Invalid options are refused before anything else (§5.10.1).
     let bad = BuildOptions::default().with_motion(MotionOptions::new(2, 1.0, 0.0));
     let err = Gas::build(&bad, &[input.into()]).unwrap_err();
@@ -655,7 +697,8 @@ fn s5_10_2_one_buffer_per_motion_key_of_the_same_shape() {
     // A motion GAS is not updatable here: a typed refusal.
     let later = [VertexBuffer::f32x3(&k0)];
     let input = TriangleInput::new(VertexBuffer::f32x3(&k0)).motion_vertices(&later);
-    let up = BuildOptions::new(BuildFlags::ALLOW_UPDATE).with_motion(MotionOptions::new(2, 0.0, 1.0));
+    let up =
+        BuildOptions::new(BuildFlags::ALLOW_UPDATE).with_motion(MotionOptions::new(2, 0.0, 1.0));
     assert!(matches!(
         Gas::build(&up, &[input.into()]),
         Err(BuildError::Unsupported(_))
@@ -695,7 +738,11 @@ fn s5_10_2_motion_structures_save_and_load_with_identical_hits() {
     .unwrap()
     .into();
     let inst = [Instance::new(g.clone())];
-    let ias = Ias::build(&BuildOptions::default().with_motion(m), &[(&inst[..]).into()]).unwrap();
+    let ias = Ias::build(
+        &BuildOptions::default().with_motion(m),
+        &[(&inst[..]).into()],
+    )
+    .unwrap();
     let back = oxray_bvh::IasData::from_bytes(&ias.data().to_bytes(), &[g]).unwrap();
     assert_eq!(back.motion, m);
 }

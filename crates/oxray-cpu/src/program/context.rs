@@ -445,6 +445,12 @@ macro_rules! hit_queries {
                 None => [0.0; 4],
             }
         }
+        /// `optixGetGASMotionTimeBegin`, `…TimeEnd` and `…StepCount` of the hit's GAS
+        /// (guide §13.10): its motion options (the default, no motion, for a static GAS).
+        pub fn gas_motion_options(&self) -> oxray_core::MotionOptions {
+            self.gas
+                .map_or(oxray_core::MotionOptions::NONE, |g| g.motion_options())
+        }
         /// `optixIsTriangleHit`.
         pub fn is_triangle_hit(&self) -> bool {
             self.$hit.hit_kind.0 >= 0xFE

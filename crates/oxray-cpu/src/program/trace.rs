@@ -489,7 +489,9 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
         };
         let ray = RayState { tmin, ..self.ray };
         // With motion, the box at the ray's time (guide §5.10.1).
-        let aabb = gas.aabb_at(slot as usize, self.ray.time).unwrap_or(oxray_core::Aabb::EMPTY);
+        let aabb = gas
+            .aabb_at(slot as usize, self.ray.time)
+            .unwrap_or(oxray_core::Aabb::EMPTY);
         // Copies: the context also borrows the visitor, to report to it.
         let path = self.path;
         let place = self.place;
@@ -618,7 +620,14 @@ pub(crate) fn trace<P>(
             &[],
         ));
     }
-    let ray = Ray::with_interval(args.origin, args.direction, args.tmin, args.tmax);
+    // Guide §13.5: without motion blur in the pipeline the ray time is ignored (0), for
+    // traversal and for `optixGetRayTime` alike.
+    let time = if pipe.compile.uses_motion_blur {
+        args.time
+    } else {
+        0.0
+    };
+    let ray = Ray::with_interval(args.origin, args.direction, args.tmin, args.tmax).with_time(time);
     if pipe.validation_mode && ray.validate().is_err() {
         let o = args.origin.to_array().map(f32::to_bits);
         let d = args.direction.to_array().map(f32::to_bits);
@@ -641,11 +650,7 @@ pub(crate) fn trace<P>(
         direction: args.direction,
         tmin: args.tmin,
         tmax: args.tmax,
-        time: if pipe.compile.uses_motion_blur {
-            args.time
-        } else {
-            0.0
-        },
+        time,
         flags: args.flags,
         mask: (args.visibility_mask & 0xFF) as u8,
     };
