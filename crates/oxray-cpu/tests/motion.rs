@@ -7,9 +7,6 @@
 //! spaced over `[timeBegin, timeEnd]`, linear between the two neighbouring keys, time clamped),
 //! then intersect the interpolated geometry with the existing references.
 
-mod common;
-
-use common::kernels;
 use glam::Vec3;
 use oxray_bvh::{GasData, Sphere};
 use oxray_core::{
@@ -23,6 +20,11 @@ use oxray_testkit::mesh::random_soup;
 use oxray_testkit::oracle::{check_closest, hit_bits, reference_hits};
 use oxray_testkit::rng::Rng;
 use oxray_testkit::Tri;
+
+/// Every kernel this processor runs.
+fn kernels() -> Vec<Isa> {
+    Isa::available()
+}
 
 /// The keys and fraction of `time` under `m`, computed here from the guide's rule (not with
 /// the engine's `MotionOptions::sample`): `None` where a vanish flag hides the structure.
@@ -515,7 +517,7 @@ fn reference_placed(
     let mut o2w = glam::DAffine3::from_mat4(glam::Mat4::from(*inst).as_dmat4());
     for c in chains {
         let m = c.at(ray.time)?;
-        o2w = o2w * glam::DAffine3::from_mat4(glam::Mat4::from(m).as_dmat4());
+        o2w *= glam::DAffine3::from_mat4(glam::Mat4::from(m).as_dmat4());
     }
     let w2o = o2w.inverse();
     let o = w2o.transform_point3(ray.origin.as_dvec3()).as_vec3();

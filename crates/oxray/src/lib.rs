@@ -92,13 +92,14 @@ pub use oxray_core::{
     BuildInput, BuildInputKind, BuildOperation, BuildOptions, CandidateAction, CustomHit,
     CustomPrimitive, CustomPrimitiveInput, DeviceContext, EmittedProperty, ErrorCode, Exception,
     ExceptionCode, ExceptionFlags, GeometryFlags, Hit, HitKind, IndexBuffer, IndexFormat,
-    InputLocation, Instance, InstanceFlags, LaunchError, LaunchReport, LoadError, LogLevel,
+    InputLocation, Instance, InstanceFlags, KeySample, LaunchError, LaunchReport, LoadError,
+    LogLevel, MatrixMotionTransform, MotionFlags, MotionKeyRule, MotionOptions, MotionRule,
     PipelineCompileOptions, PipelineError, PipelineLinkOptions, PrimitiveType, PrimitiveTypeFlags,
     QueryError, Ray, RayError, RayFlags, RayRecord, SbtHeader, SbtIndexOffsets, SbtIndexSize,
-    SbtRegion, ShaderBindingTable, SphereInput, StaticTransform, Transform, Traversable,
-    TraversableGraphFlags, TraversableHandle, TraversableKind, TriangleInput, UpdateRule,
-    VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID, MAX_PRIMITIVES_PER_GAS,
-    MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
+    SbtRegion, ShaderBindingTable, SphereInput, SrtData, SrtMotionTransform, StaticTransform,
+    Transform, Traversable, TraversableGraphFlags, TraversableHandle, TraversableKind,
+    TriangleInput, UpdateRule, VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
+    MAX_PRIMITIVES_PER_GAS, MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
 
 pub use oxray_bvh::{
