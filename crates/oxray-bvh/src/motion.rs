@@ -271,6 +271,34 @@ impl GasData {
         }
     }
 
+    /// The box around the active primitives at each motion key (one box without motion): the
+    /// emitted property `AABBS` (guide §5.8, one per key).
+    pub fn key_bounds(&self) -> Vec<Aabb> {
+        let keys = self.motion_options().key_count();
+        (0..keys)
+            .map(|key| {
+                let s = KeySample {
+                    key,
+                    next: key,
+                    fraction: 0.0,
+                };
+                let mut out = Aabb::EMPTY;
+                for slot in (0..self.slot_prim.len()).filter(|&i| self.slot_is_active(i)) {
+                    let b = match self.kind {
+                        GasKind::Triangles => {
+                            let t = self.triangle_keys(s).0[slot / 4].get(slot % 4);
+                            Aabb::from_points(&t.map(Vec3::from))
+                        }
+                        GasKind::CustomPrimitives => self.aabb_keys(s).0[slot],
+                        GasKind::Spheres => self.sphere_keys(s).0[slot].bounds(),
+                    };
+                    out = out.union(&b);
+                }
+                out
+            })
+            .collect()
+    }
+
     /// The motion options (the default, no motion, for a static structure).
     pub fn motion_options(&self) -> MotionOptions {
         self.motion
