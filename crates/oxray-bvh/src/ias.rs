@@ -299,6 +299,12 @@ impl IasData {
                 given: options.flags,
             });
         }
+        if options.motion != self.motion {
+            return rule(UpdateRule::Motion {
+                built: self.motion,
+                given: options.motion,
+            });
+        }
         if inputs.len() != 1 {
             return rule(UpdateRule::InputCount {
                 built: 1,

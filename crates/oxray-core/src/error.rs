@@ -397,11 +397,24 @@ pub enum UpdateRule {
         /// The instance (index in the build input).
         instance: u32,
     },
+    /// The motion options differ from the build's (§5.6: the number of motion keys may not
+    /// change, and the other options must be identical).
+    Motion {
+        /// Options of the build.
+        built: crate::motion::MotionOptions,
+        /// Options of the update.
+        given: crate::motion::MotionOptions,
+    },
 }
 
 impl std::fmt::Display for UpdateRule {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
+            UpdateRule::Motion { built, given } => write!(
+                f,
+                "motion options {given:?} differ from the build's {built:?} (guide §5.6: the \
+                 number of motion keys may not change)"
+            ),
             UpdateRule::NoStructure => write!(
                 f,
                 "operation Update needs the structure to update; build with operation Build, or \

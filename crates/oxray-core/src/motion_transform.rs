@@ -530,12 +530,15 @@ mod tests {
 
     #[test]
     fn s5_10_5_the_interpolated_quaternion_is_normalised() {
-        let h = std::f32::consts::FRAC_1_SQRT_2;
+        // Key 1 turns 120 degrees about z. Half-way the lerped quaternion (0, 0, .433, .75) is
+        // not of unit length; normalised it turns 60 degrees (nlerp and slerp agree at the
+        // middle), and a pure rotation keeps lengths.
+        let (s, c) = (60f32.to_radians().sin(), 60f32.to_radians().cos());
         let keys = [
             SrtData::IDENTITY,
             SrtData {
-                qz: 1.0,
-                qw: 0.0 + 1e-3,
+                qz: s,
+                qw: c,
                 ..SrtData::IDENTITY
             },
         ];
@@ -545,12 +548,12 @@ mod tests {
             &keys,
         )
         .unwrap();
-        // Half-way the lerped quaternion (0, 0, .5, .5) has length ~0.707: nlerp makes it a
-        // pure rotation, which keeps lengths.
-        let m = t.object_to_world_at(0.5).unwrap();
-        let p = m.transform_point(Vec3::X);
-        assert!((p.length() - 1.0).abs() < 1e-5, "{p}");
-        assert!((p - Vec3::new(h, h, 0.0)).length() < 1e-3, "{p}");
+        let p = t.object_to_world_at(0.5).unwrap().transform_point(Vec3::X);
+        assert!((p - Vec3::new(c, s, 0.0)).length() < 1e-6, "{p}");
+        // Without the normalisation the point would be scaled by |q|^2 = 0.75.
+        let raw = keys[0].lerp(&keys[1], 0.5);
+        let n2 = raw.qz * raw.qz + raw.qw * raw.qw;
+        assert!((n2 - 0.75).abs() < 1e-6);
     }
 
     #[test]
@@ -651,5 +654,27 @@ mod tests {
         assert_eq!(at(0.5), Some(Vec3::new(1.0, 0.0, 0.0)));
         assert_eq!(at(9.0), Some(Vec3::new(4.0, 0.0, 0.0)));
         assert_eq!(at(-0.1), None);
+    }
+
+    #[test]
+    fn s5_10_4_s5_10_5_the_optix_layouts_have_the_guides_sizes() {
+        let m = MotionOptions::new(3, -1.0, 1.5).with_flags(MotionFlags::END_VANISH);
+        let srt =
+            SrtMotionTransform::new(TraversableHandle::NULL, m, &[SrtData::IDENTITY; 3]).unwrap();
+        // sizeof(OptixSRTMotionTransform) = 8 + 12 + 12 + 2 * 64, plus one key.
+        assert_eq!(srt.optix_layout().len(), 8 + 12 + 12 + 3 * 64);
+        let mat = MatrixMotionTransform::new(TraversableHandle::NULL, m, &[Transform::IDENTITY; 3])
+            .unwrap();
+        assert_eq!(mat.optix_layout().len(), 32 + 3 * 48);
+        let b = mat.optix_layout();
+        let word = |at: usize| u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+        assert_eq!(word(0) as u64 | (word(4) as u64) << 32, 0, "child handle");
+        assert_eq!((word(8) & 0xFFFF, word(8) >> 16), (3, 2), "numKeys, flags");
+        assert_eq!(f32::from_bits(word(12)), -1.0);
+        assert_eq!(f32::from_bits(word(16)), 1.5);
+        assert_eq!(f32::from_bits(word(32)), 1.0, "the first key's m00");
+        let srt_bytes = srt.optix_layout();
+        let qw = f32::from_le_bytes(srt_bytes[32 + 12 * 4..32 + 13 * 4].try_into().unwrap());
+        assert_eq!(qw, 1.0, "the first key's qw");
     }
 }

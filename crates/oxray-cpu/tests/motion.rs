@@ -775,3 +775,45 @@ fn motion_traversal_is_deterministic_whatever_the_thread_count() {
     assert_eq!(one, run(4));
     assert!(one.iter().filter(|h| h.is_some()).count() > 500);
 }
+
+#[test]
+fn s5_6_an_update_keeps_the_motion_options() {
+    let tri = [[-1.0f32, -1.0, 0.0], [1.0, -1.0, 0.0], [0.0, 1.0, 0.0]];
+    let g: TraversableHandle = Gas::build(
+        &BuildOptions::default(),
+        &[TriangleInput::new(VertexBuffer::f32x3(&tri)).into()],
+    )
+    .unwrap()
+    .into();
+    let inst = [Instance::new(g)];
+    let m = MotionOptions::new(2, 0.0, 1.0);
+    let options = BuildOptions::new(BuildFlags::ALLOW_UPDATE).with_motion(m);
+    let mut ias = Ias::build(&options, &[(&inst[..]).into()]).unwrap();
+    let update = BuildOptions {
+        operation: oxray_core::BuildOperation::Update,
+        ..options
+    };
+    ias.update(&update, &[(&inst[..]).into()]).unwrap();
+    let other = update.with_motion(MotionOptions::new(3, 0.0, 1.0));
+    let err = ias.update(&other, &[(&inst[..]).into()]).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            BuildError::InvalidUpdate(oxray_core::UpdateRule::Motion { .. })
+        ),
+        "{err}"
+    );
+    // A static updatable GAS cannot be updated into one with motion.
+    let mut gas = Gas::build(
+        &BuildOptions::new(BuildFlags::ALLOW_UPDATE),
+        &[TriangleInput::new(VertexBuffer::f32x3(&tri)).into()],
+    )
+    .unwrap();
+    let later = [VertexBuffer::f32x3(&tri)];
+    let input = TriangleInput::new(VertexBuffer::f32x3(&tri)).motion_vertices(&later);
+    let up = BuildOptions {
+        operation: oxray_core::BuildOperation::Update,
+        ..BuildOptions::new(BuildFlags::ALLOW_UPDATE).with_motion(m)
+    };
+    assert!(gas.update(&up, &[input.into()]).is_err());
+}
