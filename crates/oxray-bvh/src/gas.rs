@@ -154,6 +154,9 @@ pub struct GasData {
     /// The structure's identity across updates and compaction (see
     /// [`Traversable::lineage`](oxray_core::Traversable::lineage)).
     pub lineage: u64,
+    /// A structure built with motion (guide §5.10.2): its options and the primitives of keys
+    /// 1, 2, … (`triangles`, `aabbs` and `spheres` hold key 0). `None` without motion.
+    pub motion: Option<crate::motion::GasMotion>,
 }
 
 /// What an update must repeat of a build input (guide §5.6): its type, counts and formats.
@@ -422,13 +425,14 @@ impl GasData {
             num_primitives: summary.num_primitives,
             shapes: inputs.iter().filter_map(InputShape::of).collect(),
             lineage: crate::next_lineage(),
+            motion: None,
         })
     }
 
     /// The tree over the boxes of the active primitives (`Some`), for a structure that keeps
     /// one primitive per leaf slot in the tree's order (custom primitives, spheres): the slot
     /// table, the bounds and the node layouts. The caller stores the primitives by slot.
-    fn build_slots(
+    pub(crate) fn build_slots(
         &mut self,
         boxes: &[Option<Aabb>],
         config: &BuildConfig,
@@ -469,6 +473,23 @@ impl GasData {
         };
 
         let mut tree = None;
+        if options.motion.has_motion() {
+            // A refit would re-read every key; the CUDA layouts have no keys.
+            if options.flags.contains(BuildFlags::ALLOW_UPDATE) {
+                return Err(BuildError::Unsupported("ALLOW_UPDATE with motion keys"));
+            }
+            if keep_tree {
+                return Err(BuildError::Unsupported(
+                    "a GAS with motion keys for a layout other than the CPU's",
+                ));
+            }
+            crate::motion::build_motion(&mut gas, options.motion, inputs, &config, width);
+            gas.shapes = Vec::new();
+            if !options.flags.contains(BuildFlags::ALLOW_COMPACTION) {
+                gas.shrink_to_fit();
+            }
+            return Ok((gas, None));
+        }
         match gas.kind {
             GasKind::Triangles => {
                 let mut per_input: Vec<Vec<[Vec3; 3]>> = inputs
@@ -806,7 +827,10 @@ impl GasData {
         let primitive_bytes = bytes(&self.triangles)
             + bytes(&self.aabbs)
             + bytes(&self.spheres)
-            + bytes(&self.curves);
+            + bytes(&self.curves)
+            + self.motion.as_ref().map_or(0, |m| {
+                bytes(&m.triangles) + bytes(&m.aabbs) + bytes(&m.spheres)
+            });
         GasMemory {
             output_bytes: node_bytes
                 + primitive_bytes
@@ -834,6 +858,9 @@ impl GasData {
         self.inputs.shrink_to_fit();
         self.record_flags.shrink_to_fit();
         self.shapes.shrink_to_fit();
+        if let Some(m) = &mut self.motion {
+            m.shrink_to_fit();
+        }
     }
 
     /// Grows every table to the size the memory query allows it (the output buffer).
@@ -858,7 +885,8 @@ impl GasData {
                 + bytes(&self.sbt_offsets)
                 + bytes(&self.inputs)
                 + bytes(&self.record_flags)
-                + bytes(&self.shapes),
+                + bytes(&self.shapes)
+                + self.motion.as_ref().map_or(0, |m| m.bytes()),
         )
     }
 
@@ -972,7 +1000,7 @@ pub const NO_PRIMITIVE: u32 = u32::MAX;
 /// The map from a binary leaf's first slot before packing (`before`, the 4-wide layout's leaf
 /// starts in node and lane order) to its first slot after (`after`, in the same order), sorted
 /// for lookups: the wide layouts' leaves are the binary tree's.
-fn leaf_map(before: &[u32], after: &[u32]) -> Vec<(u32, u32)> {
+pub(crate) fn leaf_map(before: &[u32], after: &[u32]) -> Vec<(u32, u32)> {
     let mut map: Vec<(u32, u32)> = before.iter().copied().zip(after.iter().copied()).collect();
     map.sort_unstable();
     map
@@ -997,7 +1025,7 @@ fn remap_leaves(mut tree: Bvh2, map: &[(u32, u32)]) -> Bvh2 {
 
 /// Points the leaves of another wide layout (collapsed from the same binary tree) at the slots
 /// the packing gave them.
-fn remap_wide_leaves<N: WideNode>(nodes: &mut [N], map: &[(u32, u32)]) {
+pub(crate) fn remap_wide_leaves<N: WideNode>(nodes: &mut [N], map: &[(u32, u32)]) {
     nodes.par_iter_mut().for_each(|n| {
         for l in 0..N::WIDTH {
             if n.count(l) > 0 {
@@ -1011,7 +1039,7 @@ fn remap_wide_leaves<N: WideNode>(nodes: &mut [N], map: &[(u32, u32)]) {
 
 /// Lays the triangles of every leaf out in blocks of four, leaves in node order, and points the
 /// leaves at their blocks. `global[slot]` is the primitive at binary-BVH slot `slot`.
-fn pack_triangles(
+pub(crate) fn pack_triangles(
     bvh: &mut Bvh4,
     global: &[u32],
     tris: &[[Vec3; 3]],
@@ -1124,9 +1152,14 @@ fn decode_spheres<'a>(s: &'a SphereInput<'_>) -> impl Iterator<Item = Sphere> + 
 
 /// Sphere `i` of a validated input.
 pub(crate) fn decode_sphere(s: &SphereInput<'_>, i: usize) -> Sphere {
+    decode_sphere_key(s, i, 0)
+}
+
+/// Sphere `i` of a validated input at motion key `key`.
+pub(crate) fn decode_sphere_key(s: &SphereInput<'_>, i: usize, key: usize) -> Sphere {
     Sphere::new(
-        s.centre(s.vertex_buffers[0], i),
-        s.radius(s.radius_buffers[0], i),
+        s.centre(s.vertex_buffers[key], i),
+        s.radius(s.radius_buffers[key], i),
     )
 }
 

@@ -72,6 +72,10 @@ pub struct IasData {
     /// The structure's identity across updates and compaction (see
     /// [`Traversable::lineage`](oxray_core::Traversable::lineage)).
     pub lineage: u64,
+    /// The build's motion options (guide §5.10.3): they change which instances can be hit
+    /// only through the vanish flags, which hide every instance outside the IAS's time range.
+    /// The tree's boxes bound the instances at every time (their children's bounds do).
+    pub motion: oxray_core::MotionOptions,
 }
 
 pub(crate) fn validate_instance(i: u32, inst: &Instance) -> Result<Transform, BuildError> {
@@ -155,6 +159,7 @@ impl IasData {
         if options.operation == BuildOperation::Update {
             return Err(BuildError::InvalidUpdate(UpdateRule::NoStructure));
         }
+        options.motion.validate_for_structure()?;
         let list = instance_list(inputs)?;
         let keep_inactive = options.flags.contains(BuildFlags::ALLOW_UPDATE);
         let records: Vec<InstanceData> = list
@@ -241,6 +246,7 @@ impl IasData {
             depth,
             input_kind: inputs[0].kind(),
             lineage: crate::next_lineage(),
+            motion: options.motion,
         };
         if keep_inactive {
             data.refit();
@@ -291,6 +297,12 @@ impl IasData {
             return rule(UpdateRule::Flags {
                 built: self.build_flags,
                 given: options.flags,
+            });
+        }
+        if options.motion != self.motion {
+            return rule(UpdateRule::Motion {
+                built: self.motion,
+                given: options.motion,
             });
         }
         if inputs.len() != 1 {

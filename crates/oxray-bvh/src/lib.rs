@@ -37,6 +37,7 @@ pub mod export;
 pub mod gas;
 pub mod ias;
 pub mod memory;
+pub mod motion;
 mod poly;
 mod refit;
 pub mod sbvh;
@@ -59,6 +60,7 @@ pub use gas::{
 };
 pub use ias::{IasData, InstanceData};
 pub use memory::{compute_memory_usage, AccelBufferSizes};
+pub use motion::GasMotion;
 pub use sbvh::{build_sbvh2, SpatialSplits};
 pub use sphere::Sphere;
 pub use stats::BvhStats;

@@ -50,6 +50,18 @@ pub fn compute_memory_usage(
                 + crate::build::temp_bytes(refs);
         }
     }
+    if options.motion.has_motion() {
+        // Every later key keeps its own copy of the primitives (no more than one block or box
+        // per primitive each), and the builder decodes every key (guide §5.10.2).
+        let n = summary.num_primitives as usize;
+        let later = options.motion.key_count() - 1;
+        let per_prim = match summary.kind {
+            oxray_core::BuildInputKind::Triangles => std::mem::size_of::<Triangle4>(),
+            _ => std::mem::size_of::<Aabb>(),
+        };
+        sizes.output_size_in_bytes += later * n * per_prim;
+        sizes.temp_size_in_bytes += later * n * std::mem::size_of::<[[f32; 3]; 3]>();
+    }
     if options.flags.contains(oxray_core::BuildFlags::ALLOW_UPDATE) {
         // A refit works in place: the table of input starts and the thread pool's jobs.
         sizes.temp_update_size_in_bytes = inputs.len() * 4 + FIXED_TEMP;

@@ -174,6 +174,13 @@ impl GasData {
                 given: options.flags,
             }));
         }
+        if options.motion.has_motion() {
+            // An updatable structure has no motion (motion builds refuse ALLOW_UPDATE).
+            return Err(rule(UpdateRule::Motion {
+                built: self.motion_options(),
+                given: options.motion,
+            }));
+        }
         if inputs.len() != self.inputs.len() {
             return Err(rule(UpdateRule::InputCount {
                 built: self.inputs.len(),

@@ -19,13 +19,15 @@
 //! structures (a primitive kind, an array of spheres after the boxes, and a sphere input's
 //! `singleRadius` in its shape); version 4 added curve structures (a primitive kind, an array
 //! of curve segments after the input shapes, and a curve input's type, end caps and normals in
-//! its shape). Versions 1 to 3 are still read.
+//! its shape); version 5 added motion (guide §5.10.2: a GAS's motion options and its
+//! primitives at keys 1, 2, …, after the other arrays). Versions 1 to 4 are still read.
 
 use crate::bvh4::{Bvh4, Bvh4Node};
 use crate::bvh8::{Bvh8, Bvh8Node};
 use crate::curve::CurveSegment;
 use crate::gas::{GasData, GasKind, InputRecord, InputShape, NO_PRIMITIVE};
 use crate::ias::{validate_instance, IasData, InstanceData};
+use crate::motion::GasMotion;
 use crate::sphere::Sphere;
 use crate::triangle4::Triangle4;
 use crate::wide::WideNode;
@@ -33,19 +35,22 @@ use crate::MAX_BVH2_DEPTH;
 use bytemuck::Pod;
 use oxray_core::{
     Aabb, BuildError, BuildFlags, BuildInputKind, GeometryFlags, Instance, InstanceFlags,
-    LoadError, Transform, TraversableHandle, MAX_PRIMITIVES_PER_GAS, MAX_SBT_RECORDS_PER_GAS,
+    LoadError, MotionFlags, MotionOptions, Transform, TraversableHandle, MAX_PRIMITIVES_PER_GAS,
+    MAX_SBT_RECORDS_PER_GAS,
 };
 
 /// The first bytes of every saved structure.
 pub const MAGIC: [u8; 8] = *b"OXRAYAS\0";
 /// The version this build writes. It reads it and every earlier version.
-pub const FORMAT_VERSION: u32 = 4;
+pub const FORMAT_VERSION: u32 = 5;
 /// The first version with a GAS's optional 8-wide layout (version 1 has none).
 const VERSION_BVH8: u32 = 2;
 /// The first version with spheres (earlier ones have no sphere array).
 const VERSION_SPHERES: u32 = 3;
 /// The first version with curves (earlier ones have no curve array).
 const VERSION_CURVES: u32 = 4;
+/// The first version with motion (earlier ones have no motion section).
+const VERSION_MOTION: u32 = 5;
 const KIND_GAS: u32 = 1;
 const KIND_IAS: u32 = 2;
 const HEADER: usize = 8 + 4 + 4 + 8 + 8;
@@ -261,6 +266,67 @@ fn kind_of(code: u32, version: u32) -> Option<GasKind> {
     }
 }
 
+/// Reads a GAS's motion section (version 5): options valid for a structure, and exactly
+/// `keys - 1` copies of the primitive array of its kind (`lens`: triangle blocks, boxes,
+/// spheres of key 0), none of the others. An updatable structure has no motion.
+fn read_motion(
+    r: &mut Reader<'_>,
+    kind: GasKind,
+    build_flags: BuildFlags,
+    lens: [u64; 3],
+) -> Result<Option<GasMotion>, LoadError> {
+    let num_keys = r.u32("the motion keys")?;
+    let flags = r.u32("the motion flags")?;
+    let time_begin = f32::from_bits(r.u32("the motion begin")?);
+    let time_end = f32::from_bits(r.u32("the motion end")?);
+    let mut counts = [0u64; 3];
+    for c in counts.iter_mut() {
+        *c = r.u64("the motion array lengths")?;
+    }
+    let triangles: Vec<Triangle4> = r.array(counts[0], "the motion triangles")?;
+    let aabbs: Vec<Aabb> = r.array(counts[1], "the motion boxes")?;
+    let spheres: Vec<Sphere> = r.array(counts[2], "the motion spheres")?;
+    let options = MotionOptions {
+        num_keys: u16::try_from(num_keys).map_err(|_| invalid("motion keys", 0))?,
+        flags: u16::try_from(flags)
+            .ok()
+            .and_then(MotionFlags::from_bits)
+            .ok_or(invalid("motion flags", 0))?,
+        time_begin,
+        time_end,
+    };
+    if !options.has_motion() {
+        // No motion: nothing else may be set.
+        if num_keys != 0 || flags != 0 || counts != [0; 3] || time_begin != 0.0 || time_end != 0.0 {
+            return Err(invalid("motion options", 0));
+        }
+        return Ok(None);
+    }
+    if options.validate_for_structure().is_err() || build_flags.contains(BuildFlags::ALLOW_UPDATE) {
+        return Err(invalid("motion options", 0));
+    }
+    let later = options.key_count() as u64 - 1;
+    let own = match kind {
+        GasKind::Triangles => 0,
+        GasKind::CustomPrimitives => 1,
+        GasKind::Spheres => 2,
+        // Curves are never built with motion keys.
+        GasKind::Curves => return Err(invalid("motion options", 0)),
+    };
+    for (i, (&n, &base)) in counts.iter().zip(&lens).enumerate() {
+        let expected = if i == own { later * base } else { 0 };
+        if n != expected {
+            return Err(invalid("motion array length", i));
+        }
+    }
+    Ok(Some(GasMotion {
+        options,
+        triangles,
+        aabbs,
+        spheres,
+    }))
+}
+
 impl GasData {
     /// Saves the structure as bytes that [`GasData::from_bytes`] loads back, on this machine
     /// or another, into a structure with bit-identical hits.
@@ -329,6 +395,21 @@ impl GasData {
             w.u32(s.num_sbt_records);
         }
         w.pod(&self.curves);
+        // Motion: the options (no keys without motion), then the later keys' primitives.
+        let m = self.motion.as_ref();
+        let options = m.map_or(MotionOptions::NONE, |m| m.options);
+        w.u32(options.num_keys as u32);
+        w.u32(options.flags.bits() as u32);
+        w.u32(options.time_begin.to_bits());
+        w.u32(options.time_end.to_bits());
+        let (mt, ma, ms): (&[Triangle4], &[Aabb], &[Sphere]) =
+            m.map_or((&[], &[], &[]), |m| (&m.triangles, &m.aabbs, &m.spheres));
+        for n in [mt.len(), ma.len(), ms.len()] {
+            w.u64(n as u64);
+        }
+        w.pod(mt);
+        w.pod(ma);
+        w.pod(ms);
         frame(KIND_GAS, w.0)
     }
 
@@ -368,6 +449,11 @@ impl GasData {
         let raw_flags: Vec<u32> = r.array(nr, "the geometry flags")?;
         let raw_shapes: Vec<[u32; 5]> = r.array(nsh, "the input shapes")?;
         let curves: Vec<CurveSegment> = r.array(ncv, "the curve segments")?;
+        let motion = if version >= VERSION_MOTION {
+            read_motion(&mut r, kind, build_flags, [nt, na, nsp])?
+        } else {
+            None
+        };
         if !r.bytes.is_empty() {
             return Err(LoadError::TrailingBytes(r.bytes.len() as u64));
         }
@@ -532,6 +618,7 @@ impl GasData {
             num_primitives,
             shapes,
             lineage: crate::next_lineage(),
+            motion,
         };
         if let Some(slot) = gas.repeated_reference() {
             return Err(invalid("primitive referenced from two leaf slots", slot));
@@ -616,6 +703,10 @@ impl IasData {
                 w.u32(v);
             }
         }
+        w.u32(self.motion.num_keys as u32);
+        w.u32(self.motion.flags.bits() as u32);
+        w.u32(self.motion.time_begin.to_bits());
+        w.u32(self.motion.time_end.to_bits());
         frame(KIND_IAS, w.0)
     }
 
@@ -625,9 +716,8 @@ impl IasData {
     /// boxes are the saved ones, not recomputed, as in OptiX's relocation. Every field is
     /// checked as a build checks it, and the tree as [`GasData::from_bytes`] does.
     pub fn from_bytes(bytes: &[u8], children: &[TraversableHandle]) -> Result<IasData, LoadError> {
-        let mut r = Reader {
-            bytes: unframe(bytes, KIND_IAS)?.1,
-        };
+        let (version, payload) = unframe(bytes, KIND_IAS)?;
+        let mut r = Reader { bytes: payload };
         let build_flags =
             BuildFlags::from_bits(r.u32("the build flags")?).ok_or(invalid("build flags", 0))?;
         let input_kind = match r.u32("the input kind")? {
@@ -652,6 +742,25 @@ impl IasData {
         let boxes: Vec<Aabb> = r.array(nb, "the boxes")?;
         let slot_of: Vec<u32> = r.array(ns, "the slot table")?;
         let raw: Vec<[u32; 17]> = r.array(ni, "the instances")?;
+        let motion = if version >= VERSION_MOTION {
+            let num_keys = r.u32("the motion keys")?;
+            let flags = r.u32("the motion flags")?;
+            let options = MotionOptions {
+                num_keys: u16::try_from(num_keys).map_err(|_| invalid("motion keys", 0))?,
+                flags: u16::try_from(flags)
+                    .ok()
+                    .and_then(MotionFlags::from_bits)
+                    .ok_or(invalid("motion flags", 0))?,
+                time_begin: f32::from_bits(r.u32("the motion begin")?),
+                time_end: f32::from_bits(r.u32("the motion end")?),
+            };
+            options
+                .validate_for_structure()
+                .map_err(|_| invalid("motion options", 0))?;
+            options
+        } else {
+            MotionOptions::NONE
+        };
         if !r.bytes.is_empty() {
             return Err(LoadError::TrailingBytes(r.bytes.len() as u64));
         }
@@ -719,6 +828,7 @@ impl IasData {
             depth,
             input_kind,
             lineage: crate::next_lineage(),
+            motion,
         })
     }
 }

@@ -254,8 +254,8 @@ pub enum BuildError {
     /// Compaction (guide §5.8) of a structure built without `ALLOW_COMPACTION`.
     #[error("compaction needs a structure built with ALLOW_COMPACTION (guide §5.8)")]
     CompactionNotAllowed,
-    /// A sphere input gives one vertex buffer and one radius buffer per motion key (guide §5.3,
-    /// §5.10.2). Builds have no motion yet: one key, one buffer of each.
+    /// A build input gives one vertex (or box, or radius) buffer per motion key of the build
+    /// (guide §5.3, §5.10.2).
     #[error(
         "{at}: {given} {buffer}s, but the build has {expected} motion key(s) and takes one per key"
     )]
@@ -294,6 +294,28 @@ pub enum BuildError {
         /// What is wrong.
         reason: &'static str,
     },
+    /// Motion options that break a rule of guide §5.10.1.
+    #[error("invalid motion options: {0}")]
+    InvalidMotionOptions(crate::motion::MotionRule),
+    /// A key of a motion transform that breaks a rule of guide §5.10.4–§5.10.6.
+    #[error("motion transform key {key}: {rule}")]
+    InvalidMotionKey {
+        /// The key (the count of keys given, for a wrong count).
+        key: usize,
+        /// The rule it breaks.
+        rule: crate::motion_transform::MotionKeyRule,
+    },
+    /// A motion key buffer of a build input differs from key 0 in its count or format
+    /// (guide §5.10.2: every key describes the same primitives).
+    #[error("{at}: motion key {key}'s {buffer} differs from key 0's in count or format")]
+    MotionKeyMismatch {
+        /// The input.
+        at: InputLocation,
+        /// The key.
+        key: usize,
+        /// Which buffers.
+        buffer: BufferKind,
+    },
     /// `primitiveIndexOffset + numPrimitives` must fit in 32 bits.
     #[error("{at}: primitive index offset {offset} + {count} primitives overflows 32 bits")]
     PrimitiveIndexOffsetOverflow {
@@ -326,6 +348,8 @@ impl BuildError {
             | BuildError::CompactionNotAllowed
             | BuildError::MotionKeyCount { .. }
             | BuildError::InvalidCurveInput { .. }
+            | BuildError::InvalidMotionOptions(_)
+            | BuildError::InvalidMotionKey { .. }
             | BuildError::InvalidUpdate(
                 UpdateRule::NoStructure | UpdateRule::NotAnUpdate | UpdateRule::NotAllowed,
             ) => ErrorCode::InvalidValue,
@@ -402,11 +426,24 @@ pub enum UpdateRule {
         /// The instance (index in the build input).
         instance: u32,
     },
+    /// The motion options differ from the build's (§5.6: the number of motion keys may not
+    /// change, and the other options must be identical).
+    Motion {
+        /// Options of the build.
+        built: crate::motion::MotionOptions,
+        /// Options of the update.
+        given: crate::motion::MotionOptions,
+    },
 }
 
 impl std::fmt::Display for UpdateRule {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
+            UpdateRule::Motion { built, given } => write!(
+                f,
+                "motion options {given:?} differ from the build's {built:?} (guide §5.6: the \
+                 number of motion keys may not change)"
+            ),
             UpdateRule::NoStructure => write!(
                 f,
                 "operation Update needs the structure to update; build with operation Build, or \

@@ -19,6 +19,10 @@ pub enum TraversableKind {
     Ias,
     /// A static transform.
     StaticTransform,
+    /// A matrix motion transform (guide §5.10.4).
+    MatrixMotionTransform,
+    /// An SRT motion transform (guide §5.10.5).
+    SrtMotionTransform,
 }
 
 /// Which backend's memory a traversable lives in.

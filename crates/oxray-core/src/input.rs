@@ -227,6 +227,11 @@ pub struct TriangleInput<'a> {
     pub sbt_index_offsets: Option<SbtIndexOffsets<'a>>,
     /// Added to the primitive index that hits report.
     pub primitive_index_offset: u32,
+    /// The vertices at motion keys 1, 2, … of a build with motion (guide §5.10.2):
+    /// [`vertices`](Self::vertices) is key 0, so a build of `n` keys takes `n - 1` buffers
+    /// here, each of the same count and format as key 0 (strides may differ). Empty without
+    /// motion. The indices are shared by every key.
+    pub motion_vertices: &'a [VertexBuffer<'a>],
 }
 
 impl<'a> TriangleInput<'a> {
@@ -239,6 +244,35 @@ impl<'a> TriangleInput<'a> {
             flags: ONE_RECORD,
             sbt_index_offsets: None,
             primitive_index_offset: 0,
+            motion_vertices: &[],
+        }
+    }
+
+    /// Sets the vertices of motion keys 1, 2, … (key 0 is [`vertices`](Self::vertices)).
+    ///
+    /// ```
+    /// use oxray_core::{TriangleInput, VertexBuffer};
+    /// let k0 = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let k1 = [[0.0f32, 0.0, 1.0], [1.0, 0.0, 1.0], [0.0, 1.0, 1.0]];
+    /// let later = [VertexBuffer::f32x3(&k1)];
+    /// let input = TriangleInput::new(VertexBuffer::f32x3(&k0)).motion_vertices(&later);
+    /// assert_eq!(input.num_motion_keys(), 2);
+    /// ```
+    pub fn motion_vertices(mut self, keys: &'a [VertexBuffer<'a>]) -> Self {
+        self.motion_vertices = keys;
+        self
+    }
+
+    /// Motion keys the input gives vertices for (1 without motion).
+    pub fn num_motion_keys(&self) -> usize {
+        1 + self.motion_vertices.len()
+    }
+
+    /// The vertex buffer of motion key `key` (0 is [`vertices`](Self::vertices)).
+    pub fn vertex_key(&self, key: usize) -> Option<&VertexBuffer<'a>> {
+        match key {
+            0 => Some(&self.vertices),
+            k => self.motion_vertices.get(k - 1),
         }
     }
 
@@ -325,6 +359,11 @@ pub struct CustomPrimitiveInput<'a> {
     pub sbt_index_offsets: Option<SbtIndexOffsets<'a>>,
     /// Added to the primitive index that hits report.
     pub primitive_index_offset: u32,
+    /// The boxes at motion keys 1, 2, … of a build with motion (guide §5.10.1, §5.10.2):
+    /// [`aabbs`](Self::aabbs) is key 0, so a build of `n` keys takes `n - 1` buffers here, each
+    /// of the same count. Boxes are interpolated linearly between keys, so each key's box must
+    /// be large enough that the interpolated boxes contain the primitive's whole motion path.
+    pub motion_aabbs: &'a [AabbBuffer<'a>],
 }
 
 impl<'a> CustomPrimitiveInput<'a> {
@@ -335,7 +374,33 @@ impl<'a> CustomPrimitiveInput<'a> {
             flags: ONE_RECORD,
             sbt_index_offsets: None,
             primitive_index_offset: 0,
+            motion_aabbs: &[],
         }
+    }
+
+    /// Sets the boxes of motion keys 1, 2, … (key 0 is [`aabbs`](Self::aabbs)).
+    pub fn motion_aabbs(mut self, keys: &'a [AabbBuffer<'a>]) -> Self {
+        self.motion_aabbs = keys;
+        self
+    }
+
+    /// The box buffer of motion key `key` (0 is [`aabbs`](Self::aabbs)).
+    pub fn aabb_key(&self, key: usize) -> Option<&AabbBuffer<'a>> {
+        match key {
+            0 => Some(&self.aabbs),
+            k => self.motion_aabbs.get(k - 1),
+        }
+    }
+
+    /// Box `i` of a validated key buffer.
+    #[inline]
+    pub fn aabb(buffer: &AabbBuffer<'_>, i: usize) -> crate::Aabb {
+        let at = i * buffer.effective_stride();
+        let f: [f32; 6] = std::array::from_fn(|k| {
+            let b = &buffer.data[at + 4 * k..at + 4 * k + 4];
+            f32::from_le_bytes([b[0], b[1], b[2], b[3]])
+        });
+        crate::Aabb::new(Vec3::new(f[0], f[1], f[2]), Vec3::new(f[3], f[4], f[5]))
     }
 
     /// Sets the per-record geometry flags.
@@ -362,9 +427,8 @@ impl<'a> CustomPrimitiveInput<'a> {
 ///
 /// As in OptiX, the centres and radii are given per motion key: `vertex_buffers[k]` holds the
 /// centres (`float3`, `vertex_stride` bytes apart) and `radius_buffers[k]` the radii (`f32`,
-/// `radius_stride` bytes apart) at key `k`. Builds have no motion yet, so there is exactly one
-/// key: both slices must have length 1 ([`BuildError::MotionKeyCount`](crate::BuildError)
-/// otherwise). With [`single_radius`](Self::single_radius), each radius buffer holds one radius
+/// `radius_stride` bytes apart) at key `k`: both slices have one buffer per motion key of the
+/// build (one without motion; [`BuildError::MotionKeyCount`](crate::BuildError) otherwise). With [`single_radius`](Self::single_radius), each radius buffer holds one radius
 /// for every sphere. There is no index buffer and no pre-transform (§9.1): a non-uniform scale
 /// belongs in an instance transform. Spheres take per-primitive SBT index offsets like
 /// triangles (§9.1).

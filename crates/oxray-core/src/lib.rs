@@ -32,6 +32,8 @@ pub mod handle;
 pub mod hit;
 pub mod input;
 pub mod instance;
+pub mod motion;
+pub mod motion_transform;
 pub mod options;
 pub mod pipeline;
 pub mod ray;
@@ -61,6 +63,8 @@ pub use instance::{
     Instance, InstanceFlags, StaticTransform, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
     MAX_SBT_OFFSET, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
+pub use motion::{KeySample, MotionFlags, MotionOptions, MotionRule};
+pub use motion_transform::{MatrixMotionTransform, MotionKeyRule, SrtData, SrtMotionTransform};
 pub use options::{
     AccelProperty, BuildFlags, BuildOperation, BuildOptions, EmittedProperty, GeometryFlags,
 };

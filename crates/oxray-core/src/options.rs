@@ -63,6 +63,10 @@ pub struct BuildOptions {
     pub flags: BuildFlags,
     /// Build or update.
     pub operation: BuildOperation,
+    /// Motion keys and times (`motionOptions`, guide §5.10.1); the default (all zero) is no
+    /// motion. A GAS with motion takes one vertex (box, centre and radius) buffer per key; an
+    /// IAS's motion affects only which instances vanish outside its range (§5.10.3).
+    pub motion: crate::motion::MotionOptions,
 }
 
 impl BuildOptions {
@@ -71,7 +75,20 @@ impl BuildOptions {
         BuildOptions {
             flags,
             operation: BuildOperation::Build,
+            motion: crate::motion::MotionOptions::NONE,
         }
+    }
+
+    /// The same options with motion (guide §5.10.1).
+    ///
+    /// ```
+    /// use oxray_core::{BuildFlags, BuildOptions, MotionOptions};
+    /// let opts = BuildOptions::new(BuildFlags::empty()).with_motion(MotionOptions::new(2, 0.0, 1.0));
+    /// assert_eq!(opts.motion.key_count(), 2);
+    /// ```
+    pub fn with_motion(mut self, motion: crate::motion::MotionOptions) -> Self {
+        self.motion = motion;
+        self
     }
 }
 

@@ -71,6 +71,37 @@ struct OptixStaticTransform {
     float invTransform[12];
 };
 
+// Motion (guide §5.10.1): keys evenly spaced from timeBegin to timeEnd.
+enum OptixMotionFlags {
+    OPTIX_MOTION_FLAG_NONE = 0,
+    OPTIX_MOTION_FLAG_START_VANISH = 1u << 0,
+    OPTIX_MOTION_FLAG_END_VANISH = 1u << 1,
+};
+struct OptixMotionOptions {
+    unsigned short numKeys;
+    unsigned short flags;
+    float timeBegin;
+    float timeEnd;
+};
+// A matrix motion transform (§5.10.4): variable size, numKeys 3x4 row-major matrices.
+struct OptixMatrixMotionTransform {
+    OptixTraversableHandle child;
+    OptixMotionOptions motionOptions;
+    unsigned int pad[3];
+    float transform[2][12];
+};
+// One key of an SRT motion transform (§5.10.5).
+struct OptixSRTData {
+    float sx, a, b, pvx, sy, c, pvy, sz, pvz, qx, qy, qz, qw, tx, ty, tz;
+};
+// An SRT motion transform (§5.10.5): variable size, numKeys keys.
+struct OptixSRTMotionTransform {
+    OptixTraversableHandle child;
+    OptixMotionOptions motionOptions;
+    unsigned int pad[3];
+    OptixSRTData srtData[2];
+};
+
 enum OptixTransformType {
     OPTIX_TRANSFORM_TYPE_NONE = 0,
     OPTIX_TRANSFORM_TYPE_STATIC_TRANSFORM = 1,

@@ -30,6 +30,8 @@ pub fn validate_structure(
     let Some(first) = inputs.first() else {
         return Err(BuildError::NoBuildInputs);
     };
+    options.motion.validate_for_structure()?;
+    let keys = options.motion.key_count();
     if options
         .flags
         .contains(BuildFlags::PREFER_FAST_TRACE | BuildFlags::PREFER_FAST_BUILD)
@@ -65,9 +67,10 @@ pub fn validate_structure(
         prims += input.num_primitives() as u64;
         records += input.flags().len() as u64;
     }
-    if prims > MAX_PRIMITIVES_PER_GAS {
+    // The limit counts every key's primitives (guide §12).
+    if prims * keys as u64 > MAX_PRIMITIVES_PER_GAS {
         return Err(BuildError::TooManyPrimitives {
-            count: prims,
+            count: prims * keys as u64,
             limit: MAX_PRIMITIVES_PER_GAS,
         });
     }
@@ -83,21 +86,31 @@ pub fn validate_structure(
         match input {
             BuildInput::Triangles(t) => {
                 let v = &t.vertices;
-                check_stride(
-                    at,
-                    BufferKind::Vertices,
-                    v.stride,
-                    v.format.size(),
-                    v.format.alignment(),
-                )?;
-                check_len(
-                    at,
-                    BufferKind::Vertices,
-                    v.data.len(),
-                    v.count,
-                    v.effective_stride(),
-                    v.format.size(),
-                )?;
+                check_key_count(at, BufferKind::Vertices, t.num_motion_keys(), keys)?;
+                for (key, k) in (0..keys).filter_map(|key| Some((key, t.vertex_key(key)?))) {
+                    if k.count != v.count || k.format != v.format {
+                        return Err(BuildError::MotionKeyMismatch {
+                            at,
+                            key,
+                            buffer: BufferKind::Vertices,
+                        });
+                    }
+                    check_stride(
+                        at,
+                        BufferKind::Vertices,
+                        k.stride,
+                        k.format.size(),
+                        k.format.alignment(),
+                    )?;
+                    check_len(
+                        at,
+                        BufferKind::Vertices,
+                        k.data.len(),
+                        k.count,
+                        k.effective_stride(),
+                        k.format.size(),
+                    )?;
+                }
                 match &t.indices {
                     Some(ix) => {
                         check_stride(
@@ -129,19 +142,28 @@ pub fn validate_structure(
             BuildInput::Instances(_) | BuildInput::InstancePointers(_) => {
                 unreachable!("instance inputs were refused above")
             }
-            BuildInput::Spheres(s) => validate_spheres(at, s)?,
-            BuildInput::Curves(c) => validate_curves(at, c)?,
+            BuildInput::Spheres(s) => validate_spheres(at, s, keys)?,
+            BuildInput::Curves(c) => validate_curves(at, c, keys)?,
             BuildInput::CustomPrimitives(c) => {
-                let a = &c.aabbs;
-                check_stride(at, BufferKind::Aabbs, a.stride, 24, 8)?;
-                check_len(
-                    at,
-                    BufferKind::Aabbs,
-                    a.data.len(),
-                    a.count,
-                    a.effective_stride(),
-                    24,
-                )?;
+                check_key_count(at, BufferKind::Aabbs, 1 + c.motion_aabbs.len(), keys)?;
+                for (key, a) in (0..keys).filter_map(|key| Some((key, c.aabb_key(key)?))) {
+                    if a.count != c.aabbs.count {
+                        return Err(BuildError::MotionKeyMismatch {
+                            at,
+                            key,
+                            buffer: BufferKind::Aabbs,
+                        });
+                    }
+                    check_stride(at, BufferKind::Aabbs, a.stride, 24, 8)?;
+                    check_len(
+                        at,
+                        BufferKind::Aabbs,
+                        a.data.len(),
+                        a.count,
+                        a.effective_stride(),
+                        24,
+                    )?;
+                }
             }
         }
         let n = input.num_primitives();
@@ -183,27 +205,31 @@ pub fn validate_structure(
     })
 }
 
-/// Motion keys of a build: builds have no motion options yet, so one.
-const MOTION_KEYS: usize = 1;
+/// One buffer per motion key of the build (guide §5.10.2).
+fn check_key_count(
+    at: InputLocation,
+    buffer: BufferKind,
+    given: usize,
+    expected: usize,
+) -> Result<(), BuildError> {
+    if given != expected {
+        return Err(BuildError::MotionKeyCount {
+            at,
+            buffer,
+            given,
+            expected,
+        });
+    }
+    Ok(())
+}
 
 /// The rules of guide §5.3 (and `OptixBuildInputSphereArray`'s fields): one centre buffer and
 /// one radius buffer per motion key, `float3` centres and `f32` radii with strides that are 0
 /// or a multiple of 4 and at least one element, buffers long enough for `numVertices`
 /// elements (one radius per buffer with `singleRadius`).
-fn validate_spheres(at: InputLocation, s: &SphereInput<'_>) -> Result<(), BuildError> {
-    for (buffer, given) in [
-        (BufferKind::Vertices, s.vertex_buffers.len()),
-        (BufferKind::Radii, s.radius_buffers.len()),
-    ] {
-        if given != MOTION_KEYS {
-            return Err(BuildError::MotionKeyCount {
-                at,
-                buffer,
-                given,
-                expected: MOTION_KEYS,
-            });
-        }
-    }
+fn validate_spheres(at: InputLocation, s: &SphereInput<'_>, keys: usize) -> Result<(), BuildError> {
+    check_key_count(at, BufferKind::Vertices, s.vertex_buffers.len(), keys)?;
+    check_key_count(at, BufferKind::Radii, s.radius_buffers.len(), keys)?;
     check_stride(at, BufferKind::Vertices, s.vertex_stride, 12, 4)?;
     check_stride(at, BufferKind::Radii, s.radius_stride, 4, 4)?;
     let n = s.num_vertices;
@@ -237,19 +263,13 @@ fn validate_spheres(at: InputLocation, s: &SphereInput<'_>) -> Result<(), BuildE
 /// `f32` radii, `u32` indices with strides that are 0 or a multiple of 4, buffers long enough,
 /// no flat end caps on linear curves, and every segment's control points inside the vertex
 /// buffer.
-fn validate_curves(at: InputLocation, c: &CurveInput<'_>) -> Result<(), BuildError> {
-    for (buffer, given) in [
-        (BufferKind::Vertices, c.vertex_buffers.len()),
-        (BufferKind::Radii, c.width_buffers.len()),
-    ] {
-        if given != MOTION_KEYS {
-            return Err(BuildError::MotionKeyCount {
-                at,
-                buffer,
-                given,
-                expected: MOTION_KEYS,
-            });
-        }
+fn validate_curves(at: InputLocation, c: &CurveInput<'_>, keys: usize) -> Result<(), BuildError> {
+    check_key_count(at, BufferKind::Vertices, c.vertex_buffers.len(), keys)?;
+    check_key_count(at, BufferKind::Radii, c.width_buffers.len(), keys)?;
+    if keys != 1 {
+        // Curves are interpolated between keys nowhere yet: a build with motion keys and a
+        // curve input is refused rather than traced at one key.
+        return Err(BuildError::Unsupported("curves with motion keys (guide §5.10.2)"));
     }
     if !c.normal_buffers.is_empty() {
         if !c.curve_type.is_ribbon() {
@@ -258,14 +278,7 @@ fn validate_curves(at: InputLocation, c: &CurveInput<'_>) -> Result<(), BuildErr
                 reason: "normals are given but only ribbons (flat quadratic B-splines) take them",
             });
         }
-        if c.normal_buffers.len() != MOTION_KEYS {
-            return Err(BuildError::MotionKeyCount {
-                at,
-                buffer: BufferKind::Normals,
-                given: c.normal_buffers.len(),
-                expected: MOTION_KEYS,
-            });
-        }
+        check_key_count(at, BufferKind::Normals, c.normal_buffers.len(), keys)?;
     }
     if c.curve_type == CurveType::RoundLinear && c.endcaps == CurveEndcaps::On {
         return Err(BuildError::InvalidCurveInput {

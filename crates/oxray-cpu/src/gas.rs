@@ -167,6 +167,8 @@ pub(crate) enum CpuNode {
     Gas(Arc<Gas>),
     Ias(Arc<crate::Ias>),
     Static(Arc<oxray_core::StaticTransform>),
+    MatrixMotion(Arc<oxray_core::MatrixMotionTransform>),
+    SrtMotion(Arc<oxray_core::SrtMotionTransform>),
 }
 
 impl std::fmt::Debug for CpuNode {
@@ -175,6 +177,8 @@ impl std::fmt::Debug for CpuNode {
             CpuNode::Gas(g) => g.describe(),
             CpuNode::Ias(i) => i.describe(),
             CpuNode::Static(s) => s.describe(),
+            CpuNode::MatrixMotion(m) => m.describe(),
+            CpuNode::SrtMotion(m) => m.describe(),
         })
     }
 }
@@ -197,6 +201,15 @@ impl CpuNode {
         if let Some(s) = handle.downcast_arc::<oxray_core::StaticTransform>() {
             if matches!(s.backend(), BackendKind::Cpu | BackendKind::Any) {
                 return Ok(Some(CpuNode::Static(s)));
+            }
+        }
+        // Motion transforms over structures of this backend (or over nothing).
+        if matches!(backend, BackendKind::Cpu | BackendKind::Any) {
+            if let Some(m) = handle.downcast_arc::<oxray_core::MatrixMotionTransform>() {
+                return Ok(Some(CpuNode::MatrixMotion(m)));
+            }
+            if let Some(m) = handle.downcast_arc::<oxray_core::SrtMotionTransform>() {
+                return Ok(Some(CpuNode::SrtMotion(m)));
             }
         }
         Err(backend)

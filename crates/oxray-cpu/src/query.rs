@@ -165,7 +165,10 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
             primitive_index,
             sbt_gas_index,
             build_input,
-            aabb: gas.aabbs[slot as usize],
+            // With motion, the box at the ray's time (guide §5.10.1).
+            aabb: gas
+                .aabb_at(slot as usize, self.object_ray.time)
+                .unwrap_or(oxray_core::Aabb::EMPTY),
         };
         let ray = Ray {
             tmin,

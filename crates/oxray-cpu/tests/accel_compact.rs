@@ -92,6 +92,7 @@ fn a_compacted_structure_can_be_updated_like_its_source_5_8() {
     let up = BuildOptions {
         flags,
         operation: BuildOperation::Update,
+        ..Default::default()
     };
     gas.update(&up, &[input(&m)]).unwrap();
     compact.update(&up, &[input(&m)]).unwrap();

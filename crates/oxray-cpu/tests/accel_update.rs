@@ -24,6 +24,7 @@ fn update_options(flags: BuildFlags) -> BuildOptions {
     BuildOptions {
         flags,
         operation: BuildOperation::Update,
+        ..Default::default()
     }
 }
 

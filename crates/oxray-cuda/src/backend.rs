@@ -142,6 +142,9 @@ fn query_error(e: CudaError) -> QueryError {
     }
 }
 
+/// Motion blur (guide §5.10) is traced by the CPU backend only: structures with motion keys
+/// are refused after validation, and motion transforms under instances when the IAS is built.
+pub(crate) const MOTION_UNSUPPORTED: &str = "motion blur (guide §5.10) on the CUDA backend";
 /// Why the CUDA backend refuses a sphere GAS.
 pub(crate) const SPHERES_UNSUPPORTED: &str =
     "built-in spheres (guide §5.3) on the CUDA backend (the CPU backend traces them)";
@@ -211,6 +214,9 @@ impl AccelBackend for Cuda {
         if summary.kind == oxray_core::BuildInputKind::Curves {
             return Err(BuildError::Unsupported(CURVES_UNSUPPORTED));
         }
+        if options.motion.has_motion() {
+            return Err(BuildError::Unsupported(MOTION_UNSUPPORTED));
+        }
         if let Some(config) = self.device_build_config(options, inputs) {
             match device_build::build_triangles(&self.ctx, options, inputs, &config) {
                 Ok((gas, _)) => return Ok(gas),
@@ -232,6 +238,9 @@ impl AccelBackend for Cuda {
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaIas, BuildError> {
         let (data, tree) = IasData::build_with_tree(options, inputs)?;
+        if options.motion.has_motion() {
+            return Err(BuildError::Unsupported(MOTION_UNSUPPORTED));
+        }
         CudaIas::upload(&self.ctx, data, &tree)
     }
 

@@ -558,6 +558,11 @@ impl CudaGas {
         tree: &Bvh2,
         layout: NodeLayout,
     ) -> Result<CudaGas, CudaError> {
+        // The device layouts have no motion keys: uploading key 0 alone would trace another
+        // scene (guide §5.10).
+        if gas.motion.is_some() {
+            return Err(CudaError::Unsupported(crate::backend::MOTION_UNSUPPORTED));
+        }
         match gas.kind {
             GasKind::CustomPrimitives => return Self::upload_custom(ctx, gas, tree),
             GasKind::Spheres => {

@@ -155,7 +155,12 @@ impl Gas {
     /// CUDA backend emits the box and refuses the compacted size with `Unsupported`.
     pub fn emit_property(&self, property: AccelProperty) -> Result<EmittedProperty, BuildError> {
         match property {
-            AccelProperty::Aabbs => Ok(EmittedProperty::Aabbs(vec![self.bounds()])),
+            // One box per motion key (guide §5.10.2); the CUDA backend has no motion.
+            AccelProperty::Aabbs => Ok(EmittedProperty::Aabbs(on_gas!(
+                self,
+                g => g.data().key_bounds(),
+                vec![g.bounds()]
+            ))),
             AccelProperty::CompactedSize => on_gas!(
                 self,
                 g => g

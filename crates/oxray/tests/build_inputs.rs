@@ -165,6 +165,7 @@ fn update_operation_in_a_build_call_is_refused_5_6() {
         let options = BuildOptions {
             flags: BuildFlags::ALLOW_UPDATE,
             operation: BuildOperation::Update,
+            ..Default::default()
         };
         let e = Gas::build(&options, &[input]).unwrap_err();
         assert_eq!(e, BuildError::InvalidUpdate(oxray::UpdateRule::NoStructure));

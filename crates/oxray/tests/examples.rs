@@ -14,6 +14,10 @@ mod hair;
 mod hello;
 #[path = "../examples/instancing.rs"]
 mod instancing;
+#[path = "../examples/motion_geometry.rs"]
+mod motion_geometry;
+#[path = "../examples/simple_motion_blur.rs"]
+mod simple_motion_blur;
 #[path = "../examples/triangle.rs"]
 mod triangle;
 #[path = "../examples/triangle_cpp.rs"]
@@ -274,4 +278,50 @@ fn triangle_in_cuda_cpp_renders_the_rust_triangle_pixel_for_pixel() {
             println!("the GPU half skips: {e}");
         }
     }
+}
+
+/// Pixels whose colour lies strictly between the background and the fully covered colour:
+/// only some of a pixel's ray times hit, which is what motion blur looks like.
+fn partially_covered(px: &[[u8; 4]], bg: [u8; 4], channel: usize, full: u8) -> usize {
+    px.iter()
+        .filter(|p| p[channel] > bg[channel] + 12 && p[channel] + 12 < full)
+        .count()
+}
+
+#[test]
+fn simple_motion_blur_smears_the_moving_cubes_5_10() {
+    let px = run("simple_motion_blur", simple_motion_blur::render);
+    let bg = common_bg([0.1, 0.1, 0.15]);
+    assert_eq!(at(&px, 0, 0), bg);
+    // The translating cube (orange: red channel) covers its path from x = -2.6 to -0.2 only
+    // part of the time away from the middle: many partially covered pixels, not a hard edge.
+    let orange = px
+        .iter()
+        .filter(|p| p[0] > p[2] + 20)
+        .copied()
+        .collect::<Vec<_>>();
+    assert!(orange.len() > 500, "{} orange pixels", orange.len());
+    assert!(
+        partially_covered(&orange, bg, 0, 200) * 3 > orange.len(),
+        "most of the translating cube's pixels are blurred"
+    );
+    // The turning cube (blue) has a sharp core and blurred corners.
+    let blue = px.iter().filter(|p| p[2] > p[0] + 20).count();
+    assert!(blue > 500, "{blue} blue pixels");
+}
+
+#[test]
+fn motion_geometry_blurs_the_deforming_sphere_5_10_2() {
+    let px = run("motion_geometry", motion_geometry::render);
+    let bg = common_bg([0.12, 0.1, 0.1]);
+    assert_eq!(at(&px, 0, 0), bg);
+    let green: Vec<[u8; 4]> = px.iter().filter(|p| p[1] > p[0] + 10).copied().collect();
+    assert!(green.len() > 1000, "{} green pixels", green.len());
+    // The silhouette changes with time: its rim is partially covered.
+    assert!(partially_covered(&green, bg, 1, 120) > 100);
+}
+
+fn common_bg(c: [f32; 3]) -> [u8; 4] {
+    let q = |x: f32| (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8;
+    [q(c[0]), q(c[1]), q(c[2]), 255]
 }

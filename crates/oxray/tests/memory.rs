@@ -441,6 +441,7 @@ fn memory_query_rejects_what_the_build_rejects_5() {
     let update = BuildOptions {
         flags: BuildFlags::ALLOW_UPDATE,
         operation: oxray::BuildOperation::Update,
+        ..Default::default()
     };
     let sizes = compute_memory_usage(&update, &[valid]).unwrap();
     assert!(sizes.temp_update_size_in_bytes > 0);

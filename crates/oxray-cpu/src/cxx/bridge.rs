@@ -143,6 +143,8 @@ pub(crate) struct CApi {
     gas_handle: unsafe extern "C" fn(*mut CFrame) -> u64,
     sphere_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
     curve_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
+    motion_transform: unsafe extern "C" fn(*mut CFrame, u32, u32) -> *const c_void,
+    gas_motion: unsafe extern "C" fn(*mut CFrame, u64, *mut f32) -> u32,
 }
 
 static API: CApi = CApi {
@@ -155,6 +157,8 @@ static API: CApi = CApi {
     gas_handle: api_gas_handle,
     sphere_data: api_sphere_data,
     curve_data: api_curve_data,
+    motion_transform: api_motion_transform,
+    gas_motion: api_gas_motion,
 };
 
 /// A wrapped program: `__oxray_entry_<name>(frame)`, 0 when it returned, 1 when it unwound.
@@ -715,6 +719,8 @@ unsafe extern "C" fn api_transform_list(
             instance_index,
         } => (4, (instance_id, instance_index)),
         TransformListKind::StaticTransform => (1, (0, 0)),
+        TransformListKind::MatrixMotionTransform => (2, (0, 0)),
+        TransformListKind::SrtMotionTransform => (3, (0, 0)),
     };
     // SAFETY: the header passes two result words and two 12-float matrices.
     unsafe {
@@ -773,6 +779,81 @@ unsafe extern "C" fn api_curve_data(f: *mut CFrame, out: *mut f32) {
     let flat = p.as_flattened();
     // SAFETY: the header passes 16 floats.
     unsafe { std::ptr::copy_nonoverlapping(flat.as_ptr(), out, 16) };
+}
+
+unsafe extern "C" fn api_motion_transform(f: *mut CFrame, i: u32, kind: u32) -> *const c_void {
+    // SAFETY: the header passes the running program's frame.
+    let f = unsafe { &mut *f };
+    // The layouts live in the transforms, which the traced handle keeps alive for the launch.
+    fn layout<C: MotionLookup>(c: &C, i: u32, kind: u32) -> *const c_void {
+        let bytes = match kind {
+            2 => c.matrix(i).map(|m| m.optix_layout()),
+            3 => c.srt(i).map(|m| m.optix_layout()),
+            _ => None,
+        };
+        bytes.map_or(std::ptr::null(), |b| b.as_ptr().cast())
+    }
+    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
+    unsafe {
+        match f.kind {
+            KIND_CH => layout(ctx_of::<Ch>(f), i, kind),
+            KIND_AH => layout(ctx_of::<Ah>(f), i, kind),
+            KIND_IS => layout(ctx_of::<Is>(f), i, kind),
+            _ => std::ptr::null(),
+        }
+    }
+}
+
+/// The motion transforms of a hit's transform list, whatever the program kind.
+trait MotionLookup {
+    fn matrix(&self, i: u32) -> Option<&oxray_core::MatrixMotionTransform>;
+    fn srt(&self, i: u32) -> Option<&oxray_core::SrtMotionTransform>;
+}
+
+macro_rules! motion_lookup {
+    ($($t:ty),*) => {$(
+        impl MotionLookup for $t {
+            fn matrix(&self, i: u32) -> Option<&oxray_core::MatrixMotionTransform> {
+                self.matrix_motion_transform(i)
+            }
+            fn srt(&self, i: u32) -> Option<&oxray_core::SrtMotionTransform> {
+                self.srt_motion_transform(i)
+            }
+        }
+    )*};
+}
+motion_lookup!(Ch, Ah, Is);
+
+unsafe extern "C" fn api_gas_motion(f: *mut CFrame, gas: u64, times: *mut f32) -> u32 {
+    // SAFETY: the header passes the running program's frame.
+    let f = unsafe { &mut *f };
+    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
+    let hit_gas = unsafe {
+        match f.kind {
+            KIND_CH => ctx_of::<Ch>(f).gas,
+            KIND_AH => ctx_of::<Ah>(f).gas,
+            _ => None,
+        }
+    };
+    // The hit's GAS by its address, or a registered one: a value is never followed.
+    let found = hit_gas
+        .filter(|g| *g as *const crate::Gas as usize as u64 == gas)
+        .map(|g| g.motion_options())
+        .or_else(|| {
+            launch_of(f)
+                .and_then(|l| l.handle(gas))
+                .and_then(|h| h.downcast_ref::<crate::Gas>())
+                .map(|g| g.motion_options())
+        });
+    let Some(m) = found else {
+        return 0;
+    };
+    // SAFETY: the header passes two floats.
+    unsafe {
+        *times = m.time_begin;
+        *times.add(1) = m.time_end;
+    }
+    m.key_count() as u32
 }
 
 unsafe extern "C" fn api_gas_handle(f: *mut CFrame) -> u64 {

@@ -227,6 +227,13 @@ struct __oxray_Api {
     // The object-space control points and radii of the hit curve segment (16 floats, as many
     // float4s as the type has, then zeros; zeros for another primitive type).
     void (*curve_data)(__oxray_Frame* f, float* v);
+    // Entry i of the transform list as an OptixMatrixMotionTransform (kind 2) or
+    // OptixSRTMotionTransform (kind 3), read-only, alive for the launch; null if the entry is
+    // not of that kind.
+    const void* (*motion_transform)(__oxray_Frame* f, unsigned int i, unsigned int kind);
+    // The motion options of a GAS (its handle, or the hit's GAS): writes timeBegin and timeEnd,
+    // returns the number of keys (1 without motion, 0 for a handle that names no GAS).
+    unsigned int (*gas_motion)(__oxray_Frame* f, unsigned long long gas, float* times);
 };
 
 // Program kinds, as the runtime numbers them.
@@ -708,6 +715,38 @@ static inline const OptixStaticTransform* optixGetStaticTransformFromHandle(
     std::memcpy(__oxray_static.transform, e.o2w, sizeof e.o2w);
     std::memcpy(__oxray_static.invTransform, e.w2o, sizeof e.w2o);
     return &__oxray_static;
+}
+
+static inline const OptixMatrixMotionTransform* optixGetMatrixMotionTransformFromHandle(
+    OptixTraversableHandle h) {
+    if ((h & 0xFFFF000000000000ull) != __OXRAY_LIST_TAG) return nullptr;
+    return static_cast<const OptixMatrixMotionTransform*>(
+        __oxray_frame->api->motion_transform(__oxray_frame, (unsigned int)h, 2u));
+}
+static inline const OptixSRTMotionTransform* optixGetSRTMotionTransformFromHandle(
+    OptixTraversableHandle h) {
+    if ((h & 0xFFFF000000000000ull) != __OXRAY_LIST_TAG) return nullptr;
+    return static_cast<const OptixSRTMotionTransform*>(
+        __oxray_frame->api->motion_transform(__oxray_frame, (unsigned int)h, 3u));
+}
+
+// ---------------------------------------------------------------------------------------------
+// Motion options of a GAS (guide §13.10)
+// ---------------------------------------------------------------------------------------------
+
+static inline float optixGetGASMotionTimeBegin(OptixTraversableHandle gas) {
+    float t[2] = {0.f, 0.f};
+    __oxray_frame->api->gas_motion(__oxray_frame, gas, t);
+    return t[0];
+}
+static inline float optixGetGASMotionTimeEnd(OptixTraversableHandle gas) {
+    float t[2] = {0.f, 0.f};
+    __oxray_frame->api->gas_motion(__oxray_frame, gas, t);
+    return t[1];
+}
+static inline unsigned int optixGetGASMotionStepCount(OptixTraversableHandle gas) {
+    float t[2];
+    return __oxray_frame->api->gas_motion(__oxray_frame, gas, t);
 }
 
 #endif  // OXRAY_DEVICE_CPU_H

@@ -23,6 +23,12 @@ pub enum TransformListKind {
     },
     /// A static transform.
     StaticTransform,
+    /// A matrix motion transform (guide §5.10.4); the entry's matrices are those at the ray's
+    /// time.
+    MatrixMotionTransform,
+    /// An SRT motion transform (guide §5.10.5); the entry's matrices are those at the ray's
+    /// time.
+    SrtMotionTransform,
 }
 
 /// One entry of the transform list of the current hit (guide §13.11).
@@ -311,7 +317,40 @@ macro_rules! transform_queries {
                     object_to_world: *st.transform(),
                     world_to_object: *st.inverse(),
                 },
+                Level::MatrixMotion(..) => TransformListEntry {
+                    kind: TransformListKind::MatrixMotionTransform,
+                    object_to_world: level.object_to_world(),
+                    world_to_object: level.world_to_object(),
+                },
+                Level::SrtMotion(..) => TransformListEntry {
+                    kind: TransformListKind::SrtMotionTransform,
+                    object_to_world: level.object_to_world(),
+                    world_to_object: level.world_to_object(),
+                },
             })
+        }
+
+        /// `optixGetMatrixMotionTransformFromHandle` on entry `i` of the transform list: the
+        /// traversable, with its keys and motion options (guide §13.11). `None` if the entry
+        /// is not a matrix motion transform.
+        pub fn matrix_motion_transform(
+            &self,
+            i: u32,
+        ) -> Option<&oxray_core::MatrixMotionTransform> {
+            match self.path?.levels().nth(i as usize)? {
+                Level::MatrixMotion(m, _) => Some(m),
+                _ => None,
+            }
+        }
+
+        /// `optixGetSRTMotionTransformFromHandle` on entry `i` of the transform list: the
+        /// traversable, with its keys and motion options (guide §13.11). `None` if the entry
+        /// is not an SRT motion transform.
+        pub fn srt_motion_transform(&self, i: u32) -> Option<&oxray_core::SrtMotionTransform> {
+            match self.path?.levels().nth(i as usize)? {
+                Level::SrtMotion(m, _) => Some(m),
+                _ => None,
+            }
         }
 
         /// `optixGetTransformListSize`: transforms (instances and static transforms) between
@@ -397,9 +436,10 @@ macro_rules! hit_queries {
         /// `optixGetSphereData`: the object-space centre and radius `(x, y, z, r)` of the hit
         /// sphere (guide §9.4; no build flag needed). Zeros for another primitive type.
         pub fn sphere_data(&self) -> [f32; 4] {
+            // A sphere with motion is the one at the ray's time (guide §5.10.2).
             match self
                 .gas
-                .and_then(|g| g.spheres.get(self.$hit.slot as usize))
+                .and_then(|g| g.sphere_at(self.$hit.slot as usize, self.ray.time))
             {
                 Some(s) => s.to_array(),
                 None => [0.0; 4],
@@ -436,6 +476,12 @@ macro_rules! hit_queries {
                 None => [[0.0; 4]; 4],
             }
         }
+        /// `optixGetGASMotionTimeBegin`, `…TimeEnd` and `…StepCount` of the hit's GAS
+        /// (guide §13.10): its motion options (the default, no motion, for a static GAS).
+        pub fn gas_motion_options(&self) -> oxray_core::MotionOptions {
+            self.gas
+                .map_or(oxray_core::MotionOptions::NONE, |g| g.motion_options())
+        }
         /// `optixIsTriangleHit`.
         pub fn is_triangle_hit(&self) -> bool {
             self.$hit.hit_kind.0 >= 0xFE
@@ -447,9 +493,11 @@ macro_rules! hit_queries {
         /// `optixGetTriangleVertexData`: the object-space vertices of the hit triangle (zeros
         /// for a custom primitive).
         pub fn triangle_vertex_data(&self) -> [Vec3; 3] {
+            // A triangle with motion is the one at the ray's time, interpolated as traversal
+            // interpolated it (guide §13.9).
             let slot = self.$hit.slot as usize;
-            match self.gas.and_then(|g| g.triangles.get(slot / 4)) {
-                Some(block) => block.get(slot % 4).map(Vec3::from),
+            match self.gas.and_then(|g| g.triangle_at(slot, self.ray.time)) {
+                Some(t) => t.map(Vec3::from),
                 None => [Vec3::ZERO; 3],
             }
         }

@@ -350,10 +350,10 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
         // One level (the common IAS over GASes) needs no composition.
         let (mut o2w, mut w2o) = (crate::Transform::IDENTITY, crate::Transform::IDENTITY);
         if let (1, Some(level)) = (path.len, path.levels().next()) {
-            (o2w, w2o) = (*level.object_to_world(), *level.world_to_object());
+            (o2w, w2o) = (level.object_to_world(), level.world_to_object());
         } else {
             for level in path.levels() {
-                o2w = o2w.then_after(level.object_to_world());
+                o2w = o2w.then_after(&level.object_to_world());
                 w2o = level.world_to_object().then_after(&w2o);
             }
         }
@@ -520,7 +520,10 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             ..self.frame
         };
         let ray = RayState { tmin, ..self.ray };
-        let aabb = gas.aabbs[slot as usize];
+        // With motion, the box at the ray's time (guide §5.10.1).
+        let aabb = gas
+            .aabb_at(slot as usize, self.ray.time)
+            .unwrap_or(oxray_core::Aabb::EMPTY);
         // Copies: the context also borrows the visitor, to report to it.
         let path = self.path;
         let place = self.place;
@@ -606,7 +609,8 @@ fn check_graph<P>(
                         .iter()
                         .all(|n| matches!(n, None | Some(crate::gas::CpuNode::Gas(_))))
             }
-            NodeRef::Static(_) => false,
+            // Transforms need ALLOW_ANY (§5.9.1), motion transforms included.
+            NodeRef::Static(_) | NodeRef::MatrixMotion(_) | NodeRef::SrtMotion(_) => false,
         };
         if !allowed {
             let code = if matches!(root, NodeRef::Gas(_)) {
@@ -648,7 +652,14 @@ pub(crate) fn trace<P>(
             &[],
         ));
     }
-    let ray = Ray::with_interval(args.origin, args.direction, args.tmin, args.tmax);
+    // Guide §13.5: without motion blur in the pipeline the ray time is ignored (0), for
+    // traversal and for `optixGetRayTime` alike.
+    let time = if pipe.compile.uses_motion_blur {
+        args.time
+    } else {
+        0.0
+    };
+    let ray = Ray::with_interval(args.origin, args.direction, args.tmin, args.tmax).with_time(time);
     if pipe.validation_mode && ray.validate().is_err() {
         let o = args.origin.to_array().map(f32::to_bits);
         let d = args.direction.to_array().map(f32::to_bits);
@@ -671,11 +682,7 @@ pub(crate) fn trace<P>(
         direction: args.direction,
         tmin: args.tmin,
         tmax: args.tmax,
-        time: if pipe.compile.uses_motion_blur {
-            args.time
-        } else {
-            0.0
-        },
+        time,
         flags: args.flags,
         mask: (args.visibility_mask & 0xFF) as u8,
     };

@@ -5,6 +5,7 @@
 
 mod kernel;
 mod leaf;
+mod motion;
 mod node;
 mod ray;
 mod scene;

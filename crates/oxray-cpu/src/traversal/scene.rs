@@ -7,6 +7,7 @@ use super::kernel::{traverse, Entry, GasVisitor};
 use super::leaf::{
     AabbLeaves, CurveLeaves, LeafEnd, LeafIntersector, SphereLeaves, TriangleLeaves,
 };
+use super::motion::{MotionAabbLeaves, MotionSphereLeaves, MotionTriangleLeaves};
 use super::node::{Bvh4, Bvh8Scalar};
 use super::ray::PreparedRay;
 use crate::gas::CpuNode;
@@ -14,28 +15,39 @@ use crate::{Gas, Ias, Isa};
 use oxray_bvh::GasKind;
 use oxray_bvh::InstanceData as InstanceRecord;
 use oxray_core::ray::min_ignore_nan;
-use oxray_core::{Ray, StaticTransform, Transform, MAX_TRAVERSABLE_GRAPH_DEPTH};
+use oxray_core::{
+    KeySample, MatrixMotionTransform, Ray, SrtMotionTransform, StaticTransform, Transform,
+    MAX_TRAVERSABLE_GRAPH_DEPTH,
+};
 
-/// One transform on the way from the root to a GAS.
+/// One transform on the way from the root to a GAS. A motion transform keeps the ray's time
+/// and its interpolated transform (guide §5.10.4, §5.10.5: the transform at that time).
 #[derive(Clone, Copy)]
 pub(crate) enum Level<'s> {
     Instance(&'s InstanceRecord),
     Static(&'s StaticTransform),
+    MatrixMotion(&'s MatrixMotionTransform, f32),
+    SrtMotion(&'s SrtMotionTransform, f32),
 }
 
 impl Level<'_> {
-    /// Object-to-world transform of this level.
-    pub fn object_to_world(&self) -> &Transform {
+    /// Object-to-world transform of this level (a motion transform's at the ray's time).
+    pub fn object_to_world(&self) -> Transform {
         match self {
-            Level::Instance(i) => &i.object_to_world,
-            Level::Static(s) => s.transform(),
+            Level::Instance(i) => i.object_to_world,
+            Level::Static(s) => *s.transform(),
+            Level::MatrixMotion(m, time) => m.object_to_world_at(*time).unwrap_or_default(),
+            Level::SrtMotion(m, time) => m.object_to_world_at(*time).unwrap_or_default(),
         }
     }
-    /// World-to-object transform of this level.
-    pub fn world_to_object(&self) -> &Transform {
+    /// World-to-object transform of this level (a motion transform's at the ray's time).
+    pub fn world_to_object(&self) -> Transform {
         match self {
-            Level::Instance(i) => &i.world_to_object,
-            Level::Static(s) => s.inverse(),
+            Level::Instance(i) => i.world_to_object,
+            Level::Static(s) => *s.inverse(),
+            Level::MatrixMotion(..) | Level::SrtMotion(..) => {
+                self.object_to_world().inverse().unwrap_or_default()
+            }
         }
     }
 }
@@ -96,6 +108,8 @@ pub(crate) enum NodeRef<'s> {
     Gas(&'s Gas),
     Ias(&'s Ias),
     Static(&'s StaticTransform),
+    MatrixMotion(&'s MatrixMotionTransform),
+    SrtMotion(&'s SrtMotionTransform),
 }
 
 impl<'s> From<&'s CpuNode> for NodeRef<'s> {
@@ -104,6 +118,8 @@ impl<'s> From<&'s CpuNode> for NodeRef<'s> {
             CpuNode::Gas(g) => NodeRef::Gas(g),
             CpuNode::Ias(i) => NodeRef::Ias(i),
             CpuNode::Static(s) => NodeRef::Static(s),
+            CpuNode::MatrixMotion(m) => NodeRef::MatrixMotion(m),
+            CpuNode::SrtMotion(m) => NodeRef::SrtMotion(m),
         }
     }
 }
@@ -126,6 +142,12 @@ impl<'s> NodeRef<'s> {
         if let Some(i) = handle.downcast_ref::<Ias>() {
             return Some(NodeRef::Ias(i));
         }
+        if let Some(m) = handle.downcast_ref::<MatrixMotionTransform>() {
+            return Some(NodeRef::MatrixMotion(m));
+        }
+        if let Some(m) = handle.downcast_ref::<SrtMotionTransform>() {
+            return Some(NodeRef::SrtMotion(m));
+        }
         handle
             .downcast_ref::<StaticTransform>()
             .map(NodeRef::Static)
@@ -144,11 +166,23 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
 ) -> (f32, bool) {
     match node {
         NodeRef::Gas(gas) => {
+            // Guide §5.10.1: a structure with motion is hit at the ray's time, and not at all
+            // outside its range where a vanish flag says so.
+            let sample = match &gas.motion {
+                None => None,
+                Some(m) => match m.options.sample(ray.time) {
+                    Some(s) => Some(s),
+                    None => return (ray.tmax, false),
+                },
+            };
             visitor.enter_gas(gas, path, ray);
             let Some(prepared) = PreparedRay::new(ray) else {
                 return (ray.tmax, false);
             };
             let (tmin, tmax) = (ray.tmin, ray.tmax);
+            if let Some(s) = sample {
+                return traverse_motion_gas(gas, s, &prepared, tmin, tmax, visitor, stack);
+            }
             match gas.kind {
                 GasKind::Triangles => {
                     let leaves = TriangleLeaves(&gas.triangles);
@@ -169,6 +203,10 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
             }
         }
         NodeRef::Ias(ias) => {
+            // Guide §5.10.3: an IAS's vanish flags hide every instance outside its range.
+            if ias.motion.vanishes_at(ray.time) {
+                return (ray.tmax, false);
+            }
             let Some(prepared) = PreparedRay::new(ray) else {
                 return (ray.tmax, false);
             };
@@ -186,6 +224,79 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
             };
             let r = transform_ray(st.inverse(), ray);
             traverse_node(child, &p, &r, visitor, stack)
+        }
+        NodeRef::MatrixMotion(m) => {
+            let o2w = m.object_to_world_at(ray.time);
+            let level = Level::MatrixMotion(m, ray.time);
+            traverse_motion_transform(m.child(), o2w, level, path, ray, visitor, stack)
+        }
+        NodeRef::SrtMotion(m) => {
+            let o2w = m.object_to_world_at(ray.time);
+            let level = Level::SrtMotion(m, ray.time);
+            traverse_motion_transform(m.child(), o2w, level, path, ray, visitor, stack)
+        }
+    }
+}
+
+/// Enters a motion transform's child with the ray carried by the transform at the ray's time
+/// (`o2w`; `None` where the transform vanishes). An interpolated matrix may be singular where
+/// its keys are not (a scale passing through zero): the child is then not hit at that time.
+fn traverse_motion_transform<'s, V: SceneVisitor<'s>>(
+    child: &'s oxray_core::TraversableHandle,
+    o2w: Option<Transform>,
+    level: Level<'s>,
+    path: &Path<'s>,
+    ray: &Ray,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    let Some(w2o) = o2w.and_then(|m| m.inverse()) else {
+        return (ray.tmax, false);
+    };
+    let Some(child) = NodeRef::of(child) else {
+        return (ray.tmax, false);
+    };
+    let Some(p) = path.push(level) else {
+        visitor.graph_too_deep();
+        return (ray.tmax, true);
+    };
+    let r = transform_ray(&w2o, ray);
+    traverse_node(child, &p, &r, visitor, stack)
+}
+
+/// Traverses a GAS with motion at the keys `s` of the ray's time: its tree bounds every key,
+/// and the leaves interpolate their primitives between the two keys.
+#[inline(never)]
+fn traverse_motion_gas<V: GasVisitor>(
+    gas: &Gas,
+    s: KeySample,
+    prepared: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    let f = s.fraction;
+    match gas.kind {
+        GasKind::Triangles => {
+            let (a, b) = gas.triangle_keys(s);
+            let leaves = MotionTriangleLeaves { a, b, f };
+            traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
+        }
+        GasKind::CustomPrimitives => {
+            let (a, b) = gas.aabb_keys(s);
+            let leaves = MotionAabbLeaves { a, b, f };
+            traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
+        }
+        GasKind::Spheres => {
+            let (a, b) = gas.sphere_keys(s);
+            let leaves = MotionSphereLeaves { a, b, f };
+            traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
+        }
+        // Curves have one key (validation refuses them with motion): their static leaves.
+        GasKind::Curves => {
+            let leaves = CurveLeaves(&gas.curves);
+            traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
         }
     }
 }

@@ -437,6 +437,27 @@ static __forceinline__ __device__ const OptixStaticTransform* optixGetStaticTran
         reinterpret_cast<const __oxray_Traversable*>(handle)->nodes);
 }
 
+// Motion transforms and GASes with motion (guide §5.10) are refused by the CUDA backend when
+// a structure is built, so no transform-list entry is a motion transform (these give null) and
+// no GAS has motion (one key, times 0).
+static __forceinline__ __device__ const OptixMatrixMotionTransform*
+optixGetMatrixMotionTransformFromHandle(OptixTraversableHandle) {
+    return nullptr;
+}
+static __forceinline__ __device__ const OptixSRTMotionTransform*
+optixGetSRTMotionTransformFromHandle(OptixTraversableHandle) {
+    return nullptr;
+}
+static __forceinline__ __device__ float optixGetGASMotionTimeBegin(OptixTraversableHandle) {
+    return 0.f;
+}
+static __forceinline__ __device__ float optixGetGASMotionTimeEnd(OptixTraversableHandle) {
+    return 0.f;
+}
+static __forceinline__ __device__ unsigned int optixGetGASMotionStepCount(OptixTraversableHandle) {
+    return 1u;
+}
+
 // The object-to-world (`inverse` false) or world-to-object matrix of a transform-list entry,
 // 12 floats row-major.
 static __forceinline__ __device__ const float* __oxray_level_matrix(unsigned long long handle,

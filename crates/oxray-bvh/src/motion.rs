@@ -1,0 +1,371 @@
+//! Geometry acceleration structures with motion (guide §5.10.2): the primitives at every motion
+//! key, under one tree whose boxes bound every key.
+//!
+//! A primitive interpolated linearly between two keys lies in the convex hull of its two key
+//! primitives, so in the union of their boxes: the tree is built over the union of each
+//! primitive's key boxes (padded by a few ulps for the rounding of the interpolation), and its
+//! nodes are those of a static structure. Key 0 of the primitives lives where a static
+//! structure keeps its primitives (`GasData::triangles`, `aabbs`, `spheres`), in the same
+//! leaf-slot order; keys 1, 2, … live in [`GasMotion`], each a copy of that layout.
+
+use crate::build::{build_bvh2, BuildConfig};
+use crate::bvh4::Bvh4;
+use crate::gas::{decode_sphere_key, decode_triangles, GasData, GasKind, NodeWidth};
+use crate::sphere::Sphere;
+use crate::triangle::is_degenerate;
+use crate::triangle4::Triangle4;
+use glam::Vec3;
+use oxray_core::motion::lerp;
+use oxray_core::motion_transform::pad_motion_box;
+use oxray_core::{Aabb, BuildInput, CustomPrimitiveInput, KeySample, MotionOptions, TriangleInput};
+use rayon::prelude::*;
+
+/// The motion of a GAS: its options and its primitives at keys 1, 2, … in the leaf-slot
+/// layout of key 0. Key `k`'s copy of a table of `n` entries is entries `(k - 1) * n ..`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GasMotion {
+    /// The build's motion options (more than one key).
+    pub options: MotionOptions,
+    /// Triangle blocks of keys 1, 2, … (triangle GAS).
+    pub triangles: Vec<Triangle4>,
+    /// Boxes of keys 1, 2, … (custom-primitive GAS).
+    pub aabbs: Vec<Aabb>,
+    /// Spheres of keys 1, 2, … (sphere GAS).
+    pub spheres: Vec<Sphere>,
+}
+
+impl GasMotion {
+    /// Key `key`'s copy of a table whose key 0 is `base` (`later` holding keys 1, 2, …).
+    #[inline]
+    pub fn key<'a, T>(base: &'a [T], later: &'a [T], key: usize) -> &'a [T] {
+        if key == 0 {
+            base
+        } else {
+            let n = base.len();
+            &later[(key - 1) * n..key * n]
+        }
+    }
+
+    pub(crate) fn shrink_to_fit(&mut self) {
+        self.triangles.shrink_to_fit();
+        self.aabbs.shrink_to_fit();
+        self.spheres.shrink_to_fit();
+    }
+
+    /// Bytes of the later keys' primitives.
+    pub fn bytes(&self) -> usize {
+        std::mem::size_of_val(&self.triangles[..])
+            + std::mem::size_of_val(&self.aabbs[..])
+            + std::mem::size_of_val(&self.spheres[..])
+    }
+}
+
+/// The union of boxes, padded for interpolation; `None` if any key is `None`.
+fn union_boxes(keys: impl Iterator<Item = Option<Aabb>>) -> Option<Aabb> {
+    let mut out = Aabb::EMPTY;
+    for b in keys {
+        out = out.union(&b?);
+    }
+    Some(pad_motion_box(&out))
+}
+
+/// Builds a GAS with motion into `gas` (made by `GasData::prepare`): the primitives of every
+/// key, the tree over their union boxes, the later keys in [`GasMotion`].
+pub(crate) fn build_motion(
+    gas: &mut GasData,
+    motion: MotionOptions,
+    inputs: &[BuildInput<'_>],
+    config: &BuildConfig,
+    width: NodeWidth,
+) {
+    let keys = motion.key_count();
+    let mut out = GasMotion {
+        options: motion,
+        triangles: Vec::new(),
+        aabbs: Vec::new(),
+        spheres: Vec::new(),
+    };
+    match gas.kind {
+        GasKind::Triangles => {
+            let per_key: Vec<Vec<[Vec3; 3]>> = (0..keys)
+                .map(|key| {
+                    inputs
+                        .iter()
+                        .flat_map(|input| match input {
+                            BuildInput::Triangles(t) => {
+                                let vertices = *t.vertex_key(key).unwrap_or(&t.vertices);
+                                decode_triangles(&TriangleInput { vertices, ..*t })
+                            }
+                            _ => unreachable!("inputs are homogeneous"),
+                        })
+                        .collect()
+                })
+                .collect();
+            // Active: finite at every key and not degenerate at some key (a triangle that
+            // degenerates at one instant is still hit at the others).
+            let boxes: Vec<Option<Aabb>> = (0..per_key[0].len())
+                .into_par_iter()
+                .map(|i| {
+                    let finite = per_key.iter().all(|k| k[i].iter().all(|p| p.is_finite()));
+                    let area = per_key
+                        .iter()
+                        .any(|k| !is_degenerate(k[i][0], k[i][1], k[i][2]));
+                    if !(finite && area) {
+                        return None;
+                    }
+                    union_boxes(per_key.iter().map(|k| Some(Aabb::from_points(&k[i]))))
+                })
+                .collect();
+            let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
+                .iter()
+                .enumerate()
+                .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
+                .unzip();
+            let bvh2 = build_bvh2(&bounds, config);
+            gas.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
+            let unpacked = Bvh4::from(&bvh2);
+            let global: Vec<u32> = bvh2
+                .prim_order
+                .par_iter()
+                .map(|&k| ids[k as usize])
+                .collect();
+            // Packing is deterministic: every key packs into the same layout.
+            for (key, tris) in per_key.iter().enumerate() {
+                let mut bvh = unpacked.clone();
+                let (blocks, slots) = crate::gas::pack_triangles(&mut bvh, &global, tris);
+                if key == 0 {
+                    (gas.bvh, gas.triangles, gas.slot_prim) = (bvh, blocks, slots);
+                } else {
+                    out.triangles.extend_from_slice(&blocks);
+                }
+            }
+            if width == NodeWidth::Eight {
+                let map = crate::gas::leaf_map(
+                    &crate::wide::leaf_starts(&unpacked.nodes),
+                    &crate::wide::leaf_starts(&gas.bvh.nodes),
+                );
+                let mut b8 = crate::bvh8::Bvh8::from(&bvh2);
+                crate::gas::remap_wide_leaves(&mut b8.nodes, &map);
+                gas.bvh8 = Some(b8);
+            }
+        }
+        GasKind::CustomPrimitives => {
+            let per_key: Vec<Vec<Aabb>> = (0..keys)
+                .map(|key| {
+                    inputs
+                        .iter()
+                        .flat_map(|input| match input {
+                            BuildInput::CustomPrimitives(c) => {
+                                let buf = *c.aabb_key(key).unwrap_or(&c.aabbs);
+                                (0..buf.count as usize)
+                                    .map(move |i| CustomPrimitiveInput::aabb(&buf, i))
+                            }
+                            _ => unreachable!("inputs are homogeneous"),
+                        })
+                        .collect()
+                })
+                .collect();
+            // A primitive is active where every key's box is valid.
+            let boxes: Vec<Option<Aabb>> = (0..per_key[0].len())
+                .map(|i| {
+                    union_boxes(
+                        per_key
+                            .iter()
+                            .map(|k| k[i].is_finite_valid().then_some(k[i])),
+                    )
+                })
+                .collect();
+            gas.build_slots(&boxes, config, width);
+            for (key, b) in per_key.iter().enumerate() {
+                let slotted = gas.slot_prim.iter().map(|&g| b[g as usize]);
+                if key == 0 {
+                    gas.aabbs = slotted.collect();
+                } else {
+                    out.aabbs.extend(slotted);
+                }
+            }
+        }
+        GasKind::Spheres => {
+            let per_key: Vec<Vec<Sphere>> = (0..keys)
+                .map(|key| {
+                    inputs
+                        .iter()
+                        .flat_map(|input| match input {
+                            BuildInput::Spheres(s) => (0..s.num_vertices as usize)
+                                .map(move |i| decode_sphere_key(s, i, key)),
+                            _ => unreachable!("inputs are homogeneous"),
+                        })
+                        .collect()
+                })
+                .collect();
+            // A sphere interpolated between two keys lies in the union of their boxes: its
+            // centre is on the segment and its radius at most the larger one.
+            let boxes: Vec<Option<Aabb>> = (0..per_key[0].len())
+                .map(|i| {
+                    union_boxes(
+                        per_key
+                            .iter()
+                            .map(|k| k[i].is_active().then(|| k[i].bounds())),
+                    )
+                })
+                .collect();
+            gas.build_slots(&boxes, config, width);
+            for (key, s) in per_key.iter().enumerate() {
+                let slotted = gas.slot_prim.iter().map(|&g| s[g as usize]);
+                if key == 0 {
+                    gas.spheres = slotted.collect();
+                } else {
+                    out.spheres.extend(slotted);
+                }
+            }
+        }
+        GasKind::Curves => unreachable!("validation refuses curves with motion keys"),
+    }
+    gas.motion = Some(out);
+}
+
+/// Four triangles interpolated lane by lane between two keys' blocks (key `a` exactly where
+/// `f` is 0).
+#[inline(always)]
+pub fn lerp_triangle4(a: &Triangle4, b: &Triangle4, f: f32) -> Triangle4 {
+    let mut out = *a;
+    if f == 0.0 {
+        // Key `a` itself, signs of zeros included.
+        return out;
+    }
+    for (o, bv) in out.v.iter_mut().zip(&b.v) {
+        for (oa, ba) in o.iter_mut().zip(bv) {
+            for (x, &y) in oa.iter_mut().zip(ba) {
+                *x = lerp(*x, y, f);
+            }
+        }
+    }
+    out
+}
+
+/// A box interpolated corner by corner between two keys (guide §5.10.1).
+#[inline(always)]
+pub fn lerp_aabb(a: &Aabb, b: &Aabb, f: f32) -> Aabb {
+    Aabb::new(
+        Vec3::from_array(std::array::from_fn(|i| lerp(a.min[i], b.min[i], f))),
+        Vec3::from_array(std::array::from_fn(|i| lerp(a.max[i], b.max[i], f))),
+    )
+}
+
+/// A sphere interpolated between two keys: centre and radius linearly (guide §5.10.2).
+#[inline(always)]
+pub fn lerp_sphere(a: &Sphere, b: &Sphere, f: f32) -> Sphere {
+    Sphere {
+        center: std::array::from_fn(|i| lerp(a.center[i], b.center[i], f)),
+        radius: lerp(a.radius, b.radius, f),
+    }
+}
+
+impl GasData {
+    /// The motion keys a ray at `time` sees (guide §5.10.1): [`KeySample::STATIC`] without
+    /// motion, `None` where the structure vanishes.
+    #[inline]
+    pub fn key_sample(&self, time: f32) -> Option<KeySample> {
+        match &self.motion {
+            None => Some(KeySample::STATIC),
+            Some(m) => m.options.sample(time),
+        }
+    }
+
+    /// The box around the active primitives at each motion key (one box without motion): the
+    /// emitted property `AABBS` (guide §5.8, one per key).
+    pub fn key_bounds(&self) -> Vec<Aabb> {
+        let keys = self.motion_options().key_count();
+        (0..keys)
+            .map(|key| {
+                let s = KeySample {
+                    key,
+                    next: key,
+                    fraction: 0.0,
+                };
+                let mut out = Aabb::EMPTY;
+                for slot in (0..self.slot_prim.len()).filter(|&i| self.slot_is_active(i)) {
+                    let b = match self.kind {
+                        GasKind::Triangles => {
+                            let t = self.triangle_keys(s).0[slot / 4].get(slot % 4);
+                            Aabb::from_points(&t.map(Vec3::from))
+                        }
+                        GasKind::CustomPrimitives => self.aabb_keys(s).0[slot],
+                        GasKind::Spheres => self.sphere_keys(s).0[slot].bounds(),
+                        // Curves have one key (validation refuses them with motion).
+                        GasKind::Curves => self.curves[slot].bounds(),
+                    };
+                    out = out.union(&b);
+                }
+                out
+            })
+            .collect()
+    }
+
+    /// The motion options (the default, no motion, for a static structure).
+    pub fn motion_options(&self) -> MotionOptions {
+        self.motion
+            .as_ref()
+            .map_or(MotionOptions::NONE, |m| m.options)
+    }
+
+    /// The triangle blocks of two keys (both key 0 without motion).
+    #[inline]
+    pub fn triangle_keys(&self, s: KeySample) -> (&[Triangle4], &[Triangle4]) {
+        match &self.motion {
+            None => (&self.triangles, &self.triangles),
+            Some(m) => (
+                GasMotion::key(&self.triangles, &m.triangles, s.key),
+                GasMotion::key(&self.triangles, &m.triangles, s.next),
+            ),
+        }
+    }
+
+    /// The boxes of two keys (both key 0 without motion).
+    #[inline]
+    pub fn aabb_keys(&self, s: KeySample) -> (&[Aabb], &[Aabb]) {
+        match &self.motion {
+            None => (&self.aabbs, &self.aabbs),
+            Some(m) => (
+                GasMotion::key(&self.aabbs, &m.aabbs, s.key),
+                GasMotion::key(&self.aabbs, &m.aabbs, s.next),
+            ),
+        }
+    }
+
+    /// The spheres of two keys (both key 0 without motion).
+    #[inline]
+    pub fn sphere_keys(&self, s: KeySample) -> (&[Sphere], &[Sphere]) {
+        match &self.motion {
+            None => (&self.spheres, &self.spheres),
+            Some(m) => (
+                GasMotion::key(&self.spheres, &m.spheres, s.key),
+                GasMotion::key(&self.spheres, &m.spheres, s.next),
+            ),
+        }
+    }
+
+    /// The triangle of leaf slot `slot` at `time` (interpolated between its keys; clamped
+    /// outside the range, and key 0's where the structure vanishes); `None` for a slot out of
+    /// range or a structure of another kind.
+    pub fn triangle_at(&self, slot: usize, time: f32) -> Option<[[f32; 3]; 3]> {
+        let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
+        let (a, b) = self.triangle_keys(s);
+        let (a, b) = (a.get(slot / 4)?, b.get(slot / 4)?);
+        Some(lerp_triangle4(a, b, s.fraction).get(slot % 4))
+    }
+
+    /// The box of leaf slot `slot` at `time` (see [`triangle_at`](Self::triangle_at)).
+    pub fn aabb_at(&self, slot: usize, time: f32) -> Option<Aabb> {
+        let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
+        let (a, b) = self.aabb_keys(s);
+        Some(lerp_aabb(a.get(slot)?, b.get(slot)?, s.fraction))
+    }
+
+    /// The sphere of leaf slot `slot` at `time` (see [`triangle_at`](Self::triangle_at)).
+    pub fn sphere_at(&self, slot: usize, time: f32) -> Option<Sphere> {
+        let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
+        let (a, b) = self.sphere_keys(s);
+        Some(lerp_sphere(a.get(slot)?, b.get(slot)?, s.fraction))
+    }
+}

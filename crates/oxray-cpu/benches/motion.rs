@@ -1,0 +1,96 @@
+//! What motion costs in traversal (guide §5.10.2): the same mesh traced as a static GAS and as
+//! GASes with two motion keys — motionless (both keys equal: the cost of interpolating every
+//! block tested), small motion (a translation of 2 % of the mesh's size) and large motion (half
+//! its size, where the tree's boxes, the union over both keys, grow) — with camera rays at
+//! random times and with incoherent rays. Prints Mrays/s and the ratio to the static GAS.
+//!
+//! `cargo bench -p oxray-cpu --bench motion` (numbers depend on the machine and its load: compare
+//! the ratios of one run).
+
+use glam::Vec3;
+use oxray_core::{BuildOptions, IndexBuffer, MotionOptions, Ray, TriangleInput, VertexBuffer};
+use oxray_cpu::Gas;
+use oxray_testkit::mesh::{find_mesh, icosphere_f32, load_obj, Mesh};
+use oxray_testkit::rays::{camera_rays, hemisphere_rays};
+use oxray_testkit::rng::Rng;
+use std::time::Instant;
+
+fn mesh() -> (String, Mesh) {
+    if let Some(m) = find_mesh("stanford-bunny.obj").and_then(|p| load_obj(&p).ok()) {
+        return ("bunny".into(), m);
+    }
+    ("icosphere(6)".into(), icosphere_f32(6))
+}
+
+fn build(m: &Mesh, later: Option<&[[f32; 3]]>) -> Gas {
+    let input = TriangleInput::new(VertexBuffer::f32x3(&m.positions))
+        .indices(IndexBuffer::u32x3(&m.triangles));
+    match later {
+        None => Gas::build(&BuildOptions::default(), &[input.into()]).unwrap(),
+        Some(k1) => {
+            let keys = [VertexBuffer::f32x3(k1)];
+            let options = BuildOptions::default().with_motion(MotionOptions::new(2, 0.0, 1.0));
+            Gas::build(&options, &[input.motion_vertices(&keys).into()]).unwrap()
+        }
+    }
+}
+
+fn mrays(gas: &Gas, rays: &[Ray], runs: usize) -> f64 {
+    let mut hits = vec![None; rays.len()];
+    gas.intersect_batch(rays, &mut hits).unwrap();
+    let mut times: Vec<f64> = (0..runs)
+        .map(|_| {
+            let t = Instant::now();
+            gas.intersect_batch(rays, &mut hits).unwrap();
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    rays.len() as f64 / times[runs / 2] / 1e6
+}
+
+fn main() {
+    let (name, m) = mesh();
+    let (lo, hi) = oxray_testkit::mesh::bounds(&m.positions);
+    let size = (Vec3::from(hi) - Vec3::from(lo)).max_element();
+    let mut rng = Rng::new(7);
+    let timed = |rays: Vec<Ray>, rng: &mut Rng| -> Vec<Ray> {
+        rays.into_iter().map(|r| r.with_time(rng.f32())).collect()
+    };
+    let camera = timed(camera_rays(&m.positions, 512, 512), &mut rng);
+    let diffuse = timed(
+        hemisphere_rays(&m.positions, &m.triangles, 512 * 512, 11),
+        &mut rng,
+    );
+    let shifted = |d: f32| -> Vec<[f32; 3]> {
+        m.positions
+            .iter()
+            .map(|p| [p[0] + d * size, p[1], p[2]])
+            .collect()
+    };
+    let cases: [(&str, Option<Vec<[f32; 3]>>); 4] = [
+        ("static", None),
+        ("motionless 2 keys", Some(shifted(0.0))),
+        ("small motion (2 %)", Some(shifted(0.02))),
+        ("large motion (50 %)", Some(shifted(0.5))),
+    ];
+    println!(
+        "{name}: {} triangles, {} threads; Mrays/s (ratio to static)",
+        m.triangles.len(),
+        rayon::current_num_threads()
+    );
+    println!("{:<22} {:>18} {:>18}", "", "camera", "diffuse");
+    let mut base = (0.0, 0.0);
+    for (label, later) in cases {
+        let gas = build(&m, later.as_deref());
+        let (c, d) = (mrays(&gas, &camera, 7), mrays(&gas, &diffuse, 7));
+        if later.is_none() {
+            base = (c, d);
+        }
+        println!(
+            "{label:<22} {c:>10.2} ({:>4.2}) {d:>10.2} ({:>4.2})",
+            c / base.0,
+            d / base.1
+        );
+    }
+}
