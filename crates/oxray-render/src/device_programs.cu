@@ -658,8 +658,10 @@ PTF Shading shading(const Material& m, const HitData& g) {
                 V3 tangent = xf_vector(x.o2w, (e1 * d2.y - e2 * d1.y) / det);
                 tangent = normalize_or_zero(tangent - ns * dot(ns, tangent));
                 if (!is_zero(tangent)) {
+                    // glTF: +Y is up in the image (decreasing v), bitangent = cross(N, T) * w,
+                    // w = -1 for a mirrored mapping (det > 0).
                     V3 bitangent = cross(ns, tangent);
-                    if (det < 0.0f) bitangent = -bitangent;
+                    if (det > 0.0f) bitangent = -bitangent;
                     V3 n = xyz(tex(m.normal_tex, sh.uvs, false)) * 2.0f - v3s(1.0f);
                     n = v3(n.x * m.normal_scale, n.y * m.normal_scale, n.z);
                     V3 mapped = normalize_or(tangent * n.x + bitangent * n.y + ns * n.z, ns);

@@ -86,6 +86,19 @@ pub struct RenderOptions {
     pub camera: Option<usize>,
 }
 
+impl Default for RenderOptions {
+    /// 640 x 480 pixels, 16 samples per pixel, paths of up to 8 vertices, the scene's camera.
+    fn default() -> Self {
+        RenderOptions {
+            width: 640,
+            height: 480,
+            spp: 16,
+            max_depth: 8,
+            camera: None,
+        }
+    }
+}
+
 /// Why a render failed.
 #[derive(Debug, Error)]
 pub enum RenderError {

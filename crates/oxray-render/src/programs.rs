@@ -256,8 +256,12 @@ fn shading(ctx: &ClosestHitCtx<Params>, m: &MaterialDesc, prim: &Primitive) -> S
                 let tangent = ctx.transform_vector_to_world((e1 * d2.y - e2 * d1.y) / det);
                 let tangent = (tangent - ns * ns.dot(tangent)).normalize_or_zero();
                 if tangent != Vec3::ZERO {
+                    // glTF's tangent space: +X along increasing u, +Y up in the image, that
+                    // is along decreasing v (v runs down the image), and the bitangent is
+                    // cross(N, T) * w. An unmirrored mapping has det < 0 (v against the
+                    // surface's counter-clockwise orientation): w = 1; a mirrored one w = -1.
                     let mut bitangent = ns.cross(tangent);
-                    if det < 0.0 {
+                    if det > 0.0 {
                         bitangent = -bitangent;
                     }
                     let n = tex(p, Some(nt), &uvs, false).truncate() * 2.0 - Vec3::ONE;
