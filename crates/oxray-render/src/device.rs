@@ -115,7 +115,7 @@ struct MaterialGpu {
     alpha_mode: u32,
     alpha_cutoff: f32,
     double_sided: u32,
-    pad: u32,
+    specular: f32,
     base_color_tex: TexRefGpu,
     metallic_roughness_tex: TexRefGpu,
     emissive_tex: TexRefGpu,
@@ -195,6 +195,7 @@ struct ParamsGpu {
     env_texels: u64,
     env_conditional: u64,
     env_marginal: u64,
+    ggx_albedo: u64,
     num_materials: u32,
     num_textures: u32,
     num_lights: u32,
@@ -216,7 +217,7 @@ struct ParamsGpu {
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
 const _: () = assert!(std::mem::size_of::<HitDataGpu>() == 56);
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 216);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 224);
 
 fn tex_ref(r: Option<TextureRef>) -> TexRefGpu {
     match r {
@@ -250,7 +251,7 @@ fn material(m: &MaterialDesc) -> MaterialGpu {
         alpha_mode,
         alpha_cutoff,
         double_sided: m.double_sided as u32,
-        pad: 0,
+        specular: m.specular,
         base_color_tex: tex_ref(m.base_color_texture),
         metallic_roughness_tex: tex_ref(m.metallic_roughness_texture),
         emissive_tex: tex_ref(m.emissive_texture),
@@ -579,6 +580,7 @@ pub fn render_with_source(
         env_texels: up.put(&env_texels)?,
         env_conditional: up.put(env_tables.conditional)?,
         env_marginal: up.put(env_tables.marginal)?,
+        ggx_albedo: up.put(&crate::albedo::GgxAlbedo::get().cells)?,
         num_materials: materials.len() as u32,
         num_textures: textures.len() as u32,
         num_lights: light_tris.len() as u32,

@@ -53,7 +53,7 @@ struct Material {
     u32 alpha_mode;  // 0 opaque, 1 mask, 2 blend
     float alpha_cutoff;
     u32 double_sided;
-    u32 pad;
+    float specular;  // KHR_materials_specular's factor: 0 is Lambertian
     TexRef base_color_tex, metallic_roughness_tex, emissive_tex, normal_tex;
 };
 
@@ -104,6 +104,7 @@ struct Params {
     u64 lights, light_cdf, light_area_pdf;  // light_area_pdf: per material
     u64 punctual;
     u64 env_texels, env_conditional, env_marginal;  // float[3] per texel; cdfs
+    u64 ggx_albedo;  // float[2] (A, B) per cell, PT_GGX_N x PT_GGX_N (albedo.rs)
     u32 num_materials, num_textures, num_lights, num_punctual, num_instances;
     u32 env_width, env_height;
     float env_total;
@@ -240,10 +241,11 @@ struct Surface {
     V3 base;
     float metallic, alpha;
     bool dielectric;
-    float ior;
+    float ior, specular;
 };
 
-PTI Surface surface_new(V3 base, float metallic, float roughness, float transmission, float ior) {
+PTI Surface surface_new(V3 base, float metallic, float roughness, float transmission, float ior,
+                        float specular) {
     float r = clampf(roughness, 0.0f, 1.0f);
     Surface s;
     s.base = base;
@@ -251,7 +253,30 @@ PTI Surface surface_new(V3 base, float metallic, float roughness, float transmis
     s.alpha = maxf(r * r, 2e-3f);
     s.dielectric = transmission >= 0.5f;
     s.ior = (finite(ior) && ior >= 1.0f) ? ior : 1.5f;
+    // NaN: glTF's default coat.
+    s.specular = specular >= 0.0f ? minf(specular, 1.0f) : (specular < 0.0f ? 0.0f : 1.0f);
     return s;
+}
+
+// The GGX albedo terms (A, B) at cos_o and alpha, bilinear in (cos_o, sqrt(alpha)) (albedo.rs).
+#define PT_GGX_N 32u
+PTI void ggx_albedo(float cos_o, float alpha, float& a, float& b) {
+    const float* t = ptr<float>(params.ggx_albedo);
+    float last = (float)(PT_GGX_N - 1u);
+    float x = (cos_o > 0.0f ? minf(cos_o, 1.0f) : 0.0f) * last;
+    float y = (alpha > 0.0f ? minf(sqrtf(alpha), 1.0f) : 0.0f) * last;
+    u32 x0 = (u32)x, y0 = (u32)y;
+    if (x0 > PT_GGX_N - 2u) x0 = PT_GGX_N - 2u;
+    if (y0 > PT_GGX_N - 2u) y0 = PT_GGX_N - 2u;
+    float fx = x - (float)x0, fy = y - (float)y0;
+    const float* c00 = t + 2u * (y0 * PT_GGX_N + x0);
+    const float* c01 = c00 + 2;
+    const float* c10 = c00 + 2u * PT_GGX_N;
+    const float* c11 = c10 + 2;
+    float top_a = c00[0] * (1.0f - fx) + c01[0] * fx, top_b = c00[1] * (1.0f - fx) + c01[1] * fx;
+    float bot_a = c10[0] * (1.0f - fx) + c11[0] * fx, bot_b = c10[1] * (1.0f - fx) + c11[1] * fx;
+    a = top_a * (1.0f - fy) + bot_a * fy;
+    b = top_b * (1.0f - fy) + bot_b * fy;
 }
 
 struct BsdfSample {
@@ -274,7 +299,9 @@ PTI float pow5(float x) {
     float x2 = x * x;
     return x2 * x2 * x;
 }
-PTI V3 schlick(V3 f0, float c) { return f0 + (v3s(1.0f) - f0) * pow5(1.0f - clampf(c, 0.0f, 1.0f)); }
+PTI V3 schlick(V3 f0, float f90, float c) {
+    return f0 + (v3s(f90) - f0) * pow5(1.0f - clampf(c, 0.0f, 1.0f));
+}
 PTI float ggx_d(float nh, float a2) {
     float d = nh * nh * (a2 - 1.0f) + 1.0f;
     return a2 / (PT_PI * d * d);
@@ -282,13 +309,31 @@ PTI float ggx_d(float nh, float a2) {
 PTI float smith_g1(float nv, float a2) {
     return 2.0f * nv / (nv + sqrtf(a2 + (1.0f - a2) * nv * nv));
 }
-PTI V3 f0_of(const Surface& s) { return lerp3(v3s(0.04f), s.base, s.metallic); }
+PTI V3 f0_of(const Surface& s) { return lerp3(v3s(0.04f * s.specular), s.base, s.metallic); }
+PTI float f90_of(const Surface& s) { return s.specular + (1.0f - s.specular) * s.metallic; }
 PTI V3 diffuse_colour(const Surface& s) { return s.base * (1.0f - s.metallic); }
-PTI float specular_probability(const Surface& s, float cos_o) {
-    float sp = luminance(schlick(f0_of(s), cos_o));
-    float d = luminance(diffuse_colour(s));
-    if (d <= 0.0f) return 1.0f;
-    return clampf(sp / (sp + d), 0.05f, 0.95f);
+PTI V3 min3(V3 a, V3 b) { return v3(minf(a.x, b.x), minf(a.y, b.y), minf(a.z, b.z)); }
+
+// What depends on the outgoing direction only (bsdf.rs Lobes): Turquin's multiple-scattering
+// factor on the GGX lobe, the diffuse layer's reflectance under the coat, and the probability
+// of sampling the specular lobe.
+struct Lobes {
+    V3 compensation, diffuse;
+    float p_spec;
+};
+PTI Lobes lobes_of(const Surface& s, float cos_o) {
+    float a, b;
+    ggx_albedo(cos_o, s.alpha, a, b);
+    V3 f0 = f0_of(s);
+    float e = maxf(a + b, 1e-4f);
+    Lobes l;
+    l.compensation = v3s(1.0f) + f0 * ((1.0f - e) / e);
+    V3 e_spec = min3((f0 * a + v3s(f90_of(s) * b)) * l.compensation, v3s(1.0f));
+    l.diffuse = diffuse_colour(s) * (v3s(1.0f) - e_spec);
+    float sp = luminance(e_spec);
+    float d = luminance(l.diffuse);
+    l.p_spec = sp <= 0.0f ? 0.0f : (d <= 0.0f ? 1.0f : clampf(sp / (sp + d), 0.05f, 0.95f));
+    return l;
 }
 
 // BSDF times |cos| at wi, and the pdf of sampling wi.
@@ -301,10 +346,11 @@ PTI V3 bsdf_eval(const Surface& s, V3 n, V3 wo, V3 wi, float& pdf) {
     float a2 = s.alpha * s.alpha;
     float d = ggx_d(nh, a2);
     float g1o = smith_g1(cos_o, a2);
-    V3 f = schlick(f0_of(s), oh);
-    V3 spec = f * (d * g1o * smith_g1(cos_i, a2) / (4.0f * cos_o));
-    V3 diff = (v3s(1.0f) - f) * diffuse_colour(s) * (PT_FRAC_1_PI * cos_i);
-    float ps = specular_probability(s, cos_o);
+    Lobes l = lobes_of(s, cos_o);
+    V3 f = schlick(f0_of(s), f90_of(s), oh);
+    V3 spec = f * l.compensation * (d * g1o * smith_g1(cos_i, a2) / (4.0f * cos_o));
+    V3 diff = l.diffuse * (PT_FRAC_1_PI * cos_i);
+    float ps = l.p_spec;
     pdf = ps * d * g1o / (4.0f * cos_o) + (1.0f - ps) * cos_i * PT_FRAC_1_PI;
     return spec + diff;
 }
@@ -349,7 +395,7 @@ PTI bool bsdf_sample(const Surface& s, V3 n, V3 wo, bool entering, float u0, flo
     V3 t, b;
     basis(n, t, b);
     V3 wi;
-    if (u0 < specular_probability(s, cos_o)) {
+    if (u0 < lobes_of(s, cos_o).p_spec) {
         V3 wo_l = to_local(wo, n, t, b);
         V3 h = sample_vndf(wo_l, s.alpha, u1, u2);
         h = t * h.x + b * h.y + n * h.z;
@@ -894,7 +940,8 @@ extern "C" __global__ void __closesthit__radiance() {
         // glTF: the vertex colour multiplies the base colour factor and texture.
         V3 base = v3a(m.base_color) * xyz(base_tex) * xyz(sh.color);
         Surface surf =
-            surface_new(base, m.metallic * mr.z, m.roughness * mr.y, m.transmission, m.ior);
+            surface_new(base, m.metallic * mr.z, m.roughness * mr.y, m.transmission, m.ior,
+                        m.specular);
         if (!surf.dielectric) {
             rad = rad + thr * next_event(rng, surf, sh, wo);
             rad = rad + thr * punctual_light(rng, surf, sh, wo);

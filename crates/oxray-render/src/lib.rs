@@ -49,6 +49,7 @@
 
 #![warn(missing_docs)]
 
+pub mod albedo;
 pub mod bsdf;
 pub mod device;
 pub mod lights;

@@ -364,6 +364,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
             m.roughness * mr.y,
             m.transmission,
             m.ior,
+            m.specular,
         );
 
         if !surf.dielectric {
