@@ -196,6 +196,7 @@ struct ParamsGpu {
     env_conditional: u64,
     env_marginal: u64,
     ggx_albedo: u64,
+    filter: u64,
     num_materials: u32,
     num_textures: u32,
     num_lights: u32,
@@ -212,12 +213,13 @@ struct ParamsGpu {
     sample: u32,
     max_depth: u32,
     eps: f32,
-    pad: [u32; 2],
+    filter_len: u32,
+    pad: [u32; 3],
 }
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
 const _: () = assert!(std::mem::size_of::<HitDataGpu>() == 56);
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 224);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 240);
 
 fn tex_ref(r: Option<TextureRef>) -> TexRefGpu {
     match r {
@@ -334,7 +336,7 @@ fn check_supported(device: &Device, scene: &SceneDesc) -> Result<(), RenderError
 ///
 /// let device = oxray::Device::cpu(); // or Device::cuda(0)?
 /// let scene = oxray_scene::cornell_box();
-/// let opts = RenderOptions { width: 8, height: 8, spp: 2, max_depth: 4, camera: None };
+/// let opts = RenderOptions { width: 8, height: 8, spp: 2, max_depth: 4, ..Default::default() };
 /// let image = render_on(&device, &scene, &Environment::uniform(Vec3::ZERO), &opts, |_| {})?;
 /// assert_eq!(image.pixels.len(), 64);
 /// assert!(image.pixels.iter().any(|p| p[0] + p[1] + p[2] > 0.0));
@@ -581,6 +583,7 @@ pub fn render_with_source(
         env_conditional: up.put(env_tables.conditional)?,
         env_marginal: up.put(env_tables.marginal)?,
         ggx_albedo: up.put(&crate::albedo::GgxAlbedo::get().cells)?,
+        filter: up.put(&prep.filter)?,
         num_materials: materials.len() as u32,
         num_textures: textures.len() as u32,
         num_lights: light_tris.len() as u32,
@@ -597,7 +600,8 @@ pub fn render_with_source(
         sample: 0,
         max_depth: prep.max_depth,
         eps: prep.eps,
-        pad: [0; 2],
+        filter_len: prep.filter.len() as u32,
+        pad: [0; 3],
     };
 
     let sbt = ShaderBindingTable {

@@ -105,6 +105,7 @@ struct Params {
     u64 punctual;
     u64 env_texels, env_conditional, env_marginal;  // float[3] per texel; cdfs
     u64 ggx_albedo;  // float[2] (A, B) per cell, PT_GGX_N x PT_GGX_N (albedo.rs)
+    u64 filter;      // float[filter_len]: the pixel filter's inverse CDF (filter.rs)
     u32 num_materials, num_textures, num_lights, num_punctual, num_instances;
     u32 env_width, env_height;
     float env_total;
@@ -112,7 +113,8 @@ struct Params {
     float cam_origin[3], cam_forward[3], cam_right[3], cam_up[3];
     u32 sample, max_depth;
     float eps;
-    u32 pad[2];
+    u32 filter_len;
+    u32 pad[3];
 };
 
 }  // namespace pt
@@ -589,20 +591,46 @@ PTI u32 env_texel_of(V3 d) {
 
 PTI V3 env_texel(u32 i) { return v3a(ptr<float>(params.env_texels) + 3ull * i); }
 
-PTI V3 env_radiance(V3 d) {
+// Bilinear between texel centres, wrapping in u, clamped at the poles (lights.rs radiance).
+PTF V3 env_radiance(V3 d) {
     if (!finite3(d)) return v3s(0.0f);
-    return env_texel(env_texel_of(d));
+    long long w = (long long)params.env_width, h = (long long)params.env_height;
+    float u = 0.5f + atan2f(d.x, -d.z) / PT_TAU;
+    float v = acosf(clampf(d.y, -1.0f, 1.0f)) / PT_PI;
+    float xf = u * (float)w - 0.5f;
+    float yf = v * (float)h - 0.5f;
+    float xfl = floorf(xf), yfl = floorf(yf);
+    float fx = xf - xfl, fy = yf - yfl;
+    long long x0 = ((long long)xfl % w + w) % w;
+    long long x1 = (x0 + 1) % w;
+    long long y0 = (long long)yfl, y1 = y0 + 1;
+    y0 = y0 < 0 ? 0 : (y0 > h - 1 ? h - 1 : y0);
+    y1 = y1 < 0 ? 0 : (y1 > h - 1 ? h - 1 : y1);
+    V3 top = env_texel((u32)(y0 * w + x0)) * (1.0f - fx) + env_texel((u32)(y0 * w + x1)) * fx;
+    V3 bottom = env_texel((u32)(y1 * w + x0)) * (1.0f - fx) + env_texel((u32)(y1 * w + x1)) * fx;
+    return top * (1.0f - fy) + bottom * fy;
+}
+
+// The probability that env_sample picks cell (x, y): its intervals' widths in the tables.
+PTI float env_cell_probability(u32 x, u32 y) {
+    const float* marginal = ptr<float>(params.env_marginal);
+    const float* row = ptr<float>(params.env_conditional) + (u64)y * params.env_width;
+    float py = marginal[y] - (y == 0u ? 0.0f : marginal[y - 1u]);
+    float px = row[x] - (x == 0u ? 0.0f : row[x - 1u]);
+    return py * px;
+}
+
+// A uniform point in a cell of probability p, per solid angle at polar sine sin_theta.
+PTI float env_density(float p, float sin_theta) {
+    return p * (float)(params.env_width * params.env_height) /
+           (2.0f * PT_PI * PT_PI * maxf(sin_theta, 1e-6f));
 }
 
 PTF float env_pdf(V3 d) {
     if (params.env_total <= 0.0f || !finite3(d)) return 0.0f;
     u32 i = env_texel_of(d);
-    u32 y = i / params.env_width;
-    float centre = sinf(PT_PI * ((float)y + 0.5f) / (float)params.env_height);
-    float p_texel = luminance(env_texel(i)) * centre / params.env_total;
-    float sin_theta = maxf(sqrtf(maxf(1.0f - d.y * d.y, 0.0f)), 1e-6f);
-    return p_texel * (float)(params.env_width * params.env_height) /
-           (2.0f * PT_PI * PT_PI * sin_theta);
+    float p = env_cell_probability(i % params.env_width, i / params.env_width);
+    return env_density(p, sqrtf(maxf(1.0f - d.y * d.y, 0.0f)));
 }
 
 // The first index whose cumulative value exceeds u (Rust's partition_point(|&c| c <= u)).
@@ -645,10 +673,22 @@ PTF bool env_sample(float u0, float u1, V3& d, V3& l, float& pdf) {
     float fy = within(marginal, y, u0);
     float fx = within(row, x, u1);
     d = direction_at(((float)x + fx) / (float)w, ((float)y + fy) / (float)h);
-    pdf = env_pdf(d);
-    if (!(pdf > 0.0f)) return false;
+    pdf = env_density(env_cell_probability(x, y), sqrtf(maxf(1.0f - d.y * d.y, 0.0f)));
+    if (!(pdf > 0.0f) || !finite(pdf)) return false;
     l = env_radiance(d);
     return true;
+}
+
+// An offset from the pixel's centre drawn from the filter's table (filter.rs sample_offset).
+PTI float filter_offset(float u) {
+    u32 n = params.filter_len;
+    if (n < 2u) return u - 0.5f;
+    const float* t = ptr<float>(params.filter);
+    float x = clampf(u, 0.0f, 1.0f) * (float)(n - 1u);
+    u32 i = (u32)x;
+    if (i > n - 2u) i = n - 2u;
+    float f = x - (float)i;
+    return t[i] * (1.0f - f) + t[i + 1u] * f;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -866,8 +906,11 @@ extern "C" __global__ void __raygen__camera() {
     Rng rng = rng_new(pixel, params.sample, 0x5eedu);
     float jx = rng.uniform();
     float jy = rng.uniform();
-    float sx = 2.0f * ((float)idx.x + jx) / (float)dim.x - 1.0f;
-    float sy = 1.0f - 2.0f * ((float)idx.y + jy) / (float)dim.y;
+    // Filter importance sampling: the offset from the pixel's centre follows the filter.
+    float ox = 0.5f + filter_offset(jx);
+    float oy = 0.5f + filter_offset(jy);
+    float sx = 2.0f * ((float)idx.x + ox) / (float)dim.x - 1.0f;
+    float sy = 1.0f - 2.0f * ((float)idx.y + oy) / (float)dim.y;
     V3 dir = normalize(v3a(params.cam_forward) + v3a(params.cam_right) * sx +
                        v3a(params.cam_up) * sy);
     PathState s;

@@ -24,6 +24,7 @@
 //! ```
 //! use glam::Vec3;
 //! use oxray_render::lights::Environment;
+//! use oxray_render::filter::Filter;
 //! use oxray_render::{render, RenderOptions};
 //!
 //! let scene = oxray_scene::cornell_box();
@@ -33,6 +34,7 @@
 //!     spp: 2,
 //!     max_depth: 4,
 //!     camera: None, // the scene's first camera, else one framing the scene
+//!     filter: Filter::Gaussian,
 //! };
 //! let dark = Environment::uniform(Vec3::ZERO); // the box is lit by its ceiling panel only
 //! let mut passes = 0;
@@ -52,10 +54,12 @@
 pub mod albedo;
 pub mod bsdf;
 pub mod device;
+pub mod filter;
 pub mod lights;
 pub mod output;
 pub mod programs;
 pub mod texture;
+pub mod tonemap;
 
 use glam::Vec3;
 use lights::{Environment, TriangleLights};
@@ -85,10 +89,13 @@ pub struct RenderOptions {
     pub max_depth: u32,
     /// Which of the scene's cameras to use; `None`: the first, or a camera framing the scene.
     pub camera: Option<usize>,
+    /// The pixel reconstruction filter.
+    pub filter: filter::Filter,
 }
 
 impl Default for RenderOptions {
-    /// 640 x 480 pixels, 16 samples per pixel, paths of up to 8 vertices, the scene's camera.
+    /// 640 x 480 pixels, 16 samples per pixel, paths of up to 8 vertices, the scene's camera,
+    /// the Gaussian pixel filter.
     fn default() -> Self {
         RenderOptions {
             width: 640,
@@ -96,6 +103,7 @@ impl Default for RenderOptions {
             spp: 16,
             max_depth: 8,
             camera: None,
+            filter: filter::Filter::default(),
         }
     }
 }
@@ -210,6 +218,8 @@ pub(crate) struct Prepared {
     /// Whether the scene is one untransformed placement, traced as its GAS: the instance level
     /// would only add a transform per ray.
     pub single: bool,
+    /// The pixel filter's inverse-CDF table ([`filter::Filter::table`]).
+    pub filter: Vec<f32>,
 }
 
 /// One instance to trace.
@@ -273,6 +283,7 @@ pub(crate) fn prepare(
         max_depth: opts.max_depth.max(1),
         placements,
         single,
+        filter: opts.filter.table(),
     })
 }
 
@@ -415,6 +426,7 @@ pub fn render(
             sample,
             max_depth: prep.max_depth,
             eps: prep.eps,
+            filter: &prep.filter,
         };
         let report = pipeline.launch(&mut util, &params, opts.width, opts.height, 1)?;
         if let Some((index, e)) = report.first_exceptions.first() {

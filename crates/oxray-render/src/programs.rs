@@ -4,6 +4,7 @@
 //! roulette), an any-hit program for alpha cutouts (both ray types) and the miss programs.
 
 use super::bsdf::{hash, Rng, Surface};
+use super::filter::sample_offset;
 use super::lights::{Environment, TriangleLights};
 use super::texture::sample;
 use glam::{Vec2, Vec3, Vec4};
@@ -59,6 +60,8 @@ pub struct Params<'a> {
     pub max_depth: u32,
     /// Distance by which new rays leave a surface, along its normal.
     pub eps: f32,
+    /// The pixel filter's inverse-CDF table ([`crate::filter::Filter::table`]).
+    pub filter: &'a [f32],
 }
 
 /// The radiance payload. The random state is word 0 in both ray types so that the any-hit
@@ -544,9 +547,12 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             let p = ctx.params();
             let pixel = y * w + x;
             let mut rng = Rng::new(pixel, p.sample, 0x5eed);
+            // Filter importance sampling: the offset from the pixel's centre follows the filter.
             let (jx, jy) = (rng.uniform(), rng.uniform());
-            let sx = 2.0 * (x as f32 + jx) / w as f32 - 1.0;
-            let sy = 1.0 - 2.0 * (y as f32 + jy) / h as f32;
+            let ox = 0.5 + sample_offset(p.filter, jx);
+            let oy = 0.5 + sample_offset(p.filter, jy);
+            let sx = 2.0 * (x as f32 + ox) / w as f32 - 1.0;
+            let sy = 1.0 - 2.0 * (y as f32 + oy) / h as f32;
             let c = &p.camera;
             let dir = (c.forward + c.right * sx + c.up * sy).normalize();
             let mut s = PathState {

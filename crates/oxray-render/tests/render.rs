@@ -17,7 +17,7 @@ fn opts(w: u32, h: u32, spp: u32, max_depth: u32) -> RenderOptions {
         height: h,
         spp,
         max_depth,
-        camera: None,
+        ..Default::default()
     }
 }
 
@@ -452,4 +452,68 @@ fn ground_plane_is_under_the_scene_and_outside_the_framing() {
     assert_eq!(camera_before.origin, camera_after.origin);
     let g = bottom(&scene);
     assert!(g > 0.0 && g <= 0.46, "{g}");
+}
+
+#[test]
+fn pixel_filters_spread_an_edge_by_their_width_and_keep_its_energy() {
+    // An emitter of radiance 1 fills the right half of the view exactly up to the boundary
+    // between columns 7 and 8. The box filter keeps every sample in its pixel's square: column 7
+    // is black and column 8 white, exactly. The Gaussian and Blackman-Harris filters (radius
+    // 1.5 pixels) blur the edge over their width, and a row's total stays the same.
+    use oxray_render::filter::Filter;
+    let half = Primitive {
+        positions: vec![
+            [0.0, -10.0, 0.0],
+            [10.0, -10.0, 0.0],
+            [10.0, 10.0, 0.0],
+            [0.0, 10.0, 0.0],
+        ],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        ..Default::default()
+    };
+    let scene = SceneDesc {
+        meshes: vec![MeshDesc {
+            name: "half".into(),
+            primitives: vec![half],
+        }],
+        materials: vec![MaterialDesc {
+            base_color: [0.0, 0.0, 0.0, 1.0],
+            emissive: [1.0; 3],
+            ..Default::default()
+        }],
+        instances: vec![InstanceDesc {
+            mesh: 0,
+            transform: glam::Mat4::IDENTITY,
+        }],
+        cameras: vec![Camera::look_at(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 1.0)],
+        ..Default::default()
+    };
+    let row_of = |filter| {
+        let o = RenderOptions {
+            filter,
+            ..opts(16, 16, 64, 1)
+        };
+        let img = render(&scene, &black(), &o, |_| {}).unwrap();
+        // The mean of the middle rows per column.
+        (0..16)
+            .map(|x| (4..12).map(|y| img.pixels[y * 16 + x][0]).sum::<f32>() / 8.0)
+            .collect::<Vec<f32>>()
+    };
+    let b = row_of(Filter::Box);
+    assert_eq!((b[7], b[8]), (0.0, 1.0), "{b:?}");
+    let box_total: f32 = b.iter().sum();
+    for f in [Filter::Gaussian, Filter::BlackmanHarris] {
+        let r = row_of(f);
+        println!("{f:?}: columns 5..11 {:?}", &r[5..11]);
+        assert!(
+            r[7] > 0.02 && r[7] < 0.5 && r[8] > 0.5 && r[8] < 0.98,
+            "{f:?}: {r:?}"
+        );
+        assert!(r[5] < 0.01 && r[10] > 0.99, "{f:?}: {r:?}");
+        let total: f32 = r.iter().sum();
+        assert!(
+            (total - box_total).abs() < 0.1,
+            "{f:?}: {total} vs {box_total}"
+        );
+    }
 }
