@@ -336,6 +336,7 @@ fn run(cli: Cli) -> Result<()> {
                 max_depth: max_depth.clamp(1, 64),
                 camera,
                 filter,
+                ..Default::default()
             };
             let bar = if quiet {
                 indicatif::ProgressBar::hidden()

@@ -214,7 +214,8 @@ struct ParamsGpu {
     max_depth: u32,
     eps: f32,
     filter_len: u32,
-    pad: [u32; 3],
+    roulette_depth: u32,
+    pad: [u32; 2],
 }
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
@@ -601,7 +602,8 @@ pub fn render_with_source(
         max_depth: prep.max_depth,
         eps: prep.eps,
         filter_len: prep.filter.len() as u32,
-        pad: [0; 3],
+        roulette_depth: prep.roulette_depth,
+        pad: [0; 2],
     };
 
     let sbt = ShaderBindingTable {

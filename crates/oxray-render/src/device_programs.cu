@@ -114,7 +114,8 @@ struct Params {
     u32 sample, max_depth;
     float eps;
     u32 filter_len;
-    u32 pad[3];
+    u32 roulette_depth;  // the first vertex after which Russian roulette may end a path
+    u32 pad[2];
 };
 
 }  // namespace pt
@@ -999,7 +1000,7 @@ extern "C" __global__ void __closesthit__radiance() {
             s.pdf = b.pdf;
             s.origin = offset(sh, b.wi);
             s.direction = b.wi;
-            if (s.depth >= 2u) {
+            if (s.depth >= params.roulette_depth) {
                 float q = clampf(max_element(thr), 0.05f, 1.0f);
                 if (rng.uniform() >= q) {
                     s.done = 1u;

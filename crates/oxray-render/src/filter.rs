@@ -72,7 +72,8 @@ impl Filter {
     pub fn eval(self, x: f32) -> f32 {
         let r = self.radius() as f64;
         let x = x as f64;
-        if !(x.abs() <= r) {
+        // NaN falls through to 0 as well.
+        if x.is_nan() || x.abs() > r {
             return 0.0;
         }
         let v = match self {

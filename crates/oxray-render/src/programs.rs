@@ -62,6 +62,8 @@ pub struct Params<'a> {
     pub eps: f32,
     /// The pixel filter's inverse-CDF table ([`crate::filter::Filter::table`]).
     pub filter: &'a [f32],
+    /// The first vertex after which Russian roulette may end a path.
+    pub roulette_depth: u32,
 }
 
 /// The radiance payload. The random state is word 0 in both ray types so that the any-hit
@@ -385,7 +387,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
                 s.pdf = b.pdf;
                 s.origin = offset(p, &sh, b.wi).to_array();
                 s.direction = b.wi.to_array();
-                if s.depth >= 2 {
+                if s.depth >= p.roulette_depth {
                     let q = thr.max_element().clamp(0.05, 1.0);
                     if rng.uniform() >= q {
                         s.done = 1;
