@@ -62,6 +62,15 @@ enum Command {
         /// Exposure in stops applied before tone mapping (PNG only; EXR stays linear).
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         exposure: f32,
+        /// Tone curve of a PNG: "aces" (Hill's ACES fit, radiance divided by 0.6 first:
+        /// mid-grey 0.18 becomes 127/255), "neutral" (Khronos PBR Neutral: colours below 0.76
+        /// kept, mid-grey 105/255) or "linear" (clamped: mid-grey 118/255).
+        #[arg(long, default_value = "aces")]
+        tonemap: String,
+        /// Pixel filter, by filter importance sampling: "gaussian" (sigma 0.5 pixel, radius
+        /// 1.5), "blackman-harris" (radius 1.5) or "box" (the pixel's square).
+        #[arg(long, default_value = "gaussian")]
+        filter: String,
         /// Put the scene on a large grey ground plane.
         #[arg(long)]
         ground: bool,
@@ -228,6 +237,8 @@ fn run(cli: Cli) -> Result<()> {
             env,
             env_intensity,
             exposure,
+            tonemap,
+            filter,
             ground,
             quiet,
             backend,
@@ -247,6 +258,12 @@ fn run(cli: Cli) -> Result<()> {
             if !(exposure.is_finite() && exposure.abs() <= 32.0) {
                 bail!("--exposure must be within -32..=32 stops, got {exposure}");
             }
+            let tone_map: oxray_render::tonemap::ToneMap = tonemap
+                .parse()
+                .map_err(|e| anyhow::anyhow!("--tonemap: {e}"))?;
+            let filter: oxray_render::filter::Filter = filter
+                .parse()
+                .map_err(|e| anyhow::anyhow!("--filter: {e}"))?;
             if !(env_intensity.is_finite() && env_intensity >= 0.0) {
                 bail!("--env-intensity must be a finite number >= 0, got {env_intensity}");
             }
@@ -318,6 +335,8 @@ fn run(cli: Cli) -> Result<()> {
                 spp,
                 max_depth: max_depth.clamp(1, 64),
                 camera,
+                filter,
+                ..Default::default()
             };
             let bar = if quiet {
                 indicatif::ProgressBar::hidden()
@@ -337,16 +356,10 @@ fn run(cli: Cli) -> Result<()> {
                 })
             })?;
             bar.finish_and_clear();
-            let mut image = image;
-            if ext.as_deref() == Some("png") && exposure != 0.0 {
-                let k = exposure.exp2();
-                for p in &mut image.pixels {
-                    for c in &mut p[..3] {
-                        *c *= k;
-                    }
-                }
-            }
-            image.save(&output).map_err(anyhow::Error::msg)?;
+            let look = oxray_render::tonemap::Look { tone_map, exposure };
+            image
+                .save_with(&output, &look)
+                .map_err(anyhow::Error::msg)?;
             let on = renderer
                 .describe()
                 .map_or(String::new(), |d| format!(" with {d}"));

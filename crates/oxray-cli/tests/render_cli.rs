@@ -395,3 +395,54 @@ fn exposure_darkens_or_brightens_the_png() {
         "--exposure",
     );
 }
+
+#[test]
+fn tone_curves_and_pixel_filters_are_chosen_on_the_command_line() {
+    let mean_byte = |args: &[&str]| {
+        let png = tmp(&format!("look-{}.png", args.join("-")));
+        let mut all = vec![
+            "render",
+            "-o",
+            s(&png),
+            "--size",
+            "16x16",
+            "--spp",
+            "2",
+            "--quiet",
+        ];
+        all.extend_from_slice(args);
+        let out = oxray(&all);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let mut reader = png::Decoder::new(std::fs::File::open(&png).unwrap())
+            .read_info()
+            .unwrap();
+        let mut buf = vec![0; reader.output_buffer_size()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        let bytes = &buf[..info.buffer_size()];
+        bytes.iter().map(|&b| b as f64).sum::<f64>() / bytes.len() as f64
+    };
+    // The neutral curve keeps mid tones darker than ACES's boosted exposure and brighter than
+    // nothing; the curves differ.
+    let aces = mean_byte(&["--tonemap", "aces"]);
+    let neutral = mean_byte(&["--tonemap", "neutral"]);
+    let linear = mean_byte(&["--tonemap", "linear"]);
+    assert!(
+        aces != neutral && neutral != linear,
+        "{aces} {neutral} {linear}"
+    );
+    for f in ["box", "gaussian", "blackman-harris"] {
+        assert!(mean_byte(&["--filter", f]) > 0.0);
+    }
+    assert_one_error(
+        &oxray(&["render", "-o", s(&tmp("t.png")), "--tonemap", "filmic"]),
+        "--tonemap: unknown tone curve",
+    );
+    assert_one_error(
+        &oxray(&["render", "-o", s(&tmp("f.png")), "--filter", "lanczos"]),
+        "--filter: unknown pixel filter",
+    );
+}

@@ -17,7 +17,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         height: 512,
         spp: 64,
         max_depth: 8,
-        camera: None,
+        ..Default::default()
     };
     let scene = oxray_scene::cornell_box();
     let started = std::time::Instant::now();

@@ -115,7 +115,7 @@ struct MaterialGpu {
     alpha_mode: u32,
     alpha_cutoff: f32,
     double_sided: u32,
-    pad: u32,
+    specular: f32,
     base_color_tex: TexRefGpu,
     metallic_roughness_tex: TexRefGpu,
     emissive_tex: TexRefGpu,
@@ -195,6 +195,8 @@ struct ParamsGpu {
     env_texels: u64,
     env_conditional: u64,
     env_marginal: u64,
+    ggx_albedo: u64,
+    filter: u64,
     num_materials: u32,
     num_textures: u32,
     num_lights: u32,
@@ -211,12 +213,14 @@ struct ParamsGpu {
     sample: u32,
     max_depth: u32,
     eps: f32,
+    filter_len: u32,
+    roulette_depth: u32,
     pad: [u32; 2],
 }
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
 const _: () = assert!(std::mem::size_of::<HitDataGpu>() == 56);
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 216);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 240);
 
 fn tex_ref(r: Option<TextureRef>) -> TexRefGpu {
     match r {
@@ -250,7 +254,7 @@ fn material(m: &MaterialDesc) -> MaterialGpu {
         alpha_mode,
         alpha_cutoff,
         double_sided: m.double_sided as u32,
-        pad: 0,
+        specular: m.specular,
         base_color_tex: tex_ref(m.base_color_texture),
         metallic_roughness_tex: tex_ref(m.metallic_roughness_texture),
         emissive_tex: tex_ref(m.emissive_texture),
@@ -333,7 +337,7 @@ fn check_supported(device: &Device, scene: &SceneDesc) -> Result<(), RenderError
 ///
 /// let device = oxray::Device::cpu(); // or Device::cuda(0)?
 /// let scene = oxray_scene::cornell_box();
-/// let opts = RenderOptions { width: 8, height: 8, spp: 2, max_depth: 4, camera: None };
+/// let opts = RenderOptions { width: 8, height: 8, spp: 2, max_depth: 4, ..Default::default() };
 /// let image = render_on(&device, &scene, &Environment::uniform(Vec3::ZERO), &opts, |_| {})?;
 /// assert_eq!(image.pixels.len(), 64);
 /// assert!(image.pixels.iter().any(|p| p[0] + p[1] + p[2] > 0.0));
@@ -579,6 +583,8 @@ pub fn render_with_source(
         env_texels: up.put(&env_texels)?,
         env_conditional: up.put(env_tables.conditional)?,
         env_marginal: up.put(env_tables.marginal)?,
+        ggx_albedo: up.put(&crate::albedo::GgxAlbedo::get().cells)?,
+        filter: up.put(&prep.filter)?,
         num_materials: materials.len() as u32,
         num_textures: textures.len() as u32,
         num_lights: light_tris.len() as u32,
@@ -595,6 +601,8 @@ pub fn render_with_source(
         sample: 0,
         max_depth: prep.max_depth,
         eps: prep.eps,
+        filter_len: prep.filter.len() as u32,
+        roulette_depth: prep.roulette_depth,
         pad: [0; 2],
     };
 

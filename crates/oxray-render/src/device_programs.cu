@@ -53,7 +53,7 @@ struct Material {
     u32 alpha_mode;  // 0 opaque, 1 mask, 2 blend
     float alpha_cutoff;
     u32 double_sided;
-    u32 pad;
+    float specular;  // KHR_materials_specular's factor: 0 is Lambertian
     TexRef base_color_tex, metallic_roughness_tex, emissive_tex, normal_tex;
 };
 
@@ -104,6 +104,8 @@ struct Params {
     u64 lights, light_cdf, light_area_pdf;  // light_area_pdf: per material
     u64 punctual;
     u64 env_texels, env_conditional, env_marginal;  // float[3] per texel; cdfs
+    u64 ggx_albedo;  // float[2] (A, B) per cell, PT_GGX_N x PT_GGX_N (albedo.rs)
+    u64 filter;      // float[filter_len]: the pixel filter's inverse CDF (filter.rs)
     u32 num_materials, num_textures, num_lights, num_punctual, num_instances;
     u32 env_width, env_height;
     float env_total;
@@ -111,6 +113,8 @@ struct Params {
     float cam_origin[3], cam_forward[3], cam_right[3], cam_up[3];
     u32 sample, max_depth;
     float eps;
+    u32 filter_len;
+    u32 roulette_depth;  // the first vertex after which Russian roulette may end a path
     u32 pad[2];
 };
 
@@ -240,10 +244,11 @@ struct Surface {
     V3 base;
     float metallic, alpha;
     bool dielectric;
-    float ior;
+    float ior, specular;
 };
 
-PTI Surface surface_new(V3 base, float metallic, float roughness, float transmission, float ior) {
+PTI Surface surface_new(V3 base, float metallic, float roughness, float transmission, float ior,
+                        float specular) {
     float r = clampf(roughness, 0.0f, 1.0f);
     Surface s;
     s.base = base;
@@ -251,7 +256,30 @@ PTI Surface surface_new(V3 base, float metallic, float roughness, float transmis
     s.alpha = maxf(r * r, 2e-3f);
     s.dielectric = transmission >= 0.5f;
     s.ior = (finite(ior) && ior >= 1.0f) ? ior : 1.5f;
+    // NaN: glTF's default coat.
+    s.specular = specular >= 0.0f ? minf(specular, 1.0f) : (specular < 0.0f ? 0.0f : 1.0f);
     return s;
+}
+
+// The GGX albedo terms (A, B) at cos_o and alpha, bilinear in (cos_o, sqrt(alpha)) (albedo.rs).
+#define PT_GGX_N 32u
+PTI void ggx_albedo(float cos_o, float alpha, float& a, float& b) {
+    const float* t = ptr<float>(params.ggx_albedo);
+    float last = (float)(PT_GGX_N - 1u);
+    float x = (cos_o > 0.0f ? minf(cos_o, 1.0f) : 0.0f) * last;
+    float y = (alpha > 0.0f ? minf(sqrtf(alpha), 1.0f) : 0.0f) * last;
+    u32 x0 = (u32)x, y0 = (u32)y;
+    if (x0 > PT_GGX_N - 2u) x0 = PT_GGX_N - 2u;
+    if (y0 > PT_GGX_N - 2u) y0 = PT_GGX_N - 2u;
+    float fx = x - (float)x0, fy = y - (float)y0;
+    const float* c00 = t + 2u * (y0 * PT_GGX_N + x0);
+    const float* c01 = c00 + 2;
+    const float* c10 = c00 + 2u * PT_GGX_N;
+    const float* c11 = c10 + 2;
+    float top_a = c00[0] * (1.0f - fx) + c01[0] * fx, top_b = c00[1] * (1.0f - fx) + c01[1] * fx;
+    float bot_a = c10[0] * (1.0f - fx) + c11[0] * fx, bot_b = c10[1] * (1.0f - fx) + c11[1] * fx;
+    a = top_a * (1.0f - fy) + bot_a * fy;
+    b = top_b * (1.0f - fy) + bot_b * fy;
 }
 
 struct BsdfSample {
@@ -274,7 +302,9 @@ PTI float pow5(float x) {
     float x2 = x * x;
     return x2 * x2 * x;
 }
-PTI V3 schlick(V3 f0, float c) { return f0 + (v3s(1.0f) - f0) * pow5(1.0f - clampf(c, 0.0f, 1.0f)); }
+PTI V3 schlick(V3 f0, float f90, float c) {
+    return f0 + (v3s(f90) - f0) * pow5(1.0f - clampf(c, 0.0f, 1.0f));
+}
 PTI float ggx_d(float nh, float a2) {
     float d = nh * nh * (a2 - 1.0f) + 1.0f;
     return a2 / (PT_PI * d * d);
@@ -282,13 +312,31 @@ PTI float ggx_d(float nh, float a2) {
 PTI float smith_g1(float nv, float a2) {
     return 2.0f * nv / (nv + sqrtf(a2 + (1.0f - a2) * nv * nv));
 }
-PTI V3 f0_of(const Surface& s) { return lerp3(v3s(0.04f), s.base, s.metallic); }
+PTI V3 f0_of(const Surface& s) { return lerp3(v3s(0.04f * s.specular), s.base, s.metallic); }
+PTI float f90_of(const Surface& s) { return s.specular + (1.0f - s.specular) * s.metallic; }
 PTI V3 diffuse_colour(const Surface& s) { return s.base * (1.0f - s.metallic); }
-PTI float specular_probability(const Surface& s, float cos_o) {
-    float sp = luminance(schlick(f0_of(s), cos_o));
-    float d = luminance(diffuse_colour(s));
-    if (d <= 0.0f) return 1.0f;
-    return clampf(sp / (sp + d), 0.05f, 0.95f);
+PTI V3 min3(V3 a, V3 b) { return v3(minf(a.x, b.x), minf(a.y, b.y), minf(a.z, b.z)); }
+
+// What depends on the outgoing direction only (bsdf.rs Lobes): Turquin's multiple-scattering
+// factor on the GGX lobe, the diffuse layer's reflectance under the coat, and the probability
+// of sampling the specular lobe.
+struct Lobes {
+    V3 compensation, diffuse;
+    float p_spec;
+};
+PTI Lobes lobes_of(const Surface& s, float cos_o) {
+    float a, b;
+    ggx_albedo(cos_o, s.alpha, a, b);
+    V3 f0 = f0_of(s);
+    float e = maxf(a + b, 1e-4f);
+    Lobes l;
+    l.compensation = v3s(1.0f) + f0 * ((1.0f - e) / e);
+    V3 e_spec = min3((f0 * a + v3s(f90_of(s) * b)) * l.compensation, v3s(1.0f));
+    l.diffuse = diffuse_colour(s) * (v3s(1.0f) - e_spec);
+    float sp = luminance(e_spec);
+    float d = luminance(l.diffuse);
+    l.p_spec = sp <= 0.0f ? 0.0f : (d <= 0.0f ? 1.0f : clampf(sp / (sp + d), 0.05f, 0.95f));
+    return l;
 }
 
 // BSDF times |cos| at wi, and the pdf of sampling wi.
@@ -301,10 +349,11 @@ PTI V3 bsdf_eval(const Surface& s, V3 n, V3 wo, V3 wi, float& pdf) {
     float a2 = s.alpha * s.alpha;
     float d = ggx_d(nh, a2);
     float g1o = smith_g1(cos_o, a2);
-    V3 f = schlick(f0_of(s), oh);
-    V3 spec = f * (d * g1o * smith_g1(cos_i, a2) / (4.0f * cos_o));
-    V3 diff = (v3s(1.0f) - f) * diffuse_colour(s) * (PT_FRAC_1_PI * cos_i);
-    float ps = specular_probability(s, cos_o);
+    Lobes l = lobes_of(s, cos_o);
+    V3 f = schlick(f0_of(s), f90_of(s), oh);
+    V3 spec = f * l.compensation * (d * g1o * smith_g1(cos_i, a2) / (4.0f * cos_o));
+    V3 diff = l.diffuse * (PT_FRAC_1_PI * cos_i);
+    float ps = l.p_spec;
     pdf = ps * d * g1o / (4.0f * cos_o) + (1.0f - ps) * cos_i * PT_FRAC_1_PI;
     return spec + diff;
 }
@@ -349,7 +398,7 @@ PTI bool bsdf_sample(const Surface& s, V3 n, V3 wo, bool entering, float u0, flo
     V3 t, b;
     basis(n, t, b);
     V3 wi;
-    if (u0 < specular_probability(s, cos_o)) {
+    if (u0 < lobes_of(s, cos_o).p_spec) {
         V3 wo_l = to_local(wo, n, t, b);
         V3 h = sample_vndf(wo_l, s.alpha, u1, u2);
         h = t * h.x + b * h.y + n * h.z;
@@ -543,20 +592,46 @@ PTI u32 env_texel_of(V3 d) {
 
 PTI V3 env_texel(u32 i) { return v3a(ptr<float>(params.env_texels) + 3ull * i); }
 
-PTI V3 env_radiance(V3 d) {
+// Bilinear between texel centres, wrapping in u, clamped at the poles (lights.rs radiance).
+PTF V3 env_radiance(V3 d) {
     if (!finite3(d)) return v3s(0.0f);
-    return env_texel(env_texel_of(d));
+    long long w = (long long)params.env_width, h = (long long)params.env_height;
+    float u = 0.5f + atan2f(d.x, -d.z) / PT_TAU;
+    float v = acosf(clampf(d.y, -1.0f, 1.0f)) / PT_PI;
+    float xf = u * (float)w - 0.5f;
+    float yf = v * (float)h - 0.5f;
+    float xfl = floorf(xf), yfl = floorf(yf);
+    float fx = xf - xfl, fy = yf - yfl;
+    long long x0 = ((long long)xfl % w + w) % w;
+    long long x1 = (x0 + 1) % w;
+    long long y0 = (long long)yfl, y1 = y0 + 1;
+    y0 = y0 < 0 ? 0 : (y0 > h - 1 ? h - 1 : y0);
+    y1 = y1 < 0 ? 0 : (y1 > h - 1 ? h - 1 : y1);
+    V3 top = env_texel((u32)(y0 * w + x0)) * (1.0f - fx) + env_texel((u32)(y0 * w + x1)) * fx;
+    V3 bottom = env_texel((u32)(y1 * w + x0)) * (1.0f - fx) + env_texel((u32)(y1 * w + x1)) * fx;
+    return top * (1.0f - fy) + bottom * fy;
+}
+
+// The probability that env_sample picks cell (x, y): its intervals' widths in the tables.
+PTI float env_cell_probability(u32 x, u32 y) {
+    const float* marginal = ptr<float>(params.env_marginal);
+    const float* row = ptr<float>(params.env_conditional) + (u64)y * params.env_width;
+    float py = marginal[y] - (y == 0u ? 0.0f : marginal[y - 1u]);
+    float px = row[x] - (x == 0u ? 0.0f : row[x - 1u]);
+    return py * px;
+}
+
+// A uniform point in a cell of probability p, per solid angle at polar sine sin_theta.
+PTI float env_density(float p, float sin_theta) {
+    return p * (float)(params.env_width * params.env_height) /
+           (2.0f * PT_PI * PT_PI * maxf(sin_theta, 1e-6f));
 }
 
 PTF float env_pdf(V3 d) {
     if (params.env_total <= 0.0f || !finite3(d)) return 0.0f;
     u32 i = env_texel_of(d);
-    u32 y = i / params.env_width;
-    float centre = sinf(PT_PI * ((float)y + 0.5f) / (float)params.env_height);
-    float p_texel = luminance(env_texel(i)) * centre / params.env_total;
-    float sin_theta = maxf(sqrtf(maxf(1.0f - d.y * d.y, 0.0f)), 1e-6f);
-    return p_texel * (float)(params.env_width * params.env_height) /
-           (2.0f * PT_PI * PT_PI * sin_theta);
+    float p = env_cell_probability(i % params.env_width, i / params.env_width);
+    return env_density(p, sqrtf(maxf(1.0f - d.y * d.y, 0.0f)));
 }
 
 // The first index whose cumulative value exceeds u (Rust's partition_point(|&c| c <= u)).
@@ -599,10 +674,22 @@ PTF bool env_sample(float u0, float u1, V3& d, V3& l, float& pdf) {
     float fy = within(marginal, y, u0);
     float fx = within(row, x, u1);
     d = direction_at(((float)x + fx) / (float)w, ((float)y + fy) / (float)h);
-    pdf = env_pdf(d);
-    if (!(pdf > 0.0f)) return false;
+    pdf = env_density(env_cell_probability(x, y), sqrtf(maxf(1.0f - d.y * d.y, 0.0f)));
+    if (!(pdf > 0.0f) || !finite(pdf)) return false;
     l = env_radiance(d);
     return true;
+}
+
+// An offset from the pixel's centre drawn from the filter's table (filter.rs sample_offset).
+PTI float filter_offset(float u) {
+    u32 n = params.filter_len;
+    if (n < 2u) return u - 0.5f;
+    const float* t = ptr<float>(params.filter);
+    float x = clampf(u, 0.0f, 1.0f) * (float)(n - 1u);
+    u32 i = (u32)x;
+    if (i > n - 2u) i = n - 2u;
+    float f = x - (float)i;
+    return t[i] * (1.0f - f) + t[i + 1u] * f;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -658,8 +745,10 @@ PTF Shading shading(const Material& m, const HitData& g) {
                 V3 tangent = xf_vector(x.o2w, (e1 * d2.y - e2 * d1.y) / det);
                 tangent = normalize_or_zero(tangent - ns * dot(ns, tangent));
                 if (!is_zero(tangent)) {
+                    // glTF: +Y is up in the image (decreasing v), bitangent = cross(N, T) * w,
+                    // w = -1 for a mirrored mapping (det > 0).
                     V3 bitangent = cross(ns, tangent);
-                    if (det < 0.0f) bitangent = -bitangent;
+                    if (det > 0.0f) bitangent = -bitangent;
                     V3 n = xyz(tex(m.normal_tex, sh.uvs, false)) * 2.0f - v3s(1.0f);
                     n = v3(n.x * m.normal_scale, n.y * m.normal_scale, n.z);
                     V3 mapped = normalize_or(tangent * n.x + bitangent * n.y + ns * n.z, ns);
@@ -818,8 +907,11 @@ extern "C" __global__ void __raygen__camera() {
     Rng rng = rng_new(pixel, params.sample, 0x5eedu);
     float jx = rng.uniform();
     float jy = rng.uniform();
-    float sx = 2.0f * ((float)idx.x + jx) / (float)dim.x - 1.0f;
-    float sy = 1.0f - 2.0f * ((float)idx.y + jy) / (float)dim.y;
+    // Filter importance sampling: the offset from the pixel's centre follows the filter.
+    float ox = 0.5f + filter_offset(jx);
+    float oy = 0.5f + filter_offset(jy);
+    float sx = 2.0f * ((float)idx.x + ox) / (float)dim.x - 1.0f;
+    float sy = 1.0f - 2.0f * ((float)idx.y + oy) / (float)dim.y;
     V3 dir = normalize(v3a(params.cam_forward) + v3a(params.cam_right) * sx +
                        v3a(params.cam_up) * sy);
     PathState s;
@@ -892,7 +984,8 @@ extern "C" __global__ void __closesthit__radiance() {
         // glTF: the vertex colour multiplies the base colour factor and texture.
         V3 base = v3a(m.base_color) * xyz(base_tex) * xyz(sh.color);
         Surface surf =
-            surface_new(base, m.metallic * mr.z, m.roughness * mr.y, m.transmission, m.ior);
+            surface_new(base, m.metallic * mr.z, m.roughness * mr.y, m.transmission, m.ior,
+                        m.specular);
         if (!surf.dielectric) {
             rad = rad + thr * next_event(rng, surf, sh, wo);
             rad = rad + thr * punctual_light(rng, surf, sh, wo);
@@ -907,7 +1000,7 @@ extern "C" __global__ void __closesthit__radiance() {
             s.pdf = b.pdf;
             s.origin = offset(sh, b.wi);
             s.direction = b.wi;
-            if (s.depth >= 2u) {
+            if (s.depth >= params.roulette_depth) {
                 float q = clampf(max_element(thr), 0.05f, 1.0f);
                 if (rng.uniform() >= q) {
                     s.done = 1u;

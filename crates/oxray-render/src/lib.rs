@@ -2,16 +2,18 @@
 //! over scenes described by `oxray-scene` and built with the oxray-util layer (one GAS per mesh,
 //! one IAS instance per placement, the hit-group SBT laid out by the scene).
 //!
-//! Materials follow glTF's metallic-roughness model (Lambert plus GGX), with smooth dielectrics
-//! for transmissive materials, emission, normal maps, and alpha cutouts (MASK) or stochastic
-//! transparency (BLEND) in an any-hit program that both ray types run. Light transport: next-event
-//! estimation on emissive triangles (chosen by power) and on the environment (chosen by
-//! importance), combined with BSDF sampling by multiple importance sampling; Russian roulette.
-//! Emitters emit from both faces. Each launch adds one sample per pixel, so progress is reported
-//! per pass and the result does not depend on the thread count.
+//! Materials follow glTF's metallic-roughness model (Lambert plus GGX, energy-conserving:
+//! [`bsdf`], [`albedo`]), with `KHR_materials_specular`'s factor (0: Lambertian), smooth
+//! dielectrics for transmissive materials, emission, normal maps in glTF's tangent frame, and
+//! alpha cutouts (MASK) or stochastic transparency (BLEND) in an any-hit program that both ray
+//! types run. Light transport: next-event estimation on emissive triangles (chosen by power) and
+//! on the environment (bilinear, chosen by importance over the filtered map), combined with BSDF
+//! sampling by multiple importance sampling; Russian roulette. Pixels are reconstructed by
+//! filter importance sampling ([`filter`]). Each launch adds one sample per pixel, so progress
+//! is reported per pass and the result does not depend on the thread count.
 //!
-//! The result is linear radiance; [`Image::save`] writes it as OpenEXR (linear) or PNG
-//! (tone-mapped sRGB).
+//! The result is linear radiance; [`Image::save`] writes it as OpenEXR (linear) or PNG (sRGB
+//! through an exposure and a tone curve, [`tonemap`]; [`Image::save_with`] chooses them).
 //!
 //! The same path tracer exists as CUDA C++ programs ([`device::render_on`], `device_programs.cu`)
 //! that run on any [`oxray::Device`]: the CPU (compiled by the host's C++ compiler) or a CUDA
@@ -24,6 +26,7 @@
 //! ```
 //! use glam::Vec3;
 //! use oxray_render::lights::Environment;
+//! use oxray_render::filter::Filter;
 //! use oxray_render::{render, RenderOptions};
 //!
 //! let scene = oxray_scene::cornell_box();
@@ -33,6 +36,8 @@
 //!     spp: 2,
 //!     max_depth: 4,
 //!     camera: None, // the scene's first camera, else one framing the scene
+//!     filter: Filter::Gaussian,
+//!     roulette_depth: 3,
 //! };
 //! let dark = Environment::uniform(Vec3::ZERO); // the box is lit by its ceiling panel only
 //! let mut passes = 0;
@@ -49,12 +54,15 @@
 
 #![warn(missing_docs)]
 
+pub mod albedo;
 pub mod bsdf;
 pub mod device;
+pub mod filter;
 pub mod lights;
 pub mod output;
 pub mod programs;
 pub mod texture;
+pub mod tonemap;
 
 use glam::Vec3;
 use lights::{Environment, TriangleLights};
@@ -84,6 +92,27 @@ pub struct RenderOptions {
     pub max_depth: u32,
     /// Which of the scene's cameras to use; `None`: the first, or a camera framing the scene.
     pub camera: Option<usize>,
+    /// The pixel reconstruction filter.
+    pub filter: filter::Filter,
+    /// The first path vertex after which Russian roulette may end a path (on its throughput):
+    /// the first bounces, which carry most of the image, are never cut short.
+    pub roulette_depth: u32,
+}
+
+impl Default for RenderOptions {
+    /// 640 x 480 pixels, 16 samples per pixel, paths of up to 8 vertices, the scene's camera,
+    /// the Gaussian pixel filter.
+    fn default() -> Self {
+        RenderOptions {
+            width: 640,
+            height: 480,
+            spp: 16,
+            max_depth: 8,
+            camera: None,
+            filter: filter::Filter::default(),
+            roulette_depth: 3,
+        }
+    }
 }
 
 /// Why a render failed.
@@ -196,6 +225,10 @@ pub(crate) struct Prepared {
     /// Whether the scene is one untransformed placement, traced as its GAS: the instance level
     /// would only add a transform per ray.
     pub single: bool,
+    /// The pixel filter's inverse-CDF table ([`filter::Filter::table`]).
+    pub filter: Vec<f32>,
+    /// The first vertex after which Russian roulette may end a path.
+    pub roulette_depth: u32,
 }
 
 /// One instance to trace.
@@ -259,6 +292,8 @@ pub(crate) fn prepare(
         max_depth: opts.max_depth.max(1),
         placements,
         single,
+        filter: opts.filter.table(),
+        roulette_depth: opts.roulette_depth.max(1),
     })
 }
 
@@ -401,6 +436,8 @@ pub fn render(
             sample,
             max_depth: prep.max_depth,
             eps: prep.eps,
+            filter: &prep.filter,
+            roulette_depth: prep.roulette_depth,
         };
         let report = pipeline.launch(&mut util, &params, opts.width, opts.height, 1)?;
         if let Some((index, e)) = report.first_exceptions.first() {

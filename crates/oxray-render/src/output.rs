@@ -1,8 +1,10 @@
-//! Rendered images and their files: PNG (tone-mapped sRGB) and OpenEXR (linear). Files are
+//! Rendered images and their files: PNG (8-bit sRGB through a [`Look`]: an exposure and a tone
+//! curve, see [`crate::tonemap`]) and OpenEXR (linear). Files are
 //! written atomically (`oxray_scene::files::write_atomic`): to a temporary file in the target
 //! folder, renamed into place once complete, so a failed or killed write never leaves a
 //! truncated image nor loses the previous one.
 
+use crate::tonemap::Look;
 use std::path::Path;
 
 /// The keyword and text of the PNG text chunk that marks an image as written by oxray.
@@ -36,46 +38,37 @@ pub struct Image {
     pub pixels: Vec<[f32; 4]>,
 }
 
-/// The ACES filmic curve (Narkowicz's fit): keeps highlights from clipping harshly.
-fn tone_map(x: f32) -> f32 {
-    let x = x.max(0.0);
-    ((x * (2.51 * x + 0.03)) / (x * (2.43 * x + 0.59) + 0.14)).clamp(0.0, 1.0)
-}
-
-fn srgb_encode(x: f32) -> u8 {
-    let s = if x <= 0.0031308 {
-        12.92 * x
-    } else {
-        1.055 * x.powf(1.0 / 2.4) - 0.055
-    };
-    (s.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
-}
-
 impl Image {
-    /// The image as tone-mapped 8-bit sRGB RGBA.
+    /// The image as 8-bit sRGB RGBA through the default [`Look`] (ACES, no exposure).
     pub fn to_srgb8(&self) -> Vec<u8> {
+        self.to_srgb8_with(&Look::default())
+    }
+
+    /// The image as 8-bit sRGB RGBA through `look`.
+    pub fn to_srgb8_with(&self, look: &Look) -> Vec<u8> {
         self.pixels
             .iter()
             .flat_map(|p| {
-                [
-                    srgb_encode(tone_map(p[0])),
-                    srgb_encode(tone_map(p[1])),
-                    srgb_encode(tone_map(p[2])),
-                    255,
-                ]
+                let [r, g, b] = look.srgb8([p[0], p[1], p[2]]);
+                [r, g, b, 255]
             })
             .collect()
     }
 
-    /// Writes the image atomically; the extension picks the format: `.exr` is linear 32-bit
-    /// float RGBA, `.png` tone-mapped 8-bit sRGB, anything else an error.
+    /// Writes the image atomically with the default [`Look`]; the extension picks the format:
+    /// `.exr` is linear 32-bit float RGBA, `.png` 8-bit sRGB, anything else an error.
     pub fn save(&self, path: &Path) -> Result<(), String> {
+        self.save_with(path, &Look::default())
+    }
+
+    /// Writes the image atomically, a PNG through `look` (an EXR stays linear, as rendered).
+    pub fn save_with(&self, path: &Path, look: &Look) -> Result<(), String> {
         let ext = oxray_scene::file_extension(path);
         let name = path.display();
         match ext.as_deref() {
             Some("exr") => write_atomic(path, |tmp| self.write_exr(tmp))
                 .map_err(|e| format!("cannot write {name}: {e}")),
-            Some("png") => write_atomic(path, |tmp| self.write_png(tmp))
+            Some("png") => write_atomic(path, |tmp| self.write_png(tmp, look))
                 .map_err(|e| format!("cannot write {name}: {e}")),
             _ => Err(format!(
                 "cannot write {name}: unknown image format (expected .png or .exr)"
@@ -83,14 +76,14 @@ impl Image {
         }
     }
 
-    fn write_png(&self, path: &Path) -> Result<(), WriteError> {
+    fn write_png(&self, path: &Path, look: &Look) -> Result<(), WriteError> {
         let mut file = std::io::BufWriter::new(std::fs::File::create(path)?);
         let mut enc = png::Encoder::new(&mut file, self.width, self.height);
         enc.set_color(png::ColorType::Rgba);
         enc.set_depth(png::BitDepth::Eight);
         enc.add_text_chunk(PNG_SOFTWARE.0.into(), PNG_SOFTWARE.1.into())?;
         let mut writer = enc.write_header()?;
-        writer.write_image_data(&self.to_srgb8())?;
+        writer.write_image_data(&self.to_srgb8_with(look))?;
         // Finishing and flushing report the errors of the last bytes (a full disk).
         writer.finish()?;
         std::io::Write::flush(&mut file)?;
@@ -142,15 +135,29 @@ mod tests {
     use super::*;
 
     #[test]
-    fn tone_curve_is_monotonic_and_bounded() {
-        let mut last = 0.0;
-        for i in 0..1000 {
-            let y = tone_map(i as f32 * 0.05);
-            assert!(y >= last && y <= 1.0);
-            last = y;
-        }
-        assert_eq!(tone_map(0.0), 0.0);
-        assert_eq!(srgb_encode(1.0), 255);
+    fn pngs_follow_the_look() {
+        use crate::tonemap::ToneMap;
+        let img = Image {
+            width: 2,
+            height: 1,
+            pixels: vec![[0.18, 0.18, 0.18, 1.0], [4.0, 0.5, 0.0, 1.0]],
+        };
+        let linear = Look {
+            tone_map: ToneMap::Linear,
+            exposure: 0.0,
+        };
+        assert_eq!(img.to_srgb8_with(&linear)[..4], [118, 118, 118, 255]);
+        assert_eq!(img.to_srgb8_with(&linear)[4..7], [255, 188, 0]);
+        assert_eq!(img.to_srgb8(), img.to_srgb8_with(&Look::default()));
+        let path = std::env::temp_dir().join(format!("oxray-look-{}.png", std::process::id()));
+        img.save_with(&path, &linear).unwrap();
+        let decoder =
+            png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size()];
+        reader.next_frame(&mut buf).unwrap();
+        std::fs::remove_file(&path).ok();
+        assert_eq!(buf[..8], img.to_srgb8_with(&linear)[..]);
     }
 
     #[test]

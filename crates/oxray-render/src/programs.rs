@@ -4,6 +4,7 @@
 //! roulette), an any-hit program for alpha cutouts (both ray types) and the miss programs.
 
 use super::bsdf::{hash, Rng, Surface};
+use super::filter::sample_offset;
 use super::lights::{Environment, TriangleLights};
 use super::texture::sample;
 use glam::{Vec2, Vec3, Vec4};
@@ -59,6 +60,10 @@ pub struct Params<'a> {
     pub max_depth: u32,
     /// Distance by which new rays leave a surface, along its normal.
     pub eps: f32,
+    /// The pixel filter's inverse-CDF table ([`crate::filter::Filter::table`]).
+    pub filter: &'a [f32],
+    /// The first vertex after which Russian roulette may end a path.
+    pub roulette_depth: u32,
 }
 
 /// The radiance payload. The random state is word 0 in both ray types so that the any-hit
@@ -256,8 +261,12 @@ fn shading(ctx: &ClosestHitCtx<Params>, m: &MaterialDesc, prim: &Primitive) -> S
                 let tangent = ctx.transform_vector_to_world((e1 * d2.y - e2 * d1.y) / det);
                 let tangent = (tangent - ns * ns.dot(tangent)).normalize_or_zero();
                 if tangent != Vec3::ZERO {
+                    // glTF's tangent space: +X along increasing u, +Y up in the image, that
+                    // is along decreasing v (v runs down the image), and the bitangent is
+                    // cross(N, T) * w. An unmirrored mapping has det < 0 (v against the
+                    // surface's counter-clockwise orientation): w = 1; a mirrored one w = -1.
                     let mut bitangent = ns.cross(tangent);
-                    if det < 0.0 {
+                    if det > 0.0 {
                         bitangent = -bitangent;
                     }
                     let n = tex(p, Some(nt), &uvs, false).truncate() * 2.0 - Vec3::ONE;
@@ -360,6 +369,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
             m.roughness * mr.y,
             m.transmission,
             m.ior,
+            m.specular,
         );
 
         if !surf.dielectric {
@@ -377,7 +387,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
                 s.pdf = b.pdf;
                 s.origin = offset(p, &sh, b.wi).to_array();
                 s.direction = b.wi.to_array();
-                if s.depth >= 2 {
+                if s.depth >= p.roulette_depth {
                     let q = thr.max_element().clamp(0.05, 1.0);
                     if rng.uniform() >= q {
                         s.done = 1;
@@ -539,9 +549,12 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             let p = ctx.params();
             let pixel = y * w + x;
             let mut rng = Rng::new(pixel, p.sample, 0x5eed);
+            // Filter importance sampling: the offset from the pixel's centre follows the filter.
             let (jx, jy) = (rng.uniform(), rng.uniform());
-            let sx = 2.0 * (x as f32 + jx) / w as f32 - 1.0;
-            let sy = 1.0 - 2.0 * (y as f32 + jy) / h as f32;
+            let ox = 0.5 + sample_offset(p.filter, jx);
+            let oy = 0.5 + sample_offset(p.filter, jy);
+            let sx = 2.0 * (x as f32 + ox) / w as f32 - 1.0;
+            let sy = 1.0 - 2.0 * (y as f32 + oy) / h as f32;
             let c = &p.camera;
             let dir = (c.forward + c.right * sx + c.up * sy).normalize();
             let mut s = PathState {

@@ -43,7 +43,7 @@ fn opts(size: u32, spp: u32, max_depth: u32) -> RenderOptions {
         height: size,
         spp,
         max_depth,
-        camera: None,
+        ..Default::default()
     }
 }
 

@@ -122,7 +122,7 @@ fn floor_lit_by(light: PunctualLight) -> f32 {
         height: 3,
         spp: 1,
         max_depth: 2,
-        camera: None,
+        ..Default::default()
     };
     let img = render(&scene, &Environment::uniform(Vec3::ZERO), &opts, |_| {}).unwrap();
     img.pixels[4][0]
@@ -216,7 +216,7 @@ fn the_extensions_fixture_renders_with_its_lights_and_transforms() {
         height: 8,
         spp: 2,
         max_depth: 3,
-        camera: None,
+        ..Default::default()
     };
     let img = render(&scene, &Environment::uniform(Vec3::ZERO), &opts, |_| {}).unwrap();
     assert!(img.pixels.iter().flatten().all(|c| c.is_finite()));

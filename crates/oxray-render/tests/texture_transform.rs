@@ -117,7 +117,7 @@ fn the_renderer_samples_through_the_transform() {
         height: 16,
         spp: 1,
         max_depth: 1,
-        camera: None,
+        ..Default::default()
     };
     let env = Environment::uniform(Vec3::ZERO);
     let left_right = |r: TextureRef| {

@@ -21,7 +21,7 @@ fn shoot(scene: &SceneDesc, size: u32, spp: u32, env: Vec3, threads: usize) -> I
         height: size,
         spp,
         max_depth: 3,
-        camera: None,
+        ..Default::default()
     };
     let env = Environment::uniform(env);
     rayon::ThreadPoolBuilder::new()

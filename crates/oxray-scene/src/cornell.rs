@@ -1,20 +1,33 @@
-//! The built-in Cornell box: the classic dimensions scaled to the unit cube, diffuse walls, two
-//! boxes and a warm area light under the ceiling.
+//! The built-in Cornell box: the geometry of the Cornell University Program of Computer
+//! Graphics' measured data (<https://www.graphics.cornell.edu/online/box/data.html>) scaled by
+//! 1/555, with its camera, Lambertian walls (red on the left seen from the camera, green on the
+//! right), the two blocks as measured and the area light under the ceiling.
 
 use super::{Camera, InstanceDesc, MaterialDesc, MeshDesc, Primitive, SceneDesc};
 use glam::{Mat4, Vec3};
 
+/// A Lambertian material (no specular coat).
 fn diffuse(name: &str, rgb: [f32; 3]) -> MaterialDesc {
     MaterialDesc {
         name: name.into(),
         base_color: [rgb[0], rgb[1], rgb[2], 1.0],
         roughness: 1.0,
+        specular: 0.0,
         ..Default::default()
     }
 }
 
-/// The Cornell box scene with its camera. Materials: 0 white, 1 red, 2 green, 3 light (emitting
-/// downwards only).
+/// The data's units (millimetres) per scene unit.
+const SCALE: f32 = 555.0;
+
+/// The light's height: the data puts it in the ceiling's plane (548.8); it sits half a
+/// millimetre lower so that rays meet it, not the coincident ceiling.
+const LIGHT_Y: f32 = 548.3;
+
+/// The Cornell box scene with its camera (the data's pinhole: at (278, 273, -800) mm looking
+/// down +Z, a 25 mm film at 35 mm focal length). Materials: 0 white, 1 red, 2 green, 3 light
+/// (emitting downwards only). Every quad is listed as in the data, whose windings face the
+/// room's inside and the blocks' outside.
 pub fn cornell_box() -> SceneDesc {
     let mut light = diffuse("light", [0.78; 3]);
     light.emissive = [17.0, 12.0, 4.0];
@@ -35,62 +48,108 @@ pub fn cornell_box() -> SceneDesc {
         let prim = &mut prims[mat];
         let b = prim.positions.len() as u32;
         prim.positions
-            .extend(p.iter().map(|q| [q[0] / 555.0, q[1] / 555.0, q[2] / 555.0]));
+            .extend(p.iter().map(|q| [q[0] / SCALE, q[1] / SCALE, q[2] / SCALE]));
         prim.triangles
             .extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
     };
-    let s = 555.0;
-    quad(
-        [[0.0, 0.0, 0.0], [s, 0.0, 0.0], [s, 0.0, s], [0.0, 0.0, s]],
-        0,
-    ); // floor
-    quad([[0.0, s, 0.0], [0.0, s, s], [s, s, s], [s, s, 0.0]], 0); // ceiling
-    quad([[0.0, 0.0, s], [s, 0.0, s], [s, s, s], [0.0, s, s]], 0); // back
-    quad([[s, 0.0, 0.0], [s, s, 0.0], [s, s, s], [s, 0.0, s]], 2); // left (green)
-    quad(
-        [[0.0, 0.0, 0.0], [0.0, 0.0, s], [0.0, s, s], [0.0, s, 0.0]],
-        1,
-    ); // right (red)
+    let (white, red, green, emitter) = (0, 1, 2, 3);
+    // Floor, ceiling, back wall.
     quad(
         [
-            [213.0, 554.0, 227.0],
-            [343.0, 554.0, 227.0],
-            [343.0, 554.0, 332.0],
-            [213.0, 554.0, 332.0],
+            [552.8, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 559.2],
+            [549.6, 0.0, 559.2],
         ],
-        3,
+        white,
     );
-    // Two boxes, five quads each (no bottom).
-    let mut boxq = |c: [f32; 2], half: f32, h: f32, angle: f32| {
-        let (sn, co) = angle.to_radians().sin_cos();
-        let corner =
-            |dx: f32, dz: f32, y: f32| [c[0] + dx * co - dz * sn, y, c[1] + dx * sn + dz * co];
-        let [a, b, cc, d] =
-            [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)].map(|(x, z)| (x * half, z * half));
+    quad(
+        [
+            [556.0, 548.8, 0.0],
+            [556.0, 548.8, 559.2],
+            [0.0, 548.8, 559.2],
+            [0.0, 548.8, 0.0],
+        ],
+        white,
+    );
+    quad(
+        [
+            [549.6, 0.0, 559.2],
+            [0.0, 0.0, 559.2],
+            [0.0, 548.8, 559.2],
+            [556.0, 548.8, 559.2],
+        ],
+        white,
+    );
+    // The red wall at x = 550 is on the camera's left (it looks down +Z with +Y up, so +X is
+    // to its left); the green wall at x = 0 on its right.
+    quad(
+        [
+            [552.8, 0.0, 0.0],
+            [549.6, 0.0, 559.2],
+            [556.0, 548.8, 559.2],
+            [556.0, 548.8, 0.0],
+        ],
+        red,
+    );
+    quad(
+        [
+            [0.0, 0.0, 559.2],
+            [0.0, 0.0, 0.0],
+            [0.0, 548.8, 0.0],
+            [0.0, 548.8, 559.2],
+        ],
+        green,
+    );
+    quad(
+        [
+            [343.0, LIGHT_Y, 227.0],
+            [343.0, LIGHT_Y, 332.0],
+            [213.0, LIGHT_Y, 332.0],
+            [213.0, LIGHT_Y, 227.0],
+        ],
+        emitter,
+    );
+    // A block from its top face's corners (as the data lists them) and its height: the top and
+    // four sides (no bottom).
+    let mut block = |top: [[f32; 2]; 4], h: f32| {
+        let [a, b, c, d] = top;
         quad(
             [
-                corner(a.0, a.1, h),
-                corner(d.0, d.1, h),
-                corner(cc.0, cc.1, h),
-                corner(b.0, b.1, h),
+                [a[0], h, a[1]],
+                [b[0], h, b[1]],
+                [c[0], h, c[1]],
+                [d[0], h, d[1]],
             ],
-            0,
+            white,
         );
-        for (p, q) in [(a, b), (b, cc), (cc, d), (d, a)] {
+        for (p, q) in [(d, c), (a, d), (b, a), (c, b)] {
             quad(
                 [
-                    corner(p.0, p.1, 0.0),
-                    corner(q.0, q.1, 0.0),
-                    corner(q.0, q.1, h),
-                    corner(p.0, p.1, h),
+                    [p[0], 0.0, p[1]],
+                    [p[0], h, p[1]],
+                    [q[0], h, q[1]],
+                    [q[0], 0.0, q[1]],
                 ],
-                0,
+                white,
             );
         }
     };
-    boxq([185.0, 169.0], 82.5, 165.0, -18.0);
-    boxq([368.0, 351.0], 82.5, 330.0, 15.0);
-    let eye = Vec3::new(0.5, 0.5, -1.4);
+    // The short block, turned to face the right wall, and the tall one.
+    block(
+        [[130.0, 65.0], [82.0, 225.0], [240.0, 272.0], [290.0, 114.0]],
+        165.0,
+    );
+    block(
+        [
+            [423.0, 247.0],
+            [265.0, 296.0],
+            [314.0, 456.0],
+            [472.0, 406.0],
+        ],
+        330.0,
+    );
+    let eye = Vec3::new(278.0, 273.0, -800.0) / SCALE;
     SceneDesc {
         meshes: vec![MeshDesc {
             name: "cornell box".into(),
@@ -103,8 +162,8 @@ pub fn cornell_box() -> SceneDesc {
         }],
         cameras: vec![Camera::look_at(
             eye,
-            Vec3::new(0.5, 0.5, 0.0),
-            2.0 * 0.35f32.atan(),
+            eye + Vec3::Z,
+            2.0 * (12.5f32 / 35.0).atan(),
         )],
         ..Default::default()
     }

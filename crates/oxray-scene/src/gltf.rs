@@ -213,6 +213,7 @@ const READ_EXTENSIONS: &[&str] = &[
     "KHR_materials_emissive_strength",
     "KHR_materials_transmission",
     "KHR_materials_ior",
+    "KHR_materials_specular",
     "KHR_lights_punctual",
 ];
 
@@ -1021,6 +1022,12 @@ impl Loader<'_> {
                 } else {
                     1.5
                 },
+                // KHR_materials_specular's factor (its colour and textures are not read): 0
+                // leaves a Lambertian diffuse surface under no specular coat.
+                specular: m
+                    .specular()
+                    .map_or(1.0, |s| s.specular_factor())
+                    .clamp(0.0, 1.0),
             };
             materials.push((desc, slots));
         }

@@ -199,6 +199,10 @@ pub struct MaterialDesc {
     pub transmission: f32,
     /// Index of refraction of a dielectric.
     pub ior: f32,
+    /// Strength of the specular reflection of the non-metallic part, in [0, 1] (glTF
+    /// `KHR_materials_specular`'s `specularFactor`): 1 is glTF's default dielectric coat
+    /// (4 % reflectance at normal incidence), 0 a purely Lambertian diffuse material.
+    pub specular: f32,
 }
 
 impl Default for MaterialDesc {
@@ -218,6 +222,7 @@ impl Default for MaterialDesc {
             double_sided: true,
             transmission: 0.0,
             ior: 1.5,
+            specular: 1.0,
         }
     }
 }

@@ -12,7 +12,9 @@
 //! - `illum` 3 or 5, or a specular colour brighter than the diffuse one, makes a metal whose
 //!   colour is `Ks`; `Pm` sets the metalness directly;
 //! - `illum` 4, 6 or 7 with `Ni > 1`, or `d < 1` with `Ni > 1`, makes a glass (transmission 1,
-//!   index of refraction `Ni`), which is then opaque: transmission models its transparency.
+//!   index of refraction `Ni`), which is then opaque: transmission models its transparency;
+//! - `illum` 0 or 1 (no specular term) makes a Lambertian diffuse material (`specular` 0),
+//!   unless `Pm` makes it metallic.
 //!
 //! A missing or unreadable `.mtl` or texture is a warning; the geometry still loads.
 
@@ -346,6 +348,12 @@ fn convert(m: &tobj::Material, texture: Option<TextureRef>) -> MaterialDesc {
         kd
     };
     let alpha = if glass { 1.0 } else { dissolve };
+    // The MTL illumination models 0 (colour) and 1 (ambient and diffuse) have no specular term.
+    let specular = if matches!(illum, 0 | 1) && !glass && !metal {
+        0.0
+    } else {
+        default.specular
+    };
     MaterialDesc {
         name: m.name.clone(),
         base_color: [rgb[0], rgb[1], rgb[2], alpha],
@@ -355,6 +363,7 @@ fn convert(m: &tobj::Material, texture: Option<TextureRef>) -> MaterialDesc {
         emissive: ke,
         transmission: if glass { 1.0 } else { 0.0 },
         ior: if glass { ni } else { default.ior },
+        specular,
         alpha_mode: if alpha < 1.0 {
             AlphaMode::Blend
         } else {

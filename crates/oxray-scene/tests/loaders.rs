@@ -1058,3 +1058,49 @@ fn the_second_texture_coordinate_set_is_read_and_textures_may_use_it() {
         s.warnings
     );
 }
+
+#[test]
+fn lambertian_materials_from_obj_illum_and_khr_materials_specular() {
+    // MTL illumination models 0 and 1 have no specular term: a Lambertian material. Model 2
+    // (and no model) keeps glTF's default dielectric coat; a metal stays specular.
+    let dir = tmp_dir("lambert");
+    std::fs::write(
+        dir.join("m.mtl"),
+        "newmtl flat\nKd 0.5 0.5 0.5\nillum 0\n\
+         newmtl matte\nKd 0.5 0.5 0.5\nillum 1\n\
+         newmtl shiny\nKd 0.5 0.5 0.5\nillum 2\n\
+         newmtl metal\nKd 0.5 0.5 0.5\nKs 0.9 0.9 0.9\nillum 3\n",
+    )
+    .unwrap();
+    let mut obj = String::from("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\n");
+    for m in ["flat", "matte", "shiny", "metal"] {
+        obj += &format!("usemtl {m}\nf 1 2 3\n");
+    }
+    std::fs::write(dir.join("m.obj"), obj).unwrap();
+    let s = SceneDesc::load(&dir.join("m.obj")).unwrap();
+    let by_name = |n: &str| s.materials.iter().find(|m| m.name == n).unwrap();
+    assert_eq!(by_name("flat").specular, 0.0);
+    assert_eq!(by_name("matte").specular, 0.0);
+    assert_eq!(by_name("shiny").specular, 1.0);
+    assert_eq!(by_name("metal").specular, 1.0);
+    assert_eq!(by_name("metal").metallic, 1.0);
+
+    // glTF: KHR_materials_specular's factor, read without a warning; 1 without the extension.
+    let bin: Vec<u8> = [0f32, 0., 0., 1., 0., 0., 0., 1., 0.]
+        .iter()
+        .flat_map(|f| f.to_le_bytes())
+        .collect();
+    let path = gltf_with_bin(
+        "specular",
+        &bin,
+        r#"{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3"}"#,
+        r#"{"buffer":0,"byteLength":36}"#,
+        r#","extensionsUsed":["KHR_materials_specular"],
+        "materials":[{"extensions":{"KHR_materials_specular":{"specularFactor":0.0}}},
+                     {"extensions":{"KHR_materials_specular":{"specularFactor":0.25}}},{}]"#,
+    );
+    let s = SceneDesc::load(&path).unwrap();
+    assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+    let spec: Vec<f32> = s.materials.iter().take(3).map(|m| m.specular).collect();
+    assert_eq!(spec, [0.0, 0.25, 1.0]);
+}
