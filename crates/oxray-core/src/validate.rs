@@ -269,7 +269,9 @@ fn validate_curves(at: InputLocation, c: &CurveInput<'_>, keys: usize) -> Result
     if keys != 1 {
         // Curves are interpolated between keys nowhere yet: a build with motion keys and a
         // curve input is refused rather than traced at one key.
-        return Err(BuildError::Unsupported("curves with motion keys (guide §5.10.2)"));
+        return Err(BuildError::Unsupported(
+            "curves with motion keys (guide §5.10.2)",
+        ));
     }
     if !c.normal_buffers.is_empty() {
         if !c.curve_type.is_ribbon() {
