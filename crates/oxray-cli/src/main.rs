@@ -74,6 +74,14 @@ enum Command {
         /// Put the scene on a large grey ground plane.
         #[arg(long)]
         ground: bool,
+        /// Seed of the random sequence: the same seed gives the same image, another seed an
+        /// independent one.
+        #[arg(long, default_value_t = 0)]
+        seed: u32,
+        /// Also write the first hit's albedo, shading normal, distance and sample count, as the
+        /// layers albedo.RGB, normal.XYZ, depth.Z and samples.Y of the output (an .exr file).
+        #[arg(long)]
+        aov: bool,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -240,6 +248,8 @@ fn run(cli: Cli) -> Result<()> {
             tonemap,
             filter,
             ground,
+            seed,
+            aov,
             quiet,
             backend,
         } => {
@@ -270,6 +280,12 @@ fn run(cli: Cli) -> Result<()> {
             let named = output.is_some();
             let output = output.unwrap_or_else(|| default_output(scene.as_deref()));
             let ext = oxray_scene::file_extension(&output);
+            if aov && ext.as_deref() != Some("exr") {
+                bail!(
+                    "--aov writes layers of an OpenEXR file: name an .exr output, not {}",
+                    output.display()
+                );
+            }
             if !matches!(ext.as_deref(), Some("png") | Some("exr")) {
                 bail!(
                     "cannot write {}: unknown image format (expected .png or .exr)",
@@ -336,6 +352,8 @@ fn run(cli: Cli) -> Result<()> {
                 max_depth: max_depth.clamp(1, 64),
                 camera,
                 filter,
+                seed,
+                aovs: aov,
                 ..Default::default()
             };
             let bar = if quiet {
@@ -350,16 +368,20 @@ fn run(cli: Cli) -> Result<()> {
                 .expect("a valid template")
                 .progress_chars("=> "),
             );
-            let image = pool.install(|| {
-                renderer.render(&desc, &environment, &opts, |done| {
-                    bar.set_position(done as u64)
+            let rendered = pool.install(|| {
+                renderer.render(&desc, &environment, &opts, |p| {
+                    bar.set_position(p.samples() as u64);
+                    std::ops::ControlFlow::Continue(())
                 })
             })?;
             bar.finish_and_clear();
             let look = oxray_render::tonemap::Look { tone_map, exposure };
-            image
-                .save_with(&output, &look)
-                .map_err(anyhow::Error::msg)?;
+            if aov {
+                rendered.save_exr(&output)
+            } else {
+                rendered.image.save_with(&output, &look)
+            }
+            .map_err(anyhow::Error::msg)?;
             let on = renderer
                 .describe()
                 .map_or(String::new(), |d| format!(" with {d}"));

@@ -11,8 +11,9 @@
 use oxray::{BackendKind, Device};
 use oxray_cli::device::DeviceCommandError;
 use oxray_render::lights::Environment;
-use oxray_render::{Image, RenderError, RenderOptions};
+use oxray_render::{Progress, RenderError, RenderOptions, Rendered, Renderer};
 use oxray_scene::SceneDesc;
+use std::ops::ControlFlow;
 
 /// A renderer chosen by `--backend`.
 pub enum RenderBackend {
@@ -55,22 +56,21 @@ pub fn open(name: &str) -> Result<RenderBackend, DeviceCommandError> {
 }
 
 impl RenderBackend {
-    /// Renders with this backend (call it on the render's thread pool).
+    /// Renders with this backend (call it on the render's thread pool); `on_pass` sees each
+    /// pass and may stop the render.
     pub fn render(
         &self,
         scene: &SceneDesc,
         env: &Environment,
         opts: &RenderOptions,
-        progress: impl FnMut(u32),
-    ) -> Result<Image, RenderError> {
+        on_pass: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
+    ) -> Result<Rendered, RenderError> {
         match self {
-            RenderBackend::Rust => oxray_render::render(scene, env, opts, progress),
+            RenderBackend::Rust => oxray_render::render_passes(scene, env, opts, on_pass),
             RenderBackend::CxxOnCpu => {
-                oxray_render::device::render_on(&Device::cpu(), scene, env, opts, progress)
+                Renderer::new(&Device::cpu(), scene, env)?.render(opts, on_pass)
             }
-            RenderBackend::Device(d) => {
-                oxray_render::device::render_on(d, scene, env, opts, progress)
-            }
+            RenderBackend::Device(d) => Renderer::new(d, scene, env)?.render(opts, on_pass),
         }
     }
 

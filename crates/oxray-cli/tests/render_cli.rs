@@ -446,3 +446,57 @@ fn tone_curves_and_pixel_filters_are_chosen_on_the_command_line() {
         "--filter: unknown pixel filter",
     );
 }
+
+#[test]
+fn seeds_and_aov_layers() {
+    let scene = obj_scene();
+    let render = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&scene),
+            "-o",
+            s(out),
+            "--size",
+            "24x16",
+            "--spp",
+            "2",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        oxray(&args)
+    };
+    let bytes = |p: &Path| std::fs::read(p).unwrap();
+    let (a, b, c) = (tmp("seed-a.png"), tmp("seed-b.png"), tmp("seed-c.png"));
+    assert!(render(&a, &["--seed", "5"]).status.success());
+    assert!(render(&b, &["--seed", "5"]).status.success());
+    assert!(render(&c, &["--seed", "6"]).status.success());
+    assert_eq!(bytes(&a), bytes(&b), "the same seed, the same image");
+    assert_ne!(bytes(&a), bytes(&c), "another seed, another image");
+
+    let exr = tmp("layers.exr");
+    let out = render(&exr, &["--aov"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read = exr::prelude::read_all_flat_layers_from_file(&exr).unwrap();
+    let names: Vec<String> = read.layer_data[0]
+        .channel_data
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    for layer in ["R", "albedo.R", "normal.Z", "depth.Z", "samples.Y"] {
+        assert!(
+            names.iter().any(|n| n == layer),
+            "{layer} missing from {names:?}"
+        );
+    }
+    let png = tmp("layers.png");
+    assert_one_error(
+        &render(&png, &["--aov"]),
+        "--aov writes layers of an OpenEXR file",
+    );
+    assert!(!png.exists());
+}

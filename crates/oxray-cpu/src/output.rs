@@ -69,11 +69,14 @@ impl<T: Pod> OutputBuffer<T> {
         if i >= self.len {
             return None;
         }
-        let bytes: Vec<u8> = self.words[i * Self::WORDS..(i + 1) * Self::WORDS]
-            .iter()
-            .flat_map(|w| w.load(Ordering::Relaxed).to_le_bytes())
-            .collect();
-        Some(bytemuck::pod_read_unaligned(&bytes))
+        // Into the value itself: programs read elements per sample, so no allocation here.
+        let mut value = T::zeroed();
+        let dst = bytemuck::bytes_of_mut(&mut value);
+        let src = &self.words[i * Self::WORDS..(i + 1) * Self::WORDS];
+        for (d, w) in dst.chunks_exact_mut(4).zip(src) {
+            d.copy_from_slice(&w.load(Ordering::Relaxed).to_le_bytes());
+        }
+        Some(value)
     }
 
     /// All elements.

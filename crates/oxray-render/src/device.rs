@@ -15,15 +15,18 @@
 //! images statistically.
 
 use crate::lights::Environment;
-use crate::{image_from_sums, prepare, traced, Image, RenderError, RenderOptions};
+use crate::programs::CameraFrame;
+use crate::{prepare_lighting, traced, Image, RenderError, RenderOptions};
 use bytemuck::{Pod, Zeroable};
-use oxray::programs::{Buffer, HitGroupDesc, ProgramGroup};
+use oxray::programs::{Buffer, HitGroupDesc, Pipeline, ProgramGroup};
 use oxray::{
-    BackendKind, BuildFlags, BuildInput, BuildOptions, Device, GeometryFlags, IndexBuffer,
-    Instance, ModuleSource, PipelineCompileOptions, PipelineLinkOptions, SbtRegion,
+    BackendKind, BuildFlags, BuildInput, BuildOptions, Device, Gas, GeometryFlags, Ias,
+    IndexBuffer, Instance, ModuleSource, PipelineCompileOptions, PipelineLinkOptions, SbtRegion,
     ShaderBindingTable, Transform, TriangleInput, VertexBuffer,
 };
-use oxray_scene::{AlphaMode, LightKind, MaterialDesc, SceneDesc, TextureRef, Wrap};
+use oxray_scene::{AlphaMode, LightKind, MaterialDesc, MeshDesc, SceneDesc, TextureRef, Wrap};
+use std::borrow::Cow;
+use std::ops::ControlFlow;
 
 /// The CUDA C++ source of the path tracer's programs.
 pub const SOURCE: &str = include_str!("device_programs.cu");
@@ -197,6 +200,7 @@ struct ParamsGpu {
     env_marginal: u64,
     ggx_albedo: u64,
     filter: u64,
+    aov: u64,
     num_materials: u32,
     num_textures: u32,
     num_lights: u32,
@@ -215,12 +219,13 @@ struct ParamsGpu {
     eps: f32,
     filter_len: u32,
     roulette_depth: u32,
-    pad: [u32; 2],
+    seed: u32,
+    pad: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
 const _: () = assert!(std::mem::size_of::<HitDataGpu>() == 56);
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 240);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 248);
 
 fn tex_ref(r: Option<TextureRef>) -> TexRefGpu {
     match r {
@@ -271,14 +276,22 @@ fn wrap(w: Wrap) -> u32 {
 }
 
 /// Device memory for `data` (nothing for an empty slice: its address is 0).
-struct Uploads<'d> {
-    device: &'d Device,
+pub(crate) struct Uploads {
+    device: Device,
     // Kept alive for the programs that read them through their addresses.
     f32s: Vec<Buffer<f32>>,
     bytes: Vec<Buffer<u8>>,
 }
 
-impl Uploads<'_> {
+impl Uploads {
+    fn new(device: &Device) -> Self {
+        Uploads {
+            device: device.clone(),
+            f32s: Vec::new(),
+            bytes: Vec::new(),
+        }
+    }
+
     fn put<T: Pod>(&mut self, data: &[T]) -> Result<u64, RenderError> {
         if data.is_empty() {
             return Ok(0);
@@ -327,7 +340,8 @@ fn check_supported(device: &Device, scene: &SceneDesc) -> Result<(), RenderError
 /// programs ([`SOURCE`]): the same algorithm, options and result as
 /// [`render`](crate::render), one launch per sample (`progress` is called after each with the
 /// number of samples done). On the CPU device the programs are compiled by the host's C++
-/// compiler (cached on disk), on a CUDA device by NVRTC.
+/// compiler (cached on disk), on a CUDA device by NVRTC. To render a scene more than once,
+/// progressively, with edits or AOVs, use a [`Renderer`](crate::Renderer).
 ///
 /// ```
 /// use glam::Vec3;
@@ -365,256 +379,434 @@ pub fn render_with_source(
     opts: &RenderOptions,
     mut progress: impl FnMut(u32),
 ) -> Result<Image, RenderError> {
-    let prep = prepare(scene, env, opts)?;
-    check_supported(device, scene)?;
-    let mut up = Uploads {
-        device,
-        f32s: Vec::new(),
-        bytes: Vec::new(),
-    };
+    let mut renderer =
+        crate::Renderer::with_source(device, source, Cow::Borrowed(scene), Cow::Borrowed(env))?;
+    let done = renderer.render(opts, |p| {
+        progress(p.samples());
+        ControlFlow::Continue(())
+    })?;
+    Ok(done.image)
+}
 
-    // The programs and their groups.
-    let module = device.create_module(ModuleSource::CudaCpp(source))?;
-    let hit = |ch: &'static str, ah: bool| {
-        ProgramGroup::hit_group(HitGroupDesc {
-            closest_hit: Some((&module, ch)),
-            any_hit: ah.then_some((&module, ANY_HIT)),
-            intersection: None,
-        })
-    };
-    let raygen = ProgramGroup::raygen(&module, RAYGEN)?;
-    let miss_env = ProgramGroup::miss(&module, MISS[0])?;
-    let miss_shadow = ProgramGroup::miss(&module, MISS[1])?;
-    let radiance_opaque = hit(CLOSEST_HIT, false)?;
-    let radiance_alpha = hit(CLOSEST_HIT, true)?;
-    let shadow_opaque = hit(CLOSEST_HIT_SHADOW, false)?;
-    let shadow_alpha = hit(CLOSEST_HIT_SHADOW, true)?;
-    let pipeline = device.create_pipeline(
-        &compile_options(),
-        &link_options(),
-        Some("params"),
-        &[
-            raygen.clone(),
-            miss_env.clone(),
-            miss_shadow.clone(),
-            radiance_opaque.clone(),
-            radiance_alpha.clone(),
-            shadow_opaque.clone(),
-            shadow_alpha.clone(),
-        ],
-    )?;
+/// The program groups of the pipeline.
+struct Groups {
+    raygen: ProgramGroup,
+    miss_env: ProgramGroup,
+    miss_shadow: ProgramGroup,
+    radiance_opaque: ProgramGroup,
+    radiance_alpha: ProgramGroup,
+    shadow_opaque: ProgramGroup,
+    shadow_alpha: ProgramGroup,
+}
 
-    // Geometry: one GAS per mesh, one build input (and two SBT records) per primitive.
-    let mut records = Vec::new();
-    let mut gas_of_mesh = Vec::with_capacity(scene.meshes.len());
-    for mesh in &scene.meshes {
-        let prims: Vec<_> = mesh.primitives.iter().filter(|p| traced(p)).collect();
-        if prims.is_empty() {
-            gas_of_mesh.push(None);
-            continue;
-        }
-        let sbt_offset = records.len() as u32;
-        let flags: Vec<[GeometryFlags; 1]> = prims
-            .iter()
-            .map(|p| {
-                let opaque = scene.materials[p.material as usize].alpha_mode == AlphaMode::Opaque;
-                [if opaque {
-                    GeometryFlags::DISABLE_ANYHIT
-                } else {
-                    GeometryFlags::REQUIRE_SINGLE_ANYHIT_CALL
-                }]
-            })
-            .collect();
-        let inputs: Vec<BuildInput> = prims
-            .iter()
-            .zip(&flags)
-            .map(|(p, f)| {
-                TriangleInput::new(VertexBuffer::f32x3(&p.positions))
-                    .indices(IndexBuffer::u32x3(&p.triangles))
-                    .flags(f)
-                    .into()
-            })
-            .collect();
-        let gas = device.build_gas(&BuildOptions::new(BuildFlags::PREFER_FAST_TRACE), &inputs)?;
-        for p in prims {
-            let data = HitDataGpu {
-                positions: up.put(&p.positions)?,
-                normals: up.put(&p.normals)?,
-                uvs0: up.put(&p.uvs)?,
-                uvs1: up.put(&p.uvs1)?,
-                colors: up.put(&p.colors)?,
-                triangles: up.put(&p.triangles)?,
-                material: p.material,
-                num_triangles: p.triangles.len() as u32,
-            };
-            let (radiance, shadow) =
-                if scene.materials[p.material as usize].alpha_mode == AlphaMode::Opaque {
-                    (&radiance_opaque, &shadow_opaque)
-                } else {
-                    (&radiance_alpha, &shadow_alpha)
-                };
-            records.push((radiance.pack_header(), data));
-            records.push((shadow.pack_header(), data));
-        }
-        gas_of_mesh.push(Some((gas, sbt_offset)));
-    }
+/// One mesh's GAS (one build input per traced primitive) and its primitives' hit data.
+struct MeshGas {
+    gas: Gas,
+    /// Per traced primitive: whether its material was opaque when the GAS was built (opaque
+    /// inputs are built with `DISABLE_ANYHIT`).
+    opaque: Vec<bool>,
+    hit: Vec<HitDataGpu>,
+}
 
-    // The root: the GAS of a single untransformed placement, else one level of instances.
-    let mut xforms = Vec::new();
-    let mut ias = None;
-    let handle = if prep.single {
-        xforms.push(InstanceXformGpu {
-            o2w: Transform::IDENTITY.0,
-            w2o: Transform::IDENTITY.0,
-        });
-        let (gas, _) = gas_of_mesh[prep.placements[0].mesh]
-            .as_ref()
-            .ok_or_else(|| RenderError::Scene("the scene could not be built".into()))?;
-        gas.optix_handle()?
-    } else {
-        let mut instances = Vec::with_capacity(prep.placements.len());
-        for p in &prep.placements {
-            let Some((gas, sbt_offset)) = &gas_of_mesh[p.mesh] else {
-                continue;
-            };
-            let inverse = p.transform.inverse().ok_or_else(|| {
-                RenderError::Scene(format!(
-                    "instance {} has a transform that cannot be inverted",
-                    p.id
-                ))
-            })?;
-            xforms.push(InstanceXformGpu {
-                o2w: p.transform.0,
-                w2o: inverse.0,
-            });
-            instances.push(
-                Instance::new(gas.handle())
-                    .transform(p.transform)
-                    .instance_id(p.id)
-                    .sbt_offset(*sbt_offset),
-            );
-        }
-        let built = device.build_ias(
-            &BuildOptions::new(BuildFlags::PREFER_FAST_TRACE),
-            &[(&instances[..]).into()],
-        )?;
-        let h = built.optix_handle()?;
-        ias = Some(built);
-        h
-    };
+/// What a render's edits do not change: the compiled pipeline, the GASes, the vertex
+/// attributes, the textures and the constant tables on the device.
+pub(crate) struct SceneGeometry {
+    pipeline: Pipeline,
+    groups: Groups,
+    /// Per scene mesh; `None` for a mesh without triangles.
+    meshes: Vec<Option<MeshGas>>,
+    textures: u64,
+    num_textures: u32,
+    texels: u64,
+    srgb: u64,
+    ggx_albedo: u64,
+    _up: Uploads,
+}
 
-    // Materials and textures.
-    let materials: Vec<MaterialGpu> = scene.materials.iter().map(material).collect();
-    let mut texels: Vec<[u8; 4]> = Vec::new();
-    let mut textures = Vec::with_capacity(scene.textures.len());
-    for t in &scene.textures {
-        textures.push(TextureGpu {
-            offset: texels.len() as u32,
-            width: t.width,
-            height: t.height,
-            wrap_u: wrap(t.wrap_u),
-            wrap_v: wrap(t.wrap_v),
-            pad: [0; 3],
-        });
-        texels.extend_from_slice(&t.texels);
-    }
+/// Whether material `m` of `scene` is opaque (no any-hit program).
+fn is_opaque(scene: &SceneDesc, m: u32) -> bool {
+    scene
+        .materials
+        .get(m as usize)
+        .is_none_or(|m| m.alpha_mode == AlphaMode::Opaque)
+}
 
-    // Lights: emissive triangles (with their selection table), punctual lights, environment.
-    let lights = &prep.lights;
-    let light_tris: Vec<LightTriGpu> = lights
-        .triangles
+/// Builds the GAS of `mesh`: one build input per traced primitive, opaque ones without any-hit.
+fn build_mesh_gas(
+    device: &Device,
+    scene: &SceneDesc,
+    mesh: &MeshDesc,
+) -> Result<(Gas, Vec<bool>), RenderError> {
+    let prims: Vec<_> = mesh.primitives.iter().filter(|p| traced(p)).collect();
+    let opaque: Vec<bool> = prims.iter().map(|p| is_opaque(scene, p.material)).collect();
+    let flags: Vec<[GeometryFlags; 1]> = opaque
         .iter()
-        .map(|t| LightTriGpu {
-            p0: t.p0.to_array(),
-            e1: t.e1.to_array(),
-            e2: t.e2.to_array(),
-            normal: t.normal.to_array(),
-            uv: [
-                t.uv[0].x, t.uv[0].y, t.uv[1].x, t.uv[1].y, t.uv[2].x, t.uv[2].y,
+        .map(|&o| {
+            [if o {
+                GeometryFlags::DISABLE_ANYHIT
+            } else {
+                GeometryFlags::REQUIRE_SINGLE_ANYHIT_CALL
+            }]
+        })
+        .collect();
+    let inputs: Vec<BuildInput> = prims
+        .iter()
+        .zip(&flags)
+        .map(|(p, f)| {
+            TriangleInput::new(VertexBuffer::f32x3(&p.positions))
+                .indices(IndexBuffer::u32x3(&p.triangles))
+                .flags(f)
+                .into()
+        })
+        .collect();
+    let gas = device.build_gas(&BuildOptions::new(BuildFlags::PREFER_FAST_TRACE), &inputs)?;
+    Ok((gas, opaque))
+}
+
+impl SceneGeometry {
+    /// Compiles the programs of `source`, builds one GAS per mesh and uploads the vertex
+    /// attributes, the textures and the constant tables.
+    pub(crate) fn build(
+        device: &Device,
+        source: &str,
+        scene: &SceneDesc,
+    ) -> Result<Self, RenderError> {
+        check_supported(device, scene)?;
+        let module = device.create_module(ModuleSource::CudaCpp(source))?;
+        let hit = |ch: &'static str, ah: bool| {
+            ProgramGroup::hit_group(HitGroupDesc {
+                closest_hit: Some((&module, ch)),
+                any_hit: ah.then_some((&module, ANY_HIT)),
+                intersection: None,
+            })
+        };
+        let groups = Groups {
+            raygen: ProgramGroup::raygen(&module, RAYGEN)?,
+            miss_env: ProgramGroup::miss(&module, MISS[0])?,
+            miss_shadow: ProgramGroup::miss(&module, MISS[1])?,
+            radiance_opaque: hit(CLOSEST_HIT, false)?,
+            radiance_alpha: hit(CLOSEST_HIT, true)?,
+            shadow_opaque: hit(CLOSEST_HIT_SHADOW, false)?,
+            shadow_alpha: hit(CLOSEST_HIT_SHADOW, true)?,
+        };
+        let pipeline = device.create_pipeline(
+            &compile_options(),
+            &link_options(),
+            Some("params"),
+            &[
+                groups.raygen.clone(),
+                groups.miss_env.clone(),
+                groups.miss_shadow.clone(),
+                groups.radiance_opaque.clone(),
+                groups.radiance_alpha.clone(),
+                groups.shadow_opaque.clone(),
+                groups.shadow_alpha.clone(),
             ],
-            material: t.material,
-            two_sided: t.two_sided as u32,
-        })
-        .collect();
-    let area_pdf: Vec<f32> = (0..scene.materials.len() as u32)
-        .map(|m| lights.area_pdf(m))
-        .collect();
-    let punctual: Vec<PunctualGpu> = scene
-        .lights
-        .iter()
-        .map(|l| {
-            let (kind, cos_inner, cos_outer) = match l.kind {
-                LightKind::Directional => (0, 1.0, 1.0),
-                LightKind::Point => (1, 1.0, 1.0),
-                LightKind::Spot {
-                    inner_cone,
-                    outer_cone,
-                } => (2, inner_cone.cos(), outer_cone.cos()),
-            };
-            PunctualGpu {
-                kind,
-                position: l.position.to_array(),
-                direction: l.direction.to_array(),
-                intensity: l.intensity.to_array(),
-                range: l.range.unwrap_or(f32::INFINITY),
-                cos_inner,
-                cos_outer,
-                pad: 0,
+        )?;
+
+        let mut up = Uploads::new(device);
+        let mut meshes = Vec::with_capacity(scene.meshes.len());
+        for mesh in &scene.meshes {
+            if !mesh.primitives.iter().any(traced) {
+                meshes.push(None);
+                continue;
             }
+            let (gas, opaque) = build_mesh_gas(device, scene, mesh)?;
+            let mut hit = Vec::new();
+            for p in mesh.primitives.iter().filter(|p| traced(p)) {
+                hit.push(HitDataGpu {
+                    positions: up.put(&p.positions)?,
+                    normals: up.put(&p.normals)?,
+                    uvs0: up.put(&p.uvs)?,
+                    uvs1: up.put(&p.uvs1)?,
+                    colors: up.put(&p.colors)?,
+                    triangles: up.put(&p.triangles)?,
+                    material: p.material,
+                    num_triangles: p.triangles.len() as u32,
+                });
+            }
+            meshes.push(Some(MeshGas { gas, opaque, hit }));
+        }
+
+        let mut texels: Vec<[u8; 4]> = Vec::new();
+        let mut textures = Vec::with_capacity(scene.textures.len());
+        for t in &scene.textures {
+            textures.push(TextureGpu {
+                offset: texels.len() as u32,
+                width: t.width,
+                height: t.height,
+                wrap_u: wrap(t.wrap_u),
+                wrap_v: wrap(t.wrap_v),
+                pad: [0; 3],
+            });
+            texels.extend_from_slice(&t.texels);
+        }
+        Ok(SceneGeometry {
+            pipeline,
+            groups,
+            meshes,
+            textures: up.put(&textures)?,
+            num_textures: textures.len() as u32,
+            texels: up.put(&texels)?,
+            srgb: up.put(&crate::texture::srgb_table()[..])?,
+            ggx_albedo: up.put(&crate::albedo::GgxAlbedo::get().cells)?,
+            _up: up,
         })
-        .collect();
-    let env_tables = env.tables();
-    let env_texels: Vec<[f32; 3]> = env_tables.texels.iter().map(|t| t.to_array()).collect();
+    }
 
-    let accum = device.create_buffer::<[f32; 4]>(opts.width as usize * opts.height as usize)?;
-    let c = &prep.camera;
-    let mut params = ParamsGpu {
-        accum: accum.device_ptr(),
-        handle,
-        materials: up.put(&materials)?,
-        textures: up.put(&textures)?,
-        texels: up.put(&texels)?,
-        srgb: up.put(&crate::texture::srgb_table()[..])?,
-        instances: up.put(&xforms)?,
-        lights: up.put(&light_tris)?,
-        light_cdf: up.put(lights.cdf())?,
-        light_area_pdf: up.put(&area_pdf)?,
-        punctual: up.put(&punctual)?,
-        env_texels: up.put(&env_texels)?,
-        env_conditional: up.put(env_tables.conditional)?,
-        env_marginal: up.put(env_tables.marginal)?,
-        ggx_albedo: up.put(&crate::albedo::GgxAlbedo::get().cells)?,
-        filter: up.put(&prep.filter)?,
-        num_materials: materials.len() as u32,
-        num_textures: textures.len() as u32,
-        num_lights: light_tris.len() as u32,
-        num_punctual: punctual.len() as u32,
-        num_instances: xforms.len() as u32,
-        env_width: env_tables.width as u32,
-        env_height: env_tables.height as u32,
-        env_total: env_tables.total,
-        p_env: prep.p_env,
-        cam_origin: c.origin.to_array(),
-        cam_forward: c.forward.to_array(),
-        cam_right: c.right.to_array(),
-        cam_up: c.up.to_array(),
-        sample: 0,
-        max_depth: prep.max_depth,
-        eps: prep.eps,
-        filter_len: prep.filter.len() as u32,
-        roulette_depth: prep.roulette_depth,
-        pad: [0; 2],
-    };
+    /// Rebuilds the GAS of every mesh with a primitive of `material` (its alpha mode changed
+    /// between opaque and not); the hit data stays.
+    pub(crate) fn rebuild_meshes_of_material(
+        &mut self,
+        device: &Device,
+        scene: &SceneDesc,
+        material: u32,
+    ) -> Result<(), RenderError> {
+        for (mesh, built) in scene.meshes.iter().zip(&mut self.meshes) {
+            let Some(built) = built else { continue };
+            if built.hit.iter().any(|h| h.material == material) {
+                let (gas, opaque) = build_mesh_gas(device, scene, mesh)?;
+                built.gas = gas;
+                built.opaque = opaque;
+            }
+        }
+        Ok(())
+    }
+}
 
-    let sbt = ShaderBindingTable {
-        raygen: SbtRegion::from_headers(&[raygen.pack_header()]),
-        miss: SbtRegion::from_headers(&[miss_env.pack_header(), miss_shadow.pack_header()]),
-        hitgroup: SbtRegion::from_records(&records),
-        ..Default::default()
-    };
-    for sample in 0..opts.spp {
-        params.sample = sample;
-        let report = pipeline.launch_with(&params, &sbt, opts.width, opts.height, 1)?;
+/// What edits change: the root (the IAS, or a single GAS), the SBT, the materials, the lights
+/// and the environment, with the launch parameters that point at them.
+pub(crate) struct GpuScene {
+    /// The root's IAS, kept alive for the launches (the handle in `params` refers to it).
+    _ias: Option<Ias>,
+    sbt: ShaderBindingTable,
+    params: ParamsGpu,
+    _up: Uploads,
+}
+
+impl GpuScene {
+    /// The tables of `scene` lit by `env`, over the structures of `geometry`.
+    pub(crate) fn build(
+        device: &Device,
+        scene: &SceneDesc,
+        env: &Environment,
+        geometry: &SceneGeometry,
+    ) -> Result<Self, RenderError> {
+        let lit = prepare_lighting(scene, env)?;
+        let mut up = Uploads::new(device);
+        let g = &geometry.groups;
+
+        // The hit-group SBT: two records (radiance, shadow) per traced primitive, mesh by mesh.
+        let mut records = Vec::new();
+        let mut sbt_offset = Vec::with_capacity(geometry.meshes.len());
+        for built in &geometry.meshes {
+            sbt_offset.push(records.len() as u32);
+            let Some(built) = built else { continue };
+            for (data, &opaque) in built.hit.iter().zip(&built.opaque) {
+                let (radiance, shadow) = if opaque {
+                    (&g.radiance_opaque, &g.shadow_opaque)
+                } else {
+                    (&g.radiance_alpha, &g.shadow_alpha)
+                };
+                records.push((radiance.pack_header(), *data));
+                records.push((shadow.pack_header(), *data));
+            }
+        }
+
+        // The root: the GAS of a single untransformed placement, else one level of instances.
+        let mut xforms = Vec::new();
+        let mut ias = None;
+        let handle = if lit.single {
+            xforms.push(InstanceXformGpu {
+                o2w: Transform::IDENTITY.0,
+                w2o: Transform::IDENTITY.0,
+            });
+            let built = geometry.meshes[lit.placements[0].mesh]
+                .as_ref()
+                .ok_or_else(|| RenderError::Scene("the scene could not be built".into()))?;
+            built.gas.optix_handle()?
+        } else {
+            let mut instances = Vec::with_capacity(lit.placements.len());
+            for p in &lit.placements {
+                let Some(built) = &geometry.meshes[p.mesh] else {
+                    continue;
+                };
+                let inverse = p.transform.inverse().ok_or_else(|| {
+                    RenderError::Scene(format!(
+                        "instance {} has a transform that cannot be inverted",
+                        p.id
+                    ))
+                })?;
+                xforms.push(InstanceXformGpu {
+                    o2w: p.transform.0,
+                    w2o: inverse.0,
+                });
+                instances.push(
+                    Instance::new(built.gas.handle())
+                        .transform(p.transform)
+                        .instance_id(p.id)
+                        .sbt_offset(sbt_offset[p.mesh]),
+                );
+            }
+            let built = device.build_ias(
+                &BuildOptions::new(BuildFlags::PREFER_FAST_TRACE),
+                &[(&instances[..]).into()],
+            )?;
+            let h = built.optix_handle()?;
+            ias = Some(built);
+            h
+        };
+
+        let materials: Vec<MaterialGpu> = scene.materials.iter().map(material).collect();
+        // Lights: emissive triangles (with their selection table), punctual lights, environment.
+        let lights = &lit.lights;
+        let light_tris: Vec<LightTriGpu> = lights
+            .triangles
+            .iter()
+            .map(|t| LightTriGpu {
+                p0: t.p0.to_array(),
+                e1: t.e1.to_array(),
+                e2: t.e2.to_array(),
+                normal: t.normal.to_array(),
+                uv: [
+                    t.uv[0].x, t.uv[0].y, t.uv[1].x, t.uv[1].y, t.uv[2].x, t.uv[2].y,
+                ],
+                material: t.material,
+                two_sided: t.two_sided as u32,
+            })
+            .collect();
+        let area_pdf: Vec<f32> = (0..scene.materials.len() as u32)
+            .map(|m| lights.area_pdf(m))
+            .collect();
+        let punctual: Vec<PunctualGpu> = scene
+            .lights
+            .iter()
+            .map(|l| {
+                let (kind, cos_inner, cos_outer) = match l.kind {
+                    LightKind::Directional => (0, 1.0, 1.0),
+                    LightKind::Point => (1, 1.0, 1.0),
+                    LightKind::Spot {
+                        inner_cone,
+                        outer_cone,
+                    } => (2, inner_cone.cos(), outer_cone.cos()),
+                };
+                PunctualGpu {
+                    kind,
+                    position: l.position.to_array(),
+                    direction: l.direction.to_array(),
+                    intensity: l.intensity.to_array(),
+                    range: l.range.unwrap_or(f32::INFINITY),
+                    cos_inner,
+                    cos_outer,
+                    pad: 0,
+                }
+            })
+            .collect();
+        let env_tables = env.tables();
+        let env_texels: Vec<[f32; 3]> = env_tables.texels.iter().map(|t| t.to_array()).collect();
+
+        let params = ParamsGpu {
+            accum: 0,
+            handle,
+            materials: up.put(&materials)?,
+            textures: geometry.textures,
+            texels: geometry.texels,
+            srgb: geometry.srgb,
+            instances: up.put(&xforms)?,
+            lights: up.put(&light_tris)?,
+            light_cdf: up.put(lights.cdf())?,
+            light_area_pdf: up.put(&area_pdf)?,
+            punctual: up.put(&punctual)?,
+            env_texels: up.put(&env_texels)?,
+            env_conditional: up.put(env_tables.conditional)?,
+            env_marginal: up.put(env_tables.marginal)?,
+            ggx_albedo: geometry.ggx_albedo,
+            filter: 0,
+            aov: 0,
+            num_materials: materials.len() as u32,
+            num_textures: geometry.num_textures,
+            num_lights: light_tris.len() as u32,
+            num_punctual: punctual.len() as u32,
+            num_instances: xforms.len() as u32,
+            env_width: env_tables.width as u32,
+            env_height: env_tables.height as u32,
+            env_total: env_tables.total,
+            p_env: lit.p_env,
+            cam_origin: [0.0; 3],
+            cam_forward: [0.0; 3],
+            cam_right: [0.0; 3],
+            cam_up: [0.0; 3],
+            sample: 0,
+            max_depth: 1,
+            eps: lit.eps,
+            filter_len: 0,
+            roulette_depth: 1,
+            seed: 0,
+            pad: 0,
+        };
+        let sbt = ShaderBindingTable {
+            raygen: SbtRegion::from_headers(&[g.raygen.pack_header()]),
+            miss: SbtRegion::from_headers(&[g.miss_env.pack_header(), g.miss_shadow.pack_header()]),
+            hitgroup: SbtRegion::from_records(&records),
+            ..Default::default()
+        };
+        Ok(GpuScene {
+            _ias: ias,
+            sbt,
+            params,
+            _up: up,
+        })
+    }
+
+    /// The launches of one render: these tables seen from `camera` with `opts`, adding to
+    /// `accum` (and `aov`), with the pixel filter's table in `filter`.
+    pub(crate) fn pass<'a>(
+        &'a self,
+        geometry: &'a SceneGeometry,
+        opts: &RenderOptions,
+        camera: CameraFrame,
+        accum: &Buffer<[f32; 4]>,
+        aov: Option<&Buffer<[f32; 8]>>,
+        filter: &Buffer<f32>,
+    ) -> Pass<'a> {
+        let mut params = self.params;
+        params.accum = accum.device_ptr();
+        params.aov = aov.map_or(0, |b| b.device_ptr());
+        params.filter = filter.device_ptr();
+        params.filter_len = filter.len() as u32;
+        params.cam_origin = camera.origin.to_array();
+        params.cam_forward = camera.forward.to_array();
+        params.cam_right = camera.right.to_array();
+        params.cam_up = camera.up.to_array();
+        params.max_depth = opts.max_depth.max(1);
+        params.roulette_depth = opts.roulette_depth.max(1);
+        params.seed = opts.seed;
+        Pass {
+            pipeline: &geometry.pipeline,
+            sbt: &self.sbt,
+            params,
+            width: opts.width,
+            height: opts.height,
+        }
+    }
+}
+
+/// The launches of one render ([`GpuScene::pass`]).
+pub(crate) struct Pass<'a> {
+    pipeline: &'a Pipeline,
+    sbt: &'a ShaderBindingTable,
+    params: ParamsGpu,
+    width: u32,
+    height: u32,
+}
+
+impl Pass<'_> {
+    /// Adds sample `sample` to every pixel.
+    pub(crate) fn launch(&mut self, sample: u32) -> Result<(), RenderError> {
+        self.params.sample = sample;
+        let report =
+            self.pipeline
+                .launch_with(&self.params, self.sbt, self.width, self.height, 1)?;
         if let Some((index, e)) = report.first_exceptions.first() {
             return Err(RenderError::Exceptions {
                 pass: sample,
@@ -622,10 +814,6 @@ pub fn render_with_source(
                 first: format!("at pixel {:?}: {e}", &index[..2]),
             });
         }
-        progress(sample + 1);
+        Ok(())
     }
-    let sums = accum.download()?;
-    // The structures lived until the last launch.
-    drop((ias, gas_of_mesh, up));
-    Ok(image_from_sums(opts.width, opts.height, &sums))
 }

@@ -106,6 +106,7 @@ struct Params {
     u64 env_texels, env_conditional, env_marginal;  // float[3] per texel; cdfs
     u64 ggx_albedo;  // float[2] (A, B) per cell, PT_GGX_N x PT_GGX_N (albedo.rs)
     u64 filter;      // float[filter_len]: the pixel filter's inverse CDF (filter.rs)
+    u64 aov;         // float[8] per pixel, or 0: the first hit's albedo, normal, distance sums
     u32 num_materials, num_textures, num_lights, num_punctual, num_instances;
     u32 env_width, env_height;
     float env_total;
@@ -115,7 +116,8 @@ struct Params {
     float eps;
     u32 filter_len;
     u32 roulette_depth;  // the first vertex after which Russian roulette may end a path
-    u32 pad[2];
+    u32 seed;            // chooses the image's random sequence (0: the default one)
+    u32 pad;
 };
 
 }  // namespace pt
@@ -900,11 +902,31 @@ using namespace pt;
 // The programs
 // ---------------------------------------------------------------------------------------------
 
+// The first hit's auxiliary values (RenderOptions::aovs): sums per pixel of the surface's
+// albedo (base colour with its texture and vertex colour), shading normal (world space) and
+// distance from the camera, and the number of samples that hit. Each launch index owns its
+// pixel, so the sums need no atomics. The same sums in the same order as programs.rs.
+PTF void write_aov(const Material& m, const Shading& sh) {
+    const uint3 idx = optixGetLaunchIndex();
+    const uint3 dim = optixGetLaunchDimensions();
+    u32 pixel = idx.y * dim.x + idx.x;
+    V3 albedo = v3a(m.base_color) * xyz(tex(m.base_color_tex, sh.uvs, true)) * xyz(sh.color);
+    float* a = reinterpret_cast<float*>(params.aov) + 8ull * pixel;
+    a[0] = a[0] + albedo.x;
+    a[1] = a[1] + albedo.y;
+    a[2] = a[2] + albedo.z;
+    a[3] = a[3] + sh.ns.x;
+    a[4] = a[4] + sh.ns.y;
+    a[5] = a[5] + sh.ns.z;
+    a[6] = a[6] + optixGetRayTmax();
+    a[7] = a[7] + 1.0f;
+}
+
 extern "C" __global__ void __raygen__camera() {
     const uint3 idx = optixGetLaunchIndex();
     const uint3 dim = optixGetLaunchDimensions();
     u32 pixel = idx.y * dim.x + idx.x;
-    Rng rng = rng_new(pixel, params.sample, 0x5eedu);
+    Rng rng = rng_new(pixel, params.sample, 0x5eedu ^ (params.seed * 0x9E3779B9u));
     float jx = rng.uniform();
     float jy = rng.uniform();
     // Filter importance sampling: the offset from the pixel's centre follows the filter.
@@ -955,6 +977,7 @@ extern "C" __global__ void __closesthit__radiance() {
     }
     const Material& m = ptr<Material>(params.materials)[g.material];
     Shading sh = shading(m, g);
+    if (params.aov != 0ull && s.depth == 0u) write_aov(m, sh);
     V3 dir = from_f3(optixGetWorldRayDirection());
     V3 wo = -dir;
     Rng rng{s.seed};

@@ -15,6 +15,11 @@
 //! The result is linear radiance; [`Image::save`] writes it as OpenEXR (linear) or PNG (sRGB
 //! through an exposure and a tone curve, [`tonemap`]; [`Image::save_with`] chooses them).
 //!
+//! To render a scene more than once (progressively, with a callback that sees the image and
+//! may stop the render, with edits between renders that rebuild only what they touch, with
+//! AOVs), build a [`Renderer`] on a device; [`render_passes`] gives the callback, the
+//! cancellation and the AOVs to the Rust programs too.
+//!
 //! The same path tracer exists as CUDA C++ programs ([`device::render_on`], `device_programs.cu`)
 //! that run on any [`oxray::Device`]: the CPU (compiled by the host's C++ compiler) or a CUDA
 //! GPU (compiled by NVRTC). Both versions share the scene preparation (camera, emissive
@@ -38,6 +43,8 @@
 //!     camera: None, // the scene's first camera, else one framing the scene
 //!     filter: Filter::Gaussian,
 //!     roulette_depth: 3,
+//!     seed: 0,
+//!     aovs: false,
 //! };
 //! let dark = Environment::uniform(Vec3::ZERO); // the box is lit by its ceiling panel only
 //! let mut passes = 0;
@@ -61,6 +68,7 @@ pub mod filter;
 pub mod lights;
 pub mod output;
 pub mod programs;
+pub mod renderer;
 pub mod texture;
 pub mod tonemap;
 
@@ -74,10 +82,12 @@ use oxray_scene::{AlphaMode, Camera, Primitive, SceneDesc};
 use oxray_util::{
     GasDesc, Geometry, GeometryInstance, Material, Scene, ScenePipeline, UtilInstance,
 };
-use programs::{CameraFrame, Params, RAY_TYPES};
+use programs::{CameraFrame, Params, AOV_WORDS, RAY_TYPES};
+use std::ops::ControlFlow;
 use thiserror::Error;
 
 pub use output::Image;
+pub use renderer::{Aovs, Progress, Rendered, Renderer};
 
 /// Render settings.
 #[derive(Clone, Debug)]
@@ -97,11 +107,17 @@ pub struct RenderOptions {
     /// The first path vertex after which Russian roulette may end a path (on its throughput):
     /// the first bounces, which carry most of the image, are never cut short.
     pub roulette_depth: u32,
+    /// Chooses the random sequence: renders with the same seed are identical, renders with
+    /// different seeds independent (0 is the default sequence).
+    pub seed: u32,
+    /// Also render the first hit's auxiliary images ([`Aovs`]: albedo, shading normal,
+    /// distance, samples), returned by [`Renderer::render`] and [`render_passes`].
+    pub aovs: bool,
 }
 
 impl Default for RenderOptions {
     /// 640 x 480 pixels, 16 samples per pixel, paths of up to 8 vertices, the scene's camera,
-    /// the Gaussian pixel filter.
+    /// the Gaussian pixel filter, Russian roulette after 3 vertices, seed 0, no AOVs.
     fn default() -> Self {
         RenderOptions {
             width: 640,
@@ -111,6 +127,8 @@ impl Default for RenderOptions {
             camera: None,
             filter: filter::Filter::default(),
             roulette_depth: 3,
+            seed: 0,
+            aovs: false,
         }
     }
 }
@@ -161,7 +179,24 @@ pub enum RenderError {
 /// Where the camera looks from, for `opts`: the scene's camera, else one that frames the
 /// scene's bounds from the front, slightly above and to the right.
 pub fn camera_frame(scene: &SceneDesc, opts: &RenderOptions) -> Result<CameraFrame, RenderError> {
-    let camera = match opts.camera {
+    camera_frame_with(scene, opts, None)
+}
+
+/// [`camera_frame`] from `camera` where it is given (a [`Renderer`]'s own camera).
+pub(crate) fn camera_frame_with(
+    scene: &SceneDesc,
+    opts: &RenderOptions,
+    camera: Option<Camera>,
+) -> Result<CameraFrame, RenderError> {
+    let camera = match camera {
+        Some(c) => c,
+        None => select_camera(scene, opts)?,
+    };
+    frame_of(&camera, opts)
+}
+
+fn select_camera(scene: &SceneDesc, opts: &RenderOptions) -> Result<Camera, RenderError> {
+    Ok(match opts.camera {
         Some(i) => *scene.cameras.get(i).ok_or_else(|| {
             RenderError::Scene(format!(
                 "camera {i} does not exist (the scene has {})",
@@ -172,7 +207,10 @@ pub fn camera_frame(scene: &SceneDesc, opts: &RenderOptions) -> Result<CameraFra
             Some(c) => *c,
             None => framing_camera(scene)?,
         },
-    };
+    })
+}
+
+fn frame_of(camera: &Camera, opts: &RenderOptions) -> Result<CameraFrame, RenderError> {
     let m = camera.to_world;
     let origin = m.transform_point3(Vec3::ZERO);
     let forward = m.transform_vector3(-Vec3::Z).normalize_or_zero();
@@ -210,25 +248,30 @@ fn framing_camera(scene: &SceneDesc) -> Result<Camera, RenderError> {
 }
 
 /// What both renderers ([`render`] and [`device::render_on`]) derive from a scene before
-/// tracing: the camera, the emissive triangles, the light-selection probability, the ray
-/// offset and the placements to trace.
+/// tracing: the camera and the lighting, with the options that shape the paths.
 pub(crate) struct Prepared {
     pub camera: CameraFrame,
+    pub lit: Lighting,
+    pub max_depth: u32,
+    /// The pixel filter's inverse-CDF table ([`filter::Filter::table`]).
+    pub filter: Vec<f32>,
+    /// The first vertex after which Russian roulette may end a path.
+    pub roulette_depth: u32,
+}
+
+/// What the renderers derive from a scene and its environment, whatever the view: the emissive
+/// triangles, the light-selection probability, the ray offset and the placements to trace.
+pub(crate) struct Lighting {
     pub lights: TriangleLights,
     /// Probability that next-event estimation samples the environment.
     pub p_env: f32,
     /// Distance by which new rays leave a surface.
     pub eps: f32,
-    pub max_depth: u32,
     /// The instances to trace: placeable, of meshes with triangles.
     pub placements: Vec<Placement>,
     /// Whether the scene is one untransformed placement, traced as its GAS: the instance level
     /// would only add a transform per ray.
     pub single: bool,
-    /// The pixel filter's inverse-CDF table ([`filter::Filter::table`]).
-    pub filter: Vec<f32>,
-    /// The first vertex after which Russian roulette may end a path.
-    pub roulette_depth: u32,
 }
 
 /// One instance to trace.
@@ -251,6 +294,20 @@ pub(crate) fn prepare(
 ) -> Result<Prepared, RenderError> {
     scene.validate().map_err(RenderError::Scene)?;
     let camera = camera_frame(scene, opts)?;
+    Ok(Prepared {
+        camera,
+        lit: prepare_lighting(scene, env)?,
+        max_depth: opts.max_depth.max(1),
+        filter: opts.filter.table(),
+        roulette_depth: opts.roulette_depth.max(1),
+    })
+}
+
+/// The lighting of a validated scene.
+pub(crate) fn prepare_lighting(
+    scene: &SceneDesc,
+    env: &Environment,
+) -> Result<Lighting, RenderError> {
     let lights = TriangleLights::new(scene);
     let p_env = match (lights.is_empty(), env.is_black()) {
         (_, true) => 0.0,
@@ -284,16 +341,12 @@ pub(crate) fn prepare(
         ));
     }
     let single = placements.len() == 1 && placements[0].transform == Transform::IDENTITY;
-    Ok(Prepared {
-        camera,
+    Ok(Lighting {
         lights,
         p_env,
         eps,
-        max_depth: opts.max_depth.max(1),
         placements,
         single,
-        filter: opts.filter.table(),
-        roulette_depth: opts.roulette_depth.max(1),
     })
 }
 
@@ -321,6 +374,40 @@ pub fn render(
     opts: &RenderOptions,
     mut progress: impl FnMut(u32),
 ) -> Result<Image, RenderError> {
+    let done = render_passes(scene, env, opts, |p| {
+        progress(p.samples());
+        ControlFlow::Continue(())
+    })?;
+    Ok(done.image)
+}
+
+/// [`render`] with the callback of [`Renderer::render`]: after each pass it sees the samples
+/// done and the image so far ([`Progress::image`]) and may stop the render, which then returns
+/// the image of the passes done; with [`RenderOptions::aovs`] the result has the [`Aovs`].
+///
+/// ```
+/// use std::ops::ControlFlow;
+/// use glam::Vec3;
+/// use oxray_render::{lights::Environment, render_passes, RenderOptions};
+///
+/// let scene = oxray_scene::cornell_box();
+/// let opts = RenderOptions { width: 8, height: 8, spp: 16, max_depth: 3, ..Default::default() };
+/// let done = render_passes(&scene, &Environment::uniform(Vec3::ZERO), &opts, |p| {
+///     match p.samples() < 2 {
+///         true => ControlFlow::Continue(()),
+///         false => ControlFlow::Break(()),
+///     }
+/// })?;
+/// assert!(done.cancelled);
+/// assert_eq!(done.samples, 2);
+/// # Ok::<(), oxray_render::RenderError>(())
+/// ```
+pub fn render_passes(
+    scene: &SceneDesc,
+    env: &Environment,
+    opts: &RenderOptions,
+    mut on_pass: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
+) -> Result<Rendered, RenderError> {
     let prep = prepare(scene, env, opts)?;
     // Everything the launch parameters borrow outlives the scene that holds the programs.
     let prims: Vec<&Primitive> = scene
@@ -328,8 +415,12 @@ pub fn render(
         .iter()
         .flat_map(|m| m.primitives.iter().filter(|p| traced(p)))
         .collect();
-    let lights = &prep.lights;
-    let accum = OutputBuffer::new(opts.width as usize * opts.height as usize);
+    let lights = &prep.lit.lights;
+    let pixels = opts.width as usize * opts.height as usize;
+    let accum = OutputBuffer::new(pixels);
+    let aov = opts
+        .aovs
+        .then(|| OutputBuffer::<[f32; AOV_WORDS]>::new(pixels));
     let module = programs::module()?;
     let radiance_opaque = ProgramGroup::hit_group(HitGroupDesc {
         closest_hit: Some((&module, "__closesthit__radiance")),
@@ -390,7 +481,7 @@ pub fn render(
         );
     }
     let mut instances = Vec::new();
-    for p in &prep.placements {
+    for p in &prep.lit.placements {
         let Some(gas) = gas_of_mesh[p.mesh] else {
             continue;
         };
@@ -401,7 +492,7 @@ pub fn render(
     }
     // A single untransformed instance's SBT offset is 0 either way, as the scene's only chunk
     // starts the hit-group table.
-    let single = prep.single.then(|| instances[0].gas);
+    let single = prep.lit.single.then(|| instances[0].gas);
     let ias = util.add_ias(instances, BuildFlags::PREFER_FAST_TRACE);
     util.rebuild_dirty()?;
     let handle = match single {
@@ -423,6 +514,8 @@ pub fn render(
             ProgramGroup::miss(Some((&module, "__miss__shadow")))?,
         ],
     );
+    let mut samples = 0;
+    let mut cancelled = false;
     for sample in 0..opts.spp {
         let params = Params {
             accum: &accum,
@@ -431,13 +524,15 @@ pub fn render(
             prims: &prims,
             lights,
             env,
-            p_env: prep.p_env,
+            p_env: prep.lit.p_env,
             camera: prep.camera,
             sample,
             max_depth: prep.max_depth,
-            eps: prep.eps,
+            eps: prep.lit.eps,
             filter: &prep.filter,
             roulette_depth: prep.roulette_depth,
+            seed: opts.seed,
+            aov: aov.as_ref(),
         };
         let report = pipeline.launch(&mut util, &params, opts.width, opts.height, 1)?;
         if let Some((index, e)) = report.first_exceptions.first() {
@@ -447,7 +542,20 @@ pub fn render(
                 first: format!("at pixel {:?}: {e}", &index[..2]),
             });
         }
-        progress(sample + 1);
+        samples = sample + 1;
+        let progress = Progress::host(samples, opts, &accum);
+        if on_pass(&progress).is_break() {
+            cancelled = samples < opts.spp;
+            break;
+        }
     }
-    Ok(image_from_sums(opts.width, opts.height, &accum.to_vec()))
+    let sums = accum.to_vec();
+    Ok(Rendered {
+        image: image_from_sums(opts.width, opts.height, &sums),
+        samples,
+        cancelled,
+        aovs: aov
+            .as_ref()
+            .map(|a| Aovs::from_sums(opts.width, opts.height, &sums, &a.to_vec())),
+    })
 }

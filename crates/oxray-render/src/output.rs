@@ -100,6 +100,66 @@ impl Image {
     }
 }
 
+/// Writes `image` (channels `R`, `G`, `B`, `A`) and `aovs` (layers `albedo.{R,G,B}`,
+/// `normal.{X,Y,Z}`, `depth.Z`, `samples.Y`) as one linear 32-bit float OpenEXR file,
+/// atomically ([`crate::Rendered::save_exr`]).
+pub(crate) fn write_layers_exr(
+    path: &Path,
+    image: &Image,
+    aovs: Option<&crate::Aovs>,
+) -> Result<(), String> {
+    let name = path.display();
+    if oxray_scene::file_extension(path).as_deref() != Some("exr") {
+        return Err(format!(
+            "cannot write {name}: AOVs are written to OpenEXR files (.exr)"
+        ));
+    }
+    let n = image.pixels.len();
+    if let Some(a) = aovs {
+        let sizes = [
+            a.albedo.len(),
+            a.normal.len(),
+            a.depth.len(),
+            a.samples.len(),
+        ];
+        if (a.width, a.height) != (image.width, image.height) || sizes.iter().any(|&l| l != n) {
+            return Err(format!(
+                "cannot write {name}: the AOVs are not the image's size"
+            ));
+        }
+    }
+    write_atomic(path, |tmp| {
+        use exr::prelude::*;
+        let channel =
+            |name: &str, values: Vec<f32>| AnyChannel::new(name, FlatSamples::F32(values));
+        let mut list: SmallVec<[AnyChannel<FlatSamples>; 4]> = SmallVec::new();
+        for (c, label) in ["R", "G", "B", "A"].iter().enumerate() {
+            list.push(channel(label, image.pixels.iter().map(|p| p[c]).collect()));
+        }
+        if let Some(a) = aovs {
+            for (c, label) in ["albedo.R", "albedo.G", "albedo.B"].iter().enumerate() {
+                list.push(channel(label, a.albedo.iter().map(|p| p[c]).collect()));
+            }
+            for (c, label) in ["normal.X", "normal.Y", "normal.Z"].iter().enumerate() {
+                list.push(channel(label, a.normal.iter().map(|p| p[c]).collect()));
+            }
+            list.push(channel("depth.Z", a.depth.clone()));
+            list.push(channel("samples.Y", a.samples.clone()));
+        }
+        let layer = Layer::new(
+            (image.width as usize, image.height as usize),
+            LayerAttributes::named("oxray"),
+            Encoding::FAST_LOSSLESS,
+            AnyChannels::sort(list),
+        );
+        exr::prelude::Image::from_layer(layer)
+            .write()
+            .to_file(tmp)
+            .map_err(WriteError::from)
+    })
+    .map_err(|e| format!("cannot write {name}: {e}"))
+}
+
 /// Why an image could not be written: the message of the encoder or of the file system.
 #[derive(Debug)]
 pub struct WriteError(String);

@@ -64,6 +64,19 @@ pub struct Params<'a> {
     pub filter: &'a [f32],
     /// The first vertex after which Russian roulette may end a path.
     pub roulette_depth: u32,
+    /// Chooses the image's random sequence (0: the default one).
+    pub seed: u32,
+    /// Sums per pixel of the first hit's albedo, shading normal and distance, and the number
+    /// of samples that hit ([`AOV_WORDS`] floats), or `None`.
+    pub aov: Option<&'a OutputBuffer<[f32; AOV_WORDS]>>,
+}
+
+/// Floats per pixel of the auxiliary sums: albedo (3), shading normal (3), distance, hits.
+pub const AOV_WORDS: usize = 8;
+
+/// The salt of a pixel's random stream for `seed` (the same in `device_programs.cu`).
+pub fn stream_salt(seed: u32) -> u32 {
+    0x5eed ^ seed.wrapping_mul(0x9E37_79B9)
 }
 
 /// The radiance payload. The random state is word 0 in both ray types so that the any-hit
@@ -319,6 +332,36 @@ fn visible(
     Ok(words[1] != 0)
 }
 
+/// The first hit's auxiliary values, added to its pixel's sums ([`Params::aov`]): the base
+/// colour with its texture and vertex colour, the shading normal, the distance from the camera.
+fn write_aov(
+    ctx: &ClosestHitCtx<Params>,
+    aov: &OutputBuffer<[f32; AOV_WORDS]>,
+    m: &MaterialDesc,
+    sh: &Shading,
+) {
+    let [x, y, _] = ctx.launch_index();
+    let [w, _, _] = ctx.launch_dimensions();
+    let pixel = (y * w + x) as usize;
+    let p = ctx.params();
+    let base_tex = tex(p, m.base_color_texture, &sh.uvs, true);
+    let albedo = Vec3::from_slice(&m.base_color[..3]) * base_tex.truncate() * sh.color.truncate();
+    let a = aov.read(pixel).unwrap_or([0.0; AOV_WORDS]);
+    aov.write(
+        pixel,
+        [
+            a[0] + albedo.x,
+            a[1] + albedo.y,
+            a[2] + albedo.z,
+            a[3] + sh.ns.x,
+            a[4] + sh.ns.y,
+            a[5] + sh.ns.z,
+            a[6] + ctx.ray_tmax(),
+            a[7] + 1.0,
+        ],
+    );
+}
+
 /// `__closesthit__radiance`: one path vertex.
 fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
     let mut s = load(ctx.payload_words());
@@ -330,6 +373,9 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
         return Ok(());
     };
     let sh = shading(ctx, m, prim);
+    if let (Some(aov), 0) = (p.aov, s.depth) {
+        write_aov(ctx, aov, m, &sh);
+    }
     let dir = ctx.world_ray_direction();
     let wo = -dir;
     let mut rng = Rng(s.seed);
@@ -548,7 +594,7 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             let [w, h, _] = ctx.launch_dimensions();
             let p = ctx.params();
             let pixel = y * w + x;
-            let mut rng = Rng::new(pixel, p.sample, 0x5eed);
+            let mut rng = Rng::new(pixel, p.sample, stream_salt(p.seed));
             // Filter importance sampling: the offset from the pixel's centre follows the filter.
             let (jx, jy) = (rng.uniform(), rng.uniform());
             let ox = 0.5 + sample_offset(p.filter, jx);
