@@ -78,6 +78,9 @@ enum Command {
         /// independent one.
         #[arg(long, default_value_t = 0)]
         seed: u32,
+        /// Stop after this many seconds (at the end of a pass) and write the samples done.
+        #[arg(long, value_name = "SECONDS")]
+        time: Option<f64>,
         /// Also write the first hit's albedo, shading normal, distance and sample count, as the
         /// layers albedo.RGB, normal.XYZ, depth.Z and samples.Y of the output (an .exr file).
         #[arg(long)]
@@ -249,6 +252,7 @@ fn run(cli: Cli) -> Result<()> {
             filter,
             ground,
             seed,
+            time,
             aov,
             quiet,
             backend,
@@ -274,6 +278,13 @@ fn run(cli: Cli) -> Result<()> {
             let filter: oxray_render::filter::Filter = filter
                 .parse()
                 .map_err(|e| anyhow::anyhow!("--filter: {e}"))?;
+            let budget = match time {
+                Some(t) if t.is_finite() && t > 0.0 && t <= 1e7 => {
+                    Some(std::time::Duration::from_secs_f64(t))
+                }
+                Some(t) => bail!("--time must be a number of seconds in (0, 1e7], got {t}"),
+                None => None,
+            };
             if !(env_intensity.is_finite() && env_intensity >= 0.0) {
                 bail!("--env-intensity must be a finite number >= 0, got {env_intensity}");
             }
@@ -368,12 +379,31 @@ fn run(cli: Cli) -> Result<()> {
                 .expect("a valid template")
                 .progress_chars("=> "),
             );
+            // Ctrl-C (or SIGTERM, SIGHUP) ends the render after the pass in flight and writes
+            // the samples done; a second one quits at once.
+            let interrupted = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+            {
+                let flag = interrupted.clone();
+                ctrlc::set_handler(move || {
+                    if flag.swap(true, std::sync::atomic::Ordering::SeqCst) {
+                        std::process::exit(130);
+                    }
+                })
+                .context("cannot install the interrupt handler")?;
+            }
+            let render_start = std::time::Instant::now();
             let rendered = pool.install(|| {
                 renderer.render(&desc, &environment, &opts, |p| {
                     bar.set_position(p.samples() as u64);
-                    std::ops::ControlFlow::Continue(())
+                    let out_of_time = budget.is_some_and(|b| render_start.elapsed() >= b);
+                    if out_of_time || interrupted.load(std::sync::atomic::Ordering::SeqCst) {
+                        std::ops::ControlFlow::Break(())
+                    } else {
+                        std::ops::ControlFlow::Continue(())
+                    }
                 })
             })?;
+            let render_secs = render_start.elapsed().as_secs_f64();
             bar.finish_and_clear();
             let look = oxray_render::tonemap::Look { tone_map, exposure };
             if aov {
@@ -385,13 +415,28 @@ fn run(cli: Cli) -> Result<()> {
             let on = renderer
                 .describe()
                 .map_or(String::new(), |d| format!(" with {d}"));
+            let done = rendered.samples;
+            let stopped = match (
+                rendered.cancelled,
+                interrupted.load(std::sync::atomic::Ordering::SeqCst),
+            ) {
+                (false, _) => String::new(),
+                (true, true) => format!(", interrupted after {done} of {spp} spp"),
+                (true, false) => format!(", out of time after {done} of {spp} spp"),
+            };
+            let samples_per_s = w as f64 * h as f64 * done as f64 / render_secs.max(1e-9);
             say(format_args!(
-                "wrote {} ({w}x{h}, {spp} spp, {} triangles, {} instances{on}): loaded in {loaded:.1} s, total {:.1} s",
+                "wrote {} ({w}x{h}, {done} spp, {} triangles, {} instances{on}{stopped}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s), total {:.1} s",
                 output.display(),
                 desc.triangle_count(),
                 desc.instances.len(),
+                samples_per_s / 1e6,
                 start.elapsed().as_secs_f64()
-            ))
+            ))?;
+            if rendered.cancelled && interrupted.load(std::sync::atomic::Ordering::SeqCst) {
+                std::process::exit(130);
+            }
+            Ok(())
         }
         Command::Raycast {
             mesh,

@@ -500,3 +500,73 @@ fn seeds_and_aov_layers() {
     );
     assert!(!png.exists());
 }
+
+/// `--time` ends the render at the end of a pass and writes the samples done; an interrupt
+/// (SIGINT, as Ctrl-C sends) does the same and exits with status 130.
+#[test]
+fn a_time_budget_or_an_interrupt_writes_the_samples_done() {
+    let scene = obj_scene();
+    let budget = tmp("budget.png");
+    let out = oxray(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&budget),
+        "--size",
+        "16x16",
+        "--spp",
+        "65536",
+        "--time",
+        "0.5",
+    ]);
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(said.contains("out of time after"), "{said}");
+    assert!(said.contains("M samples/s"), "{said}");
+    assert!(budget.exists());
+    assert_one_error(
+        &oxray(&["render", "-o", s(&budget), "--time", "0"]),
+        "--time must be",
+    );
+
+    let interrupted = tmp("interrupted.png");
+    let child = Command::new(env!("CARGO_BIN_EXE_oxray"))
+        .args([
+            "render",
+            s(&scene),
+            "-o",
+            s(&interrupted),
+            "--size",
+            "16x16",
+            "--spp",
+            "65536",
+            "--quiet",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Well after the handler is installed (the scene loads in milliseconds).
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let out = child.wait_with_output().unwrap();
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(130),
+        "{said} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(said.contains("interrupted after"), "{said}");
+    let decoder = png::Decoder::new(std::fs::File::open(&interrupted).unwrap());
+    let reader = decoder.read_info().unwrap();
+    assert_eq!((reader.info().width, reader.info().height), (16, 16));
+}
