@@ -52,6 +52,19 @@ enum Command {
         /// Which of the scene's cameras to use (default: the first, else one framing the scene).
         #[arg(long)]
         camera: Option<usize>,
+        /// Put the camera at X,Y,Z (world space; default: where the chosen camera is).
+        #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+        look_from: Option<Vec3>,
+        /// Aim the camera at X,Y,Z (default: the scene's centre with --look-from, else where the
+        /// chosen camera looks).
+        #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+        look_at: Option<Vec3>,
+        /// The camera's up direction (default: +Y).
+        #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+        up: Option<Vec3>,
+        /// Vertical field of view in degrees (default: the chosen camera's).
+        #[arg(long, value_name = "DEGREES")]
+        fov: Option<f32>,
         /// Environment light: "sky" (procedural daylight, the default for scene files), "none",
         /// a constant grey level such as "0.5", or an equirectangular .hdr or .exr map.
         #[arg(long)]
@@ -206,6 +219,63 @@ fn main() {
 
 /// Prints a line on standard output. A closed pipe (`oxray info f | head -0`) ends the program
 /// quietly with status 0, as Unix tools do; another write error (a full disk) is an error.
+/// Parses `X,Y,Z` into a finite vector.
+fn parse_vec3(text: &str) -> Result<Vec3, String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    let values: Option<Vec<f32>> = parts.iter().map(|p| p.parse::<f32>().ok()).collect();
+    match values.as_deref() {
+        Some(&[x, y, z]) if x.is_finite() && y.is_finite() && z.is_finite() => {
+            Ok(Vec3::new(x, y, z))
+        }
+        _ => Err(format!("expected three finite numbers X,Y,Z, got {text:?}")),
+    }
+}
+
+/// `--look-from`, `--look-at`, `--up` and `--fov`: a camera made from the chosen one.
+struct CameraOverride {
+    look_from: Option<Vec3>,
+    look_at: Option<Vec3>,
+    up: Option<Vec3>,
+    fov: Option<f32>,
+}
+
+impl CameraOverride {
+    fn camera(
+        &self,
+        chosen: &oxray_render::programs::CameraFrame,
+        bounds: Option<(Vec3, Vec3)>,
+    ) -> Result<oxray_scene::Camera> {
+        let eye = self.look_from.unwrap_or(chosen.origin);
+        let target = match (self.look_at, self.look_from, bounds) {
+            (Some(t), _, _) => t,
+            (None, Some(_), Some((lo, hi))) => (lo + hi) * 0.5,
+            _ => chosen.origin + chosen.forward,
+        };
+        let forward = target - eye;
+        if forward.length() <= 1e-6 * eye.length().max(1.0) {
+            bail!("--look-from and --look-at must be different points");
+        }
+        let up = match self.up {
+            Some(u) => u,
+            None if self.look_from.is_none() && self.look_at.is_none() => chosen.up,
+            None => Vec3::Y,
+        };
+        if forward.normalize().cross(up.normalize_or_zero()).length() < 1e-3 {
+            bail!("--up must not be parallel to the viewing direction (or zero), got {up}");
+        }
+        let yfov = match self.fov {
+            Some(f) if f.is_finite() && f > 0.0 && f < 170.0 => f.to_radians(),
+            Some(f) => bail!("--fov must be in (0, 170) degrees, got {f}"),
+            None => 2.0 * chosen.up.length().atan(),
+        };
+        Ok(oxray_scene::Camera {
+            to_world: glam::Mat4::look_at_rh(eye, target, up).inverse(),
+            yfov,
+            aspect: None,
+        })
+    }
+}
+
 fn say(line: impl std::fmt::Display) -> Result<()> {
     use std::io::Write;
     let mut out = std::io::stdout().lock();
@@ -245,6 +315,10 @@ fn run(cli: Cli) -> Result<()> {
             max_depth,
             threads,
             camera,
+            look_from,
+            look_at,
+            up,
+            fov,
             env,
             env_intensity,
             exposure,
@@ -356,7 +430,7 @@ fn run(cli: Cli) -> Result<()> {
                 },
             };
             let loaded = start.elapsed().as_secs_f64();
-            let opts = RenderOptions {
+            let mut opts = RenderOptions {
                 width: w,
                 height: h,
                 spp,
@@ -367,6 +441,18 @@ fn run(cli: Cli) -> Result<()> {
                 aovs: aov,
                 ..Default::default()
             };
+            if look_from.is_some() || look_at.is_some() || up.is_some() || fov.is_some() {
+                let chosen = oxray_render::camera_frame(&desc, &opts)?;
+                let view = CameraOverride {
+                    look_from,
+                    look_at,
+                    up,
+                    fov,
+                };
+                desc.cameras
+                    .insert(0, view.camera(&chosen, desc.content_bounds())?);
+                opts.camera = Some(0);
+            }
             let bar = if quiet {
                 indicatif::ProgressBar::hidden()
             } else {

@@ -570,3 +570,91 @@ fn a_time_budget_or_an_interrupt_writes_the_samples_done() {
     let reader = decoder.read_info().unwrap();
     assert_eq!((reader.info().width, reader.info().height), (16, 16));
 }
+
+/// `--look-from`, `--look-at`, `--up` and `--fov` aim the camera.
+#[test]
+fn the_camera_is_aimed_from_the_command_line() {
+    let scene = obj_scene();
+    let radiance = |extra: &[&str]| -> f32 {
+        let out_path = tmp("aimed.exr");
+        let mut args = vec![
+            "render",
+            s(&scene),
+            "-o",
+            s(&out_path),
+            "--size",
+            "16x16",
+            "--spp",
+            "2",
+            "--quiet",
+            "--env",
+            "none",
+        ];
+        args.extend_from_slice(extra);
+        let out = oxray(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let img = exr::prelude::read_first_rgba_layer_from_file(
+            &out_path,
+            |res, _| vec![0f32; res.width() * res.height()],
+            |px: &mut Vec<f32>, pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * 16 + pos.x()] = r + g + b;
+            },
+        )
+        .unwrap();
+        img.layer_data.channel_data.pixels.iter().sum()
+    };
+    let towards = radiance(&["--look-from", "0,1,5", "--look-at", "0,0.5,-1"]);
+    let away = radiance(&["--look-from", "0,1,5", "--look-at", "0,1,10"]);
+    let narrow = radiance(&[
+        "--look-from",
+        "0,1,5",
+        "--look-at",
+        "0,0.5,-1",
+        "--fov",
+        "5",
+    ]);
+    assert!(towards > 0.0, "the lit scene is in view");
+    assert_eq!(
+        away, 0.0,
+        "nothing is behind the camera and the environment is black"
+    );
+    assert_ne!(narrow, towards, "a narrower view sees less of the scene");
+    // Only --fov or --up: the chosen camera, changed in that.
+    assert!(radiance(&["--fov", "30"]) > 0.0);
+    assert!(radiance(&["--look-at", "0,-2,-1", "--up", "0,0,-1"]) > 0.0);
+
+    let out_path = tmp("refused.png");
+    let o = s(&out_path);
+    let refused = |args: &[&str], needle: &str| {
+        let mut all = vec!["render", s(&scene), "-o", o];
+        all.extend_from_slice(args);
+        let out = oxray(&all);
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        assert!(err.contains(needle), "{args:?}: {err} lacks {needle:?}");
+        assert!(!err.contains("panicked"));
+    };
+    refused(&["--look-from", "1,2"], "three finite numbers");
+    refused(&["--look-at", "1,nan,2"], "three finite numbers");
+    refused(
+        &["--look-from", "1,1,1", "--look-at", "1,1,1"],
+        "different points",
+    );
+    refused(
+        &[
+            "--look-from",
+            "0,0,5",
+            "--look-at",
+            "0,0,0",
+            "--up",
+            "0,0,-1",
+        ],
+        "parallel",
+    );
+    refused(&["--fov", "0"], "--fov must be in");
+    assert!(!out_path.exists());
+}
