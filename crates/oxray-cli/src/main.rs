@@ -26,15 +26,19 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Render a scene with the path tracer: glTF 2.0 (.gltf, .glb), OBJ (+MTL) or PLY. Without
-    /// SCENE, the built-in Cornell box.
+    /// Render a scene file to an image with the path tracer.
+    ///
+    /// Scenes: glTF 2.0 (.gltf, .glb), OBJ (+MTL) or PLY. Without SCENE, the built-in Cornell
+    /// box. Ctrl-C stops after the pass in flight and writes the samples done.
     Render {
         /// The scene file; omit for the built-in Cornell box.
         scene: Option<PathBuf>,
-        /// Output image: .png (tone-mapped sRGB) or .exr (linear); an existing file is replaced
-        /// (atomically), but never one the render reads. Default: NAME.oxray.png in the current
-        /// directory, NAME being the scene file's name without extension (cornell without a
-        /// scene); an existing file of that name is replaced only if oxray wrote it.
+        /// Output image: .png (tone-mapped sRGB) or .exr (linear).
+        ///
+        /// An existing file is replaced (atomically), but never one the render reads. Default:
+        /// NAME.oxray.png in the current directory, NAME being the scene file's name without
+        /// extension (cornell without a scene); an existing file of that name is replaced only
+        /// if oxray wrote it.
         #[arg(short, long)]
         output: Option<PathBuf>,
         /// Image size, WxH.
@@ -47,7 +51,7 @@ enum Command {
         #[arg(long, default_value_t = 8)]
         max_depth: u32,
         /// Worker threads (default: all cores).
-        #[arg(long)]
+        #[arg(short = 't', long)]
         threads: Option<usize>,
         /// Which of the scene's cameras to use (default: the first, else one framing the scene).
         #[arg(long)]
@@ -55,8 +59,9 @@ enum Command {
         /// Put the camera at X,Y,Z (world space; default: where the chosen camera is).
         #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
         look_from: Option<Vec3>,
-        /// Aim the camera at X,Y,Z (default: the scene's centre with --look-from, else where the
-        /// chosen camera looks).
+        /// Aim the camera at X,Y,Z.
+        ///
+        /// Default: the scene's centre with --look-from, else where the chosen camera looks.
         #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
         look_at: Option<Vec3>,
         /// The camera's up direction (default: +Y).
@@ -65,8 +70,11 @@ enum Command {
         /// Vertical field of view in degrees (default: the chosen camera's).
         #[arg(long, value_name = "DEGREES")]
         fov: Option<f32>,
-        /// Environment light: "sky" (procedural daylight, the default for scene files), "none",
-        /// a constant grey level such as "0.5", or an equirectangular .hdr or .exr map.
+        /// Environment light: sky, none, a grey level, or an .hdr/.exr map.
+        ///
+        /// "sky" is a procedural daylight (the default for scene files), "none" is black (the
+        /// default for the Cornell box), a number such as "0.5" a constant grey, and a .hdr or
+        /// .exr file an equirectangular map.
         #[arg(long)]
         env: Option<String>,
         /// Multiplies the environment's radiance.
@@ -75,32 +83,41 @@ enum Command {
         /// Exposure in stops applied before tone mapping (PNG only; EXR stays linear).
         #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
         exposure: f32,
-        /// Tone curve of a PNG: "aces" (Hill's ACES fit, radiance divided by 0.6 first:
-        /// mid-grey 0.18 becomes 127/255), "neutral" (Khronos PBR Neutral: colours below 0.76
-        /// kept, mid-grey 105/255) or "linear" (clamped: mid-grey 118/255).
+        /// Tone curve of a PNG: aces, neutral or linear.
+        ///
+        /// "aces": Hill's ACES fit, radiance divided by 0.6 first (mid-grey 0.18 becomes
+        /// 127/255). "neutral": Khronos PBR Neutral (colours below 0.76 kept, mid-grey
+        /// 105/255). "linear": clamped (mid-grey 118/255).
         #[arg(long, default_value = "aces")]
         tonemap: String,
-        /// Pixel filter, by filter importance sampling: "gaussian" (sigma 0.5 pixel, radius
-        /// 1.5), "blackman-harris" (radius 1.5) or "box" (the pixel's square).
+        /// Pixel filter: gaussian, blackman-harris or box.
+        ///
+        /// Applied by filter importance sampling: "gaussian" (sigma 0.5 pixel, radius 1.5),
+        /// "blackman-harris" (radius 1.5) or "box" (the pixel's square).
         #[arg(long, default_value = "gaussian")]
         filter: String,
         /// Put the scene on a large grey ground plane.
         #[arg(long)]
         ground: bool,
-        /// Seed of the random sequence: the same seed gives the same image, another seed an
-        /// independent one.
+        /// Seed of the random sequence.
+        ///
+        /// The same seed gives the same image, another seed an independent one.
         #[arg(long, default_value_t = 0)]
         seed: u32,
         /// Stop after this many seconds (at the end of a pass) and write the samples done.
         #[arg(long, value_name = "SECONDS")]
         time: Option<f64>,
-        /// Also write the first hit's albedo, shading normal, distance and sample count, as the
-        /// layers albedo.RGB, normal.XYZ, depth.Z and samples.Y of the output (an .exr file).
+        /// Also write AOVs (albedo, normal, depth, samples) as layers of the .exr output.
+        ///
+        /// The first hit's albedo, shading normal, distance and sample count, as the layers
+        /// albedo.RGB, normal.XYZ, depth.Z and samples.Y of the output (an .exr file).
         #[arg(long)]
         aov: bool,
         /// No progress bar.
-        #[arg(long)]
+        #[arg(short, long)]
         quiet: bool,
+        /// Which path tracer on which device: cpu, cpu-cxx, cuda, cuda:N or auto.
+        ///
         /// cpu: the path tracer's Rust programs on the CPU. cpu-cxx: its CUDA C++ programs on
         /// the CPU (compiled by the host's C++ compiler). cuda, cuda:N: the CUDA C++ programs on
         /// that GPU (asking for one this machine lacks is an error). auto: a GPU where there is
@@ -108,12 +125,14 @@ enum Command {
         #[arg(long, default_value = "cpu", value_parser = render_device::parse)]
         backend: String,
     },
-    /// Cast a file of rays (little-endian `f32[8]`: ox, oy, oz, tmin, dx, dy, dz, tmax) at a
-    /// mesh; write hits (f32 t, u32 primitive, f32 u, f32 v; t = +inf and primitive 0xFFFFFFFF
-    /// on a miss) or, with --occlusion, one u32 0/1 per ray. Primitive indices are triangles in
-    /// file order (polygons fan-triangulated, strips unrolled).
+    /// Cast a file of rays at a mesh and write the hits.
+    ///
+    /// Rays are little-endian `f32[8]`: ox, oy, oz, tmin, dx, dy, dz, tmax. Hits are f32 t,
+    /// u32 primitive, f32 u, f32 v (t = +inf and primitive 0xFFFFFFFF on a miss) or, with
+    /// --occlusion, one u32 0/1 per ray. Primitive indices are triangles in file order
+    /// (polygons fan-triangulated, strips unrolled, glTF meshes flattened node by node).
     Raycast {
-        /// The mesh (.obj, .ply).
+        /// The mesh or scene (.obj, .ply, .gltf, .glb).
         mesh: PathBuf,
         /// The ray file.
         #[arg(long)]
@@ -125,28 +144,33 @@ enum Command {
         #[arg(long)]
         occlusion: bool,
         /// Worker threads (default: all cores).
-        #[arg(long)]
+        #[arg(short = 't', long)]
         threads: Option<usize>,
-        /// The device that builds and traces: cpu, cuda (GPU 0), cuda:N or auto (a GPU where
-        /// there is one). Asking for CUDA without one is an error.
+        /// The device that builds and traces: cpu, cuda, cuda:N or auto.
+        ///
+        /// cuda is GPU 0, auto a GPU where there is one (else the CPU). Asking for CUDA without
+        /// one is an error.
         #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
         backend: String,
     },
-    /// Triangle and instance counts and BVH statistics of a mesh or scene: for glTF, one GAS
-    /// per mesh and an IAS over the node placements, as the renderer builds them.
+    /// Triangle and instance counts and BVH statistics of a mesh or scene.
+    ///
+    /// For glTF, one GAS per mesh and an IAS over the node placements, as the renderer builds
+    /// them.
     Info {
         /// The mesh or scene (.obj, .ply, .gltf, .glb).
         mesh: PathBuf,
     },
-    /// Build time and Mrays/s on meshes: primary (camera) and diffuse (hemisphere) rays with
-    /// closest and any hit, and shadow rays to a point light.
-    /// Without MESH, the bunny and igea from ../shared/data when present, else a generated
-    /// icosphere.
+    /// Build time and Mrays/s on meshes.
+    ///
+    /// Primary (camera) and diffuse (hemisphere) rays with closest and any hit, and shadow rays
+    /// to a point light. Without MESH, the bunny and igea from ../shared/data when present,
+    /// else a generated icosphere.
     Bench {
         /// Meshes (.obj, .ply).
         meshes: Vec<PathBuf>,
         /// Worker threads (default: all cores).
-        #[arg(long)]
+        #[arg(short = 't', long)]
         threads: Option<usize>,
         /// Rays per set are SIDE x SIDE.
         #[arg(long, default_value_t = 1024)]
@@ -154,32 +178,47 @@ enum Command {
         /// Repetitions of each measurement (the median is reported).
         #[arg(long, default_value_t = 5)]
         runs: usize,
-        /// Also write each mesh, its rays and oxray's answers here, for
-        /// scripts/bench_embree.py and scripts/embree3_bench.c.
+        /// Also write each mesh, its rays and oxray's answers into this folder.
+        ///
+        /// For scripts/bench_embree.py and scripts/embree3_bench.c.
         #[arg(long)]
         export: Option<PathBuf>,
-        /// The build whose structure the ray columns trace (and --export answers with):
-        /// default, fast-build (PREFER_FAST_BUILD), fast-trace (PREFER_FAST_TRACE, with
-        /// spatial splits) or fast-trace-binned (PREFER_FAST_TRACE without spatial splits).
+        /// The build preset the rays trace: default, fast-build, fast-trace or fast-trace-binned.
+        ///
+        /// The structure the ray columns trace (and --export answers with): default,
+        /// fast-build (PREFER_FAST_BUILD), fast-trace (PREFER_FAST_TRACE, with spatial splits)
+        /// or fast-trace-binned (PREFER_FAST_TRACE without spatial splits).
         #[arg(long, default_value = "default")]
         build: String,
         /// Also build an IAS of this many instances of the first mesh and trace through it, on
         /// the device of --backend.
         #[arg(long)]
         instances: Option<usize>,
-        /// Split every triangle of each mesh into 4^K at its edges' midpoints first (the same
-        /// surface with K more levels of triangles: a large mesh of a real shape).
+        /// Split every triangle into 4^K first (a large mesh of a real shape).
+        ///
+        /// Each triangle of each mesh is split at its edges' midpoints K times: the same
+        /// surface with K more levels of triangles.
         #[arg(long, value_name = "K", default_value_t = 0, value_parser = clap::value_parser!(u32).range(0..=6))]
         subdivide: u32,
+        /// The device measured next to the CPU: cpu, cuda, cuda:N or auto.
+        ///
         /// cpu: the CPU table. cuda, cuda:N, auto: the same ray sets on that device next to
         /// the CPU, with hit agreement (asking for CUDA without one is an error).
         #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
         backend: String,
-        /// With --backend cuda: instead of the query table, time GAS builds on the device
-        /// against the host's builder (per preset: kernel and end-to-end ms, SAH cost, and
-        /// closest-hit Mrays/s through each tree).
+        /// With --backend cuda: time GAS builds on the device against the host's builder.
+        ///
+        /// Instead of the query table: per preset, kernel and end-to-end ms, SAH cost, and
+        /// closest-hit Mrays/s through each tree.
         #[arg(long)]
         gas_builds: bool,
+    },
+    /// Print a shell completion script (bash, zsh, fish, elvish or powershell).
+    ///
+    /// For bash: `oxray completions bash > ~/.local/share/bash-completion/completions/oxray`.
+    Completions {
+        /// The shell.
+        shell: clap_complete::Shell,
     },
 }
 
@@ -307,6 +346,12 @@ fn default_meshes() -> Vec<PathBuf> {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Completions { shell } => {
+            use clap::CommandFactory;
+            let mut out = Vec::new();
+            clap_complete::generate(shell, &mut Cli::command(), "oxray", &mut out);
+            say(String::from_utf8_lossy(&out).trim_end())
+        }
         Command::Render {
             scene,
             output,

@@ -168,3 +168,41 @@ fn info_reports_counts_and_bvh_statistics() {
     assert!(text.contains("BVH: 1 nodes"), "{text}");
     assert!(text.contains("SAH cost"), "{text}");
 }
+
+/// `-h` gives one line per option, `--help` the details; completions are generated for the
+/// shells clap knows.
+#[test]
+fn short_help_long_help_and_completions() {
+    let run = |args: &[&str]| {
+        let out = oxray().args(args).output().unwrap();
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8(out.stdout).unwrap()
+    };
+    for command in ["render", "raycast", "info", "bench"] {
+        let short = run(&[command, "-h"]);
+        let long = run(&[command, "--help"]);
+        assert!(
+            long.len() > short.len(),
+            "{command}: --help adds the details"
+        );
+        for line in short.lines() {
+            // An option's summary is one line of one sentence, defaults included.
+            assert!(line.len() <= 140, "{command} -h: a long line: {line}");
+        }
+    }
+    let short = run(&["render", "-h"]);
+    assert!(!short.contains("Hill's ACES fit"));
+    assert!(run(&["render", "--help"]).contains("Hill's ACES fit"));
+    assert!(short.contains("-q, --quiet") && short.contains("-t, --threads"));
+    assert!(run(&["raycast", "-h"]).contains(".gltf"));
+
+    let bash = run(&["completions", "bash"]);
+    assert!(bash.contains("--look-from") && bash.contains("raycast"));
+    assert!(run(&["completions", "fish"]).contains("complete -c oxray"));
+    let bad = oxray().args(["completions", "tcsh"]).output().unwrap();
+    assert!(!bad.status.success());
+}
