@@ -107,6 +107,9 @@ enum Command {
         /// Stop after this many seconds (at the end of a pass) and write the samples done.
         #[arg(long, value_name = "SECONDS")]
         time: Option<f64>,
+        /// Write the image so far every SECONDS while rendering (replaced atomically).
+        #[arg(long, value_name = "SECONDS")]
+        checkpoint: Option<f64>,
         /// Also write AOVs (albedo, normal, depth, samples) as layers of the .exr output.
         ///
         /// The first hit's albedo, shading normal, distance and sample count, as the layers
@@ -372,6 +375,7 @@ fn run(cli: Cli) -> Result<()> {
             ground,
             seed,
             time,
+            checkpoint,
             aov,
             quiet,
             backend,
@@ -397,6 +401,13 @@ fn run(cli: Cli) -> Result<()> {
             let filter: oxray_render::filter::Filter = filter
                 .parse()
                 .map_err(|e| anyhow::anyhow!("--filter: {e}"))?;
+            let checkpoint = match checkpoint {
+                Some(t) if t.is_finite() && t > 0.0 && t <= 1e7 => {
+                    Some(std::time::Duration::from_secs_f64(t))
+                }
+                Some(t) => bail!("--checkpoint must be a number of seconds in (0, 1e7], got {t}"),
+                None => None,
+            };
             let budget = match time {
                 Some(t) if t.is_finite() && t > 0.0 && t <= 1e7 => {
                     Some(std::time::Duration::from_secs_f64(t))
@@ -522,10 +533,29 @@ fn run(cli: Cli) -> Result<()> {
                 })
                 .context("cannot install the interrupt handler")?;
             }
+            let look = oxray_render::tonemap::Look { tone_map, exposure };
             let render_start = std::time::Instant::now();
+            let mut last_checkpoint = render_start;
+            let mut checkpoints = 0u32;
+            let mut checkpoint_error = None;
             let rendered = pool.install(|| {
                 renderer.render(&desc, &environment, &opts, |p| {
                     bar.set_position(p.samples() as u64);
+                    let more = p.samples() < p.total();
+                    if more && checkpoint.is_some_and(|e| last_checkpoint.elapsed() >= e) {
+                        // The image so far replaces the output atomically: the file is a
+                        // whole image at every moment.
+                        let written = p
+                            .image()
+                            .map_err(|e| e.to_string())
+                            .and_then(|image| image.save_with(&output, &look));
+                        if let Err(e) = written {
+                            checkpoint_error = Some(e);
+                            return std::ops::ControlFlow::Break(());
+                        }
+                        checkpoints += 1;
+                        last_checkpoint = std::time::Instant::now();
+                    }
                     let out_of_time = budget.is_some_and(|b| render_start.elapsed() >= b);
                     if out_of_time || interrupted.load(std::sync::atomic::Ordering::SeqCst) {
                         std::ops::ControlFlow::Break(())
@@ -534,9 +564,11 @@ fn run(cli: Cli) -> Result<()> {
                     }
                 })
             })?;
+            if let Some(e) = checkpoint_error {
+                bail!("{e}");
+            }
             let render_secs = render_start.elapsed().as_secs_f64();
             bar.finish_and_clear();
-            let look = oxray_render::tonemap::Look { tone_map, exposure };
             if aov {
                 rendered.save_exr(&output)
             } else {
@@ -547,14 +579,19 @@ fn run(cli: Cli) -> Result<()> {
                 .describe()
                 .map_or(String::new(), |d| format!(" with {d}"));
             let done = rendered.samples;
-            let stopped = match (
-                rendered.cancelled,
-                interrupted.load(std::sync::atomic::Ordering::SeqCst),
-            ) {
-                (false, _) => String::new(),
-                (true, true) => format!(", interrupted after {done} of {spp} spp"),
-                (true, false) => format!(", out of time after {done} of {spp} spp"),
+            let written = match checkpoints {
+                0 => String::new(),
+                n => format!(", {n} checkpoint images before"),
             };
+            let stopped = written
+                + &match (
+                    rendered.cancelled,
+                    interrupted.load(std::sync::atomic::Ordering::SeqCst),
+                ) {
+                    (false, _) => String::new(),
+                    (true, true) => format!(", interrupted after {done} of {spp} spp"),
+                    (true, false) => format!(", out of time after {done} of {spp} spp"),
+                };
             let samples_per_s = w as f64 * h as f64 * done as f64 / render_secs.max(1e-9);
             say(format_args!(
                 "wrote {} ({w}x{h}, {done} spp, {} triangles, {} instances{on}{stopped}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s), total {:.1} s",

@@ -532,6 +532,33 @@ fn a_time_budget_or_an_interrupt_writes_the_samples_done() {
         &oxray(&["render", "-o", s(&budget), "--time", "0"]),
         "--time must be",
     );
+    // Checkpoints: the image so far, written while the render goes on.
+    let out = oxray(&[
+        "render",
+        s(&scene),
+        "-o",
+        s(&budget),
+        "--size",
+        "16x16",
+        "--spp",
+        "65536",
+        "--time",
+        "1",
+        "--checkpoint",
+        "0.1",
+        "--quiet",
+    ]);
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(said.contains("checkpoint images before"), "{said}");
+    assert_one_error(
+        &oxray(&["render", "-o", s(&budget), "--checkpoint", "nan"]),
+        "--checkpoint must be",
+    );
 
     let interrupted = tmp("interrupted.png");
     let child = Command::new(env!("CARGO_BIN_EXE_oxray"))
