@@ -507,24 +507,28 @@ fn seeds_and_aov_layers() {
 fn a_time_budget_or_an_interrupt_writes_the_samples_done() {
     let scene = obj_scene();
     let budget = tmp("budget.png");
-    let out = oxray(&[
-        "render",
-        s(&scene),
-        "-o",
-        s(&budget),
-        "--size",
-        "16x16",
-        "--spp",
-        "65536",
-        "--time",
-        "0.5",
-    ]);
-    let said = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    // A render far too long to finish, stopped by the options in `extra`; what it said.
+    let stopped = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&scene),
+            "-o",
+            s(&budget),
+            "--size",
+            "16x16",
+            "--spp",
+            "65536",
+        ];
+        args.extend_from_slice(extra);
+        let out = oxray(&args);
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let said = stopped(&["--time", "0.5"]);
     assert!(said.contains("out of time after"), "{said}");
     assert!(said.contains("M samples/s"), "{said}");
     assert!(budget.exists());
@@ -533,27 +537,7 @@ fn a_time_budget_or_an_interrupt_writes_the_samples_done() {
         "--time must be",
     );
     // Checkpoints: the image so far, written while the render goes on.
-    let out = oxray(&[
-        "render",
-        s(&scene),
-        "-o",
-        s(&budget),
-        "--size",
-        "16x16",
-        "--spp",
-        "65536",
-        "--time",
-        "1",
-        "--checkpoint",
-        "0.1",
-        "--quiet",
-    ]);
-    let said = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let said = stopped(&["--time", "1", "--checkpoint", "0.1", "--quiet"]);
     assert!(said.contains("checkpoint images before"), "{said}");
     assert_one_error(
         &oxray(&["render", "-o", s(&budget), "--checkpoint", "nan"]),

@@ -136,28 +136,27 @@ impl<'s> Renderer<'s> {
     }
 
     /// Replaces material `index`. The material table is uploaded again; the meshes that use the
-    /// material are rebuilt only when its alpha mode changes between opaque and not.
+    /// material are rebuilt only when its alpha mode changes between opaque and not. A material
+    /// the scene cannot use (a texture that does not exist, say) is an error that changes
+    /// nothing.
     pub fn set_material(
         &mut self,
         index: usize,
         material: MaterialDesc,
     ) -> Result<(), RenderError> {
-        let count = self.scene.materials.len();
-        let slot = self
+        let old = self
             .scene
-            .to_mut()
             .materials
-            .get_mut(index)
-            .ok_or_else(|| {
-                RenderError::Scene(format!(
-                    "material {index} does not exist (the scene has {count})"
-                ))
-            })?;
-        let was_opaque = slot.alpha_mode == AlphaMode::Opaque;
-        let now_opaque = material.alpha_mode == AlphaMode::Opaque;
-        *slot = material;
-        self.scene.validate().map_err(RenderError::Scene)?;
-        if was_opaque != now_opaque {
+            .get(index)
+            .ok_or_else(|| missing("material", index, self.scene.materials.len()))?;
+        let rebuild =
+            (old.alpha_mode == AlphaMode::Opaque) != (material.alpha_mode == AlphaMode::Opaque);
+        let old = std::mem::replace(&mut self.scene.to_mut().materials[index], material);
+        if let Err(e) = self.scene.validate() {
+            self.scene.to_mut().materials[index] = old;
+            return Err(RenderError::Scene(e));
+        }
+        if rebuild {
             self.geometry
                 .rebuild_meshes_of_material(&self.device, &self.scene, index as u32)?;
         }
@@ -173,16 +172,10 @@ impl<'s> Renderer<'s> {
         to_world: Mat4,
     ) -> Result<(), RenderError> {
         let count = self.scene.instances.len();
-        let inst = self
-            .scene
-            .to_mut()
-            .instances
-            .get_mut(index)
-            .ok_or_else(|| {
-                RenderError::Scene(format!(
-                    "instance {index} does not exist (the scene has {count})"
-                ))
-            })?;
+        if index >= count {
+            return Err(missing("instance", index, count));
+        }
+        let inst = &mut self.scene.to_mut().instances[index];
         inst.transform = to_world;
         self.tables = None;
         Ok(())
@@ -261,6 +254,13 @@ impl<'s> Renderer<'s> {
             aovs,
         })
     }
+}
+
+/// The error of an edit of item `index` of a scene that has `count` of them.
+fn missing(what: &str, index: usize, count: usize) -> RenderError {
+    RenderError::Scene(format!(
+        "{what} {index} does not exist (the scene has {count})"
+    ))
 }
 
 /// A render's state after a pass, for the callbacks of [`Renderer::render`] and

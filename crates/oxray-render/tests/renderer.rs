@@ -143,10 +143,17 @@ fn edits_then_a_render_equal_a_new_renderer_over_the_edited_scene() {
     bad.base_color_texture = Some(oxray_scene::TextureRef::new(999));
     let materials = r.scene().materials.len();
     assert!(r.set_material(materials, bad.clone()).is_err());
+    let kept = r.scene().materials[0].clone();
     assert!(
         r.set_material(0, bad).is_err(),
         "a texture that does not exist"
     );
+    assert_eq!(
+        r.scene().materials[0],
+        kept,
+        "a refused edit changes nothing"
+    );
+    assert_eq!(all(&mut r, &o).image, fresh(&recoloured, &grey, &o));
 }
 
 #[test]
