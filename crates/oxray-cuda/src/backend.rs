@@ -145,10 +145,6 @@ fn query_error(e: CudaError) -> QueryError {
 /// Motion blur (guide §5.10) is traced by the CPU backend only: structures with motion keys
 /// are refused after validation, and motion transforms under instances when the IAS is built.
 pub(crate) const MOTION_UNSUPPORTED: &str = "motion blur (guide §5.10) on the CUDA backend";
-/// Why the CUDA backend refuses a sphere GAS.
-pub(crate) const SPHERES_UNSUPPORTED: &str =
-    "built-in spheres (guide §5.3) on the CUDA backend (the CPU backend traces them)";
-
 /// Why the CUDA backend refuses a curve GAS.
 pub(crate) const CURVES_UNSUPPORTED: &str =
     "built-in curves (guide §5.2) on the CUDA backend (the CPU backend traces them)";
@@ -203,14 +199,10 @@ impl AccelBackend for Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaGas, BuildError> {
-        // Built-in spheres (guide §5.3) are traced by the CPU backend only for now: refused
+        // Built-in curves (guide §5.2) are traced by the CPU backend only for now: refused
         // after validation (so that bad inputs get the same errors on every device) and
         // before any build work.
         let summary = oxray_core::validate::validate_structure(options, inputs)?;
-        if summary.kind == oxray_core::BuildInputKind::Spheres {
-            return Err(BuildError::Unsupported(SPHERES_UNSUPPORTED));
-        }
-        // Built-in curves (guide §5.2) likewise.
         if summary.kind == oxray_core::BuildInputKind::Curves {
             return Err(BuildError::Unsupported(CURVES_UNSUPPORTED));
         }
@@ -226,8 +218,10 @@ impl AccelBackend for Cuda {
                 Err(DeviceBuildError::Device(e)) => return Err(build_error(e)),
             }
         }
-        // A GAS of custom primitives is uploaded for pipelines, which run its intersection
-        // programs; the batched queries refuse it.
+        // The host builds the rest: the presets and layouts the device builder does not make,
+        // spheres (built-in, traced by pipelines and the query kernels alike) and custom
+        // primitives (uploaded for pipelines, which run their intersection programs; the
+        // batched queries refuse them).
         let (data, tree) = GasData::build_with_tree(options, inputs)?;
         CudaGas::upload_with_layout(&self.ctx, &data, &tree, self.layout).map_err(build_error)
     }

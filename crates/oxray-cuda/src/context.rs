@@ -54,6 +54,8 @@ pub(crate) struct Kernels {
     pub occluded_bvh2: CudaFunction,
     pub closest_ias: CudaFunction,
     pub occluded_ias: CudaFunction,
+    pub closest_spheres: CudaFunction,
+    pub occluded_spheres: CudaFunction,
 }
 
 /// A CUDA device ready to trace: driver and NVRTC loaded, a context and stream on the device,
@@ -179,6 +181,8 @@ impl CudaContext {
             occluded_bvh2: load("oxray_occluded_bvh2")?,
             closest_ias: load("oxray_closest_ias")?,
             occluded_ias: load("oxray_occluded_ias")?,
+            closest_spheres: load("oxray_closest_spheres")?,
+            occluded_spheres: load("oxray_occluded_spheres")?,
         };
         let stream = guarded("creating a stream", || ctx.new_stream())?;
         Ok(CudaContext {
@@ -217,6 +221,8 @@ impl CudaContext {
             ("oxray_occluded_bvh2", &k.occluded_bvh2),
             ("oxray_closest_ias", &k.closest_ias),
             ("oxray_occluded_ias", &k.occluded_ias),
+            ("oxray_closest_spheres", &k.closest_spheres),
+            ("oxray_occluded_spheres", &k.occluded_spheres),
         ]
         .into_iter()
         .map(|(name, f)| {
@@ -372,6 +378,8 @@ mod tests {
             "oxray_occluded_bvh2",
             "oxray_closest_ias",
             "oxray_occluded_ias",
+            "oxray_closest_spheres",
+            "oxray_occluded_spheres",
         ] {
             assert!(ptx.contains(&format!(".entry {entry}")), "{entry} missing");
         }

@@ -323,6 +323,7 @@ pub(crate) const DESCRIPTOR_IAS: u32 = 2;
 pub(crate) const DESCRIPTOR_STATIC: u32 = 3;
 pub(crate) const DESCRIPTOR_INSTANCE: u32 = 4;
 pub(crate) const DESCRIPTOR_CUSTOM_GAS: u32 = 5;
+pub(crate) const DESCRIPTOR_SPHERE_GAS: u32 = 6;
 
 /// The 16 words of a traversable descriptor (`__oxray_Traversable`): kind, count, four
 /// addresses, the graph depth.
@@ -351,32 +352,54 @@ pub(crate) fn descriptor_words(
 /// which no ray enters.
 pub(crate) fn custom_words(gas: &GasData) -> (Vec<u32>, Vec<SlotInfo>) {
     let mut words = Vec::with_capacity(8 * gas.aabbs.len().max(1));
-    let mut slots = Vec::with_capacity(gas.aabbs.len());
-    for (s, b) in gas.aabbs.iter().enumerate() {
+    for b in &gas.aabbs {
         for f in [
             b.min.x, b.min.y, b.min.z, 0.0, b.max.x, b.max.y, b.max.z, 0.0,
         ] {
             words.push(f.to_bits());
         }
-        slots.push(if gas.slot_is_active(s) {
-            let (primitive_index, sbt_gas_index, build_input) = gas.resolve(s as u32);
-            SlotInfo {
-                primitive_index,
-                sbt_gas_index,
-                build_input,
-            }
-        } else {
-            SlotInfo {
-                primitive_index: u32::MAX,
-                sbt_gas_index: 0,
-                build_input: 0,
-            }
-        });
     }
     if words.is_empty() {
         words.resize(8, 0);
     }
-    (words, slots)
+    (words, slot_infos(gas, gas.aabbs.len()))
+}
+
+/// The spheres of a sphere GAS as uploaded (4 words per leaf slot: the centre and the radius,
+/// `optixGetSphereData`'s `float4`) and what a hit on each slot reports. Inactive slots keep
+/// their NaN record, which no ray hits.
+pub(crate) fn sphere_words(gas: &GasData) -> (Vec<u32>, Vec<SlotInfo>) {
+    let mut words: Vec<u32> = gas
+        .spheres
+        .iter()
+        .flat_map(|s| s.to_array().map(f32::to_bits))
+        .collect();
+    if words.is_empty() {
+        words.resize(4, 0);
+    }
+    (words, slot_infos(gas, gas.spheres.len()))
+}
+
+/// What a hit on each of the first `n` leaf slots reports (an inactive slot: no primitive).
+fn slot_infos(gas: &GasData, n: usize) -> Vec<SlotInfo> {
+    (0..n)
+        .map(|s| {
+            if gas.slot_is_active(s) {
+                let (primitive_index, sbt_gas_index, build_input) = gas.resolve(s as u32);
+                SlotInfo {
+                    primitive_index,
+                    sbt_gas_index,
+                    build_input,
+                }
+            } else {
+                SlotInfo {
+                    primitive_index: u32::MAX,
+                    sbt_gas_index: 0,
+                    build_input: 0,
+                }
+            }
+        })
+        .collect()
 }
 
 /// Device and host buffers reused by the one-call queries.
@@ -550,8 +573,8 @@ impl CudaGas {
         CudaGas::upload_with_layout(ctx, gas, tree, NodeLayout::default())
     }
 
-    /// Uploads a GAS in the given node layout. A GAS of custom primitives is uploaded in the
-    /// binary layout whatever `layout` says (only pipelines trace it).
+    /// Uploads a GAS in the given node layout. A GAS of custom primitives or of spheres is
+    /// uploaded in the binary layout whatever `layout` says.
     pub fn upload_with_layout(
         ctx: &CudaContext,
         gas: &GasData,
@@ -565,9 +588,7 @@ impl CudaGas {
         }
         match gas.kind {
             GasKind::CustomPrimitives => return Self::upload_custom(ctx, gas, tree),
-            GasKind::Spheres => {
-                return Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED))
-            }
+            GasKind::Spheres => return Self::upload_spheres(ctx, gas, tree),
             GasKind::Curves => {
                 return Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED))
             }
@@ -609,13 +630,33 @@ impl CudaGas {
     /// A GAS of custom primitives: the binary nodes and, per leaf slot, its box as two `float4`
     /// (lower and upper corners; `w` unused).
     fn upload_custom(ctx: &CudaContext, gas: &GasData, tree: &Bvh2) -> Result<CudaGas, CudaError> {
-        if gas.aabbs.len() > MAX_SLOTS {
+        let (words, slots) = custom_words(gas);
+        Self::upload_slots(ctx, gas, tree, GasKind::CustomPrimitives, words, slots)
+    }
+
+    /// A GAS of built-in spheres (guide §5.3): the binary nodes and, per leaf slot, its sphere
+    /// as one `float4` (centre, radius), which both the pipelines' traversal and the query
+    /// kernels test with the CPU's arithmetic.
+    fn upload_spheres(ctx: &CudaContext, gas: &GasData, tree: &Bvh2) -> Result<CudaGas, CudaError> {
+        let (words, slots) = sphere_words(gas);
+        Self::upload_slots(ctx, gas, tree, GasKind::Spheres, words, slots)
+    }
+
+    /// A GAS in the binary layout whose leaf slots are the primitive records `words`.
+    fn upload_slots(
+        ctx: &CudaContext,
+        gas: &GasData,
+        tree: &Bvh2,
+        kind: GasKind,
+        words: Vec<u32>,
+        slots: Vec<SlotInfo>,
+    ) -> Result<CudaGas, CudaError> {
+        if slots.len() > MAX_SLOTS {
             return Err(CudaError::TooLarge(format!(
                 "{} leaf slots; at most {MAX_SLOTS}",
-                gas.aabbs.len()
+                slots.len()
             )));
         }
-        let (words, slots) = custom_words(gas);
         let nodes_host = bvh2_words(tree).map_err(CudaError::TooLarge)?;
         let nodes = ctx
             .stream
@@ -624,11 +665,11 @@ impl CudaGas {
         let boxes = ctx
             .stream
             .clone_htod(&words[..])
-            .map_err(driver("copying boxes to the device"))?;
+            .map_err(driver("copying primitives to the device"))?;
         ctx.synchronize()?;
         Ok(CudaGas {
             ctx: ctx.clone(),
-            kind: GasKind::CustomPrimitives,
+            kind,
             layout: NodeLayout::Bvh2,
             num_nodes: nodes_host.len() / 16,
             device_bytes: 4 * (nodes_host.len() + words.len()),
@@ -677,13 +718,13 @@ impl CudaGas {
         self.builder
     }
 
-    /// Refuses the batched queries on a GAS of custom primitives.
-    fn check_triangles(&self) -> Result<(), CudaError> {
+    /// Refuses the batched queries on a GAS of custom primitives (which need a pipeline's
+    /// intersection programs); triangles and spheres have query kernels.
+    fn check_queryable(&self) -> Result<(), CudaError> {
         match self.kind {
-            GasKind::Triangles => Ok(()),
+            GasKind::Triangles | GasKind::Spheres => Ok(()),
             GasKind::CustomPrimitives => Err(CudaError::CustomPrimitives),
             // Never uploaded (`upload_with_layout` refuses them).
-            GasKind::Spheres => Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED)),
             GasKind::Curves => Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED)),
         }
     }
@@ -712,10 +753,8 @@ impl CudaGas {
         let kind = match self.kind {
             GasKind::Triangles => DESCRIPTOR_GAS,
             GasKind::CustomPrimitives => DESCRIPTOR_CUSTOM_GAS,
+            GasKind::Spheres => DESCRIPTOR_SPHERE_GAS,
             // Never uploaded (`upload_with_layout` refuses them).
-            GasKind::Spheres => {
-                return Err(CudaError::Unsupported(crate::backend::SPHERES_UNSUPPORTED))
-            }
             GasKind::Curves => {
                 return Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED))
             }
@@ -794,7 +833,7 @@ impl CudaGas {
                 outputs: hits.len(),
             });
         }
-        self.check_triangles()?;
+        self.check_queryable()?;
         self.with_records(rays, |records| self.resolve_into(records, hits))
     }
 
@@ -808,7 +847,7 @@ impl CudaGas {
 
     /// Traces a batch with the reused buffers and hands the records to `f`.
     fn with_records(&self, rays: &[Ray], f: impl FnOnce(&[HitRecord])) -> Result<(), CudaError> {
-        self.check_triangles()?;
+        self.check_queryable()?;
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         guard.closest(&self.ctx, rays, false, &|r, h, _, n| {
             self.launch_closest(r, h, n)
@@ -830,7 +869,7 @@ impl CudaGas {
         rays: &[Ray],
         occluded: &mut [bool],
     ) -> Result<(), CudaError> {
-        self.check_triangles()?;
+        self.check_queryable()?;
         let mut guard = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         guard.any(&self.ctx, rays, occluded, &|r, o, n| {
             self.launch_occluded(r, o, n)
@@ -843,7 +882,7 @@ impl CudaGas {
         rays: &DeviceRays,
         hits: &mut DeviceHits,
     ) -> Result<(), CudaError> {
-        self.check_triangles()?;
+        self.check_queryable()?;
         if rays.len() != hits.len() {
             return Err(CudaError::LengthMismatch {
                 rays: rays.len(),
@@ -864,7 +903,7 @@ impl CudaGas {
         rays: &DeviceRays,
         out: &mut DeviceOcclusion,
     ) -> Result<(), CudaError> {
-        self.check_triangles()?;
+        self.check_queryable()?;
         if rays.len() != out.len() {
             return Err(CudaError::LengthMismatch {
                 rays: rays.len(),
@@ -887,9 +926,11 @@ impl CudaGas {
         n: u32,
     ) -> Result<(), CudaError> {
         debug_assert!(rays.len() >= 8 * n as usize && hits.len() >= 4 * n as usize);
-        let f = match self.layout {
-            NodeLayout::Bvh4 => &self.ctx.kernels.closest_bvh4,
-            NodeLayout::Bvh2 => &self.ctx.kernels.closest_bvh2,
+        let k = &self.ctx.kernels;
+        let f = match (self.kind, self.layout) {
+            (GasKind::Spheres, _) => &k.closest_spheres,
+            (_, NodeLayout::Bvh4) => &k.closest_bvh4,
+            (_, NodeLayout::Bvh2) => &k.closest_bvh2,
         };
         let mut launch = self.ctx.stream.launch_builder(f);
         launch
@@ -898,10 +939,11 @@ impl CudaGas {
             .arg(rays)
             .arg(hits)
             .arg(&n);
-        // SAFETY: the kernel's parameters are (const float4* nodes, const float4* triangles,
-        // const float4* rays, uint4* hits, u32 n), matching the arguments pushed: device
-        // buffers of 32-bit words, 256-byte aligned by the allocator, holding the nodes and
-        // triangles of `DeviceLayout` (every child index and slot range in bounds), and at
+        // SAFETY: the kernel's parameters are (const float4* nodes, const float4* triangles or
+        // spheres, const float4* rays, uint4* hits, u32 n), matching the arguments pushed:
+        // device buffers of 32-bit words, 256-byte aligned by the allocator, holding the nodes
+        // and primitives of `DeviceLayout` or `upload_slots` (every child index and slot range
+        // in bounds, a sphere GAS always in the binary layout its kernel walks), and at
         // least 8 words per ray and 4 words per hit for `n` rays (checked by every caller).
         // Threads past `n` return at once.
         unsafe { launch.launch(grid(n)) }.map_err(driver("launching the closest-hit kernel"))?;
@@ -916,9 +958,11 @@ impl CudaGas {
         n: u32,
     ) -> Result<(), CudaError> {
         debug_assert!(rays.len() >= 8 * n as usize && out.len() >= n as usize);
-        let f = match self.layout {
-            NodeLayout::Bvh4 => &self.ctx.kernels.occluded_bvh4,
-            NodeLayout::Bvh2 => &self.ctx.kernels.occluded_bvh2,
+        let k = &self.ctx.kernels;
+        let f = match (self.kind, self.layout) {
+            (GasKind::Spheres, _) => &k.occluded_spheres,
+            (_, NodeLayout::Bvh4) => &k.occluded_bvh4,
+            (_, NodeLayout::Bvh2) => &k.occluded_bvh2,
         };
         let mut launch = self.ctx.stream.launch_builder(f);
         launch
@@ -970,7 +1014,12 @@ impl CudaGas {
             return None;
         }
         let s = self.slots.get(r.slot_index() as usize)?;
-        Some(hit_of(r, s, false, !0, 0))
+        let mut hit = hit_of(r, s, false, !0, 0);
+        if self.kind == GasKind::Spheres {
+            // Spheres have only a front face and no attributes (guide §9.4, §13.4).
+            hit.hit_kind = HitKind::SPHERE_FRONT_FACE;
+        }
+        Some(hit)
     }
 }
 

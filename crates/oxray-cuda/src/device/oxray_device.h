@@ -87,12 +87,14 @@
 // made by the host; the handle is its device address). The kind word comes first in every
 // record a handle can point at (instances too), so that a handle is decoded by reading it.
 struct __oxray_Traversable {
-    u32 kind;   // __OXRAY_GAS, __OXRAY_CUSTOM_GAS, __OXRAY_IAS or __OXRAY_STATIC
+    u32 kind;   // __OXRAY_GAS, __OXRAY_CUSTOM_GAS, __OXRAY_SPHERE_GAS, __OXRAY_IAS or
+                // __OXRAY_STATIC
     u32 count;  // GAS: SBT records (geometry flags); IAS: instance slots; static transform: 1
     unsigned long long nodes;      // GAS, IAS: binary nodes; static transform: its
                                    // OptixStaticTransform, which follows this descriptor
     unsigned long long prims;      // triangle GAS: 3 float4 per leaf slot; custom GAS: 2 float4
-                                   // per leaf slot (the box's corners); IAS: 6 float4 per slot
+                                   // per leaf slot (the box's corners); sphere GAS: 1 float4
+                                   // per leaf slot (centre, radius); IAS: 6 float4 per slot
                                    // (the query kernels' table: the world box is rows 3, 4)
     unsigned long long info;       // GAS: uint2 per slot (primitive index, SBT-GAS index);
                                    // IAS: one __oxray_Instance per slot
@@ -106,6 +108,9 @@ struct __oxray_Traversable {
 #define __OXRAY_STATIC 3u
 #define __OXRAY_INSTANCE 4u
 #define __OXRAY_CUSTOM_GAS 5u
+#define __OXRAY_SPHERE_GAS 6u
+// Whether a descriptor kind is a GAS.
+#define __OXRAY_IS_GAS(k) ((k) == __OXRAY_GAS || (k) == __OXRAY_CUSTOM_GAS || (k) == __OXRAY_SPHERE_GAS)
 
 // One instance of an IAS as pipelines read it (128 bytes). Its address is the instance's
 // handle in the transform list (optixGetTransformListHandle).
@@ -170,7 +175,7 @@ struct __oxray_RayState {
     // The current hit: candidate in any-hit, closest in closest-hit; the primitive in
     // intersection programs.
     u32 prim, sbt_gas_index, hit_kind;
-    u32 slot;  // leaf slot of a triangle hit (vertex data), ~0u for a custom primitive
+    u32 slot;  // leaf slot of a triangle or sphere hit (vertex data), ~0u for a custom primitive
     u32 attr[8];
     const __oxray_Path* path;
     // The GAS hit on a trace's fast path, whose path is the shared root (`__oxray_root_path`).
@@ -326,8 +331,8 @@ static __forceinline__ __device__ bool optixIsTriangleHit() {
 }
 // Built-in hit kinds: a triangle's 0xFE/0xFF, otherwise 0x80 | (the low byte of the
 // OptixPrimitiveType) << 1 | back face: a sphere's 0x8C/0x8D, a curve's 0x82..0x97 (oxray's
-// choice, the same on both devices: see oxray_core::HitKind; spheres and curves are traced on
-// the CPU only for now). Every other hit kind is a custom one.
+// choice, the same on both devices: see oxray_core::HitKind; curves are traced on the CPU only
+// for now). Every other hit kind is a custom one.
 static __forceinline__ __device__ OptixPrimitiveType optixGetPrimitiveType(unsigned int hitKind) {
     if (hitKind == OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE ||
         hitKind == OPTIX_HIT_KIND_TRIANGLE_BACK_FACE)
@@ -568,12 +573,16 @@ static __forceinline__ __device__ void optixGetTriangleVertexData(float3 data[3]
     }
 }
 
-// Guide §9.4: the centre and radius of the hit sphere. The CUDA backend refuses to build sphere
-// structures (they are traced on the CPU backend only, for now), so no hit on this device is a
-// sphere: the function exists so that one program compiles for both devices, and gives zeros
-// as it does on the CPU for a hit that is not a sphere.
+// Guide §9.4: the centre and radius of the hit sphere, in object space, as the build input gave
+// them; zeros for a hit that is not a sphere, as on the CPU.
 static __forceinline__ __device__ void optixGetSphereData(float4 data[1]) {
-    data[0] = make_float4(0.0f, 0.0f, 0.0f, 0.0f);
+    __oxray_ThreadState& s = __oxray_state();
+    const __oxray_Traversable* g = __oxray_hit_gas();
+    if (g == nullptr || g->kind != __OXRAY_SPHERE_GAS || s.ray.slot == 0xffffffffu) {
+        data[0] = make_float4(0.0f, 0.0f, 0.0f, 0.0f);
+        return;
+    }
+    data[0] = reinterpret_cast<const float4*>(g->prims)[s.ray.slot];
 }
 
 // Guide §9.3: a curve hit's u and a ribbon hit's (u, v) are its attributes. The CUDA backend
@@ -808,11 +817,14 @@ static __forceinline__ __device__ u32 __oxray_candidate(const __oxray_TraceArgs&
     return terminate ? 2u : 1u;
 }
 
-// The pipeline's primitive types (§6.3), wherever in the graph a GAS sits.
+// The pipeline's primitive types (§6.3), wherever in the graph a GAS sits. An empty set means
+// triangles and custom primitives: spheres must be named (§9.1).
 static __forceinline__ __device__ void __oxray_check_primitive_type(u32 kind) {
-    if (OXRAY_PRIMITIVE_TYPE_FLAGS == 0u) return;
-    u32 needed = kind == __OXRAY_GAS ? (1u << 31) : 1u;
-    if ((OXRAY_PRIMITIVE_TYPE_FLAGS & needed) == 0u) {
+    const u32 triangle = 1u << 31, custom = 1u, sphere = 1u << 6;
+    const u32 allowed = OXRAY_PRIMITIVE_TYPE_FLAGS == 0u ? (triangle | custom)
+                                                         : OXRAY_PRIMITIVE_TYPE_FLAGS;
+    u32 needed = kind == __OXRAY_GAS ? triangle : (kind == __OXRAY_SPHERE_GAS ? sphere : custom);
+    if ((allowed & needed) == 0u) {
         __oxray_throw(OPTIX_EXCEPTION_CODE_UNSUPPORTED_PRIMITIVE_TYPE, 0, nullptr);
     }
 }
@@ -862,6 +874,48 @@ static __noinline__ __device__ bool __oxray_walk_triangles(const TraceRay& r,
             if (d == 0u) continue;
             tmax_ = h.t;
             tmax = h.t;
+            if (d == 2u) {
+                ended = true;
+                return true;
+            }
+        }
+        return false;
+    });
+    return ended;
+}
+
+// The hit kind of a sphere's front face: 0x80 | (OPTIX_PRIMITIVE_TYPE_SPHERE & 0xFF) << 1.
+#define __OXRAY_HIT_KIND_SPHERE_FRONT_FACE 0x8Cu
+
+// Traverses a GAS of built-in spheres (§9.4) with the object-space ray `r`: each sphere's entry
+// point in the interval is a candidate (spheres are hollow, their back faces culled, §9.6); the
+// triangle face-culling flags do not apply, the any-hit rules and CULL_*_ANYHIT do.
+static __noinline__ __device__ bool __oxray_walk_spheres(const TraceRay& r,
+                                                         const __oxray_Traversable* g,
+                                                         const __oxray_TraceArgs& a,
+                                                         const __oxray_Path& path, float tmin,
+                                                         float& tmax, __oxray_Best& best) {
+    const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
+    const float4* spheres = reinterpret_cast<const float4*>(g->prims);
+    const uint2* slots = reinterpret_cast<const uint2*>(g->info);
+    const u32* gflags_of = reinterpret_cast<const u32*>(g->geom_flags);
+    bool ended = false;
+    walk_bvh2<OXRAY_BVH2_STACK>(r, nodes, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
+        for (u32 s = start; s < start + count; ++s) {
+            float t;
+            if (!intersect_sphere(r, spheres[s], tmin, tmax_, t)) continue;
+            uint2 info = slots[s];
+            u32 gflags = gflags_of[info.y];
+            const char* record = __oxray_hit_record(a, path, info.y);
+            if (__oxray_culled_by_anyhit(a.flags, __oxray_anyhit_on(a.flags, path.iflags, gflags))) {
+                continue;
+            }
+            u32 attr[8] = {0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u};
+            u32 d = __oxray_candidate(a, path, gflags, record, t, info.x, info.y,
+                                      __OXRAY_HIT_KIND_SPHERE_FRONT_FACE, s, attr, best);
+            if (d == 0u) continue;
+            tmax_ = t;
+            tmax = t;
             if (d == 2u) {
                 ended = true;
                 return true;
@@ -1063,12 +1117,16 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
     switch (t->kind) {
     case __OXRAY_GAS:
     case __OXRAY_CUSTOM_GAS:
+    case __OXRAY_SPHERE_GAS:
         __oxray_check_primitive_type(t->kind);
         path.gas = t;
         path.org = r.org;
         path.dir = r.dir;
-        return t->kind == __OXRAY_GAS ? __oxray_walk_triangles(r, t, a, path, tmin, tmax, best)
-                                      : __oxray_walk_custom(r, t, a, path, tmin, tmax, best);
+        if (t->kind == __OXRAY_GAS) return __oxray_walk_triangles(r, t, a, path, tmin, tmax, best);
+        if (t->kind == __OXRAY_SPHERE_GAS) {
+            return __oxray_walk_spheres(r, t, a, path, tmin, tmax, best);
+        }
+        return __oxray_walk_custom(r, t, a, path, tmin, tmax, best);
     case __OXRAY_IAS:
         return __oxray_walk_ias(r, t, a, path, tmin, tmax, best);
     case __OXRAY_STATIC: {
@@ -1090,11 +1148,11 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
 // as the CPU backend checks them.
 static __forceinline__ __device__ void __oxray_check_root(const __oxray_Traversable* t) {
     u32 k = t->kind;
-    if (k != __OXRAY_GAS && k != __OXRAY_CUSTOM_GAS && k != __OXRAY_IAS && k != __OXRAY_STATIC) {
+    if (!__OXRAY_IS_GAS(k) && k != __OXRAY_IAS && k != __OXRAY_STATIC) {
         __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE, 0, nullptr);
     }
     if (OXRAY_GRAPH_FLAGS != 0u) {
-        bool gas = k == __OXRAY_GAS || k == __OXRAY_CUSTOM_GAS;
+        bool gas = __OXRAY_IS_GAS(k);
         // One level of instances over GASes: an IAS of depth 2 at most.
         bool allowed = gas ? (OXRAY_GRAPH_FLAGS & 1u) != 0u
                            : (k == __OXRAY_IAS && (OXRAY_GRAPH_FLAGS & 2u) != 0u && t->depth <= 2u);

@@ -558,6 +558,59 @@ __device__ __forceinline__ IasBest trace_ias(const TraceRay& r, const float4* __
     return best;
 }
 
+// ---------------------------------------------------------------------------------------------
+// Built-in spheres (guide §5.3, §9.4, §9.6): oxray_bvh::Sphere::entry, operation for operation
+// (the kernels are compiled without FMA contraction, so both devices find the same t). A slot is
+// one float4: the centre and the radius (NaN for an inactive slot, which no ray hits).
+// ---------------------------------------------------------------------------------------------
+
+// The smaller root of |o + t d - c|^2 = r^2 (Haines et al., Ray Tracing Gems ch. 7: the
+// discriminant from the centre's distance to the ray's line, the stable roots), NaN for a miss.
+__device__ __forceinline__ float sphere_entry(float3 o, float3 d, float4 s) {
+    const float fx = o.x - s.x, fy = o.y - s.y, fz = o.z - s.z;
+    const float r = s.w;
+    const float a = d.x * d.x + d.y * d.y + d.z * d.z;
+    const float b = -(fx * d.x + fy * d.y + fz * d.z);
+    const float k = b / a;
+    const float px = fx + d.x * k, py = fy + d.y * k, pz = fz + d.z * k;
+    const float p = sqrtf(px * px + py * py + pz * pz);
+    const float disc = a * ((r - p) * (r + p));
+    if (isnan(disc) || disc < 0.0f) return __int_as_float(0x7fc00000);
+    const float cc = (fx * fx + fy * fy + fz * fz) - r * r;
+    const float q = b + copysignf(sqrtf(disc), b);
+    return fminf(cc / q, q / a);
+}
+
+// The front-face hit of a sphere in [tmin, tmax] (spheres are hollow, back faces culled: a ray
+// whose interval starts inside one does not hit it).
+__device__ __forceinline__ bool intersect_sphere(const TraceRay& r, float4 s, float tmin,
+                                                 float tmax, float& t) {
+    t = sphere_entry(r.org, r.dir, s);
+    return t >= tmin && t <= tmax;
+}
+
+template <bool ANY>
+__device__ __forceinline__ Best trace_spheres(const TraceRay& r, const float4* __restrict__ nodes,
+                                              const float4* __restrict__ spheres) {
+    Best best;
+    best.t = F32_INF;
+    best.u = 0.0f;
+    best.v = 0.0f;
+    best.slot = MISS_SLOT;
+    walk_bvh2(r, nodes, r.tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
+        for (u32 s = start; s < start + count; ++s) {
+            float t;
+            if (!intersect_sphere(r, load_ro(spheres + s), r.tmin, tmax, t)) continue;
+            best.t = t;
+            best.slot = s;
+            if (ANY) return true;
+            tmax = t;
+        }
+        return false;
+    });
+    return best;
+}
+
 // A pipeline (oxray_device.h) compiles this file for its traversal, without the query kernels.
 #ifndef OXRAY_NO_QUERY_KERNELS
 
@@ -659,6 +712,35 @@ extern "C" __global__ void __launch_bounds__(128)
     TraceRay r;
     bool hit = false;
     if (load_ray(rays, i, r)) hit = trace_ias<true>(r, top, insts).inst != MISS_SLOT;
+    occluded[i] = hit ? 1 : 0;
+}
+
+extern "C" __global__ void __launch_bounds__(128)
+    oxray_closest_spheres(const float4* __restrict__ nodes, const float4* __restrict__ spheres,
+                          const float4* __restrict__ rays, uint4* __restrict__ hits, u32 n) {
+    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    TraceRay r;
+    Best b;
+    if (load_ray(rays, i, r)) {
+        b = trace_spheres<false>(r, nodes, spheres);
+    } else {
+        b.t = F32_INF;
+        b.u = b.v = 0.0f;
+        b.slot = MISS_SLOT;
+    }
+    store_hit(hits, i, b);
+}
+
+extern "C" __global__ void __launch_bounds__(128)
+    oxray_occluded_spheres(const float4* __restrict__ nodes, const float4* __restrict__ spheres,
+                           const float4* __restrict__ rays, unsigned char* __restrict__ occluded,
+                           u32 n) {
+    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    TraceRay r;
+    bool hit = false;
+    if (load_ray(rays, i, r)) hit = trace_spheres<true>(r, nodes, spheres).slot != MISS_SLOT;
     occluded[i] = hit ? 1 : 0;
 }
 
