@@ -110,6 +110,12 @@ enum Command {
         /// Write the image so far every SECONDS while rendering (replaced atomically).
         #[arg(long, value_name = "SECONDS")]
         checkpoint: Option<f64>,
+        /// Render only the pixels X0..X1, Y0..Y1 of the image (X1 and Y1 excluded).
+        ///
+        /// The output has the window's size and each of its pixels is the same pixel of the
+        /// full --size render, bit for bit (same camera, same random numbers); row 0 is the top.
+        #[arg(long, value_name = "X0,Y0,X1,Y1")]
+        crop: Option<String>,
         /// Also write AOVs (albedo, normal, depth, samples) as layers of the .exr output.
         ///
         /// The first hit's albedo, shading normal, distance and sample count, as the layers
@@ -376,6 +382,7 @@ fn run(cli: Cli) -> Result<()> {
             seed,
             time,
             checkpoint,
+            crop,
             aov,
             quiet,
             backend,
@@ -389,6 +396,17 @@ fn run(cli: Cli) -> Result<()> {
             if w as u64 * h as u64 > 1 << 26 {
                 bail!("--size {w}x{h} has more than 2^26 pixels (about 8192x8192); render tiles of it instead");
             }
+            let crop = match crop {
+                Some(text) => {
+                    let window: oxray_render::crop::CropWindow =
+                        text.parse().map_err(|e| anyhow::anyhow!("--crop: {e}"))?;
+                    window
+                        .check(w, h)
+                        .map_err(|e| anyhow::anyhow!("--crop: {e} (--size {w}x{h})"))?;
+                    Some(window)
+                }
+                None => None,
+            };
             if spp == 0 || spp > 1 << 16 {
                 bail!("--spp must be in 1..=65536, got {spp}");
             }
@@ -495,6 +513,7 @@ fn run(cli: Cli) -> Result<()> {
                 filter,
                 seed,
                 aovs: aov,
+                crop,
                 ..Default::default()
             };
             if look_from.is_some() || look_at.is_some() || up.is_some() || fov.is_some() {
@@ -592,9 +611,14 @@ fn run(cli: Cli) -> Result<()> {
                     (true, true) => format!(", interrupted after {done} of {spp} spp"),
                     (true, false) => format!(", out of time after {done} of {spp} spp"),
                 };
-            let samples_per_s = w as f64 * h as f64 * done as f64 / render_secs.max(1e-9);
+            let (out_w, out_h) = (rendered.image.width, rendered.image.height);
+            let samples_per_s = out_w as f64 * out_h as f64 * done as f64 / render_secs.max(1e-9);
+            let size = match crop {
+                Some(c) => format!("{out_w}x{out_h}, pixels {c} of {w}x{h}"),
+                None => format!("{w}x{h}"),
+            };
             say(format_args!(
-                "wrote {} ({w}x{h}, {done} spp, {} triangles, {} instances{on}{stopped}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s), total {:.1} s",
+                "wrote {} ({size}, {done} spp, {} triangles, {} instances{on}{stopped}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s), total {:.1} s",
                 output.display(),
                 desc.triangle_count(),
                 desc.instances.len(),

@@ -669,3 +669,66 @@ fn the_camera_is_aimed_from_the_command_line() {
     refused(&["--fov", "0"], "--fov must be in");
     assert!(!out_path.exists());
 }
+
+/// Reads an 8-bit RGBA PNG: its width, height and bytes.
+fn read_png(p: &Path) -> (u32, u32, Vec<u8>) {
+    let decoder = png::Decoder::new(std::fs::File::open(p).unwrap());
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(info.buffer_size());
+    assert_eq!(info.color_type, png::ColorType::Rgba);
+    (info.width, info.height, buf)
+}
+
+/// `--crop X0,Y0,X1,Y1` writes the window of the full render, pixel for pixel; windows that
+/// are empty, malformed or past the image are one error line, and nothing is written.
+#[test]
+fn crop_renders_a_window_of_the_image() {
+    let scene = obj_scene();
+    let render = |out: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            s(&scene),
+            "-o",
+            s(out),
+            "--size",
+            "24x16",
+            "--spp",
+            "2",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        oxray(&args)
+    };
+    let (whole, part) = (tmp("crop-full.png"), tmp("crop-part.png"));
+    assert!(render(&whole, &[]).status.success());
+    let out = render(&part, &["--crop", "5,3,17,11"]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let said = String::from_utf8_lossy(&out.stdout);
+    assert!(said.contains("12x8, pixels 5,3,17,11 of 24x16"), "{said}");
+    let (fw, _, full) = read_png(&whole);
+    let (w, h, crop) = read_png(&part);
+    assert_eq!((w, h), (12, 8));
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let p = (y * w as usize + x) * 4;
+            let q = ((y + 3) * fw as usize + x + 5) * 4;
+            assert_eq!(crop[p..p + 4], full[q..q + 4], "pixel ({x}, {y})");
+        }
+    }
+    let bad = tmp("crop-bad.png");
+    for (window, needle) in [
+        ("5,3,5,11", "has no pixels"),
+        ("1,2,3", "expected four whole numbers"),
+        ("0,0,25,16", "reaches past the 24x16 image"),
+        ("0,10,4,17", "reaches past the 24x16 image"),
+    ] {
+        assert_one_error(&render(&bad, &["--crop", window]), needle);
+        assert!(!bad.exists());
+    }
+}

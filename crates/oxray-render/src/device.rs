@@ -14,6 +14,7 @@
 //! The two versions are kept under one test (`tests/device_programs.rs`) that compares their
 //! images statistically.
 
+use crate::crop::CropWindow;
 use crate::lights::Environment;
 use crate::programs::CameraFrame;
 use crate::{prepare_lighting, traced, Image, RenderError, RenderOptions};
@@ -220,12 +221,19 @@ struct ParamsGpu {
     filter_len: u32,
     roulette_depth: u32,
     seed: u32,
+    /// The full image's pixel of launch index (0, 0): the crop window's first column and row.
+    crop_x0: u32,
+    crop_y0: u32,
+    /// The full image's size (the camera's and the random streams'; the launch is the window).
+    image_width: u32,
+    image_height: u32,
     pad: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
 const _: () = assert!(std::mem::size_of::<HitDataGpu>() == 56);
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 248);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 264);
+const _: () = assert!(std::mem::offset_of!(ParamsGpu, crop_x0) == 244);
 
 fn tex_ref(r: Option<TextureRef>) -> TexRefGpu {
     match r {
@@ -742,6 +750,10 @@ impl GpuScene {
             filter_len: 0,
             roulette_depth: 1,
             seed: 0,
+            crop_x0: 0,
+            crop_y0: 0,
+            image_width: 0,
+            image_height: 0,
             pad: 0,
         };
         let sbt = ShaderBindingTable {
@@ -758,12 +770,15 @@ impl GpuScene {
         })
     }
 
-    /// The launches of one render: these tables seen from `camera` with `opts`, adding to
-    /// `accum` (and `aov`), with the pixel filter's table in `filter`.
+    /// The launches of one render: these tables seen from `camera` with `opts`, over the
+    /// pixels of `window` (of the `opts.width` x `opts.height` image), adding to `accum` (and
+    /// `aov`), the window's pixels, with the pixel filter's table in `filter`.
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn pass<'a>(
         &'a self,
         geometry: &'a SceneGeometry,
         opts: &RenderOptions,
+        window: CropWindow,
         camera: CameraFrame,
         accum: &Buffer<[f32; 4]>,
         aov: Option<&Buffer<[f32; 8]>>,
@@ -781,12 +796,15 @@ impl GpuScene {
         params.max_depth = opts.max_depth.max(1);
         params.roulette_depth = opts.roulette_depth.max(1);
         params.seed = opts.seed;
+        params.crop_x0 = window.x0();
+        params.crop_y0 = window.y0();
+        params.image_width = opts.width;
+        params.image_height = opts.height;
         Pass {
             pipeline: &geometry.pipeline,
             sbt: &self.sbt,
             params,
-            width: opts.width,
-            height: opts.height,
+            window,
         }
     }
 }
@@ -796,22 +814,26 @@ pub(crate) struct Pass<'a> {
     pipeline: &'a Pipeline,
     sbt: &'a ShaderBindingTable,
     params: ParamsGpu,
-    width: u32,
-    height: u32,
+    /// The pixels launched.
+    window: CropWindow,
 }
 
 impl Pass<'_> {
     /// Adds sample `sample` to every pixel.
     pub(crate) fn launch(&mut self, sample: u32) -> Result<(), RenderError> {
         self.params.sample = sample;
-        let report =
-            self.pipeline
-                .launch_with(&self.params, self.sbt, self.width, self.height, 1)?;
+        let report = self.pipeline.launch_with(
+            &self.params,
+            self.sbt,
+            self.window.width(),
+            self.window.height(),
+            1,
+        )?;
         if let Some((index, e)) = report.first_exceptions.first() {
             return Err(RenderError::Exceptions {
                 pass: sample,
                 count: report.exceptions,
-                first: format!("at pixel {:?}: {e}", &index[..2]),
+                first: format!("at pixel {:?}: {e}", self.window.image_pixel(index)),
             });
         }
         Ok(())

@@ -117,6 +117,11 @@ struct Params {
     u32 filter_len;
     u32 roulette_depth;  // the first vertex after which Russian roulette may end a path
     u32 seed;            // chooses the image's random sequence (0: the default one)
+    // The crop window (RenderOptions::crop): the full image's pixel of launch index (0, 0),
+    // and the full image's size, which the camera and the pixels' random streams use; the
+    // launch covers the window, and accum and aov hold its pixels.
+    u32 crop_x0, crop_y0;
+    u32 image_width, image_height;
     u32 pad;
 };
 
@@ -925,15 +930,19 @@ PTF void write_aov(const Material& m, const Shading& sh) {
 extern "C" __global__ void __raygen__camera() {
     const uint3 idx = optixGetLaunchIndex();
     const uint3 dim = optixGetLaunchDimensions();
+    // The sample is the full image's: its place there keys the random stream and the camera
+    // ray; the sums go to the window's pixel.
+    const u32 x = params.crop_x0 + idx.x, y = params.crop_y0 + idx.y;
+    const u32 w = params.image_width, h = params.image_height;
     u32 pixel = idx.y * dim.x + idx.x;
-    Rng rng = rng_new(pixel, params.sample, 0x5eedu ^ (params.seed * 0x9E3779B9u));
+    Rng rng = rng_new(y * w + x, params.sample, 0x5eedu ^ (params.seed * 0x9E3779B9u));
     float jx = rng.uniform();
     float jy = rng.uniform();
     // Filter importance sampling: the offset from the pixel's centre follows the filter.
     float ox = 0.5f + filter_offset(jx);
     float oy = 0.5f + filter_offset(jy);
-    float sx = 2.0f * ((float)idx.x + ox) / (float)dim.x - 1.0f;
-    float sy = 1.0f - 2.0f * ((float)idx.y + oy) / (float)dim.y;
+    float sx = 2.0f * ((float)x + ox) / (float)w - 1.0f;
+    float sy = 1.0f - 2.0f * ((float)y + oy) / (float)h;
     V3 dir = normalize(v3a(params.cam_forward) + v3a(params.cam_right) * sx +
                        v3a(params.cam_up) * sy);
     PathState s;

@@ -45,6 +45,7 @@
 //!     roulette_depth: 3,
 //!     seed: 0,
 //!     aovs: false,
+//!     crop: None, // the whole image ([`crop`]: a window of it)
 //! };
 //! let dark = Environment::uniform(Vec3::ZERO); // the box is lit by its ceiling panel only
 //! let mut passes = 0;
@@ -63,6 +64,7 @@
 
 pub mod albedo;
 pub mod bsdf;
+pub mod crop;
 pub mod device;
 pub mod filter;
 pub mod lights;
@@ -113,11 +115,16 @@ pub struct RenderOptions {
     /// Also render the first hit's auxiliary images ([`Aovs`]: albedo, shading normal,
     /// distance, samples), returned by [`Renderer::render`] and [`render_passes`].
     pub aovs: bool,
+    /// Render only this window of the image ([`crop::CropWindow`], in the pixels of the
+    /// `width` x `height` image); the result has the window's size and each of its pixels is
+    /// the same pixel of the full render, bit for bit. `None`: the whole image.
+    pub crop: Option<crop::CropWindow>,
 }
 
 impl Default for RenderOptions {
     /// 640 x 480 pixels, 16 samples per pixel, paths of up to 8 vertices, the scene's camera,
-    /// the Gaussian pixel filter, Russian roulette after 3 vertices, seed 0, no AOVs.
+    /// the Gaussian pixel filter, Russian roulette after 3 vertices, seed 0, no AOVs, the whole
+    /// image.
     fn default() -> Self {
         RenderOptions {
             width: 640,
@@ -129,6 +136,7 @@ impl Default for RenderOptions {
             roulette_depth: 3,
             seed: 0,
             aovs: false,
+            crop: None,
         }
     }
 }
@@ -139,6 +147,9 @@ pub enum RenderError {
     /// The scene cannot be rendered as given.
     #[error("{0}")]
     Scene(String),
+    /// The crop window is not inside the image ([`RenderOptions::crop`]).
+    #[error(transparent)]
+    Crop(#[from] crop::CropError),
     /// Building acceleration structures or the SBT failed.
     #[error(transparent)]
     Build(#[from] oxray_util::UtilError),
@@ -408,6 +419,7 @@ pub fn render_passes(
     opts: &RenderOptions,
     mut on_pass: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
 ) -> Result<Rendered, RenderError> {
+    let window = crop::window_of(opts.width, opts.height, opts.crop)?;
     let prep = prepare(scene, env, opts)?;
     // Everything the launch parameters borrow outlives the scene that holds the programs.
     let prims: Vec<&Primitive> = scene
@@ -416,7 +428,8 @@ pub fn render_passes(
         .flat_map(|m| m.primitives.iter().filter(|p| traced(p)))
         .collect();
     let lights = &prep.lit.lights;
-    let pixels = opts.width as usize * opts.height as usize;
+    let (w, h) = (window.width(), window.height());
+    let pixels = w as usize * h as usize;
     let accum = OutputBuffer::new(pixels);
     let aov = opts
         .aovs
@@ -533,17 +546,20 @@ pub fn render_passes(
             roulette_depth: prep.roulette_depth,
             seed: opts.seed,
             aov: aov.as_ref(),
+            window: [window.x0(), window.y0()],
+            image: [opts.width, opts.height],
         };
-        let report = pipeline.launch(&mut util, &params, opts.width, opts.height, 1)?;
+        // One launch index per pixel of the window.
+        let report = pipeline.launch(&mut util, &params, w, h, 1)?;
         if let Some((index, e)) = report.first_exceptions.first() {
             return Err(RenderError::Exceptions {
                 pass: sample,
                 count: report.exceptions,
-                first: format!("at pixel {:?}: {e}", &index[..2]),
+                first: format!("at pixel {:?}: {e}", window.image_pixel(index)),
             });
         }
         samples = sample + 1;
-        let progress = Progress::host(samples, opts, &accum);
+        let progress = Progress::host(samples, opts.spp, (w, h), &accum);
         if on_pass(&progress).is_break() {
             cancelled = samples < opts.spp;
             break;
@@ -551,11 +567,11 @@ pub fn render_passes(
     }
     let sums = accum.to_vec();
     Ok(Rendered {
-        image: image_from_sums(opts.width, opts.height, &sums),
+        image: image_from_sums(w, h, &sums),
         samples,
         cancelled,
         aovs: aov
             .as_ref()
-            .map(|a| Aovs::from_sums(opts.width, opts.height, &sums, &a.to_vec())),
+            .map(|a| Aovs::from_sums(w, h, &sums, &a.to_vec())),
     })
 }

@@ -69,6 +69,12 @@ pub struct Params<'a> {
     /// Sums per pixel of the first hit's albedo, shading normal and distance, and the number
     /// of samples that hit ([`AOV_WORDS`] floats), or `None`.
     pub aov: Option<&'a OutputBuffer<[f32; AOV_WORDS]>>,
+    /// The full image's pixel of launch index (0, 0): the crop window's first column and row
+    /// ([`crate::crop`]); the launch covers the window, `accum` and `aov` hold its pixels.
+    pub window: [u32; 2],
+    /// The full image's width and height: the camera's image plane and the pixels' random
+    /// streams are those of the full image, so a window's pixels are the full render's.
+    pub image: [u32; 2],
 }
 
 /// Floats per pixel of the auxiliary sums: albedo (3), shading normal (3), distance, hits.
@@ -590,11 +596,15 @@ fn punctual_light(
 pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
     Module::<Params>::new()
         .raygen("__raygen__camera", |ctx| {
-            let [x, y, _] = ctx.launch_index();
-            let [w, h, _] = ctx.launch_dimensions();
+            let [lx, ly, _] = ctx.launch_index();
+            let [lw, _, _] = ctx.launch_dimensions();
             let p = ctx.params();
-            let pixel = y * w + x;
-            let mut rng = Rng::new(pixel, p.sample, stream_salt(p.seed));
+            // The sample is the full image's: its place there keys the random stream and the
+            // camera ray; the sums go to the window's pixel.
+            let (x, y) = (p.window[0] + lx, p.window[1] + ly);
+            let [w, h] = p.image;
+            let mut rng = Rng::new(y * w + x, p.sample, stream_salt(p.seed));
+            let pixel = ly * lw + lx;
             // Filter importance sampling: the offset from the pixel's centre follows the filter.
             let (jx, jy) = (rng.uniform(), rng.uniform());
             let ox = 0.5 + sample_offset(p.filter, jx);

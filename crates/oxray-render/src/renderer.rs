@@ -52,7 +52,7 @@
 use crate::device::{self, GpuScene, SceneGeometry};
 use crate::lights::Environment;
 use crate::output::Image;
-use crate::{camera_frame_with, image_from_sums, RenderError, RenderOptions};
+use crate::{camera_frame_with, crop, image_from_sums, RenderError, RenderOptions};
 use glam::Mat4;
 use oxray::programs::Buffer;
 use oxray::{Device, OutputBuffer};
@@ -196,12 +196,8 @@ impl<'s> Renderer<'s> {
         opts: &RenderOptions,
         mut on_pass: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
     ) -> Result<Rendered, RenderError> {
-        if opts.width == 0 || opts.height == 0 {
-            return Err(RenderError::Scene(format!(
-                "the image has no pixels ({}x{})",
-                opts.width, opts.height
-            )));
-        }
+        let window = crop::window_of(opts.width, opts.height, opts.crop)?;
+        let (width, height) = (window.width(), window.height());
         let camera = camera_frame_with(&self.scene, opts, self.camera)?;
         let tables = match &mut self.tables {
             Some(t) => t,
@@ -212,14 +208,22 @@ impl<'s> Renderer<'s> {
                 &self.geometry,
             )?),
         };
-        let pixels = opts.width as usize * opts.height as usize;
+        let pixels = width as usize * height as usize;
         let accum = self.device.create_buffer::<[f32; 4]>(pixels)?;
         let aov = match opts.aovs {
             true => Some(self.device.create_buffer::<[f32; 8]>(pixels)?),
             false => None,
         };
         let filter = self.device.buffer_from_slice(&opts.filter.table())?;
-        let mut pass = tables.pass(&self.geometry, opts, camera, &accum, aov.as_ref(), &filter);
+        let mut pass = tables.pass(
+            &self.geometry,
+            opts,
+            window,
+            camera,
+            &accum,
+            aov.as_ref(),
+            &filter,
+        );
         let mut samples = 0;
         let mut cancelled = false;
         for sample in 0..opts.spp {
@@ -228,8 +232,8 @@ impl<'s> Renderer<'s> {
             let progress = Progress {
                 samples,
                 total: opts.spp,
-                width: opts.width,
-                height: opts.height,
+                width,
+                height,
                 accum: Sums::Device(&accum),
             };
             if on_pass(&progress).is_break() {
@@ -239,16 +243,11 @@ impl<'s> Renderer<'s> {
         }
         let sums = accum.download()?;
         let aovs = match aov {
-            Some(b) => Some(Aovs::from_sums(
-                opts.width,
-                opts.height,
-                &sums,
-                &b.download()?,
-            )),
+            Some(b) => Some(Aovs::from_sums(width, height, &sums, &b.download()?)),
             None => None,
         };
         Ok(Rendered {
-            image: image_from_sums(opts.width, opts.height, &sums),
+            image: image_from_sums(width, height, &sums),
             samples,
             cancelled,
             aovs,
@@ -290,8 +289,8 @@ impl<'r> Progress<'r> {
         self.total
     }
 
-    /// The mean of the samples done (copied from the device: call it when it is shown or
-    /// saved, not after every pass).
+    /// The mean of the samples done, of the crop window's size with [`RenderOptions::crop`]
+    /// (copied from the device: call it when it is shown or saved, not after every pass).
     pub fn image(&self) -> Result<Image, RenderError> {
         let sums = match self.accum {
             Sums::Device(b) => b.download()?,
@@ -300,16 +299,19 @@ impl<'r> Progress<'r> {
         Ok(image_from_sums(self.width, self.height, &sums))
     }
 
+    /// The progress of the Rust programs: `samples` of `total` done, sums of a
+    /// `width` x `height` image (the crop window) in `accum`.
     pub(crate) fn host(
         samples: u32,
-        opts: &RenderOptions,
+        total: u32,
+        (width, height): (u32, u32),
         accum: &'r OutputBuffer<[f32; 4]>,
     ) -> Self {
         Progress {
             samples,
-            total: opts.spp,
-            width: opts.width,
-            height: opts.height,
+            total,
+            width,
+            height,
             accum: Sums::Host(accum),
         }
     }
