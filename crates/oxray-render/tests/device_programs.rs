@@ -434,8 +434,8 @@ fn the_comparison_tells_noise_from_a_changed_algorithm() {
         compare(&references[which], &img)
     };
     let seed = (
-        "rng_new(pixel, params.sample, 0x5eedu ^",
-        "rng_new(pixel, params.sample, 0x5eeeu ^",
+        "rng_new(y * w + x, params.sample, 0x5eedu ^",
+        "rng_new(y * w + x, params.sample, 0x5eeeu ^",
     );
     for which in [0, 1] {
         let reseeded = variant("another seed", seed.0, seed.1, which);
