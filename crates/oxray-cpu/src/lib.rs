@@ -43,6 +43,7 @@ mod output;
 pub mod pipeline;
 pub mod program;
 mod query;
+pub mod simulation;
 mod traversal;
 
 pub use backend::{Cpu, CpuBatch};
@@ -58,6 +59,10 @@ pub use program::{
     RayGenCtx, TraceRay, TransformListEntry, TransformListKind,
 };
 pub use query::{CustomIntersector, NoCustomPrimitives};
+pub use simulation::{
+    AllHits, ClosestPoint, MeshError, NoShadingNormals, ShadingNormals, SurfaceHit,
+    SurfaceQueryError, VertexNormals,
+};
 
 // The neutral types, nameable as `crate::X` in every module.
 #[allow(unused_imports)]

@@ -108,10 +108,11 @@ pub use oxray_bvh::{
     GasExport, GasMemory, Sphere,
 };
 pub use oxray_cpu::{
-    AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, CustomIntersector, DirectCallableCtx,
-    ExceptionCtx, HitGroupDesc, Interrupt, IntersectionCtx, MissCtx, Module, NoCustomPrimitives,
-    OutputBuffer, Pipeline, ProgramGroup, ProgramGroupKind, ProgramKind, ProgramResult, RayGenCtx,
-    TraceRay, TransformListEntry, TransformListKind,
+    AllHits, AnyHitCtx, ClosestHitCtx, ClosestPoint, ContinuationCallableCtx, CustomIntersector,
+    DirectCallableCtx, ExceptionCtx, HitGroupDesc, Interrupt, IntersectionCtx, MeshError, MissCtx,
+    Module, NoCustomPrimitives, NoShadingNormals, OutputBuffer, Pipeline, ProgramGroup,
+    ProgramGroupKind, ProgramKind, ProgramResult, RayGenCtx, ShadingNormals, SurfaceHit,
+    SurfaceQueryError, TraceRay, TransformListEntry, TransformListKind, VertexNormals,
 };
 
 /// The math and plain-data crates the public API uses, at the versions it uses.

@@ -1,0 +1,269 @@
+//! Every primitive a ray crosses: sorted by distance, each reported once, with a bound on how
+//! many are kept; and the number of primitives crossed.
+//!
+//! Both are any-hit filters over the closest-hit traversal that ignore every candidate, so
+//! that the interval never shrinks and every primitive in `[tmin, tmax]` is offered. A
+//! primitive may be offered more than once (spatial splits reference a triangle from several
+//! leaves, guide §5.1); every offer of one primitive on one path has the same `t`, so the
+//! sorted list finds repeats by binary search. Once a full list is known to miss a hit, the
+//! interval shrinks to its farthest hit (not before, so that whether the list is complete is
+//! exact).
+
+use super::{check_ray, par_try_batch, SurfaceQueryError, CHUNK};
+use crate::{Gas, Ias, NoCustomPrimitives};
+use oxray_core::{CandidateAction, Hit, Ray};
+use rayon::prelude::*;
+use std::cell::RefCell;
+use std::cmp::Ordering;
+
+/// The order of the all-hits list: by `t`, then by instance, build input and primitive, so that
+/// which hits a full list keeps among equal distances does not depend on traversal order.
+/// Two offers of one primitive compare equal.
+fn order(a: &Hit, b: &Hit) -> Ordering {
+    a.t.total_cmp(&b.t)
+        .then(a.instance_index.cmp(&b.instance_index))
+        .then(a.instance_id.cmp(&b.instance_id))
+        .then(a.build_input.cmp(&b.build_input))
+        .then(a.primitive_index.cmp(&b.primitive_index))
+}
+
+/// Offers a candidate to the list `out` (sorted by [`order`], at most `max` long). Clears
+/// `*complete` where a hit is left out.
+fn offer(out: &mut Vec<Hit>, max: usize, hit: &Hit, complete: &mut bool) -> CandidateAction {
+    let Err(pos) = out.binary_search_by(|x| order(x, hit)) else {
+        // Already in the list.
+        return CandidateAction::Ignore;
+    };
+    if max == 0 {
+        // Only whether there is a hit matters.
+        *complete = false;
+        return CandidateAction::Terminate;
+    }
+    if out.len() == max {
+        *complete = false;
+        if pos == max {
+            // Beyond the full list: nothing beyond this hit can enter it either.
+            return CandidateAction::Accept;
+        }
+        out.pop();
+    }
+    out.insert(pos, *hit);
+    if !*complete && pos == max - 1 {
+        // The new farthest hit of a list known to be incomplete: nothing beyond it can enter.
+        CandidateAction::Accept
+    } else {
+        CandidateAction::Ignore
+    }
+}
+
+/// The results of [`Gas::all_hits_batch`] and [`Ias::all_hits_batch`]: every ray's hits, one
+/// ray after the other. Reuse it across batches to keep its allocations.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct AllHits {
+    hits: Vec<Hit>,
+    /// Ray `i`'s hits are `hits[offsets[i] .. offsets[i + 1]]`.
+    offsets: Vec<usize>,
+    complete: Vec<bool>,
+}
+
+impl AllHits {
+    /// An empty result.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Rays in the batch.
+    pub fn len(&self) -> usize {
+        self.complete.len()
+    }
+
+    /// Whether the batch had no ray.
+    pub fn is_empty(&self) -> bool {
+        self.complete.is_empty()
+    }
+
+    /// The hits of ray `ray`, sorted by `t`, each primitive once.
+    ///
+    /// # Panics
+    ///
+    /// If `ray >= self.len()`.
+    pub fn hits(&self, ray: usize) -> &[Hit] {
+        &self.hits[self.offsets[ray]..self.offsets[ray + 1]]
+    }
+
+    /// Whether ray `ray` has no hit beyond those kept (false where the bound left some out).
+    ///
+    /// # Panics
+    ///
+    /// If `ray >= self.len()`.
+    pub fn is_complete(&self, ray: usize) -> bool {
+        self.complete[ray]
+    }
+
+    /// Every hit of every ray, ray after ray.
+    pub fn all(&self) -> &[Hit] {
+        &self.hits
+    }
+
+    /// Where each ray's hits start in [`all`](Self::all), and the end (`len() + 1` entries).
+    pub fn offsets(&self) -> &[usize] {
+        &self.offsets
+    }
+
+    fn clear(&mut self) {
+        self.hits.clear();
+        self.offsets.clear();
+        self.offsets.push(0);
+        self.complete.clear();
+    }
+}
+
+thread_local! {
+    /// The unbounded list of [`count_hits`](Gas::count_hits), kept per thread so that counting
+    /// allocates nothing per ray once it has grown.
+    static SCRATCH: RefCell<Vec<Hit>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Runs `f` with this thread's scratch list (a fresh one should a count nest in another).
+fn with_scratch<R>(f: impl FnOnce(&mut Vec<Hit>) -> R) -> R {
+    SCRATCH.with(|cell| match cell.try_borrow_mut() {
+        Ok(mut v) => f(&mut v),
+        Err(_) => f(&mut Vec::new()),
+    })
+}
+
+/// The all-hits queries every traversable offers.
+macro_rules! all_hits_api {
+    ($t:ty) => {
+        impl $t {
+            /// Every primitive `ray` crosses in `[tmin, tmax]`, into `out` (cleared first): sorted
+            /// by `t` (then by instance index, instance id, build input and primitive index), each
+            /// primitive of each instance once, at most `max_hits` of them: the nearest. Returns
+            /// whether the list is complete (`false` where the bound left hits out). Custom
+            /// primitives are not hit. `out`'s allocation is reused: keep it across rays.
+            ///
+            /// A ray through an edge or a vertex shared by several triangles crosses each of
+            /// them: each is reported (all at the same `t`). An invalid ray is an error.
+            ///
+            /// ```
+            /// use oxray_cpu::Gas;
+            /// use oxray_core::Ray;
+            /// use glam::Vec3;
+            /// // Three parallel triangles at z = 1, 2, 3.
+            /// let v: Vec<[f32; 3]> = (1..=3)
+            ///     .flat_map(|z| [[-1.0, -1.0, z as f32], [1.0, -1.0, z as f32], [0.0, 1.0, z as f32]])
+            ///     .collect();
+            /// let gas = Gas::from_mesh(&v, &[[0, 1, 2], [3, 4, 5], [6, 7, 8]])?;
+            /// let ray = Ray::new(Vec3::ZERO, Vec3::Z);
+            /// let mut hits = Vec::new();
+            /// assert!(gas.all_hits(&ray, 8, &mut hits)?);
+            /// assert_eq!(hits.iter().map(|h| h.primitive_index).collect::<Vec<_>>(), [0, 1, 2]);
+            /// // Bounded: the two nearest, and the list says it is not complete.
+            /// assert!(!gas.all_hits(&ray, 2, &mut hits)?);
+            /// assert_eq!(hits.iter().map(|h| h.t).collect::<Vec<_>>(), [1.0, 2.0]);
+            /// assert_eq!(gas.count_hits(&ray)?, 3);
+            /// # Ok::<(), Box<dyn std::error::Error>>(())
+            /// ```
+            pub fn all_hits(
+                &self,
+                ray: &Ray,
+                max_hits: usize,
+                out: &mut Vec<Hit>,
+            ) -> Result<bool, SurfaceQueryError> {
+                check_ray(ray)?;
+                out.clear();
+                let mut complete = true;
+                self.intersect_filtered(ray, &mut NoCustomPrimitives, |h| {
+                    offer(out, max_hits, h, &mut complete)
+                });
+                Ok(complete)
+            }
+
+            /// The number of distinct primitives `ray` crosses in `[tmin, tmax]` (each primitive of
+            /// each instance once), as [`all_hits`](Self::all_hits) would list them without a
+            /// bound. Its parity tells inside from outside for a closed mesh only where the ray
+            /// crosses no edge or vertex (a shared edge counts once per triangle); see
+            /// [`Gas::signed_distance`] for a robust inside test.
+            pub fn count_hits(&self, ray: &Ray) -> Result<u32, SurfaceQueryError> {
+                check_ray(ray)?;
+                Ok(with_scratch(|list| {
+                    list.clear();
+                    let mut complete = true;
+                    self.intersect_filtered(ray, &mut NoCustomPrimitives, |h| {
+                        offer(list, usize::MAX, h, &mut complete)
+                    });
+                    list.len() as u32
+                }))
+            }
+
+            /// [`all_hits`](Self::all_hits) of a batch of rays in parallel, at most
+            /// `max_hits_per_ray` per ray, into `out` (cleared first): the same lists as ray by
+            /// ray, whatever the number of threads. Every ray is checked before any is traced: an
+            /// invalid one is an error (the lowest index) and `out` is left empty.
+            ///
+            /// ```
+            /// use oxray_cpu::{AllHits, Gas};
+            /// use oxray_core::Ray;
+            /// use glam::Vec3;
+            /// let v = [[-1.0f32, -1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 1.0, 1.0]];
+            /// let gas = Gas::from_mesh(&v, &[[0, 1, 2]])?;
+            /// let rays = [Ray::new(Vec3::ZERO, Vec3::Z), Ray::new(Vec3::ZERO, -Vec3::Z)];
+            /// let mut out = AllHits::new();
+            /// gas.all_hits_batch(&rays, 4, &mut out)?;
+            /// assert_eq!((out.hits(0).len(), out.hits(1).len()), (1, 0));
+            /// # Ok::<(), Box<dyn std::error::Error>>(())
+            /// ```
+            pub fn all_hits_batch(
+                &self,
+                rays: &[Ray],
+                max_hits_per_ray: usize,
+                out: &mut AllHits,
+            ) -> Result<(), SurfaceQueryError> {
+                out.clear();
+                if let Some((index, error)) = rays
+                    .iter()
+                    .enumerate()
+                    .find_map(|(i, r)| r.validate().err().map(|e| (i, e)))
+                {
+                    return Err(SurfaceQueryError::InvalidRay { index, error });
+                }
+                let chunks: Vec<(Vec<Hit>, Vec<usize>, Vec<bool>)> = rays
+                    .par_chunks(CHUNK)
+                    .map(|rays| {
+                        let mut hits = Vec::new();
+                        let mut ends = Vec::with_capacity(rays.len());
+                        let mut complete = Vec::with_capacity(rays.len());
+                        let mut list = Vec::new();
+                        for r in rays {
+                            // Checked above: only `Ok` comes back.
+                            complete.push(self.all_hits(r, max_hits_per_ray, &mut list)?);
+                            hits.extend_from_slice(&list);
+                            ends.push(hits.len());
+                        }
+                        Ok((hits, ends, complete))
+                    })
+                    .collect::<Result<_, SurfaceQueryError>>()?;
+                for (hits, ends, complete) in chunks {
+                    let base = out.hits.len();
+                    out.hits.extend_from_slice(&hits);
+                    out.offsets.extend(ends.iter().map(|e| base + e));
+                    out.complete.extend_from_slice(&complete);
+                }
+                Ok(())
+            }
+
+            /// [`count_hits`](Self::count_hits) of a batch of rays in parallel. The first invalid
+            /// ray (the lowest index) is the error; the counts of the others are written.
+            pub fn count_hits_batch(
+                &self,
+                rays: &[Ray],
+                counts: &mut [u32],
+            ) -> Result<(), SurfaceQueryError> {
+                par_try_batch(rays.len(), counts, |i| self.count_hits(&rays[i]))
+            }
+        }
+    };
+}
+
+all_hits_api!(Gas);
+all_hits_api!(Ias);
