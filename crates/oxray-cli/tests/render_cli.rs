@@ -447,24 +447,27 @@ fn tone_curves_and_pixel_filters_are_chosen_on_the_command_line() {
     );
 }
 
+/// `oxray render SCENE -o OUT` at 24x16 pixels and 2 spp, quietly, with `extra` options.
+fn render_small(scene: &Path, out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "render",
+        s(scene),
+        "-o",
+        s(out),
+        "--size",
+        "24x16",
+        "--spp",
+        "2",
+        "--quiet",
+    ];
+    args.extend_from_slice(extra);
+    oxray(&args)
+}
+
 #[test]
 fn seeds_and_aov_layers() {
     let scene = obj_scene();
-    let render = |out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "render",
-            s(&scene),
-            "-o",
-            s(out),
-            "--size",
-            "24x16",
-            "--spp",
-            "2",
-            "--quiet",
-        ];
-        args.extend_from_slice(extra);
-        oxray(&args)
-    };
+    let render = |out: &Path, extra: &[&str]| render_small(&scene, out, extra);
     let bytes = |p: &Path| std::fs::read(p).unwrap();
     let (a, b, c) = (tmp("seed-a.png"), tmp("seed-b.png"), tmp("seed-c.png"));
     assert!(render(&a, &["--seed", "5"]).status.success());
@@ -686,21 +689,7 @@ fn read_png(p: &Path) -> (u32, u32, Vec<u8>) {
 #[test]
 fn crop_renders_a_window_of_the_image() {
     let scene = obj_scene();
-    let render = |out: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "render",
-            s(&scene),
-            "-o",
-            s(out),
-            "--size",
-            "24x16",
-            "--spp",
-            "2",
-            "--quiet",
-        ];
-        args.extend_from_slice(extra);
-        oxray(&args)
-    };
+    let render = |out: &Path, extra: &[&str]| render_small(&scene, out, extra);
     let (whole, part) = (tmp("crop-full.png"), tmp("crop-part.png"));
     assert!(render(&whole, &[]).status.success());
     let out = render(&part, &["--crop", "5,3,17,11"]);
