@@ -130,89 +130,93 @@ impl CurveSegment {
     /// Whether a ray can hit it: finite control points, a known type, and a radius that is
     /// positive somewhere (the guide skips negative radii, §9.8).
     pub fn is_active(&self) -> bool {
-        CurveType::from_code(self.curve_type).is_some()
-            && self
-                .control_points()
+        self.active_type().is_some()
+    }
+
+    /// The curve type of an active segment ([`is_active`](Self::is_active)), `None` otherwise:
+    /// the type is decoded once.
+    #[inline]
+    fn active_type(&self) -> Option<CurveType> {
+        let ty = CurveType::from_code(self.curve_type)?;
+        let points = &self.points[..ty.control_points()];
+        // Folds without early exits: a few compares the compiler may pack.
+        let finite = points
+            .iter()
+            .flatten()
+            .fold(true, |ok, c| ok & c.is_finite())
+            & self
+                .normals
                 .iter()
-                .all(|p| p.iter().all(|c| c.is_finite()))
-            && self.control_points().iter().any(|p| p[3] > 0.0)
-            && self.normals.iter().all(|n| n.iter().all(|c| c.is_finite()))
+                .flatten()
+                .fold(true, |ok, c| ok & c.is_finite());
+        let radius = points.iter().fold(false, |any, p| any | (p[3] > 0.0));
+        (finite && radius).then_some(ty)
     }
 
     /// Power-basis coefficients of `(x, y, z, r)`: `c(u) = Σ a[k] u^k`.
     fn power_basis(&self) -> [[f64; 4]; 4] {
-        let p = |i: usize| self.points[i].map(f64::from);
-        let mut a = [[0.0; 4]; 4];
-        for d in 0..4 {
-            let q = |i: usize| p(i)[d];
-            let c = match self.curve_type() {
-                CurveType::RoundLinear => [q(0), q(1) - q(0), 0.0, 0.0],
-                CurveType::RoundQuadraticBSpline
-                | CurveType::FlatQuadraticBSpline
-                | CurveType::RoundQuadraticBSplineRocaps => [
-                    0.5 * (q(0) + q(1)),
-                    q(1) - q(0),
-                    0.5 * (q(0) - 2.0 * q(1) + q(2)),
-                    0.0,
-                ],
-                CurveType::RoundCubicBSpline | CurveType::RoundCubicBSplineRocaps => [
+        self.power_basis_of(self.curve_type())
+    }
+
+    /// [`power_basis`](Self::power_basis) for the segment's type `ty`, decoded by the caller.
+    #[inline]
+    fn power_basis_of(&self, ty: CurveType) -> [[f64; 4]; 4] {
+        let p: [[f64; 4]; 4] = self.points.map(|q| q.map(f64::from));
+        // One match per segment; each coefficient is the type's expression, coordinate by
+        // coordinate (lanes the compiler may pack).
+        macro_rules! per_coordinate {
+            (|$q:ident| [$($e:expr),* $(,)?]) => {
+                [$(std::array::from_fn(|d| {
+                    let $q = |i: usize| p[i][d];
+                    $e
+                })),*]
+            };
+        }
+        match ty {
+            CurveType::RoundLinear => per_coordinate!(|q| [q(0), q(1) - q(0), 0.0, 0.0]),
+            CurveType::RoundQuadraticBSpline
+            | CurveType::FlatQuadraticBSpline
+            | CurveType::RoundQuadraticBSplineRocaps => per_coordinate!(|q| [
+                0.5 * (q(0) + q(1)),
+                q(1) - q(0),
+                0.5 * (q(0) - 2.0 * q(1) + q(2)),
+                0.0,
+            ]),
+            CurveType::RoundCubicBSpline | CurveType::RoundCubicBSplineRocaps => {
+                per_coordinate!(|q| [
                     (q(0) + 4.0 * q(1) + q(2)) / 6.0,
                     (q(2) - q(0)) / 2.0,
                     (q(0) - 2.0 * q(1) + q(2)) / 2.0,
                     (-q(0) + 3.0 * q(1) - 3.0 * q(2) + q(3)) / 6.0,
-                ],
-                CurveType::RoundCatmullRom | CurveType::RoundCatmullRomRocaps => [
+                ])
+            }
+            CurveType::RoundCatmullRom | CurveType::RoundCatmullRomRocaps => {
+                per_coordinate!(|q| [
                     q(1),
                     0.5 * (q(2) - q(0)),
                     0.5 * (2.0 * q(0) - 5.0 * q(1) + 4.0 * q(2) - q(3)),
                     0.5 * (-q(0) + 3.0 * q(1) - 3.0 * q(2) + q(3)),
-                ],
-                CurveType::RoundCubicBezier | CurveType::RoundCubicBezierRocaps => [
+                ])
+            }
+            CurveType::RoundCubicBezier | CurveType::RoundCubicBezierRocaps => {
+                per_coordinate!(|q| [
                     q(0),
                     3.0 * (q(1) - q(0)),
                     3.0 * (q(0) - 2.0 * q(1) + q(2)),
                     -q(0) + 3.0 * q(1) - 3.0 * q(2) + q(3),
-                ],
-            };
-            for k in 0..4 {
-                a[k][d] = c[k];
+                ])
             }
         }
-        a
     }
 
     /// The centre and radius at `u`, in `f64` (the reference tests use it too).
     pub fn eval(&self, u: f64) -> (DVec3, f64) {
-        let a = self.power_basis();
-        let mut v = [0.0; 4];
-        for d in 0..4 {
-            v[d] = ((a[3][d] * u + a[2][d]) * u + a[1][d]) * u + a[0][d];
-        }
-        (DVec3::new(v[0], v[1], v[2]), v[3])
+        eval_basis(&self.power_basis(), u)
     }
 
     /// The tangent `c'(u)`, in `f64`.
     pub fn tangent(&self, u: f64) -> DVec3 {
-        let a = self.power_basis();
-        let mut v = [0.0; 3];
-        for d in 0..3 {
-            v[d] = (3.0 * a[3][d] * u + 2.0 * a[2][d]) * u + a[1][d];
-        }
-        DVec3::from_array(v)
-    }
-
-    /// Bézier control points of the segment (degree 3, elevated where lower): their convex
-    /// hull holds the centre line and their largest radius bounds the radius.
-    fn bezier_points(&self) -> [[f64; 4]; 4] {
-        let a = self.power_basis();
-        let mut b = [[0.0; 4]; 4];
-        for d in 0..4 {
-            b[0][d] = a[0][d];
-            b[1][d] = a[0][d] + a[1][d] / 3.0;
-            b[2][d] = a[0][d] + 2.0 * a[1][d] / 3.0 + a[2][d] / 3.0;
-            b[3][d] = a[0][d] + a[1][d] + a[2][d] + a[3][d];
-        }
-        b
+        tangent_basis(&self.power_basis(), u)
     }
 
     /// The box around the segment: the Bézier hull of the centre line grown by the largest
@@ -221,7 +225,7 @@ impl CurveSegment {
         if !self.is_active() {
             return Aabb::EMPTY;
         }
-        let b = self.bezier_points();
+        let b = bezier_points(&self.power_basis());
         let r = b.iter().fold(0.0f64, |m, p| m.max(p[3]));
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
@@ -240,13 +244,14 @@ impl CurveSegment {
     pub fn intersect(&self, org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<CurveHit> {
         let len = dir.as_dvec3().length();
         // NaN (a NaN direction) fails the compare: no hit.
-        if len.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) || !self.is_active() {
+        if len.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
             return None;
         }
+        let ty = self.active_type()?;
         let frame = RayFrame::new(org.as_dvec3(), dir.as_dvec3() / len);
         // Distances along the ray in world units.
         let (zmin, zmax) = (tmin as f64 * len, tmax as f64 * len);
-        let a = self.power_basis();
+        let a = self.power_basis_of(ty);
         let mut x = [0.0; 4];
         let mut y = [0.0; 4];
         let mut z = [0.0; 4];
@@ -260,23 +265,17 @@ impl CurveSegment {
             r[k] = a[k][3];
         }
         // Cheap rejection on the Bézier hull in the ray's frame.
-        let rmax = self
-            .bezier_points()
+        let rmax = bezier_points(&a)
             .iter()
             .fold(0.0f64, |m, p| m.max(p[3].abs()));
-        let hull = |c: &[f64; 4]| {
-            let b = [
-                c[0],
-                c[0] + c[1] / 3.0,
-                c[0] + 2.0 * c[1] / 3.0 + c[2] / 3.0,
-                c[0] + c[1] + c[2] + c[3],
-            ];
+        let (bx, by, bz) = (bezier_1d(&x), bezier_1d(&y), bezier_1d(&z));
+        let hull = |b: &[f64; 4]| {
             b.iter()
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
                     (l.min(v), h.max(v))
                 })
         };
-        let (hx, hy, hz) = (hull(&x), hull(&y), hull(&z));
+        let (hx, hy, hz) = (hull(&bx), hull(&by), hull(&bz));
         if hx.0 - rmax > 0.0
             || hx.1 + rmax < 0.0
             || hy.0 - rmax > 0.0
@@ -289,7 +288,8 @@ impl CurveSegment {
         // The ray's line runs along z through the frame's origin: it misses when the origin
         // is farther than the largest radius from the Bézier hull of the centre line projected
         // on the xy plane (most of the segments whose boxes a ray enters in a head of hair).
-        if hull_distance_2d(&bezier_xy(&x, &y)) > rmax {
+        let xy: [[f64; 2]; 4] = std::array::from_fn(|k| [bx[k], by[k]]);
+        if hull_distance_2d(&xy) > rmax {
             return None;
         }
         let (px, py, pz, pr) = (Poly::new(&x), Poly::new(&y), Poly::new(&z), Poly::new(&r));
@@ -298,26 +298,30 @@ impl CurveSegment {
             .mul(&pr)
             .add_scaled(&px.mul(&px), -1.0)
             .add_scaled(&py.mul(&py), -1.0);
-        let (t, hit) = if self.curve_type().is_ribbon() {
+        let (t, hit) = if ty.is_ribbon() {
             self.ribbon(&frame, &a, (&px, &py, &pz, &pr), &dd, zmin, zmax)
         } else {
-            self.round(&frame, &pz, &dd, (zmin, zmax), (hz, rmax))
+            let linear = ty == CurveType::RoundLinear;
+            self.round(&frame, &a, linear, &pz, &dd, (zmin, zmax), (hz, rmax))
         }?;
         let t = (t / len) as f32;
         // Rounding to f32 must not carry the hit out of the interval.
         (t >= tmin && t <= tmax).then_some(CurveHit { t, ..hit })
     }
 
-    /// The round-curve test in the ray's frame; `t` of the result is in world units.
+    /// The round-curve test in the ray's frame (`a` the power basis, `linear` for
+    /// [`CurveType::RoundLinear`]); `t` of the result is in world units.
+    #[allow(clippy::too_many_arguments)]
     fn round(
         &self,
         frame: &RayFrame,
+        a: &[[f64; 4]; 4],
+        linear: bool,
         pz: &Poly,
         dd: &Poly,
         (zmin, zmax): (f64, f64),
         (hz, rmax): ((f64, f64), f64),
     ) -> Option<(f64, CurveHit)> {
-        let linear = self.curve_type() == CurveType::RoundLinear;
         // Intervals of [0, 1] where D >= 0, between D's roots; none: the line misses.
         let mut roots = [0.0; MAX_COEFFS];
         let nr = dd.roots(0.0, 1.0, &mut roots);
@@ -404,8 +408,8 @@ impl CurveSegment {
             if self.flags & flag == 0 {
                 continue;
             }
-            let (c, rad) = self.eval(u);
-            let n = self.tangent(u);
+            let (c, rad) = eval_basis(a, u);
+            let n = tangent_basis(a, u);
             let dn = frame.d.dot(n);
             // Entering the tube: along the tangent at the start, against it at the end.
             if (u == 0.0 && dn <= 0.0) || (u == 1.0 && dn >= 0.0) {
@@ -516,18 +520,49 @@ impl CurveSegment {
     }
 }
 
-/// The Bézier control points in the xy plane of power-basis coefficients `x`, `y`.
-fn bezier_xy(x: &[f64; 4], y: &[f64; 4]) -> [[f64; 2]; 4] {
-    let b = |c: &[f64; 4]| {
-        [
-            c[0],
-            c[0] + c[1] / 3.0,
-            c[0] + 2.0 * c[1] / 3.0 + c[2] / 3.0,
-            c[0] + c[1] + c[2] + c[3],
-        ]
-    };
-    let (bx, by) = (b(x), b(y));
-    std::array::from_fn(|k| [bx[k], by[k]])
+/// The centre and radius at `u` of the power basis `a`, in `f64`.
+#[inline]
+fn eval_basis(a: &[[f64; 4]; 4], u: f64) -> (DVec3, f64) {
+    let mut v = [0.0; 4];
+    for d in 0..4 {
+        v[d] = ((a[3][d] * u + a[2][d]) * u + a[1][d]) * u + a[0][d];
+    }
+    (DVec3::new(v[0], v[1], v[2]), v[3])
+}
+
+/// The tangent `c'(u)` of the power basis `a`, in `f64`.
+#[inline]
+fn tangent_basis(a: &[[f64; 4]; 4], u: f64) -> DVec3 {
+    let mut v = [0.0; 3];
+    for d in 0..3 {
+        v[d] = (3.0 * a[3][d] * u + 2.0 * a[2][d]) * u + a[1][d];
+    }
+    DVec3::from_array(v)
+}
+
+/// Bézier control points of the power basis `a` (degree 3, elevated where lower): their
+/// convex hull holds the centre line and their largest radius bounds the radius.
+#[inline]
+fn bezier_points(a: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
+    let mut b = [[0.0; 4]; 4];
+    for d in 0..4 {
+        b[0][d] = a[0][d];
+        b[1][d] = a[0][d] + a[1][d] / 3.0;
+        b[2][d] = a[0][d] + 2.0 * a[1][d] / 3.0 + a[2][d] / 3.0;
+        b[3][d] = a[0][d] + a[1][d] + a[2][d] + a[3][d];
+    }
+    b
+}
+
+/// The Bézier control points of one coordinate's power-basis coefficients `c`.
+#[inline]
+fn bezier_1d(c: &[f64; 4]) -> [f64; 4] {
+    [
+        c[0],
+        c[0] + c[1] / 3.0,
+        c[0] + 2.0 * c[1] / 3.0 + c[2] / 3.0,
+        c[0] + c[1] + c[2] + c[3],
+    ]
 }
 
 /// The distance from the origin to the convex hull of four points in the plane: 0 inside
