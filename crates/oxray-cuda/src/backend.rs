@@ -145,9 +145,6 @@ fn query_error(e: CudaError) -> QueryError {
 /// Motion blur (guide §5.10) is traced by the CPU backend only: structures with motion keys
 /// are refused after validation, and motion transforms under instances when the IAS is built.
 pub(crate) const MOTION_UNSUPPORTED: &str = "motion blur (guide §5.10) on the CUDA backend";
-/// Why the CUDA backend refuses a curve GAS.
-pub(crate) const CURVES_UNSUPPORTED: &str =
-    "built-in curves (guide §5.2) on the CUDA backend (the CPU backend traces them)";
 
 fn build_error(e: CudaError) -> BuildError {
     BuildError::Device(e.to_string())
@@ -199,13 +196,8 @@ impl AccelBackend for Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaGas, BuildError> {
-        // Built-in curves (guide §5.2) are traced by the CPU backend only for now: refused
-        // after validation (so that bad inputs get the same errors on every device) and
-        // before any build work.
-        let summary = oxray_core::validate::validate_structure(options, inputs)?;
-        if summary.kind == oxray_core::BuildInputKind::Curves {
-            return Err(BuildError::Unsupported(CURVES_UNSUPPORTED));
-        }
+        // Validated first, so that bad inputs get the same errors on every device.
+        oxray_core::validate::validate_structure(options, inputs)?;
         if options.motion.has_motion() {
             return Err(BuildError::Unsupported(MOTION_UNSUPPORTED));
         }
@@ -219,7 +211,7 @@ impl AccelBackend for Cuda {
             }
         }
         // The host builds the rest: the presets and layouts the device builder does not make,
-        // spheres (built-in, traced by pipelines and the query kernels alike) and custom
+        // spheres and curves (built-in, traced by pipelines and the query kernels alike) and custom
         // primitives (uploaded for pipelines, which run their intersection programs; the
         // batched queries refuse them).
         let (data, tree) = GasData::build_with_tree(options, inputs)?;

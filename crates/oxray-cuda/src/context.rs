@@ -7,8 +7,13 @@ use cudarc::nvrtc::CompileOptions;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, OnceLock};
 
-/// The CUDA C++ source of the trace kernels, compiled at run time by NVRTC.
-pub const KERNEL_SOURCE: &str = include_str!("kernels/trace.cu");
+/// The CUDA C++ source of the trace kernels, compiled at run time by NVRTC: the walks, the
+/// box, triangle and sphere tests (`trace.cu`), then the curve intersector (`curve.cu`).
+pub const KERNEL_SOURCE: &str = concat!(
+    include_str!("kernels/trace.cu"),
+    "\n",
+    include_str!("kernels/curve.cu")
+);
 
 // The numeric contract of every backend's box and triangle tests, passed to the kernels as
 // defines so that it is written down once.
@@ -56,6 +61,8 @@ pub(crate) struct Kernels {
     pub occluded_ias: CudaFunction,
     pub closest_spheres: CudaFunction,
     pub occluded_spheres: CudaFunction,
+    pub closest_curves: CudaFunction,
+    pub occluded_curves: CudaFunction,
 }
 
 /// A CUDA device ready to trace: driver and NVRTC loaded, a context and stream on the device,
@@ -183,6 +190,8 @@ impl CudaContext {
             occluded_ias: load("oxray_occluded_ias")?,
             closest_spheres: load("oxray_closest_spheres")?,
             occluded_spheres: load("oxray_occluded_spheres")?,
+            closest_curves: load("oxray_closest_curves")?,
+            occluded_curves: load("oxray_occluded_curves")?,
         };
         let stream = guarded("creating a stream", || ctx.new_stream())?;
         Ok(CudaContext {
@@ -223,6 +232,8 @@ impl CudaContext {
             ("oxray_occluded_ias", &k.occluded_ias),
             ("oxray_closest_spheres", &k.closest_spheres),
             ("oxray_occluded_spheres", &k.occluded_spheres),
+            ("oxray_closest_curves", &k.closest_curves),
+            ("oxray_occluded_curves", &k.occluded_curves),
         ]
         .into_iter()
         .map(|(name, f)| {
@@ -380,6 +391,8 @@ mod tests {
             "oxray_occluded_ias",
             "oxray_closest_spheres",
             "oxray_occluded_spheres",
+            "oxray_closest_curves",
+            "oxray_occluded_curves",
         ] {
             assert!(ptx.contains(&format!(".entry {entry}")), "{entry} missing");
         }

@@ -7,7 +7,9 @@ use crate::layout::{bvh2_words, DeviceLayout, NodeLayout, SlotInfo, MAX_SLOTS};
 use bytemuck::{Pod, Zeroable};
 use cudarc::driver::{CudaSlice, DevicePtr, LaunchConfig, PushKernelArg};
 use oxray_bvh::{Bvh2, GasData, GasInfo, GasKind};
-use oxray_core::{Aabb, BackendKind, Hit, HitKind, Ray, RayRecord, Traversable, TraversableKind};
+use oxray_core::{
+    Aabb, BackendKind, CurveType, Hit, HitKind, Ray, RayRecord, Traversable, TraversableKind,
+};
 use rayon::prelude::*;
 use std::sync::Mutex;
 
@@ -260,6 +262,8 @@ pub struct CudaGas {
     record_flags: Vec<u32>,
     /// What a pipeline's traversal reads, made on first use ([`CudaGas::optix_handle`]).
     program_view: Mutex<Option<ProgramView>>,
+    /// The curve type of each leaf slot of a curve GAS (empty otherwise): a hit's kind.
+    curve_types: Vec<CurveType>,
 }
 
 /// The device tables a pipeline's traversal reads beyond the query kernels' (slot
@@ -274,10 +278,12 @@ pub(crate) struct ProgramView {
 
 impl ProgramView {
     /// Uploads `tables` and a descriptor of `kind` over `nodes`, `prims` and the tables'
-    /// addresses.
+    /// addresses; `types` is a curve GAS's `OptixPrimitiveTypeFlags` (0 otherwise).
+    #[allow(clippy::too_many_arguments)]
     pub(crate) fn upload(
         ctx: &CudaContext,
         kind: u32,
+        types: u32,
         depth: u32,
         count: u32,
         nodes: u64,
@@ -299,7 +305,8 @@ impl ProgramView {
                 p
             })
         };
-        let words = descriptor_words(kind, depth, count, nodes, prims, addr(0), addr(1));
+        let mut words = descriptor_words(kind, depth, count, nodes, prims, addr(0), addr(1));
+        words[11] = types;
         let descriptor = ctx
             .stream
             .clone_htod(&words[..])
@@ -324,6 +331,7 @@ pub(crate) const DESCRIPTOR_STATIC: u32 = 3;
 pub(crate) const DESCRIPTOR_INSTANCE: u32 = 4;
 pub(crate) const DESCRIPTOR_CUSTOM_GAS: u32 = 5;
 pub(crate) const DESCRIPTOR_SPHERE_GAS: u32 = 6;
+pub(crate) const DESCRIPTOR_CURVE_GAS: u32 = 7;
 
 /// The 16 words of a traversable descriptor (`__oxray_Traversable`): kind, count, four
 /// addresses, the graph depth.
@@ -378,6 +386,18 @@ pub(crate) fn sphere_words(gas: &GasData) -> (Vec<u32>, Vec<SlotInfo>) {
         words.resize(4, 0);
     }
     (words, slot_infos(gas, gas.spheres.len()))
+}
+
+/// The curve segments of a curve GAS as uploaded (24 words per leaf slot: the
+/// [`CurveSegment`](oxray_bvh::CurveSegment) record, which `curve.cu` reads as its
+/// `CurveRecord`) and what a hit on each slot reports. Inactive slots keep their NaN control
+/// points, which no ray hits.
+pub(crate) fn curve_words(gas: &GasData) -> (Vec<u32>, Vec<SlotInfo>) {
+    let mut words: Vec<u32> = bytemuck::cast_slice(&gas.curves).to_vec();
+    if words.is_empty() {
+        words.resize(24, 0);
+    }
+    (words, slot_infos(gas, gas.curves.len()))
 }
 
 /// What a hit on each of the first `n` leaf slots reports (an inactive slot: no primitive).
@@ -589,9 +609,7 @@ impl CudaGas {
         match gas.kind {
             GasKind::CustomPrimitives => return Self::upload_custom(ctx, gas, tree),
             GasKind::Spheres => return Self::upload_spheres(ctx, gas, tree),
-            GasKind::Curves => {
-                return Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED))
-            }
+            GasKind::Curves => return Self::upload_curves(ctx, gas, tree),
             GasKind::Triangles => {}
         }
         let export = gas.export_triangles().ok_or(CudaError::CustomPrimitives)?;
@@ -624,6 +642,7 @@ impl CudaGas {
             scratch: Mutex::new(Scratch::default()),
             record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
             program_view: Mutex::new(None),
+            curve_types: Vec::new(),
         })
     }
 
@@ -640,6 +659,16 @@ impl CudaGas {
     fn upload_spheres(ctx: &CudaContext, gas: &GasData, tree: &Bvh2) -> Result<CudaGas, CudaError> {
         let (words, slots) = sphere_words(gas);
         Self::upload_slots(ctx, gas, tree, GasKind::Spheres, words, slots)
+    }
+
+    /// A GAS of built-in curves (guide §5.2): the binary nodes and, per leaf slot, its segment
+    /// record (control points, ribbon normals, type, caps), which both the pipelines'
+    /// traversal and the query kernels intersect with the CPU's double-precision arithmetic.
+    fn upload_curves(ctx: &CudaContext, gas: &GasData, tree: &Bvh2) -> Result<CudaGas, CudaError> {
+        let (words, slots) = curve_words(gas);
+        let mut g = Self::upload_slots(ctx, gas, tree, GasKind::Curves, words, slots)?;
+        g.curve_types = gas.curves.iter().map(|c| c.curve_type()).collect();
+        Ok(g)
     }
 
     /// A GAS in the binary layout whose leaf slots are the primitive records `words`.
@@ -681,6 +710,7 @@ impl CudaGas {
             scratch: Mutex::new(Scratch::default()),
             record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
             program_view: Mutex::new(None),
+            curve_types: Vec::new(),
         })
     }
 
@@ -709,6 +739,7 @@ impl CudaGas {
             scratch: Mutex::new(Scratch::default()),
             record_flags,
             program_view: Mutex::new(None),
+            curve_types: Vec::new(),
         }
     }
 
@@ -722,10 +753,8 @@ impl CudaGas {
     /// intersection programs); triangles and spheres have query kernels.
     fn check_queryable(&self) -> Result<(), CudaError> {
         match self.kind {
-            GasKind::Triangles | GasKind::Spheres => Ok(()),
+            GasKind::Triangles | GasKind::Spheres | GasKind::Curves => Ok(()),
             GasKind::CustomPrimitives => Err(CudaError::CustomPrimitives),
-            // Never uploaded (`upload_with_layout` refuses them).
-            GasKind::Curves => Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED)),
         }
     }
 
@@ -754,14 +783,14 @@ impl CudaGas {
             GasKind::Triangles => DESCRIPTOR_GAS,
             GasKind::CustomPrimitives => DESCRIPTOR_CUSTOM_GAS,
             GasKind::Spheres => DESCRIPTOR_SPHERE_GAS,
-            // Never uploaded (`upload_with_layout` refuses them).
-            GasKind::Curves => {
-                return Err(CudaError::Unsupported(crate::backend::CURVES_UNSUPPORTED))
-            }
+            GasKind::Curves => DESCRIPTOR_CURVE_GAS,
         };
         let v = ProgramView::upload(
             &self.ctx,
             kind,
+            self.curve_types
+                .iter()
+                .fold(0, |f, t| f | t.type_flag().bits()),
             1,
             self.record_flags.len() as u32,
             nodes,
@@ -929,6 +958,7 @@ impl CudaGas {
         let k = &self.ctx.kernels;
         let f = match (self.kind, self.layout) {
             (GasKind::Spheres, _) => &k.closest_spheres,
+            (GasKind::Curves, _) => &k.closest_curves,
             (_, NodeLayout::Bvh4) => &k.closest_bvh4,
             (_, NodeLayout::Bvh2) => &k.closest_bvh2,
         };
@@ -961,6 +991,7 @@ impl CudaGas {
         let k = &self.ctx.kernels;
         let f = match (self.kind, self.layout) {
             (GasKind::Spheres, _) => &k.occluded_spheres,
+            (GasKind::Curves, _) => &k.occluded_curves,
             (_, NodeLayout::Bvh4) => &k.occluded_bvh4,
             (_, NodeLayout::Bvh2) => &k.occluded_bvh2,
         };
@@ -1015,9 +1046,15 @@ impl CudaGas {
         }
         let s = self.slots.get(r.slot_index() as usize)?;
         let mut hit = hit_of(r, s, false, !0, 0);
-        if self.kind == GasKind::Spheres {
+        match self.kind {
             // Spheres have only a front face and no attributes (guide §9.4, §13.4).
-            hit.hit_kind = HitKind::SPHERE_FRONT_FACE;
+            GasKind::Spheres => hit.hit_kind = HitKind::SPHERE_FRONT_FACE,
+            // A curve's kind names its type; only ribbons have back faces (§9.3, §9.6).
+            GasKind::Curves => {
+                let ty = self.curve_types.get(r.slot_index() as usize)?;
+                hit.hit_kind = HitKind::curve(*ty, !r.is_front_face());
+            }
+            _ => {}
         }
         Some(hit)
     }

@@ -122,6 +122,7 @@ impl CudaIas {
         let v = ProgramView::upload(
             &self.ctx,
             DESCRIPTOR_IAS,
+            0,
             self.data.depth,
             self.data.instances.len() as u32,
             nodes,

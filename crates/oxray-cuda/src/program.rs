@@ -560,11 +560,16 @@ const BVH2_STACK: usize = oxray_bvh::MAX_BVH2_DEPTH + 2;
 /// stack, which is reserved for every thread the device can hold.
 pub const DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH: u32 = 2;
 
+/// Bytes of stack the curve intersector of `curve.cu` takes at most.
+const CURVE_STACK: usize = 4096;
+
 /// The per-thread stack a pipeline needs (bytes): per trace level, the trace's frame and a
 /// walk frame per graph level, plus the programs' own.
 fn stack_bytes(max_trace_depth: u32, max_graph_depth: u32) -> usize {
     let walk = 4 * BVH2_STACK * 3 + 512;
-    let trace = 4096 + max_graph_depth.max(1) as usize * walk;
+    // The curve intersector's frames (its polynomials and their chains of derivatives, in
+    // double precision) sit below the deepest walk of each trace.
+    let trace = 4096 + CURVE_STACK + max_graph_depth.max(1) as usize * walk;
     trace * max_trace_depth.max(1) as usize + 2048
 }
 

@@ -9,40 +9,20 @@
 //! can be loaded (`OXRAY_REQUIRE_NVRTC=1` makes its absence a failure), so a CUDA program that
 //! does not compile fails here too.
 
+mod common;
+
+use common::{devices, name};
 use glam::Vec3;
 use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
-    Aabb, BackendKind, BuildOptions, CustomPrimitiveInput, Device, ExceptionCode, IndexBuffer,
-    Instance, InstanceFlags, LaunchReport, ModuleSource, PipelineCompileOptions,
-    PipelineLinkOptions, RayFlags, SbtRegion, ShaderBindingTable, StaticTransform, Transform,
-    TraversableHandle, TriangleInput, VertexBuffer,
+    Aabb, BuildOptions, CustomPrimitiveInput, Device, ExceptionCode, IndexBuffer, Instance,
+    InstanceFlags, LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions,
+    RayFlags, SbtRegion, ShaderBindingTable, StaticTransform, Transform, TraversableHandle,
+    TriangleInput, VertexBuffer,
 };
 
 const SUITE: &str = include_str!("../../oxray-cuda/tests/programs/suite.cu");
 const EXTENDED: &str = include_str!("conformance/extended.cu");
-
-/// The devices to run on: the CPU, and CUDA device 0 if there is one.
-fn devices() -> Vec<Device> {
-    let mut d = vec![Device::cpu()];
-    match Device::cuda(0) {
-        Ok(c) => d.push(c),
-        Err(e) => {
-            assert!(
-                std::env::var_os("OXRAY_REQUIRE_GPU").is_none(),
-                "OXRAY_REQUIRE_GPU is set but there is no CUDA device: {e}"
-            );
-            println!("the CUDA half skips: {e}");
-        }
-    }
-    d
-}
-
-fn name(d: &Device) -> &'static str {
-    match d.kind() {
-        BackendKind::Cuda => "cuda",
-        _ => "cpu",
-    }
-}
 
 /// What a group is made of: (label, kind, entries).
 #[derive(Clone, Copy)]

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{icosphere, Rng};
+use common::{devices, icosphere, Rng};
 use glam::Vec3;
 use oxray::{
     Aabb, BackendKind, BatchKind, BuildError, BuildFlags, BuildOptions, Device, DeviceError,
@@ -13,23 +13,6 @@ use oxray::{
     TraversableHandle, TraversableKind, TriangleInput, VertexBuffer,
 };
 use std::sync::Arc;
-
-/// Every device of this machine: the CPU, and CUDA device 0 where there is one.
-fn devices() -> Vec<Device> {
-    let mut d = vec![Device::cpu()];
-    match Device::cuda(0) {
-        Ok(cuda) => d.push(cuda),
-        Err(e) => {
-            assert!(
-                std::env::var_os("OXRAY_REQUIRE_GPU").is_none(),
-                "OXRAY_REQUIRE_GPU is set but CUDA is unavailable: {e}"
-            );
-            assert!(e.is_unavailable(), "CUDA is there but failed: {e}");
-            println!("no GPU ({e}): running the CPU device only");
-        }
-    }
-    d
-}
 
 /// Camera-like rays at a unit sphere from outside, plus rays from inside, random rays that miss,
 /// and invalid rays (which miss on every device).

@@ -5,52 +5,19 @@
 //! the pipeline scenarios run the same CUDA C++ programs (`conformance/spheres.cu`) on both
 //! devices; where both exist, their results must agree bit for bit.
 
+mod common;
+
+use common::{name, on_every_device};
 use glam::Vec3;
 use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
-    BackendKind, BuildInputKind, BuildOptions, Device, ExceptionCode, GeometryFlags, HitKind,
-    Instance, LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions,
-    PrimitiveTypeFlags, Ray, RayFlags, SbtIndexOffsets, SbtRegion, ShaderBindingTable, Sphere,
-    SphereInput, Transform,
+    BuildInputKind, BuildOptions, Device, ExceptionCode, GeometryFlags, HitKind, Instance,
+    LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions, PrimitiveTypeFlags,
+    Ray, RayFlags, SbtIndexOffsets, SbtRegion, ShaderBindingTable, Sphere, SphereInput, Transform,
 };
 use oxray_testkit::rng::Rng;
 
 const PROGRAMS: &str = include_str!("conformance/spheres.cu");
-
-/// The devices to run on: the CPU, and CUDA device 0 if there is one.
-fn devices() -> Vec<Device> {
-    let mut d = vec![Device::cpu()];
-    match Device::cuda(0) {
-        Ok(c) => d.push(c),
-        Err(e) => {
-            assert!(
-                std::env::var_os("OXRAY_REQUIRE_GPU").is_none(),
-                "OXRAY_REQUIRE_GPU is set but there is no CUDA device: {e}"
-            );
-            println!("the CUDA half skips: {e}");
-        }
-    }
-    d
-}
-
-fn name(d: &Device) -> &'static str {
-    match d.kind() {
-        BackendKind::Cuda => "cuda",
-        _ => "cpu",
-    }
-}
-
-/// Runs `scenario` on every device and checks that all give the same result.
-fn on_every_device<R: PartialEq + std::fmt::Debug>(scenario: impl Fn(&Device) -> R) {
-    let results: Vec<(&str, R)> = devices().iter().map(|d| (name(d), scenario(d))).collect();
-    for (n, r) in &results[1..] {
-        assert_eq!(
-            r, &results[0].1,
-            "{n} and {} differ on the same scenario",
-            results[0].0
-        );
-    }
-}
 
 /// Spheres as the byte buffers of one motion key.
 struct Cloud {

@@ -87,20 +87,21 @@
 // made by the host; the handle is its device address). The kind word comes first in every
 // record a handle can point at (instances too), so that a handle is decoded by reading it.
 struct __oxray_Traversable {
-    u32 kind;   // __OXRAY_GAS, __OXRAY_CUSTOM_GAS, __OXRAY_SPHERE_GAS, __OXRAY_IAS or
-                // __OXRAY_STATIC
+    u32 kind;   // __OXRAY_GAS, __OXRAY_CUSTOM_GAS, __OXRAY_SPHERE_GAS, __OXRAY_CURVE_GAS,
+                // __OXRAY_IAS or __OXRAY_STATIC
     u32 count;  // GAS: SBT records (geometry flags); IAS: instance slots; static transform: 1
     unsigned long long nodes;      // GAS, IAS: binary nodes; static transform: its
                                    // OptixStaticTransform, which follows this descriptor
     unsigned long long prims;      // triangle GAS: 3 float4 per leaf slot; custom GAS: 2 float4
                                    // per leaf slot (the box's corners); sphere GAS: 1 float4
-                                   // per leaf slot (centre, radius); IAS: 6 float4 per slot
+                                   // per leaf slot (centre, radius); curve GAS: 6 float4 per
+                                   // leaf slot (curve.cu's CurveRecord); IAS: 6 float4 per slot
                                    // (the query kernels' table: the world box is rows 3, 4)
     unsigned long long info;       // GAS: uint2 per slot (primitive index, SBT-GAS index);
                                    // IAS: one __oxray_Instance per slot
     unsigned long long geom_flags; // GAS: one u32 per SBT-GAS index
     u32 depth;                     // traversable graph depth (a GAS is 1)
-    u32 reserved;
+    u32 types;                     // curve GAS: the OptixPrimitiveTypeFlags of its curve types
     unsigned long long pad;
 };
 #define __OXRAY_GAS 1u
@@ -109,8 +110,11 @@ struct __oxray_Traversable {
 #define __OXRAY_INSTANCE 4u
 #define __OXRAY_CUSTOM_GAS 5u
 #define __OXRAY_SPHERE_GAS 6u
+#define __OXRAY_CURVE_GAS 7u
 // Whether a descriptor kind is a GAS.
-#define __OXRAY_IS_GAS(k) ((k) == __OXRAY_GAS || (k) == __OXRAY_CUSTOM_GAS || (k) == __OXRAY_SPHERE_GAS)
+#define __OXRAY_IS_GAS(k)                                                                    \
+    ((k) == __OXRAY_GAS || (k) == __OXRAY_CUSTOM_GAS || (k) == __OXRAY_SPHERE_GAS ||           \
+     (k) == __OXRAY_CURVE_GAS)
 
 // One instance of an IAS as pipelines read it (128 bytes). Its address is the instance's
 // handle in the transform list (optixGetTransformListHandle).
@@ -331,8 +335,8 @@ static __forceinline__ __device__ bool optixIsTriangleHit() {
 }
 // Built-in hit kinds: a triangle's 0xFE/0xFF, otherwise 0x80 | (the low byte of the
 // OptixPrimitiveType) << 1 | back face: a sphere's 0x8C/0x8D, a curve's 0x82..0x97 (oxray's
-// choice, the same on both devices: see oxray_core::HitKind; curves are traced on the CPU only
-// for now). Every other hit kind is a custom one.
+// choice, the same on both devices: see oxray_core::HitKind). Every other hit kind is a custom
+// one.
 static __forceinline__ __device__ OptixPrimitiveType optixGetPrimitiveType(unsigned int hitKind) {
     if (hitKind == OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE ||
         hitKind == OPTIX_HIT_KIND_TRIANGLE_BACK_FACE)
@@ -585,49 +589,54 @@ static __forceinline__ __device__ void optixGetSphereData(float4 data[1]) {
     data[0] = reinterpret_cast<const float4*>(g->prims)[s.ray.slot];
 }
 
-// Guide §9.3: a curve hit's u and a ribbon hit's (u, v) are its attributes. The CUDA backend
-// refuses to build curve structures (they are traced on the CPU backend only, for now), so no
-// hit on this device is a curve: these functions exist so that one program compiles for both
-// devices; the vertex data functions give zeros, as on the CPU for a hit that is not a curve.
+// Guide §9.3: a curve hit's u in its segment (exactly 0 or 1 on a flat end cap), and a ribbon
+// hit's (u, v): the hit's attributes, read as the CPU device's header reads them.
 static __forceinline__ __device__ float optixGetCurveParameter() {
     return __uint_as_float(__oxray_state().ray.attr[0]);
 }
 static __forceinline__ __device__ float2 optixGetRibbonParameters() {
-    __oxray_ThreadState& s = __oxray_state();
+    const __oxray_ThreadState& s = __oxray_state();
     return make_float2(__uint_as_float(s.ray.attr[0]), __uint_as_float(s.ray.attr[1]));
 }
-static __forceinline__ __device__ void __oxray_curve_zeros(float4* data, int n) {
-    for (int k = 0; k < n; ++k) data[k] = make_float4(0.0f, 0.0f, 0.0f, 0.0f);
+// The control points (x, y, z, radius) of the hit segment in object space, as the build input
+// gave them: the first n of its record (zeros when the hit is not a curve).
+static __forceinline__ __device__ void __oxray_curve_vertex_data(float4* data, int n) {
+    __oxray_ThreadState& s = __oxray_state();
+    const __oxray_Traversable* g = __oxray_hit_gas();
+    const bool curve = g != nullptr && g->kind == __OXRAY_CURVE_GAS && s.ray.slot != 0xffffffffu;
+    const float4* rec = curve ? reinterpret_cast<const float4*>(g->prims) + 6 * (size_t)s.ray.slot
+                              : nullptr;
+    for (int k = 0; k < n; ++k) data[k] = curve ? rec[k] : make_float4(0.0f, 0.0f, 0.0f, 0.0f);
 }
 static __forceinline__ __device__ void optixGetLinearCurveVertexData(float4 data[2]) {
-    __oxray_curve_zeros(data, 2);
+    __oxray_curve_vertex_data(data, 2);
 }
 static __forceinline__ __device__ void optixGetQuadraticBSplineVertexData(float4 data[3]) {
-    __oxray_curve_zeros(data, 3);
+    __oxray_curve_vertex_data(data, 3);
 }
 static __forceinline__ __device__ void optixGetQuadraticBSplineRocapsVertexData(float4 data[3]) {
-    __oxray_curve_zeros(data, 3);
+    __oxray_curve_vertex_data(data, 3);
 }
 static __forceinline__ __device__ void optixGetCubicBSplineVertexData(float4 data[4]) {
-    __oxray_curve_zeros(data, 4);
+    __oxray_curve_vertex_data(data, 4);
 }
 static __forceinline__ __device__ void optixGetCubicBSplineRocapsVertexData(float4 data[4]) {
-    __oxray_curve_zeros(data, 4);
+    __oxray_curve_vertex_data(data, 4);
 }
 static __forceinline__ __device__ void optixGetCatmullRomVertexData(float4 data[4]) {
-    __oxray_curve_zeros(data, 4);
+    __oxray_curve_vertex_data(data, 4);
 }
 static __forceinline__ __device__ void optixGetCatmullRomRocapsVertexData(float4 data[4]) {
-    __oxray_curve_zeros(data, 4);
+    __oxray_curve_vertex_data(data, 4);
 }
 static __forceinline__ __device__ void optixGetCubicBezierVertexData(float4 data[4]) {
-    __oxray_curve_zeros(data, 4);
+    __oxray_curve_vertex_data(data, 4);
 }
 static __forceinline__ __device__ void optixGetCubicBezierRocapsVertexData(float4 data[4]) {
-    __oxray_curve_zeros(data, 4);
+    __oxray_curve_vertex_data(data, 4);
 }
 static __forceinline__ __device__ void optixGetRibbonVertexData(float4 data[3]) {
-    __oxray_curve_zeros(data, 3);
+    __oxray_curve_vertex_data(data, 3);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -818,13 +827,18 @@ static __forceinline__ __device__ u32 __oxray_candidate(const __oxray_TraceArgs&
 }
 
 // The pipeline's primitive types (§6.3), wherever in the graph a GAS sits. An empty set means
-// triangles and custom primitives: spheres must be named (§9.1).
-static __forceinline__ __device__ void __oxray_check_primitive_type(u32 kind) {
+// triangles and custom primitives: spheres and curves must be named (§9.1), a curve GAS's every
+// type (its descriptor's `types`).
+static __forceinline__ __device__ void __oxray_check_primitive_type(const __oxray_Traversable* g) {
     const u32 triangle = 1u << 31, custom = 1u, sphere = 1u << 6;
     const u32 allowed = OXRAY_PRIMITIVE_TYPE_FLAGS == 0u ? (triangle | custom)
                                                          : OXRAY_PRIMITIVE_TYPE_FLAGS;
-    u32 needed = kind == __OXRAY_GAS ? triangle : (kind == __OXRAY_SPHERE_GAS ? sphere : custom);
-    if ((allowed & needed) == 0u) {
+    const u32 kind = g->kind;
+    u32 needed = kind == __OXRAY_GAS          ? triangle
+                 : kind == __OXRAY_SPHERE_GAS ? sphere
+                 : kind == __OXRAY_CURVE_GAS  ? g->types
+                                              : custom;
+    if ((allowed & needed) != needed) {
         __oxray_throw(OPTIX_EXCEPTION_CODE_UNSUPPORTED_PRIMITIVE_TYPE, 0, nullptr);
     }
 }
@@ -916,6 +930,47 @@ static __noinline__ __device__ bool __oxray_walk_spheres(const TraceRay& r,
             if (d == 0u) continue;
             tmax_ = t;
             tmax = t;
+            if (d == 2u) {
+                ended = true;
+                return true;
+            }
+        }
+        return false;
+    });
+    return ended;
+}
+
+// Traverses a GAS of built-in curves (§9.3) with the object-space ray `r`: each segment's
+// nearest entry (a round tube's front face, §9.6, or a ribbon's either face) in the interval is a
+// candidate with its u (and a ribbon's v) as attributes. As for spheres, the triangle
+// face-culling flags do not apply, the any-hit rules and CULL_*_ANYHIT do.
+static __noinline__ __device__ bool __oxray_walk_curves(const TraceRay& r,
+                                                        const __oxray_Traversable* g,
+                                                        const __oxray_TraceArgs& a,
+                                                        const __oxray_Path& path, float tmin,
+                                                        float& tmax, __oxray_Best& best) {
+    const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
+    const float4* curves = reinterpret_cast<const float4*>(g->prims);
+    const uint2* slots = reinterpret_cast<const uint2*>(g->info);
+    const u32* gflags_of = reinterpret_cast<const u32*>(g->geom_flags);
+    bool ended = false;
+    walk_bvh2<OXRAY_BVH2_STACK>(r, nodes, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
+        for (u32 s = start; s < start + count; ++s) {
+            const CurveRecord c = load_curve(curves, s);
+            CurveHit h;
+            if (!curve_intersect(c, r.org, r.dir, tmin, tmax_, h)) continue;
+            uint2 info = slots[s];
+            u32 gflags = gflags_of[info.y];
+            const char* record = __oxray_hit_record(a, path, info.y);
+            if (__oxray_culled_by_anyhit(a.flags, __oxray_anyhit_on(a.flags, path.iflags, gflags))) {
+                continue;
+            }
+            u32 attr[8] = {__float_as_uint(h.u), __float_as_uint(h.v), 0u, 0u, 0u, 0u, 0u, 0u};
+            u32 d = __oxray_candidate(a, path, gflags, record, h.t, info.x, info.y,
+                                      curve_hit_kind(c.type, h.back_face), s, attr, best);
+            if (d == 0u) continue;
+            tmax_ = h.t;
+            tmax = h.t;
             if (d == 2u) {
                 ended = true;
                 return true;
@@ -1118,7 +1173,8 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
     case __OXRAY_GAS:
     case __OXRAY_CUSTOM_GAS:
     case __OXRAY_SPHERE_GAS:
-        __oxray_check_primitive_type(t->kind);
+    case __OXRAY_CURVE_GAS:
+        __oxray_check_primitive_type(t);
         path.gas = t;
         path.org = r.org;
         path.dir = r.dir;
@@ -1126,6 +1182,7 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
         if (t->kind == __OXRAY_SPHERE_GAS) {
             return __oxray_walk_spheres(r, t, a, path, tmin, tmax, best);
         }
+        if (t->kind == __OXRAY_CURVE_GAS) return __oxray_walk_curves(r, t, a, path, tmin, tmax, best);
         return __oxray_walk_custom(r, t, a, path, tmin, tmax, best);
     case __OXRAY_IAS:
         return __oxray_walk_ias(r, t, a, path, tmin, tmax, best);
