@@ -1,34 +1,44 @@
 #!/usr/bin/env python3
 """Throughput of oxray's simulation queries (oxray-cpu/src/simulation) against Open3D's
-RaycastingScene (Embree underneath) on the same mesh, points and rays:
+RaycastingScene (Embree underneath) on the same mesh, points and rays, in one run:
 
     closest point   oxray Gas::closest_point_batch   vs  scene.compute_closest_points
     signed distance oxray Gas::signed_distance_batch vs  scene.compute_signed_distance
     all hits        oxray Gas::all_hits_batch        vs  scene.list_intersections
     hit counts      oxray Gas::count_hits_batch      vs  scene.count_intersections
 
-    python3 scripts/bench_simulation_queries.py [--mesh stanford-bunny] [--points N]
-                                                [--rays N] [--runs R] [--threads T]
+    scripts/setup-open3d.sh        # once: numpy + open3d-cpu 0.20 in target/open3d-venv
+    target/open3d-venv/bin/python scripts/bench_simulation_queries.py \
+        [--mesh stanford-bunny] [--points N] [--rays N] [--runs R] [--threads T] [--markdown]
 
-Needs numpy and open3d (PyPI `open3d` or `open3d-cpu`) in the running Python; without
-open3d only oxray is measured. The oxray side is a small Rust program written to a
-temporary directory and built in release mode against this checkout's crates (oxray-cpu,
-oxray-core, with the workspace's lock file), so the first run compiles for a few minutes.
+Without open3d in the running Python only oxray is measured. The oxray side is the example
+crates/oxray-cpu/examples/simulation_queries.rs, built by
+`cargo build --release -p oxray-cpu --example simulation_queries` (the workspace's target
+directory) and started once as a server: each line it reads runs one batch query and answers
+its wall-clock and CPU seconds. Every query runs R + 1 times on each engine, oxray's run and
+Open3D's in turn (so that both see the same load), the first run of each being an untimed
+warm-up. The table gives the median of the R runs of each engine (and the spread, slowest to
+fastest run), in millions of queries per second, the ratio oxray / Open3D of the medians
+(above 1: oxray is faster), and the ratio of the median CPU seconds (all threads; Open3D's /
+oxray's, above 1: oxray does less work), which other processes on the machine disturb less
+than wall-clock time. The machine (CPU model, logical CPUs, threads used, load average before
+and after) is printed first: wall-clock numbers from a loaded machine are not comparable.
 
 The mesh is one of ../shared/data/meshes (OBJ), or an icosphere of 20 * 4^5 triangles if
 it is missing. Points are uniform in the mesh's box grown by 10 %; rays start on a sphere
-twice the box's radius and aim at uniform points of the box. Both sides get the same
-threads (Open3D's RaycastingScene takes nthreads=; oxray a rayon pool of T threads).
-Results are cross-checked: closest distances (max abs difference), inside/outside
-agreement of the signed distances, and equal hit counts per ray (a ray crossing an edge
-may differ: Embree's test is not watertight). Times are the best of R runs.
+twice the box's radius and aim at uniform points of the box (seed 19: the same inputs every
+run). Both sides get the same threads (Open3D's RaycastingScene takes nthreads=; oxray a
+rayon pool of T threads). Results are cross-checked: closest distances (max abs difference),
+inside/outside agreement of the signed distances, and equal hit counts per ray (a ray
+crossing an edge may differ: Embree's test is not watertight).
 """
 
 import argparse
 import json
 import os
-import re
+import platform
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -38,85 +48,6 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
-
-RUNNER = r"""
-use glam::Vec3;
-use oxray_core::Ray;
-use oxray_cpu::{AllHits, Gas};
-use std::time::Instant;
-
-fn read(path: &std::path::Path) -> Vec<u8> {
-    std::fs::read(path).unwrap()
-}
-fn f32s(b: &[u8]) -> Vec<f32> {
-    b.chunks_exact(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect()
-}
-fn u32s(b: &[u8]) -> Vec<u32> {
-    b.chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect()
-}
-fn best<T>(runs: usize, mut f: impl FnMut() -> T) -> (f64, T) {
-    let mut best = f64::INFINITY;
-    let mut out = None;
-    for _ in 0..runs {
-        let t = Instant::now();
-        let r = f();
-        best = best.min(t.elapsed().as_secs_f64());
-        out = Some(r);
-    }
-    (best, out.unwrap())
-}
-fn write(path: &std::path::Path, v: &[u8]) {
-    std::fs::write(path, v).unwrap();
-}
-
-fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let dir = std::path::Path::new(&args[1]);
-    let runs: usize = args[2].parse().unwrap();
-    let threads: usize = args[3].parse().unwrap();
-    let max_hits: usize = args[4].parse().unwrap();
-    rayon::ThreadPoolBuilder::new().num_threads(threads).build_global().unwrap();
-    let mesh = read(&dir.join("mesh.bin"));
-    let (nv, nt) = (u32s(&mesh[..4])[0] as usize, u32s(&mesh[4..8])[0] as usize);
-    let v: Vec<[f32; 3]> = f32s(&mesh[8..8 + 12 * nv]).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let t: Vec<[u32; 3]> = u32s(&mesh[8 + 12 * nv..8 + 12 * nv + 12 * nt]).chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
-    let points: Vec<Vec3> = f32s(&read(&dir.join("points.bin"))).chunks_exact(3).map(|c| Vec3::new(c[0], c[1], c[2])).collect();
-    let rays: Vec<Ray> = f32s(&read(&dir.join("rays.bin"))).chunks_exact(6)
-        .map(|c| Ray::new(Vec3::new(c[0], c[1], c[2]), Vec3::new(c[3], c[4], c[5]))).collect();
-
-    let (build, gas) = best(1, || Gas::from_mesh(&v, &t).unwrap());
-    let (closest, cp) = best(runs, || {
-        let mut out = vec![None; points.len()];
-        gas.closest_point_batch(&points, &mut out).unwrap();
-        out
-    });
-    let (signed, sd) = best(runs, || {
-        let mut out = vec![0.0f32; points.len()];
-        gas.signed_distance_batch(&points, &mut out).unwrap();
-        out
-    });
-    let (all, hits) = best(runs, || {
-        let mut out = AllHits::new();
-        gas.all_hits_batch(&rays, max_hits, &mut out).unwrap();
-        out
-    });
-    let (count, counts) = best(runs, || {
-        let mut out = vec![0u32; rays.len()];
-        gas.count_hits_batch(&rays, &mut out).unwrap();
-        out
-    });
-    let d: Vec<u8> = cp.iter().flat_map(|c| c.unwrap().distance.to_le_bytes()).collect();
-    write(&dir.join("oxray.closest"), &d);
-    let s: Vec<u8> = sd.iter().flat_map(|x| x.to_le_bytes()).collect();
-    write(&dir.join("oxray.signed"), &s);
-    let c: Vec<u8> = counts.iter().flat_map(|x| x.to_le_bytes()).collect();
-    write(&dir.join("oxray.counts"), &c);
-    println!(
-        "{{\"build\": {build}, \"closest_point\": {closest}, \"signed_distance\": {signed}, \"all_hits\": {all}, \"count_hits\": {count}, \"listed_hits\": {}}}",
-        hits.all().len()
-    );
-}
-"""
 
 
 def load_obj(path):
@@ -161,25 +92,35 @@ def icosphere(subdivisions):
     return np.array(v, np.float32), np.array(f, np.uint32)
 
 
-def build_runner(work):
-    crate = work / "runner"
-    (crate / "src").mkdir(parents=True)
-    (crate / "src" / "main.rs").write_text(RUNNER)
-    # The workspace's versions: its glam requirement and its lock file.
-    glam = re.search(r'^glam\s*=\s*\{\s*version\s*=\s*"([^"]+)"',
-                     (REPO / "Cargo.toml").read_text(), re.M).group(1)
-    crates = REPO / "crates"
-    (crate / "Cargo.toml").write_text(
-        "[package]\nname = \"bench-simulation-queries\"\nversion = \"0.0.0\"\nedition = \"2021\"\n"
-        "[workspace]\n[dependencies]\n"
-        f"oxray-cpu = {{ path = \"{crates / 'oxray-cpu'}\" }}\n"
-        f"oxray-core = {{ path = \"{crates / 'oxray-core'}\" }}\n"
-        f"glam = \"{glam}\"\nrayon = \"1\"\n")
-    shutil.copy(REPO / "Cargo.lock", crate / "Cargo.lock")
-    target = REPO / "target" / "bench-simulation-queries"
-    subprocess.run(["cargo", "build", "--release", "--quiet"], cwd=crate, check=True,
-                   env={**os.environ, "CARGO_TARGET_DIR": str(target)})
-    return target / "release" / "bench-simulation-queries"
+def build_runner():
+    """Builds the oxray example in release mode; returns its path."""
+    subprocess.run(["cargo", "build", "--release", "--quiet", "-p", "oxray-cpu",
+                    "--example", "simulation_queries"], cwd=REPO, check=True)
+    meta = subprocess.run(["cargo", "metadata", "--format-version", "1", "--no-deps"],
+                          cwd=REPO, check=True, capture_output=True, text=True)
+    target = Path(json.loads(meta.stdout)["target_directory"])
+    return target / "release" / "examples" / "simulation_queries"
+
+
+def machine(threads):
+    """One line on the machine: CPU model, logical CPUs, threads used, OS."""
+    model = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                model = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return (f"{model}, {os.cpu_count()} logical CPUs, {threads} threads; "
+            f"{platform.system()} {platform.release()}")
+
+
+def load():
+    try:
+        return "/".join(f"{x:.2f}" for x in os.getloadavg())
+    except OSError:
+        return "?"
 
 
 def main():
@@ -187,9 +128,10 @@ def main():
     ap.add_argument("--mesh", default="stanford-bunny")
     ap.add_argument("--points", type=int, default=200_000)
     ap.add_argument("--rays", type=int, default=200_000)
-    ap.add_argument("--runs", type=int, default=3)
+    ap.add_argument("--runs", type=int, default=7, help="timed runs per query and engine")
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--max-hits", type=int, default=64)
+    ap.add_argument("--markdown", action="store_true", help="also print a Markdown table")
     args = ap.parse_args()
 
     path = REPO.parent / "shared" / "data" / "meshes" / f"{args.mesh}.obj"
@@ -210,37 +152,23 @@ def main():
     dirs = targets - origins
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     rays = np.hstack([origins, dirs]).astype(np.float32)
-    print(f"mesh {name}: {len(v)} vertices, {len(f)} triangles; {args.points} points, "
-          f"{args.rays} rays, {args.threads} threads, best of {args.runs}")
 
-    work = Path(tempfile.mkdtemp(prefix="oxray-simq-"))
     try:
-        with open(work / "mesh.bin", "wb") as out:
-            out.write(np.array([len(v), len(f)], np.uint32).tobytes())
-            out.write(v.tobytes())
-            out.write(f.tobytes())
-        (work / "points.bin").write_bytes(points.tobytes())
-        (work / "rays.bin").write_bytes(rays.tobytes())
-        exe = build_runner(work)
-        res = subprocess.run([str(exe), str(work), str(args.runs), str(args.threads),
-                              str(args.max_hits)], check=True, capture_output=True, text=True)
-        ox = json.loads(res.stdout)
-        ox_closest = np.fromfile(work / "oxray.closest", np.float32)
-        ox_signed = np.fromfile(work / "oxray.signed", np.float32)
-        ox_counts = np.fromfile(work / "oxray.counts", np.uint32)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
+        import open3d as o3d
+    except ImportError:
+        o3d = None
+    exe = build_runner()
+    print(f"machine: {machine(args.threads)}")
+    print(f"mesh {name}: {len(v)} vertices, {len(f)} triangles; {args.points} points, "
+          f"{args.rays} rays; median of {args.runs} runs after one warm-up")
+    print(f"open3d: {o3d.__version__ if o3d else 'not installed (oxray only)'}; "
+          f"load average before: {load()}")
 
     rows = [("closest point", "closest_point", args.points),
             ("signed distance", "signed_distance", args.points),
             (f"all hits (<= {args.max_hits})", "all_hits", args.rays),
             ("hit counts", "count_hits", args.rays)]
-    try:
-        import open3d as o3d
-    except ImportError:
-        o3d = None
-        print("open3d is not installed: oxray only")
-    o3 = {}
+    o3_calls = {}
     if o3d is not None:
         scene = o3d.t.geometry.RaycastingScene(nthreads=args.threads)
         mesh = o3d.t.geometry.TriangleMesh()
@@ -249,22 +177,62 @@ def main():
         scene.add_triangles(mesh)
         pts = o3d.core.Tensor(points)
         rts = o3d.core.Tensor(rays)
+        o3_calls = {"closest_point": lambda: scene.compute_closest_points(pts),
+                    "signed_distance": lambda: scene.compute_signed_distance(pts),
+                    "all_hits": lambda: scene.list_intersections(rts),
+                    "count_hits": lambda: scene.count_intersections(rts)}
 
-        def best(fn):
-            t, r = float("inf"), None
-            for _ in range(args.runs):
-                s = time.perf_counter()
-                r = fn()
-                t = min(t, time.perf_counter() - s)
-            return t, r
+    work = Path(tempfile.mkdtemp(prefix="oxray-simq-"))
+    ox = {k: [] for _, k, _ in rows}
+    o3 = {k: [] for k in o3_calls}
+    ox_cpu = {k: [] for _, k, _ in rows}
+    o3_cpu = {k: [] for k in o3_calls}
+    o3_out = {}
+    try:
+        with open(work / "mesh.bin", "wb") as out:
+            out.write(np.array([len(v), len(f)], np.uint32).tobytes())
+            out.write(v.tobytes())
+            out.write(f.tobytes())
+        (work / "points.bin").write_bytes(points.tobytes())
+        (work / "rays.bin").write_bytes(rays.tobytes())
+        runner = subprocess.Popen([str(exe), str(work), str(args.threads), str(args.max_hits)],
+                                  stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        ox_build = json.loads(runner.stdout.readline())["build"]
+        if o3d is not None:
+            t0 = time.perf_counter()
+            scene.count_intersections(rts[:1])  # commits the scene (the BVH build)
+            o3_build = time.perf_counter() - t0
+        else:
+            o3_build = float("nan")
+        # Run 0 is the warm-up of both engines; then each query runs on oxray and on Open3D
+        # in turn, so that both see the same load.
+        for run in range(args.runs + 1):
+            for _, key, _ in rows:
+                runner.stdin.write(key + "\n")
+                runner.stdin.flush()
+                r = json.loads(runner.stdout.readline())
+                if run > 0:
+                    ox[key].append(r["wall"])
+                    ox_cpu[key].append(r["cpu"])
+                if key in o3_calls:
+                    s, c = time.perf_counter(), time.process_time()
+                    o3_out[key] = o3_calls[key]()
+                    s, c = time.perf_counter() - s, time.process_time() - c
+                    if run > 0:
+                        o3[key].append(s)
+                        o3_cpu[key].append(c)
+        runner.stdin.close()
+        runner.wait()
+        ox_closest = np.fromfile(work / "oxray.closest", np.float32)
+        ox_signed = np.fromfile(work / "oxray.signed", np.float32)
+        ox_counts = np.fromfile(work / "oxray.counts", np.uint32)
+        ox_listed = int(np.fromfile(work / "oxray.listed", np.uint64)[0])
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
 
-        t0 = time.perf_counter()
-        scene.count_intersections(rts[:1])  # commits the scene (the BVH build)
-        o3["build"] = time.perf_counter() - t0
-        o3["closest_point"], cp = best(lambda: scene.compute_closest_points(pts))
-        o3["signed_distance"], sd = best(lambda: scene.compute_signed_distance(pts))
-        o3["all_hits"], lh = best(lambda: scene.list_intersections(rts))
-        o3["count_hits"], cnt = best(lambda: scene.count_intersections(rts))
+    if o3d is not None:
+        cp, sd = o3_out["closest_point"], o3_out["signed_distance"]
+        lh, cnt = o3_out["all_hits"], o3_out["count_hits"]
         o3_closest = np.linalg.norm(cp["points"].numpy() - points, axis=1)
         print(f"closest distance: max |oxray - open3d| = "
               f"{np.abs(o3_closest - ox_closest).max():.3g} (mesh radius {radius:.3g})")
@@ -272,15 +240,37 @@ def main():
         print(f"inside/outside agreement: {100 * agree:.3f} % of points")
         same = np.mean(cnt.numpy().astype(np.uint32) == ox_counts)
         print(f"equal hit counts: {100 * same:.3f} % of rays; listed hits: oxray "
-              f"{ox['listed_hits']}, open3d {len(lh['t_hit'].numpy())}")
+              f"{ox_listed}, open3d {len(lh['t_hit'].numpy())}")
+    print(f"load average after: {load()}")
 
-    print(f"\n{'query':<22}{'oxray Mq/s':>12}{'open3d Mq/s':>13}{'ratio':>8}")
-    print(f"{'build (s)':<22}{ox['build']:>12.3f}{o3.get('build', float('nan')):>13.3f}")
+    def rate(n, times):
+        """Median Mq/s, and the Mq/s of the slowest and fastest runs."""
+        return (n / statistics.median(times) / 1e6, n / max(times) / 1e6,
+                n / min(times) / 1e6)
+
+    nan = float("nan")
+    table = []
     for label, key, n in rows:
-        a = n / ox[key] / 1e6
-        b = n / o3[key] / 1e6 if key in o3 else float("nan")
-        print(f"{label:<22}{a:>12.2f}{b:>13.2f}{a / b:>8.2f}")
-
+        a = rate(n, ox[key])
+        b = rate(n, o3[key]) if key in o3 else (nan, nan, nan)
+        cpu_a = statistics.median(ox_cpu[key])
+        cpu_b = statistics.median(o3_cpu[key]) if key in o3 else nan
+        table.append((label, a, b, a[0] / b[0], cpu_b / cpu_a))
+    print(f"\n{'query':<22}{'oxray Mq/s':>12}{'(min-max)':>15}{'open3d Mq/s':>13}"
+          f"{'(min-max)':>15}{'ratio':>8}{'CPU ratio':>11}")
+    print(f"{'build (s)':<22}{ox_build:>12.3f}{'':>15}{o3_build:>13.3f}")
+    for label, a, b, ratio, cpu in table:
+        print(f"{label:<22}{a[0]:>12.2f}{f'{a[1]:.2f}-{a[2]:.2f}':>15}{b[0]:>13.2f}"
+              f"{f'{b[1]:.2f}-{b[2]:.2f}':>15}{ratio:>8.2f}{cpu:>11.2f}")
+    print("ratio: oxray's median throughput / Open3D's (above 1: oxray is faster); CPU ratio: "
+          "Open3D's median CPU seconds / oxray's (all threads), less sensitive to other load")
+    if args.markdown:
+        print("\n| query | oxray Mq/s (min-max) | Open3D Mq/s (min-max) | oxray / Open3D "
+              "| CPU-time ratio |")
+        print("|---|---:|---:|---:|---:|")
+        for label, a, b, ratio, cpu in table:
+            print(f"| {label} | {a[0]:.2f} ({a[1]:.2f}-{a[2]:.2f}) | "
+                  f"{b[0]:.2f} ({b[1]:.2f}-{b[2]:.2f}) | {ratio:.2f} | {cpu:.2f} |")
 
 if __name__ == "__main__":
     sys.exit(main())

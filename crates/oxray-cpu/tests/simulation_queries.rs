@@ -226,6 +226,72 @@ fn rays_through_shared_edges_and_vertices_report_each_triangle_once() {
     }
 }
 
+#[test]
+fn count_hits_is_the_length_of_all_hits_and_the_brute_force_count() {
+    // A stack of 150 large overlapping slabs (rays along z cross up to 150 primitives, past
+    // the fixed key array of the counting visitor: those rays are counted through the sorted
+    // list) plus slivers that spatial splits reference from several leaves.
+    let mut rng = Rng::new(21);
+    let mut tris: Vec<Tri> = (0..150)
+        .map(|k| {
+            let z = 0.5 + 3.0 * k as f32 / 150.0 + rng.f32() * 0.01;
+            let c = rng.vec3(1.5, 2.5);
+            [
+                [c.x - 3.0, c.y - 3.0, z],
+                [c.x + 3.0, c.y - 2.0, z + 0.05],
+                [c.x - 1.0, c.y + 3.0, z - 0.05],
+            ]
+        })
+        .collect();
+    for _ in 0..400 {
+        let a = rng.vec3(0.0, 4.0);
+        let b = rng.vec3(0.0, 4.0);
+        tris.push([
+            a.to_array(),
+            b.to_array(),
+            (a + rng.vec3(-0.2, 0.2)).to_array(),
+        ]);
+    }
+    let m = soup_mesh(&tris);
+    let mut list = Vec::new();
+    for options in presets() {
+        let gas = gas_of(&m, &options);
+        let mut rays: Vec<Ray> = (0..300).map(|_| random_ray(&mut rng, 4.0)).collect();
+        // Nearly along z through the stack: well over 64 hits each.
+        rays.extend((0..100).map(|_| {
+            let o = rng.vec3(1.8, 2.2);
+            let d = (Vec3::Z + rng.vec3(-0.05, 0.05)).normalize();
+            Ray::new(Vec3::new(o.x, o.y, -1.0), d)
+        }));
+        // Intervals that start and end inside the stack.
+        rays.extend((0..100).map(|_| {
+            let o = rng.vec3(1.8, 2.2);
+            let (t0, t1) = (rng.f32() * 2.0, 2.0 + rng.f32() * 3.0);
+            Ray::with_interval(Vec3::new(o.x, o.y, -1.0), Vec3::Z, t0, t1)
+        }));
+        let (mut long, mut total) = (0, 0);
+        for ray in &rays {
+            let want = reference_sorted(&tris, ray)
+                .into_iter()
+                .filter(|w| w.0 >= ray.tmin && w.0 <= ray.tmax)
+                .count();
+            let count = gas.count_hits(ray).unwrap() as usize;
+            assert!(gas.all_hits(ray, usize::MAX, &mut list).unwrap());
+            assert_eq!(count, list.len(), "{ray:?}");
+            assert_eq!(count, want, "{ray:?}");
+            long += usize::from(count > 64);
+            total += count;
+        }
+        assert!(long >= 100, "too few rays past the key array: {long}");
+        assert!(total > 15_000, "too few hits to test: {total}");
+        let mut counts = vec![0; rays.len()];
+        gas.count_hits_batch(&rays, &mut counts).unwrap();
+        for (ray, &c) in rays.iter().zip(&counts) {
+            assert_eq!(c, gas.count_hits(ray).unwrap());
+        }
+    }
+}
+
 /// The instance scene of several tests: a soup instanced with random transforms (one
 /// mirrored, one with flipped facing).
 struct Scene {

@@ -1,16 +1,27 @@
 //! Every primitive a ray crosses: sorted by distance, each reported once, with a bound on how
 //! many are kept; and the number of primitives crossed.
 //!
-//! Both are any-hit filters over the closest-hit traversal that ignore every candidate, so
-//! that the interval never shrinks and every primitive in `[tmin, tmax]` is offered. A
-//! primitive may be offered more than once (spatial splits reference a triangle from several
-//! leaves, guide §5.1); every offer of one primitive on one path has the same `t`, so the
-//! sorted list finds repeats by binary search. Once a full list is known to miss a hit, the
-//! interval shrinks to its farthest hit (not before, so that whether the list is complete is
-//! exact).
+//! Both ignore every candidate of the closest-hit traversal, so that the interval never
+//! shrinks and every primitive in `[tmin, tmax]` is offered. A primitive may be offered more
+//! than once (spatial splits reference a triangle from several leaves, guide §5.1); every offer
+//! of one primitive on one path has the same `t`.
+//!
+//! - The list of [`Gas::all_hits`] is an any-hit filter (`intersect_filtered`) that keeps the
+//!   candidates sorted and finds repeats by binary search. Once a full list is known to miss a
+//!   hit, the interval shrinks to its farthest hit (not before, so that whether the list is
+//!   complete is exact).
+//! - [`Gas::count_hits`] has a visitor of its own ([`CountVisitor`]) that keeps no hit
+//!   record: only the key of each primitive counted (`t`, instance, build input, primitive)
+//!   in a fixed array on the stack, scanned for repeats. A ray crossing more than
+//!   [`COUNT_KEYS`] primitives is counted again with the sorted list (a thread's scratch list,
+//!   allocated once).
 
 use super::{check_ray, par_try_batch, SurfaceQueryError, CHUNK};
+use crate::traversal::{
+    traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef, Path, SceneVisitor,
+};
 use crate::{Gas, Ias, NoCustomPrimitives};
+use oxray_bvh::InstanceData;
 use oxray_core::{CandidateAction, Hit, Ray};
 use rayon::prelude::*;
 use std::cell::RefCell;
@@ -53,6 +64,113 @@ fn offer(out: &mut Vec<Hit>, max: usize, hit: &Hit, complete: &mut bool) -> Cand
         CandidateAction::Accept
     } else {
         CandidateAction::Ignore
+    }
+}
+
+/// Primitives [`CountVisitor`] tells apart without a list: beyond them, the ray is counted
+/// again with the sorted list of [`all_hits`](Gas::all_hits).
+pub(crate) const COUNT_KEYS: usize = 64;
+
+/// What tells two offers of one primitive from two primitives, as [`order`] compares hits:
+/// the instance index and id, the build input and the primitive index (the `t` is kept apart).
+type CountKey = (u32, u32, u32, u32);
+
+/// The visitor of [`Gas::count_hits`]: counts every distinct primitive offered, ignoring each
+/// (the interval never shrinks). Allocates nothing: the keys of the primitives counted are a
+/// fixed array, scanned on every offer (`t` first); should they overflow, traversal is aborted
+/// and [`overflow`](Self::overflow) says to count again otherwise.
+struct CountVisitor<'s> {
+    gas: Option<&'s Gas>,
+    /// The instance nearest to the current GAS.
+    instance: Option<&'s InstanceData>,
+    /// `t` (its bits) of the primitives counted, in offer order.
+    ts: [u32; COUNT_KEYS],
+    /// The rest of their keys.
+    keys: [CountKey; COUNT_KEYS],
+    count: usize,
+    overflow: bool,
+}
+
+impl<'s> CountVisitor<'s> {
+    fn new() -> Self {
+        CountVisitor {
+            gas: None,
+            instance: None,
+            ts: [0; COUNT_KEYS],
+            keys: [(0, 0, 0, 0); COUNT_KEYS],
+            count: 0,
+            overflow: false,
+        }
+    }
+
+    /// Counts the primitive of leaf slot `slot` hit at `t`, unless it was counted already.
+    #[inline(always)]
+    fn offer(&mut self, slot: u32, t: f32) -> Decision {
+        let Some(gas) = self.gas else {
+            return Decision::Ignore;
+        };
+        let (primitive_index, _, build_input) = gas.resolve(slot);
+        let (instance_id, instance_index) =
+            self.instance.map_or((!0, 0), |i| (i.instance_id, i.index));
+        let key = (instance_index, instance_id, build_input, primitive_index);
+        let bits = t.to_bits();
+        let n = self.count;
+        if (0..n).any(|k| self.ts[k] == bits && self.keys[k] == key) {
+            return Decision::Ignore;
+        }
+        if n == COUNT_KEYS {
+            self.overflow = true;
+            return Decision::Abort;
+        }
+        self.ts[n] = bits;
+        self.keys[n] = key;
+        self.count = n + 1;
+        Decision::Ignore
+    }
+}
+
+impl<'s> SceneVisitor<'s> for CountVisitor<'s> {
+    fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, _: &Ray) {
+        self.gas = Some(gas);
+        self.instance = path.instance;
+    }
+
+    fn ray_mask(&self) -> u8 {
+        0xFF
+    }
+}
+
+impl GasVisitor for CountVisitor<'_> {
+    #[inline(always)]
+    fn triangle(&mut self, slot: u32, hit: &oxray_bvh::triangle::TriangleHit) -> Decision {
+        self.offer(slot, hit.t)
+    }
+
+    #[inline(always)]
+    fn sphere(&mut self, slot: u32, t: f32) -> Decision {
+        self.offer(slot, t)
+    }
+
+    #[inline(always)]
+    fn curve(&mut self, slot: u32, hit: &oxray_bvh::CurveHit) -> Decision {
+        self.offer(slot, hit.t)
+    }
+
+    fn custom(&mut self, _: u32, _: f32, _: f32, _: &mut [Entry]) -> (Option<f32>, bool) {
+        // Custom primitives are not hit, as by `all_hits` (`NoCustomPrimitives`).
+        (None, false)
+    }
+}
+
+/// The number of distinct primitives `ray` (valid) crosses under `root`: [`CountVisitor`], or
+/// the sorted list of `all_hits` where the ray crosses more than [`COUNT_KEYS`].
+fn count_under(root: NodeRef<'_>, ray: &Ray, list_count: impl FnOnce() -> u32) -> u32 {
+    let mut v = CountVisitor::new();
+    with_stack(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
+    if v.overflow {
+        list_count()
+    } else {
+        v.count as u32
     }
 }
 
@@ -134,7 +252,7 @@ fn with_scratch<R>(f: impl FnOnce(&mut Vec<Hit>) -> R) -> R {
 
 /// The all-hits queries every traversable offers.
 macro_rules! all_hits_api {
-    ($t:ty) => {
+    ($t:ty, $root:expr) => {
         impl $t {
             /// Every primitive `ray` crosses in `[tmin, tmax]`, into `out` (cleared first): sorted
             /// by `t` (then by instance index, instance id, build input and primitive index), each
@@ -186,13 +304,15 @@ macro_rules! all_hits_api {
             /// [`Gas::signed_distance`] for a robust inside test.
             pub fn count_hits(&self, ray: &Ray) -> Result<u32, SurfaceQueryError> {
                 check_ray(ray)?;
-                Ok(with_scratch(|list| {
-                    list.clear();
-                    let mut complete = true;
-                    self.intersect_filtered(ray, &mut NoCustomPrimitives, |h| {
-                        offer(list, usize::MAX, h, &mut complete)
-                    });
-                    list.len() as u32
+                Ok(count_under($root(self), ray, || {
+                    with_scratch(|list| {
+                        list.clear();
+                        let mut complete = true;
+                        self.intersect_filtered(ray, &mut NoCustomPrimitives, |h| {
+                            offer(list, usize::MAX, h, &mut complete)
+                        });
+                        list.len() as u32
+                    })
                 }))
             }
 
@@ -265,5 +385,5 @@ macro_rules! all_hits_api {
     };
 }
 
-all_hits_api!(Gas);
-all_hits_api!(Ias);
+all_hits_api!(Gas, NodeRef::Gas);
+all_hits_api!(Ias, NodeRef::Ias);
