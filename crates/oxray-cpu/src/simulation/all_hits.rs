@@ -302,6 +302,22 @@ macro_rules! all_hits_api {
             /// bound. Its parity tells inside from outside for a closed mesh only where the ray
             /// crosses no edge or vertex (a shared edge counts once per triangle); see
             /// [`Gas::signed_distance`] for a robust inside test.
+            ///
+            /// It keeps no hit record and allocates nothing: the primitives counted are told
+            /// apart in a fixed array on the stack (a ray crossing more than 64 is counted
+            /// again through the sorted list of `all_hits`, allocated once per thread).
+            ///
+            /// ```
+            /// use oxray_cpu::Gas;
+            /// use oxray_core::Ray;
+            /// use glam::Vec3;
+            /// // A tetrahedron: a ray through it crosses two faces, one that starts inside one.
+            /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+            /// let gas = Gas::from_mesh(&v, &[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])?;
+            /// assert_eq!(gas.count_hits(&Ray::new(Vec3::new(0.2, 0.2, -1.0), Vec3::Z))?, 2);
+            /// assert_eq!(gas.count_hits(&Ray::new(Vec3::splat(0.1), Vec3::Z))?, 1);
+            /// # Ok::<(), Box<dyn std::error::Error>>(())
+            /// ```
             pub fn count_hits(&self, ray: &Ray) -> Result<u32, SurfaceQueryError> {
                 check_ray(ray)?;
                 Ok(count_under($root(self), ray, || {
@@ -374,6 +390,19 @@ macro_rules! all_hits_api {
 
             /// [`count_hits`](Self::count_hits) of a batch of rays in parallel. The first invalid
             /// ray (the lowest index) is the error; the counts of the others are written.
+            ///
+            /// ```
+            /// use oxray_cpu::Gas;
+            /// use oxray_core::Ray;
+            /// use glam::Vec3;
+            /// let v = [[-1.0f32, -1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 1.0, 1.0]];
+            /// let gas = Gas::from_mesh(&v, &[[0, 1, 2]])?;
+            /// let rays = [Ray::new(Vec3::ZERO, Vec3::Z), Ray::new(Vec3::ZERO, -Vec3::Z)];
+            /// let mut counts = [0; 2];
+            /// gas.count_hits_batch(&rays, &mut counts)?;
+            /// assert_eq!(counts, [1, 0]);
+            /// # Ok::<(), Box<dyn std::error::Error>>(())
+            /// ```
             pub fn count_hits_batch(
                 &self,
                 rays: &[Ray],
