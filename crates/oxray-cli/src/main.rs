@@ -613,16 +613,18 @@ fn run(cli: Cli) -> Result<()> {
                 };
             let (out_w, out_h) = (rendered.image.width, rendered.image.height);
             let samples_per_s = out_w as f64 * out_h as f64 * done as f64 / render_secs.max(1e-9);
+            let rays_per_s = rendered.rays as f64 / render_secs.max(1e-9);
             let size = match crop {
                 Some(c) => format!("{out_w}x{out_h}, pixels {c} of {w}x{h}"),
                 None => format!("{w}x{h}"),
             };
             say(format_args!(
-                "wrote {} ({size}, {done} spp, {} triangles, {} instances{on}{stopped}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s), total {:.1} s",
+                "wrote {} ({size}, {done} spp, {} triangles, {} instances{on}{stopped}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s, {:.2} Mrays/s), total {:.1} s",
                 output.display(),
                 desc.triangle_count(),
                 desc.instances.len(),
                 samples_per_s / 1e6,
+                rays_per_s / 1e6,
                 start.elapsed().as_secs_f64()
             ))?;
             if rendered.cancelled && interrupted.load(std::sync::atomic::Ordering::SeqCst) {

@@ -233,6 +233,9 @@ pub struct LaunchReport {
     pub exceptions: u64,
     /// The first (up to five, by launch index) exceptions, with their launch indices.
     pub first_exceptions: Vec<([u32; 3], Exception)>,
+    /// Rays traced: the `optixTrace` calls of every launch index at every depth (radiance,
+    /// shadow and any other ray type alike), so that a caller can report rays per second.
+    pub traces: u64,
 }
 
 impl LaunchReport {
@@ -340,6 +343,7 @@ mod launch_report_tests {
         let report = LaunchReport {
             exceptions: 2,
             first_exceptions: vec![user, depth],
+            traces: 0,
         };
         let quiet = DeviceContext::new().log_callback(LogLevel::Error, |_, _, _| {});
         assert_eq!(report.clone().settle(&quiet, true), Ok(report.clone()));
@@ -354,6 +358,7 @@ mod launch_report_tests {
         let only_user = LaunchReport {
             exceptions: 1,
             first_exceptions: vec![user],
+            traces: 0,
         };
         assert_eq!(only_user.clone().settle(&strict, true), Ok(only_user));
     }

@@ -159,34 +159,38 @@ impl<P> Pipeline<P> {
             let i = i as u64;
             [(i % w) as u32, ((i / w) % h) as u32, (i / (w * h)) as u32]
         };
-        // Each chunk keeps its first five exceptions; chunks are combined in index order.
-        let (count, first): (u64, Vec<([u32; 3], Exception)>) = (0..total as usize)
+        // Each chunk keeps its first five exceptions and counts its traces; chunks are
+        // combined in index order.
+        type Chunk = (u64, Vec<([u32; 3], Exception)>, u64);
+        let (count, first, traces): Chunk = (0..total as usize)
             .into_par_iter()
             .with_min_len(64)
             .fold(
-                || (0u64, Vec::new()),
-                |(mut n, mut first), i| {
+                || (0u64, Vec::new(), 0u64),
+                |(mut n, mut first, traces), i| {
                     let index = index_of(i);
-                    if let Some(e) = run_raygen(&shared, index, raygen) {
+                    let (e, t) = run_raygen(&shared, index, raygen);
+                    if let Some(e) = e {
                         n += 1;
                         if first.len() < 5 {
                             first.push((index, e));
                         }
                     }
-                    (n, first)
+                    (n, first, traces + t)
                 },
             )
             .reduce(
-                || (0u64, Vec::new()),
-                |(n1, mut f1), (n2, f2)| {
+                || (0u64, Vec::new(), 0u64),
+                |(n1, mut f1, t1), (n2, f2, t2)| {
                     f1.extend(f2);
                     f1.truncate(5);
-                    (n1 + n2, f1)
+                    (n1 + n2, f1, t1 + t2)
                 },
             );
         LaunchReport {
             exceptions: count,
             first_exceptions: first,
+            traces,
         }
         .settle(&self.shared.context, exception_group.is_some())
     }

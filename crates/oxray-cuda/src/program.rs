@@ -428,11 +428,13 @@ __oxray_pipeline() {
     __oxray_states[threadIdx.x] = &state;
     __oxray_ThreadState& s = __oxray_state();
     s.depth = 0u;
+    s.traces = 0u;
     if (__OXRAY_STORES(true, __OXRAY_READS_CALLS)) s.calls = 0u;
     if (__OXRAY_STORES(true, __OXRAY_READS_REPORT)) s.report = nullptr;
     if (__OXRAY_STORES(true, __OXRAY_READS_PATH)) s.ray.path = nullptr;
     s.record = reinterpret_cast<const char*>(__oxray_launch.raygen);
     __oxray_call_raygen(__oxray_group_of(s.record));
+    __oxray_count_traces(s.traces);
 }
 "#,
     );
@@ -803,9 +805,11 @@ pub(crate) fn exception_report(words: &[u32]) -> LaunchReport {
         .collect();
     first.sort_by_key(|(i, _)| [i[2], i[1], i[0]]);
     first.truncate(5);
+    let word = |i: usize| words.get(i).copied().unwrap_or(0) as u64;
     LaunchReport {
         exceptions: count,
         first_exceptions: first,
+        traces: word(2) | word(3) << 32,
     }
 }
 
@@ -838,7 +842,8 @@ struct LaunchScratch {
     exceptions: CudaSlice<u32>,
     /// The launch information last written to the module's `__oxray_launch`.
     info: Option<LaunchInfo>,
-    /// Whether the last launch raised exceptions: the count is cleared before the next one.
+    /// Whether the last launch raised exceptions or traced rays: the counts are cleared before
+    /// the next one.
     raised: bool,
 }
 
@@ -1031,11 +1036,11 @@ impl CudaPipeline {
                 &mut scratch.sbt.slice_mut(..packed.bytes.len()),
             )
             .map_err(driver("copying the SBT"))?;
-        // The records past the count are never read: clearing the count is enough, and only
-        // a launch that raised exceptions leaves it set.
+        // The records past the count are never read: clearing the counts (exceptions, traces)
+        // is enough, and only a launch that raised exceptions or traced leaves them set.
         if scratch.raised {
             stream
-                .memset_zeros(&mut scratch.exceptions.slice_mut(..1))
+                .memset_zeros(&mut scratch.exceptions.slice_mut(..4))
                 .map_err(driver("clearing exception records"))?;
             scratch.raised = false;
         }
@@ -1080,13 +1085,14 @@ impl CudaPipeline {
         // synchronized below while `scratch` is locked) and in the launch parameters and
         // traversables the user's programs read, which the user provides as for OptiX.
         unsafe { launch.launch(cfg) }.map_err(driver("launching a pipeline"))?;
-        // The count first (one word); the records only when there are some.
-        let mut count = [0u32; 1];
+        // The count and the trace count first (four words); the records only when there are
+        // some.
+        let mut count = [0u32; 4];
         stream
-            .memcpy_dtoh(&scratch.exceptions.slice(..1), &mut count)
+            .memcpy_dtoh(&scratch.exceptions.slice(..4), &mut count)
             .map_err(driver("copying exception records"))?;
+        scratch.raised = count.iter().any(|&w| w != 0);
         let words = if count[0] > 0 {
-            scratch.raised = true;
             stream
                 .clone_dtoh(&scratch.exceptions.slice(..))
                 .map_err(driver("copying exception records"))?

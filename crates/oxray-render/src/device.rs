@@ -819,8 +819,8 @@ pub(crate) struct Pass<'a> {
 }
 
 impl Pass<'_> {
-    /// Adds sample `sample` to every pixel.
-    pub(crate) fn launch(&mut self, sample: u32) -> Result<(), RenderError> {
+    /// Adds sample `sample` to every pixel; returns the rays it traced.
+    pub(crate) fn launch(&mut self, sample: u32) -> Result<u64, RenderError> {
         self.params.sample = sample;
         let report = self.pipeline.launch_with(
             &self.params,
@@ -836,6 +836,6 @@ impl Pass<'_> {
                 first: format!("at pixel {:?}: {e}", self.window.image_pixel(index)),
             });
         }
-        Ok(())
+        Ok(report.traces)
     }
 }

@@ -528,6 +528,7 @@ pub fn render_passes(
         ],
     );
     let mut samples = 0;
+    let mut rays = 0;
     let mut cancelled = false;
     for sample in 0..opts.spp {
         let params = Params {
@@ -551,6 +552,7 @@ pub fn render_passes(
         };
         // One launch index per pixel of the window.
         let report = pipeline.launch(&mut util, &params, w, h, 1)?;
+        rays += report.traces;
         if let Some((index, e)) = report.first_exceptions.first() {
             return Err(RenderError::Exceptions {
                 pass: sample,
@@ -569,6 +571,7 @@ pub fn render_passes(
     Ok(Rendered {
         image: image_from_sums(w, h, &sums),
         samples,
+        rays,
         cancelled,
         aovs: aov
             .as_ref()

@@ -225,9 +225,10 @@ impl<'s> Renderer<'s> {
             &filter,
         );
         let mut samples = 0;
+        let mut rays = 0;
         let mut cancelled = false;
         for sample in 0..opts.spp {
-            pass.launch(sample)?;
+            rays += pass.launch(sample)?;
             samples = sample + 1;
             let progress = Progress {
                 samples,
@@ -249,6 +250,7 @@ impl<'s> Renderer<'s> {
         Ok(Rendered {
             image: image_from_sums(width, height, &sums),
             samples,
+            rays,
             cancelled,
             aovs,
         })
@@ -325,6 +327,10 @@ pub struct Rendered {
     pub image: Image,
     /// Samples per pixel done.
     pub samples: u32,
+    /// Rays traced (camera, bounce and shadow rays alike; the launches'
+    /// [`LaunchReport::traces`](oxray::LaunchReport::traces)): over the render's time, its rays
+    /// per second.
+    pub rays: u64,
     /// Whether the callback stopped the render before all samples were done.
     pub cancelled: bool,
     /// The auxiliary images, with [`RenderOptions::aovs`].

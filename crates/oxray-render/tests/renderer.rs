@@ -50,6 +50,32 @@ fn a_renderer_renders_what_render_on_renders_every_time() {
     assert_eq!(first.image, render(&scene, &env, &o, |_| {}).unwrap());
 }
 
+/// A render reports the rays it traced (every launch's trace count): at least one camera ray
+/// per pixel and sample, at most a camera ray and, per vertex, a bounce and its shadow rays; the
+/// same count on every render of the same options, and from the Rust programs, which trace the
+/// same rays as the C++ ones.
+#[test]
+fn a_render_counts_the_rays_it_traced() {
+    let scene = cornell_box();
+    let env = dark();
+    let o = opts(16, 3);
+    let mut r = Renderer::new(&Device::cpu(), &scene, &env).unwrap();
+    let first = all(&mut r, &o);
+    let camera_rays = 16 * 16 * 3;
+    // Each of the 4 vertices may add a bounce and up to two shadow rays (lights, environment).
+    assert!(
+        first.rays > camera_rays && first.rays <= camera_rays * (1 + 4 * 3),
+        "{} rays",
+        first.rays
+    );
+    assert_eq!(all(&mut r, &o).rays, first.rays);
+    let rust = render_passes(&scene, &env, &o, |_| ControlFlow::Continue(())).unwrap();
+    assert_eq!(rust.rays, first.rays, "Rust and C++ programs");
+    // Fewer vertices, fewer rays.
+    let short = all(&mut r, &RenderOptions { max_depth: 1, ..o });
+    assert!(short.rays < first.rays, "{} vs {}", short.rays, first.rays);
+}
+
 #[test]
 fn a_cancelled_render_is_the_render_of_the_passes_done() {
     let scene = cornell_box();
@@ -371,6 +397,13 @@ fn the_renderer_on_cuda_agrees_with_the_cpu() {
     let g = gpu.render(&o, stop_at_two).unwrap();
     let c = cpu.render(&o, stop_at_two).unwrap();
     assert!(g.cancelled && g.samples == 2);
+    // The same paths up to rounding: the same number of rays, give or take a few percent.
+    let (gr, cr) = (g.rays as f64, c.rays as f64);
+    assert!(cr >= (32 * 32 * 2) as f64, "{cr}");
+    assert!(
+        (gr - cr).abs() <= 0.05 * cr,
+        "{gr} rays on CUDA, {cr} on the CPU"
+    );
     let (ga, ca) = (g.aovs.unwrap(), c.aovs.unwrap());
     assert_eq!(ga.samples, ca.samples);
     let mut close = 0;

@@ -367,6 +367,8 @@ fn s9_3_pipelines_hit_built_in_curves_on_every_device() {
             let handle = gas.optix_handle().unwrap();
             let (out, report) = scene.run(handle, "hg", RayFlags::empty());
             assert_eq!(report.exceptions, 0, "{} {ty}: {report:?}", name(device));
+            // One trace per launch index, counted in the report.
+            assert_eq!(report.traces, u64::from(W * H), "{}", name(device));
             let rays: Vec<Ray> = (0..out.len()).map(pixel_ray).collect();
             let mut hits = vec![None; rays.len()];
             device
@@ -458,6 +460,8 @@ fn s9_1_curves_need_their_primitive_type_flag() {
                 "{}: {report:?}",
                 name(device)
             );
+            // The trace that raised is counted too.
+            assert_eq!(report.traces, u64::from(W * H), "{}", name(device));
             let code = report.first_exceptions[0].1.code;
             assert_eq!(code, ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE);
             codes.push(code);

@@ -67,6 +67,9 @@ pub(crate) struct Frame<'a, P> {
     pub depth: u32,
     /// Callable nesting depth.
     pub calls: u32,
+    /// The launch index's count of traces (its `optixTrace` calls at every depth), for the
+    /// launch report.
+    pub traces: &'a std::cell::Cell<u64>,
 }
 
 impl<P> Clone for Frame<'_, P> {

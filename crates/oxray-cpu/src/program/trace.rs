@@ -636,6 +636,7 @@ pub(crate) fn trace<P>(
     args: &TraceRay<'_>,
     payload: &mut [u32],
 ) -> ProgramResult {
+    frame.traces.set(frame.traces.get() + 1);
     let launch = frame.launch;
     let pipe = launch.pipeline;
     let n = payload.len();
@@ -811,6 +812,18 @@ pub(crate) fn run_raygen<P>(
     launch: &LaunchShared<'_, P>,
     index: [u32; 3],
     raygen_group: usize,
+) -> (Option<Exception>, u64) {
+    let traces = std::cell::Cell::new(0);
+    let e = run_raygen_counted(launch, index, raygen_group, &traces);
+    (e, traces.get())
+}
+
+/// [`run_raygen`], counting the index's traces in `traces`.
+fn run_raygen_counted<P>(
+    launch: &LaunchShared<'_, P>,
+    index: [u32; 3],
+    raygen_group: usize,
+    traces: &std::cell::Cell<u64>,
 ) -> Option<Exception> {
     let frame = Frame {
         launch,
@@ -818,6 +831,7 @@ pub(crate) fn run_raygen<P>(
         record: launch.sbt.raygen.record(0).unwrap_or(&[]),
         depth: 0,
         calls: 0,
+        traces,
     };
     let GroupPrograms::RayGen(rg) = &launch.pipeline.groups[raygen_group].inner.programs else {
         return None;

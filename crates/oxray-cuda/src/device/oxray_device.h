@@ -200,6 +200,7 @@ struct __oxray_ThreadState {
     int exception_code;
     u32 exception_ndetails;
     u32 exception_details[8];
+    u32 traces;  // optixTrace calls of this launch index, for the launch report
 };
 
 // The state itself is a local variable of the kernel (per-thread local memory, cached in L1);
@@ -240,6 +241,22 @@ static __forceinline__ __device__ u32 __oxray_group_of(const char* record) {
     return *reinterpret_cast<const u32*>(record);
 }
 
+// Adds the launch index's trace count to the launch's (words 2 and 3 of the exception buffer,
+// a u64), one atomic per group of converged threads.
+static __forceinline__ __device__ void __oxray_count_traces(u32 traces) {
+    unsigned long long* total =
+        reinterpret_cast<unsigned long long*>(__oxray_launch.exceptions) + 1;
+#if __CUDA_ARCH__ >= 800
+    const unsigned int mask = __activemask();
+    const u32 sum = __reduce_add_sync(mask, traces);
+    if ((threadIdx.x & 31u) == (u32)(__ffs(mask) - 1) && sum != 0u) {
+        atomicAdd(total, (unsigned long long)sum);
+    }
+#else
+    if (traces != 0u) atomicAdd(total, (unsigned long long)traces);
+#endif
+}
+
 // Ends the launch index with the exception in the state: the exception program runs (if the
 // SBT has one), the exception is recorded for the host, and the thread exits.
 static __noinline__ __device__ void __oxray_raise() {
@@ -259,6 +276,10 @@ static __noinline__ __device__ void __oxray_raise() {
         r[3] = (u32)s.exception_code;
         for (int i = 0; i < 8; ++i) r[4 + i] = s.exception_details[i];
         r[12] = s.exception_ndetails;
+    }
+    if (s.traces != 0u) {
+        atomicAdd(reinterpret_cast<unsigned long long*>(__oxray_launch.exceptions) + 1,
+                  (unsigned long long)s.traces);
     }
     asm volatile("exit;");
 }
@@ -1326,6 +1347,7 @@ static __forceinline__ __device__ void __oxray_enter(bool fast, __oxray_ThreadSt
                                                      OptixVisibilityMask mask, unsigned int flags,
                                                      unsigned int n, const unsigned int* payload,
                                                      __oxray_Frame& frame) {
+    st.traces += 1u;
     if (n > OXRAY_NUM_PAYLOAD_VALUES) {
         u32 d[2] = {n, (u32)OXRAY_NUM_PAYLOAD_VALUES};
         __oxray_throw(OPTIX_EXCEPTION_CODE_PAYLOAD_TYPE_MISMATCH, 2, d);

@@ -462,6 +462,7 @@ impl Setup {
                 oxray::LaunchReport {
                     exceptions: 1,
                     first_exceptions: vec![(index, exception)],
+                    ..Default::default()
                 }
             }
             Err(e) => panic!("launch: {e}"),
