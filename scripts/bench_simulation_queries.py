@@ -10,6 +10,7 @@ RaycastingScene (Embree underneath) on the same mesh, points and rays, in one ru
     scripts/setup-open3d.sh        # once: numpy + open3d-cpu 0.20 in target/open3d-venv
     target/open3d-venv/bin/python scripts/bench_simulation_queries.py \
         [--mesh stanford-bunny] [--points N] [--rays N] [--runs R] [--threads T] [--markdown]
+        [--oxray-exe PATH]
 
 Without open3d in the running Python only oxray is measured. The oxray side is the example
 crates/oxray-cpu/examples/simulation_queries.rs, built by
@@ -132,6 +133,9 @@ def main():
     ap.add_argument("--threads", type=int, default=os.cpu_count())
     ap.add_argument("--max-hits", type=int, default=64)
     ap.add_argument("--markdown", action="store_true", help="also print a Markdown table")
+    ap.add_argument("--oxray-exe", type=Path,
+                    help="an already built runner (the example of another checkout, to "
+                         "compare versions) instead of building this checkout's")
     args = ap.parse_args()
 
     path = REPO.parent / "shared" / "data" / "meshes" / f"{args.mesh}.obj"
@@ -157,8 +161,9 @@ def main():
         import open3d as o3d
     except ImportError:
         o3d = None
-    exe = build_runner()
+    exe = args.oxray_exe or build_runner()
     print(f"machine: {machine(args.threads)}")
+    print(f"oxray runner: {exe}")
     print(f"mesh {name}: {len(v)} vertices, {len(f)} triangles; {args.points} points, "
           f"{args.rays} rays; median of {args.runs} runs after one warm-up")
     print(f"open3d: {o3d.__version__ if o3d else 'not installed (oxray only)'}; "

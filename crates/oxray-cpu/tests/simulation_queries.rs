@@ -890,6 +890,51 @@ fn signed_distance_is_right_beyond_sharp_edges_and_vertices() {
 }
 
 #[test]
+fn signed_distance_at_vertices_of_high_valence_is_right() {
+    // A tall closed cone of 48 sides: its apex and the centre of its base are each a vertex of
+    // 48 triangles, more than the search keeps beside the nearest one (the pseudo-normal is
+    // then found by a second walk).
+    let n = 48;
+    let mut positions = vec![[0.0f32, 0.0, 4.0], [0.0, 0.0, 0.0]];
+    positions.extend((0..n).map(|i| {
+        let a = std::f32::consts::TAU * i as f32 / n as f32;
+        [a.cos(), a.sin(), 0.0]
+    }));
+    let ring = |i: u32| 2 + i % n as u32;
+    let mut tris = Vec::new();
+    for i in 0..n as u32 {
+        tris.push([ring(i), ring(i + 1), 0]);
+        tris.push([1, ring(i + 1), ring(i)]);
+    }
+    let m = outward(positions, &tris);
+    for options in presets() {
+        let gas = gas_of(&m, &options);
+        for k in 0..12 {
+            let phi = std::f32::consts::TAU * k as f32 / 12.0;
+            for tilt in [0.0f32, 0.3, 0.6] {
+                // Beyond the apex, in its normal cone: the apex is the closest point.
+                let dir = Vec3::new(phi.cos() * tilt.sin(), phi.sin() * tilt.sin(), tilt.cos());
+                let p = Vec3::new(0.0, 0.0, 4.0) + dir * 0.05;
+                let sd = gas.signed_distance(p).unwrap();
+                assert!((sd - 0.05).abs() < 1e-5, "{p}: {sd}");
+                // Below the base's centre: that vertex is the closest point.
+                let p = Vec3::new(0.0, 0.0, -0.05) + dir * Vec3::new(1e-3, 1e-3, 0.0);
+                let sd = gas.signed_distance(p).unwrap();
+                assert!((sd - 0.05).abs() < 1e-5, "{p}: {sd}");
+            }
+            // Inside, near the apex and near the base's centre.
+            for p in [
+                Vec3::new(0.0, 0.0, 3.8),
+                Vec3::new(0.01 * phi.cos(), 0.0, 0.02),
+            ] {
+                assert!(gas.signed_distance(p).unwrap() < 0.0, "{p}");
+                assert!(gas.contains(p).unwrap(), "{p}");
+            }
+        }
+    }
+}
+
+#[test]
 fn signed_distance_of_an_open_mesh_is_the_side_of_the_nearest_surface() {
     // One triangle, counter-clockwise seen from +z: positive above, negative below, and
     // beyond its edges the sign of the side its plane leaves the point on.
