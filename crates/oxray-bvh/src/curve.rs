@@ -84,6 +84,38 @@ pub struct CurveHit {
     pub back_face: bool,
 }
 
+/// Segment splitting at build time (guide §9.2): a segment much longer than it is wide is
+/// referenced from several leaves of the BVH, each reference bounded by the box of a piece of
+/// its parameter interval ([`CurveSegment::bounds_over`]) and each intersecting the whole
+/// segment (the same leaf record, the same primitive index), so that hits are those of an
+/// unsplit build and a ray may meet a segment in more than one leaf.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CurveSplits {
+    /// Most pieces per segment.
+    pub max_pieces: u32,
+    /// A segment is cut into about `length / (width × width_ratio)` pieces
+    /// ([`CurveSegment::pieces`]).
+    pub width_ratio: f32,
+}
+
+impl CurveSplits {
+    /// The default splitting factor.
+    pub const BALANCED: CurveSplits = CurveSplits {
+        max_pieces: 8,
+        width_ratio: 2.0,
+    };
+    /// `PREFER_FAST_TRACE`: a higher splitting factor (§9.2).
+    pub const FAST_TRACE: CurveSplits = CurveSplits {
+        max_pieces: 16,
+        width_ratio: 1.0,
+    };
+    /// `PREFER_FAST_BUILD`: a lower splitting factor (§9.2).
+    pub const FAST_BUILD: CurveSplits = CurveSplits {
+        max_pieces: 2,
+        width_ratio: 4.0,
+    };
+}
+
 impl CurveSegment {
     /// The record of an updatable structure's slot whose segment is inactive: NaN control
     /// points, which no ray hits and no bound includes. It keeps its curve type, which a
@@ -167,6 +199,8 @@ impl CurveSegment {
         macro_rules! per_coordinate {
             (|$q:ident| [$($e:expr),* $(,)?]) => {
                 [$(std::array::from_fn(|d| {
+                    // Constant coefficients do not read the control points.
+                    #[allow(unused_variables)]
                     let $q = |i: usize| p[i][d];
                     $e
                 })),*]
@@ -225,18 +259,69 @@ impl CurveSegment {
         if !self.is_active() {
             return Aabb::EMPTY;
         }
-        let b = bezier_points(&self.power_basis());
+        hull_box(&bezier_points(&self.power_basis()))
+    }
+
+    /// The box around the part of the segment over `u ∈ [u0, u1]` (a piece of a split segment,
+    /// guide §9.2): the Bézier hull of the centre line reparametrised over that interval, grown
+    /// by the largest radius coefficient of the reparametrised radius, rounded outwards as
+    /// [`bounds`](Self::bounds) is. Over `[0, 1]` it is [`bounds`](Self::bounds), bit for bit;
+    /// the boxes of `[0, u1]`, `[u1, u2]`, …, `[uₙ, 1]` together hold the whole swept surface
+    /// (every sphere `S(u)`, end caps and ribbons included). Empty for an inactive segment.
+    ///
+    /// ```
+    /// use oxray_bvh::curve::CurveSegment;
+    /// use oxray_core::CurveType;
+    /// // A diagonal straight segment: the halves' boxes are a quarter of the whole's volume.
+    /// let s = CurveSegment::new(CurveType::RoundLinear, &[[0.0, 0.0, 0.0, 0.1], [4.0, 4.0, 0.0, 0.1]], 0, None);
+    /// assert_eq!(s.bounds_over(0.0, 1.0), s.bounds());
+    /// let (a, b) = (s.bounds_over(0.0, 0.5), s.bounds_over(0.5, 1.0));
+    /// assert!(a.max.x < 2.2 && b.min.x > 1.8 && s.bounds().contains_box(&a.union(&b)));
+    /// ```
+    pub fn bounds_over(&self, u0: f64, u1: f64) -> Aabb {
+        let Some(ty) = self.active_type() else {
+            return Aabb::EMPTY;
+        };
+        let a = self.power_basis_of(ty);
+        let a = if (u0, u1) == (0.0, 1.0) {
+            a
+        } else {
+            // c(u0 + h s) in powers of s.
+            let h = u1 - u0;
+            let mut b = [[0.0; 4]; 4];
+            for d in 0..4 {
+                let (a0, a1, a2, a3) = (a[0][d], a[1][d], a[2][d], a[3][d]);
+                b[0][d] = ((a3 * u0 + a2) * u0 + a1) * u0 + a0;
+                b[1][d] = h * ((3.0 * a3 * u0 + 2.0 * a2) * u0 + a1);
+                b[2][d] = h * h * (3.0 * a3 * u0 + a2);
+                b[3][d] = h * h * h * a3;
+            }
+            b
+        };
+        hull_box(&bezier_points(&a))
+    }
+
+    /// How many pieces [`CurveSplits`] cuts the segment into (at least 1): about its length
+    /// (the length of its Bézier control polygon, which bounds the centre line's) over its width
+    /// (twice its largest radius coefficient) over `splits.width_ratio`, at most
+    /// `splits.max_pieces`. 1 for an inactive segment.
+    pub fn pieces(&self, splits: &CurveSplits) -> u32 {
+        let Some(ty) = self.active_type() else {
+            return 1;
+        };
+        let b = bezier_points(&self.power_basis_of(ty));
         let r = b.iter().fold(0.0f64, |m, p| m.max(p[3]));
-        let mut lo = DVec3::splat(f64::INFINITY);
-        let mut hi = DVec3::splat(f64::NEG_INFINITY);
-        for p in &b {
-            let c = DVec3::new(p[0], p[1], p[2]);
-            lo = lo.min(c - r);
-            hi = hi.max(c + r);
+        let length: f64 = b
+            .windows(2)
+            .map(|w| DVec3::new(w[1][0] - w[0][0], w[1][1] - w[0][1], w[1][2] - w[0][2]).length())
+            .sum();
+        let n = length / (2.0 * r * splits.width_ratio as f64);
+        // NaN (no radius, no length) and small ratios: one piece.
+        if n >= 2.0 {
+            (n as u32).min(splits.max_pieces.max(1))
+        } else {
+            1
         }
-        let pad = |v: DVec3| v.abs() * 1e-6 + DVec3::splat(r * 1e-6);
-        let (lo, hi) = (lo - pad(lo), hi + pad(hi));
-        Aabb::new(lo.as_vec3(), hi.as_vec3())
     }
 
     /// The nearest front-face hit (or ribbon hit) of the ray `org + t dir` in `[tmin, tmax]`;
@@ -554,6 +639,22 @@ fn bezier_points(a: &[[f64; 4]; 4]) -> [[f64; 4]; 4] {
     b
 }
 
+/// The box of the Bézier control points `b` of a segment's centre line grown by their largest
+/// radius, rounded outwards.
+fn hull_box(b: &[[f64; 4]; 4]) -> Aabb {
+    let r = b.iter().fold(0.0f64, |m, p| m.max(p[3]));
+    let mut lo = DVec3::splat(f64::INFINITY);
+    let mut hi = DVec3::splat(f64::NEG_INFINITY);
+    for p in b {
+        let c = DVec3::new(p[0], p[1], p[2]);
+        lo = lo.min(c - r);
+        hi = hi.max(c + r);
+    }
+    let pad = |v: DVec3| v.abs() * 1e-6 + DVec3::splat(r * 1e-6);
+    let (lo, hi) = (lo - pad(lo), hi + pad(hi));
+    Aabb::new(lo.as_vec3(), hi.as_vec3())
+}
+
 /// The Bézier control points of one coordinate's power-basis coefficients `c`.
 #[inline]
 fn bezier_1d(c: &[f64; 4]) -> [f64; 4] {
@@ -667,8 +768,9 @@ mod tests {
         CurveSegment::new(ty, &pts, 0, None)
     }
 
-    /// §5.2: the box of a segment holds every sphere S(u) of its swept surface, for every
-    /// curve type (the BVH may then never cull a hit).
+    /// §5.2, §9.2: the box of a segment, and of each piece of a split segment, holds every
+    /// sphere S(u) of its swept surface (of its part), for every curve type (the BVH may then
+    /// never cull a hit).
     #[test]
     fn s5_2_bounds_hold_the_swept_surface() {
         let mut seed = 7u64;
@@ -676,12 +778,23 @@ mod tests {
             for _ in 0..50 {
                 let s = random_segment(&mut seed, ty);
                 let b = s.bounds();
+                // §9.2: so do the boxes of the pieces of a split segment, each over its part.
+                let n = 1 + (s.points[0][0].to_bits() % 7) as usize;
+                let pieces: Vec<Aabb> = (0..n)
+                    .map(|j| s.bounds_over(j as f64 / n as f64, (j + 1) as f64 / n as f64))
+                    .collect();
                 for k in 0..=200 {
-                    let (c, r) = s.eval(k as f64 / 200.0);
+                    let u = k as f64 / 200.0;
+                    let (c, r) = s.eval(u);
                     let (lo, hi) = ((c - r).as_vec3(), (c + r).as_vec3());
                     assert!(
                         b.min.cmple(lo).all() && b.max.cmpge(hi).all(),
                         "{ty}: {b:?} {c} {r}"
+                    );
+                    let p = pieces[((u * n as f64) as usize).min(n - 1)];
+                    assert!(
+                        p.min.cmple(lo).all() && p.max.cmpge(hi).all(),
+                        "{ty}, {n} pieces: {p:?} {c} {r}"
                     );
                 }
             }

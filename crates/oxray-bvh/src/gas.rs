@@ -5,7 +5,7 @@ use crate::build::{build_bvh2, BuildConfig};
 use crate::bvh2::Bvh2;
 use crate::bvh4::Bvh4;
 use crate::bvh8::Bvh8;
-use crate::curve::{CurveSegment, CAP_END, CAP_START};
+use crate::curve::{CurveSegment, CurveSplits, CAP_END, CAP_START};
 use crate::sbvh::{build_sbvh2, SpatialSplits};
 use crate::sphere::Sphere;
 use crate::stats::BvhStats;
@@ -274,6 +274,29 @@ impl GasData {
             false,
             NodeWidth::Four,
             spatial_splits(options),
+            curve_splits(options),
+        )?
+        .0)
+    }
+
+    /// [`build`](Self::build) with the curve-splitting setting `splits` (guide §9.2) instead of
+    /// the one the build flags choose ([`curve_splits`]; `None`: one reference per segment), to
+    /// compare builders. Where the rules exclude splitting it stays off whatever `splits`
+    /// says: `ALLOW_UPDATE` builds (a refit needs one reference per primitive) and the segments
+    /// of SBT records with `REQUIRE_SINGLE_ANYHIT_CALL` (§9.2).
+    pub fn build_with_curve_splits(
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+        splits: Option<CurveSplits>,
+    ) -> Result<GasData, BuildError> {
+        let splits = splits.filter(|_| !options.flags.contains(BuildFlags::ALLOW_UPDATE));
+        Ok(Self::build_impl(
+            options,
+            inputs,
+            false,
+            NodeWidth::Four,
+            spatial_splits(options),
+            splits,
         )?
         .0)
     }
@@ -290,7 +313,7 @@ impl GasData {
         splits: Option<SpatialSplits>,
     ) -> Result<GasData, BuildError> {
         let splits = splits.filter(|_| !options.flags.contains(BuildFlags::ALLOW_UPDATE));
-        Ok(Self::build_impl(options, inputs, false, width, splits)?.0)
+        Ok(Self::build_impl(options, inputs, false, width, splits, curve_splits(options))?.0)
     }
 
     /// [`build`](Self::build) with the node layouts of `width`: with [`NodeWidth::Eight`], the
@@ -312,7 +335,15 @@ impl GasData {
         inputs: &[BuildInput<'_>],
         width: NodeWidth,
     ) -> Result<GasData, BuildError> {
-        Ok(Self::build_impl(options, inputs, false, width, spatial_splits(options))?.0)
+        Ok(Self::build_impl(
+            options,
+            inputs,
+            false,
+            width,
+            spatial_splits(options),
+            curve_splits(options),
+        )?
+        .0)
     }
 
     /// The node layouts the structure holds.
@@ -338,6 +369,7 @@ impl GasData {
             true,
             NodeWidth::Four,
             spatial_splits(options),
+            curve_splits(options),
         )?;
         Ok((gas, tree.unwrap_or_default()))
     }
@@ -443,7 +475,25 @@ impl GasData {
             .enumerate()
             .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
             .unzip();
-        let bvh2 = build_bvh2(&bounds, config);
+        self.build_slot_refs(&ids, &bounds, false, config, width)
+    }
+
+    /// [`build_slots`](Self::build_slots) over references: reference `k` is primitive `ids[k]`
+    /// bounded by `bounds[k]`, and a primitive may have several (split curve segments, guide
+    /// §9.2). Each leaf slot names one primitive; with `repeats`, a leaf keeps one slot of a
+    /// primitive that several of its references name (the leaf's box holds all of theirs).
+    pub(crate) fn build_slot_refs(
+        &mut self,
+        ids: &[u32],
+        bounds: &[Aabb],
+        repeats: bool,
+        config: &BuildConfig,
+        width: NodeWidth,
+    ) -> Bvh2 {
+        let mut bvh2 = build_bvh2(bounds, config);
+        if repeats {
+            merge_leaf_repeats(&mut bvh2, ids);
+        }
         self.slot_prim = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
         self.bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
         self.bvh = Bvh4::from(&bvh2);
@@ -459,6 +509,7 @@ impl GasData {
         keep_tree: bool,
         width: NodeWidth,
         splits: Option<SpatialSplits>,
+        curve_splits: Option<CurveSplits>,
     ) -> Result<(GasData, Option<Bvh2>), BuildError> {
         let mut gas = Self::prepare(options, inputs)?;
         // An updatable structure keeps a slot for every primitive, inactive ones included, so
@@ -668,7 +719,40 @@ impl GasData {
                         Aabb::new(c, c)
                     });
                 }
-                let bvh2 = gas.build_slots(&boxes, &config, width);
+                let (ids, bounds): (Vec<u32>, Vec<Aabb>) = boxes
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, b)| b.map(|b| (i as u32, b)))
+                    .unzip();
+                // §9.2: long segments are referenced by pieces of their parameter interval, each
+                // reference intersecting the whole segment. Never in an updatable build (a refit
+                // fills one slot per segment) nor for REQUIRE_SINGLE_ANYHIT_CALL records.
+                let curve_splits = curve_splits.filter(|_| !keep_inactive);
+                let splittable = curve_splits.and_then(|_| gas.splittable(&ids));
+                let bvh2 = match (curve_splits, splittable) {
+                    (Some(cs), Some(splittable)) => {
+                        let (ref_ids, ref_bounds): (Vec<u32>, Vec<Aabb>) = ids
+                            .par_iter()
+                            .zip(&bounds)
+                            .zip(&splittable)
+                            .flat_map_iter(|((&g, &b), &split)| {
+                                let s = &segments[g as usize];
+                                let n = if split { s.pieces(&cs) } else { 1 };
+                                (0..n).map(move |j| {
+                                    if n == 1 {
+                                        (g, b)
+                                    } else {
+                                        let u = |j: u32| j as f64 / n as f64;
+                                        (g, s.bounds_over(u(j), u(j + 1)))
+                                    }
+                                })
+                            })
+                            .unzip();
+                        let repeats = ref_ids.len() > ids.len();
+                        gas.build_slot_refs(&ref_ids, &ref_bounds, repeats, &config, width)
+                    }
+                    _ => gas.build_slot_refs(&ids, &bounds, false, &config, width),
+                };
                 gas.curves = gas
                     .slot_prim
                     .par_iter()
@@ -684,7 +768,8 @@ impl GasData {
                 if keep_inactive {
                     gas.bounds = crate::refit::refit_curve_boxes(&mut gas);
                 }
-                // One slot per segment, in the tree's order (no splitting yet).
+                // Slots in the tree's order: one per segment, or one per leaf that references
+                // it where it is split.
                 tree = keep_tree.then_some(bvh2);
             }
         }
@@ -970,6 +1055,47 @@ pub fn spatial_splits(options: &BuildOptions) -> Option<SpatialSplits> {
     (options.flags.contains(BuildFlags::PREFER_FAST_TRACE)
         && !options.flags.contains(BuildFlags::ALLOW_UPDATE))
     .then_some(SpatialSplits::FAST_TRACE)
+}
+
+/// The curve-splitting setting of a build (guide §9.2): [`CurveSplits::BALANCED`] by default,
+/// [`CurveSplits::FAST_TRACE`] with `PREFER_FAST_TRACE` (a higher splitting factor),
+/// [`CurveSplits::FAST_BUILD`] with `PREFER_FAST_BUILD` (a lower one), none with
+/// `ALLOW_UPDATE` (a refit fills one slot per segment). Segments of SBT records with
+/// `REQUIRE_SINGLE_ANYHIT_CALL` are never split, whatever this says.
+pub fn curve_splits(options: &BuildOptions) -> Option<CurveSplits> {
+    let flags = options.flags;
+    if flags.contains(BuildFlags::ALLOW_UPDATE) {
+        None
+    } else if flags.contains(BuildFlags::PREFER_FAST_TRACE) {
+        Some(CurveSplits::FAST_TRACE)
+    } else if flags.contains(BuildFlags::PREFER_FAST_BUILD) {
+        Some(CurveSplits::FAST_BUILD)
+    } else {
+        Some(CurveSplits::BALANCED)
+    }
+}
+
+/// Within each leaf of `tree`, keeps the first of the references that name one primitive
+/// (`ids[k]` the primitive of reference `k`): a leaf tests each primitive once. Leaf slots are
+/// renumbered in node order, every slot referenced by one leaf.
+fn merge_leaf_repeats(tree: &mut Bvh2, ids: &[u32]) {
+    let Bvh2 { nodes, prim_order } = tree;
+    let mut order = Vec::with_capacity(prim_order.len());
+    for node in nodes.iter_mut().filter(|n| n.is_leaf()) {
+        let first = order.len();
+        let (start, count) = (node.left_first as usize, node.count as usize);
+        for &k in &prim_order[start..start + count] {
+            let seen = order[first..]
+                .iter()
+                .any(|&j: &u32| ids[j as usize] == ids[k as usize]);
+            if !seen {
+                order.push(k);
+            }
+        }
+        node.left_first = first as u32;
+        node.count = (order.len() - first) as u32;
+    }
+    *prim_order = order;
 }
 
 /// Gives every inactive primitive of an updatable build a box to be placed by (`fallback`'s

@@ -629,15 +629,12 @@ impl GasData {
     /// A leaf slot that names a primitive an earlier slot names too, where the structure must
     /// reference it once: every primitive of an updatable structure (a refit fills one slot
     /// per primitive) or of custom primitives (never split), and the primitives of SBT records
-    /// with `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1: one any-hit call per primitive); spheres
-    /// and curve segments are never split either. Spatial
-    /// splits make the others repeat.
+    /// with `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1, §9.2: one any-hit call per primitive);
+    /// spheres are never split either. Spatial splits and curve splitting (§9.2) make the
+    /// others repeat.
     fn repeated_reference(&self) -> Option<usize> {
         let all = self.build_flags.contains(BuildFlags::ALLOW_UPDATE)
-            || matches!(
-                self.kind,
-                GasKind::CustomPrimitives | GasKind::Spheres | GasKind::Curves
-            );
+            || matches!(self.kind, GasKind::CustomPrimitives | GasKind::Spheres);
         let single = self
             .record_flags
             .iter()

@@ -921,3 +921,173 @@ extern "C" __global__ void __miss__ms() { optixSetPayload_0(0xDEADu); }
     assert_eq!(o[5], 1);
     assert!((f32::from_bits(o[6]) - (10.0 - 0.15f32.sqrt())).abs() < 1e-5);
 }
+
+/// §9.2 (splitting curve segments): a build may reference a long segment from several leaves,
+/// each bounded by a piece of its parameter interval; every reference intersects the whole
+/// segment, so the closest hits of split builds (the default, `PREFER_FAST_TRACE`'s higher and
+/// `PREFER_FAST_BUILD`'s lower splitting factor) are those of an unsplit build, bit for bit, on
+/// random rays, for every curve type; and a split structure saves and loads.
+#[test]
+fn s9_2_split_and_unsplit_builds_give_identical_closest_hits() {
+    let mut rng = Rng::new(0x92);
+    for ty in CurveType::ALL {
+        // Thin segments (radius 0.004 to 0.03, about 0.4 to 1.2 long) are split.
+        let s = Strands::random(&mut rng, ty, 300, 1.5, 0.004, 0.03);
+        let keys = s.keys();
+        let inputs = [s.input(&keys).into()];
+        let plain = BuildOptions::default();
+        let unsplit = GasData::build_with_curve_splits(&plain, &inputs, None).unwrap();
+        assert_eq!(unsplit.num_references(), unsplit.num_active_primitives());
+        let unsplit = Gas::from(unsplit);
+        let mut split = Vec::new();
+        for flags in [
+            BuildFlags::empty(),
+            BuildFlags::PREFER_FAST_TRACE,
+            BuildFlags::PREFER_FAST_BUILD,
+        ] {
+            let gas = Gas::build(&BuildOptions::new(flags), &inputs).unwrap();
+            let d = gas.data();
+            assert_eq!(d.num_active_primitives(), unsplit.num_active_primitives());
+            assert!(
+                d.num_references() > d.num_active_primitives(),
+                "{ty} {flags:?}: {} references",
+                d.num_references()
+            );
+            split.push(gas);
+        }
+        let (fast_trace, fast_build) = (split[1].data(), split[2].data());
+        assert!(fast_trace.num_references() > fast_build.num_references());
+        let loaded = Gas::from(GasData::from_bytes(&split[0].data().to_bytes()).unwrap());
+        split.push(loaded);
+        let mut hits = 0;
+        for _ in 0..3000 {
+            let o = rng.dir() * 5.0;
+            let ray = Ray::new(o, rng.vec3(-1.5, 1.5) - o);
+            let h = unsplit.intersect(&ray);
+            hits += h.is_some() as usize;
+            for g in &split {
+                assert_eq!(hit_bits(&g.intersect(&ray)), hit_bits(&h), "{ty}");
+            }
+        }
+        assert!(hits > 150, "{ty}: {hits}");
+    }
+}
+
+/// §9.2, §5.1: segments of a `REQUIRE_SINGLE_ANYHIT_CALL` record, and every segment of an
+/// `ALLOW_UPDATE` build, are not split: one leaf slot per segment, and an any-hit program that
+/// ignores every hit runs exactly once per segment the ray crosses (counted by brute force).
+/// A split build may run it more than once per segment, as the guide allows.
+#[test]
+fn s9_2_single_anyhit_and_updatable_builds_are_not_split() {
+    let mut rng = Rng::new(0x921);
+    let s = Strands::random(
+        &mut rng,
+        CurveType::RoundCubicBSpline,
+        200,
+        1.0,
+        0.005,
+        0.02,
+    );
+    let keys = s.keys();
+    let single = s
+        .input(&keys)
+        .flag(oxray_core::GeometryFlags::REQUIRE_SINGLE_ANYHIT_CALL);
+    let builds = [
+        (BuildFlags::PREFER_FAST_TRACE, single.into(), true),
+        (BuildFlags::ALLOW_UPDATE, s.input(&keys).into(), true),
+        (BuildFlags::empty(), s.input(&keys).into(), false),
+    ];
+    let module = Module::<Params>::new()
+        .raygen("__raygen__rg", |ctx| {
+            let [x, _, _] = ctx.launch_index();
+            let p = ctx.params();
+            let (o, d) = p.rays[x as usize];
+            let mut payload = [0u32; 8];
+            ctx.trace(&TraceRay::new(&p.handle, o, d), &mut payload)?;
+            p.out.write(x as usize, payload);
+            Ok(())
+        })
+        .unwrap()
+        .any_hit("__anyhit__count", |ctx| {
+            ctx.set_payload(0, ctx.payload(0) + 1);
+            ctx.ignore_intersection()
+        })
+        .unwrap()
+        .miss("__miss__ms", |_| Ok(()))
+        .unwrap();
+    let rg = ProgramGroup::raygen(&module, "__raygen__rg").unwrap();
+    let ms = ProgramGroup::miss(Some((&module, "__miss__ms"))).unwrap();
+    let hg = ProgramGroup::hit_group(HitGroupDesc {
+        any_hit: Some((&module, "__anyhit__count")),
+        ..Default::default()
+    })
+    .unwrap();
+    let pipeline = Pipeline::new(
+        &DeviceContext::new(),
+        &PipelineCompileOptions {
+            uses_primitive_type_flags: PrimitiveTypeFlags::ROUND_CUBIC_BSPLINE,
+            ..Default::default()
+        },
+        &PipelineLinkOptions { max_trace_depth: 1 },
+        &[rg.clone(), ms.clone(), hg.clone()],
+    )
+    .unwrap();
+    let sbt = ShaderBindingTable {
+        raygen: SbtRegion::from_headers(&[rg.pack_header()]),
+        miss: SbtRegion::from_headers(&[ms.pack_header()]),
+        hitgroup: SbtRegion::from_headers(&[hg.pack_header()]),
+        ..Default::default()
+    };
+    let rays: Vec<(Vec3, Vec3)> = (0..2000)
+        .map(|_| {
+            let o = rng.dir() * 4.0;
+            (o, rng.vec3(-1.0, 1.0) - o)
+        })
+        .collect();
+    for (flags, input, whole) in builds {
+        let gas = Gas::build(&BuildOptions::new(flags), &[input]).unwrap();
+        let d = gas.data();
+        assert_eq!(
+            d.num_references() == d.num_active_primitives(),
+            whole,
+            "{flags:?}"
+        );
+        // Brute force over the distinct segments: those the ray crosses.
+        let mut segments: Vec<(u32, CurveSegment)> = d
+            .slot_prim
+            .iter()
+            .zip(&d.curves)
+            .map(|(&g, &c)| (g, c))
+            .collect();
+        segments.sort_by_key(|&(g, _)| g);
+        segments.dedup_by_key(|&mut (g, _)| g);
+        let out = std::sync::Arc::new(OutputBuffer::new(rays.len()));
+        let params = Params {
+            handle: TraversableHandle::from(gas),
+            rays: rays.clone(),
+            out: out.clone(),
+        };
+        let report = pipeline
+            .launch(&params, &sbt, rays.len() as u32, 1, 1)
+            .unwrap();
+        assert_eq!(report.exceptions, 0, "{report:?}");
+        let (mut crossed, mut repeated) = (0, 0);
+        for ((o, dir), payload) in rays.iter().zip(out.to_vec()) {
+            let n = segments
+                .iter()
+                .filter(|(_, c)| c.intersect(*o, *dir, 0.0, f32::INFINITY).is_some())
+                .count() as u32;
+            crossed += n;
+            if whole {
+                assert_eq!(payload[0], n, "{flags:?}: any-hit once per segment");
+            } else {
+                assert!(payload[0] >= n, "{flags:?}");
+                repeated += payload[0] - n;
+            }
+        }
+        assert!(crossed > 200, "{crossed}");
+        if !whole {
+            assert!(repeated > 0, "a split build meets some segments twice");
+        }
+    }
+}
