@@ -40,6 +40,7 @@ pub mod memory;
 pub mod motion;
 mod poly;
 mod refit;
+mod ribbon;
 pub mod sbvh;
 pub mod serialize;
 pub mod sphere;

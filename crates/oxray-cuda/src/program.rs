@@ -448,7 +448,11 @@ const READS: [(u32, &[&str]); 13] = [
     (1, &["optixGetWorldRayOrigin", "optixGetObjectRayOrigin"]),
     (
         2,
-        &["optixGetWorldRayDirection", "optixGetObjectRayDirection"],
+        &[
+            "optixGetWorldRayDirection",
+            "optixGetObjectRayDirection",
+            "optixGetRibbonNormal",
+        ],
     ),
     (4, &["optixGetRayTmin"]),
     (8, &["optixGetRayTime"]),
@@ -486,6 +490,7 @@ const READS: [(u32, &[&str]); 13] = [
             "optixTransform",
             "optixGetGASTraversableHandle",
             "optixGetTriangleVertexData",
+            "optixGetRibbonNormal",
         ],
     ),
 ];

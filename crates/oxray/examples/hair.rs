@@ -286,7 +286,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = std::env::args()
         .nth(2)
         .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| common::output_path("hair"));
+        .unwrap_or_else(|| common::default_output("hair"));
     common::write_png(&path, w, h, &run.pixels)?;
     println!("wrote {}", path.display());
     Ok(())

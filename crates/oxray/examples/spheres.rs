@@ -248,7 +248,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = std::env::args()
         .nth(2)
         .map(std::path::PathBuf::from)
-        .unwrap_or_else(|| common::output_path("spheres"));
+        .unwrap_or_else(|| common::default_output("spheres"));
     common::write_png(&path, w, h, &images[0])?;
     println!("wrote {}", path.display());
     Ok(())

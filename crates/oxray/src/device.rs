@@ -292,7 +292,7 @@ impl Device {
     }
 
     /// Compacts a GAS built with `ALLOW_COMPACTION` (`optixAccelCompact`, guide §5.8): a new
-    /// structure of [`AccelProperty::CompactedSize`] bytes with the same hits, independent of
+    /// structure of [`AccelProperty::CompactedSize`](oxray_core::AccelProperty::CompactedSize) bytes with the same hits, independent of
     /// the source. It can be traced, updated (if built with `ALLOW_UPDATE`) and saved. The CUDA
     /// backend refuses with `Unsupported`.
     ///

@@ -53,8 +53,13 @@
 //! honours the first such call of a program once the program returns, whatever it returns, and
 //! the program's later device calls do nothing. Passing the interrupt on with `?` (or `return`)
 //! is the idiomatic way to leave the program at once, as OptiX does.
-//! Programs are Rust closures today, run by the CPU backend; see `examples/` (`hello`,
-//! `triangle`, `custom_sphere`, `cutouts`).
+//! Those programs are Rust closures, run by the CPU backend. The same pipeline model through
+//! [`Device`] takes CUDA C++ programs written against `optix.h` ([`ModuleSource::CudaCpp`]):
+//! the CUDA backend compiles them with NVRTC, the CPU backend with the host's C++ compiler, and
+//! both devices trace triangles, custom primitives, built-in spheres and curves and instance
+//! graphs with them (motion blur is the CPU's only). See `examples/`: `hello`, `triangle`,
+//! `triangle_cpp`, `custom_sphere`, `cutouts`, `instancing`, `spheres`, `hair`,
+//! `motion_geometry`, `simple_motion_blur`.
 //!
 //! The crates behind the facade, each reachable here: [`core`](oxray_core) (neutral types and
 //! the backend traits), [`bvh`] (the canonical BVH and its layouts), [`cpu`] (the CPU backend,

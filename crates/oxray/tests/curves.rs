@@ -265,9 +265,9 @@ impl Scene {
         let m: Module = device
             .create_module(ModuleSource::CudaCpp(PROGRAMS))
             .unwrap_or_else(|e| panic!("{}: {e}", name(device)));
-        let hit = |ah: Option<&'static str>| {
+        let hit = |ch: &'static str, ah: Option<&'static str>| {
             ProgramGroup::hit_group(HitGroupDesc {
-                closest_hit: Some((&m, "__closesthit__curve")),
+                closest_hit: Some((&m, ch)),
                 any_hit: ah.map(|n| (&m, n)),
                 intersection: None,
             })
@@ -275,8 +275,15 @@ impl Scene {
         let groups = vec![
             ("rg", ProgramGroup::raygen(&m, "__raygen__curves").unwrap()),
             ("ms", ProgramGroup::miss(&m, "__miss__curves").unwrap()),
-            ("hg", hit(None).unwrap()),
-            ("hg_skip_even", hit(Some("__anyhit__skip_even")).unwrap()),
+            ("hg", hit("__closesthit__curve", None).unwrap()),
+            (
+                "hg_skip_even",
+                hit("__closesthit__curve", Some("__anyhit__skip_even")).unwrap(),
+            ),
+            (
+                "hg_normal",
+                hit("__closesthit__ribbon_normal", None).unwrap(),
+            ),
         ];
         let list: Vec<ProgramGroup> = groups.iter().map(|(_, g)| g.clone()).collect();
         let compile = PipelineCompileOptions {
@@ -431,6 +438,48 @@ fn s9_3_pipelines_hit_built_in_curves_on_every_device() {
     });
 }
 
+/// §9.3: `optixGetRibbonNormal` at a ribbon hit's parameters is the unit normal of the ribbon
+/// there, as `CurveSegment::ribbon_normal` computes it (bit for bit), for ribbons with normals
+/// and ribbons that face the ray; every device gives the same words.
+#[test]
+fn s9_3_ribbon_normals_on_every_device() {
+    let mut rng = Rng::new(0x9_3_1);
+    let cases: Vec<Strands> = [true, false]
+        .map(|normals| {
+            Strands::random(&mut rng, CurveType::FlatQuadraticBSpline, 150, 1.8, normals)
+        })
+        .into();
+    on_every_device(|device| {
+        let scene = Scene::new(device, CurveType::FlatQuadraticBSpline.type_flag());
+        let mut results = Vec::new();
+        for strands in &cases {
+            let (gas, data) = strands.build(device);
+            let (out, report) =
+                scene.run(gas.optix_handle().unwrap(), "hg_normal", RayFlags::empty());
+            assert_eq!(report.exceptions, 0, "{report:?}");
+            let mut found = 0;
+            for (i, o) in out.iter().enumerate() {
+                if o[0] & 0xF == 0 {
+                    continue;
+                }
+                let ray = pixel_ray(i);
+                let s = data.curves[slot_of(&data, o[1])];
+                let h = s
+                    .intersect(ray.origin, ray.direction, ray.tmin, ray.tmax)
+                    .unwrap();
+                let n = [o[4], o[5], o[6]].map(f32::from_bits);
+                let want = s.ribbon_normal(h.u, f32::from_bits(o[7]), ray.direction);
+                assert_eq!(n, want.to_array(), "{} ray {i}", name(device));
+                assert!((want.length() - 1.0).abs() < 1e-5, "{want}");
+                found += 1;
+            }
+            assert!(found > 50, "{found} ribbon hits");
+            results.push(out);
+        }
+        results
+    });
+}
+
 /// The leaf slot holding primitive `prim` (the first, where a segment has several).
 fn slot_of(data: &GasData, prim: u32) -> usize {
     (0..data.curves.len())
@@ -488,6 +537,11 @@ fn the_curve_programs_compile_with_nvrtc() {
         CudaProgramGroup::hit_group(CudaHitGroupDesc {
             closest_hit: Some((&m, "__closesthit__curve")),
             any_hit: Some((&m, "__anyhit__skip_even")),
+            intersection: None,
+        }),
+        CudaProgramGroup::hit_group(CudaHitGroupDesc {
+            closest_hit: Some((&m, "__closesthit__ribbon_normal")),
+            any_hit: None,
             intersection: None,
         }),
     ]

@@ -41,7 +41,7 @@ const PENDING_MISUSE: u32 = 6;
 
 /// The device functions a program kind may not call, by the index the header gives them (the
 /// detail of the exception that ends such a launch index).
-pub const MISUSED_FUNCTIONS: [&str; 18] = [
+pub const MISUSED_FUNCTIONS: [&str; 19] = [
     "optixGetWorldRayOrigin",
     "optixGetWorldRayDirection",
     "optixGetObjectRayOrigin",
@@ -60,6 +60,7 @@ pub const MISUSED_FUNCTIONS: [&str; 18] = [
     "optixGetGASTraversableHandle",
     "optixGetSphereData",
     "a curve's vertex data (optixGet*VertexData)",
+    "optixGetRibbonNormal",
 ];
 
 /// The user exception that ends a launch index whose C++ program misbehaved in a way OptiX
@@ -145,6 +146,7 @@ pub(crate) struct CApi {
     curve_data: unsafe extern "C" fn(*mut CFrame, *mut f32),
     motion_transform: unsafe extern "C" fn(*mut CFrame, u32, u32) -> *const c_void,
     gas_motion: unsafe extern "C" fn(*mut CFrame, u64, *mut f32) -> u32,
+    ribbon_normal: unsafe extern "C" fn(*mut CFrame, f32, f32, *mut f32),
 }
 
 static API: CApi = CApi {
@@ -159,6 +161,7 @@ static API: CApi = CApi {
     curve_data: api_curve_data,
     motion_transform: api_motion_transform,
     gas_motion: api_gas_motion,
+    ribbon_normal: api_ribbon_normal,
 };
 
 /// A wrapped program: `__oxray_entry_<name>(frame)`, 0 when it returned, 1 when it unwound.
@@ -779,6 +782,21 @@ unsafe extern "C" fn api_curve_data(f: *mut CFrame, out: *mut f32) {
     let flat = p.as_flattened();
     // SAFETY: the header passes 16 floats.
     unsafe { std::ptr::copy_nonoverlapping(flat.as_ptr(), out, 16) };
+}
+
+unsafe extern "C" fn api_ribbon_normal(f: *mut CFrame, u: f32, v: f32, out: *mut f32) {
+    // SAFETY: the header passes the running program's frame.
+    let f = unsafe { &mut *f };
+    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
+    let n = unsafe {
+        match f.kind {
+            KIND_CH => ctx_of::<Ch>(f).ribbon_normal([u, v]),
+            KIND_AH => ctx_of::<Ah>(f).ribbon_normal([u, v]),
+            _ => glam::Vec3::ZERO,
+        }
+    };
+    // SAFETY: the header passes 3 floats.
+    unsafe { std::ptr::copy_nonoverlapping(n.to_array().as_ptr(), out, 3) };
 }
 
 unsafe extern "C" fn api_motion_transform(f: *mut CFrame, i: u32, kind: u32) -> *const c_void {

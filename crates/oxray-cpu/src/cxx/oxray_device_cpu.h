@@ -234,6 +234,9 @@ struct __oxray_Api {
     // The motion options of a GAS (its handle, or the hit's GAS): writes timeBegin and timeEnd,
     // returns the number of keys (1 without motion, 0 for a handle that names no GAS).
     unsigned int (*gas_motion)(__oxray_Frame* f, unsigned long long gas, float* times);
+    // The unit object-space normal of the hit ribbon at (u, v), out of its front face (3
+    // floats; zeros for another primitive type).
+    void (*ribbon_normal)(__oxray_Frame* f, float u, float v, float* n);
 };
 
 // Program kinds, as the runtime numbers them.
@@ -431,6 +434,14 @@ static inline void __oxray_curve_data(float4* data, int n) {
     __oxray_frame->api->curve_data(__oxray_frame, v);
     for (int k = 0; k < n; ++k)
         data[k] = make_float4(v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]);
+}
+// Guide §9.3: the geometric normal of the hit ribbon at its ribbon parameters (u, v): unit
+// length, object space, out of the front face. Zeros when the hit is not a ribbon.
+static inline float3 optixGetRibbonNormal(float2 ribbonParameters) {
+    __oxray_allow(__OXRAY_K(AH) | __OXRAY_K(CH), 18);
+    float n[3];
+    __oxray_frame->api->ribbon_normal(__oxray_frame, ribbonParameters.x, ribbonParameters.y, n);
+    return make_float3(n[0], n[1], n[2]);
 }
 static inline void optixGetLinearCurveVertexData(float4 data[2]) { __oxray_curve_data(data, 2); }
 static inline void optixGetQuadraticBSplineVertexData(float4 data[3]) {

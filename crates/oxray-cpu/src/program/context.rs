@@ -479,6 +479,21 @@ macro_rules! hit_queries {
                 None => [[0.0; 4]; 4],
             }
         }
+        /// `optixGetRibbonNormal`: the unit geometric normal, in object space, of the hit
+        /// ribbon at `ribbon_parameters` (usually [`ribbon_parameters`](Self::ribbon_parameters)),
+        /// pointing out of its front face (guide §9.3; see
+        /// [`CurveSegment::ribbon_normal`](oxray_bvh::CurveSegment::ribbon_normal)). Zero when
+        /// the hit is not a ribbon.
+        pub fn ribbon_normal(&self, ribbon_parameters: [f32; 2]) -> Vec3 {
+            match self.gas.and_then(|g| g.curves.get(self.$hit.slot as usize)) {
+                Some(s) => s.ribbon_normal(
+                    ribbon_parameters[0],
+                    ribbon_parameters[1],
+                    self.place.object_direction,
+                ),
+                None => Vec3::ZERO,
+            }
+        }
         /// `optixGetGASMotionTimeBegin`, `…TimeEnd` and `…StepCount` of the hit's GAS
         /// (guide §13.10): its motion options (the default, no motion, for a static GAS).
         pub fn gas_motion_options(&self) -> oxray_core::MotionOptions {

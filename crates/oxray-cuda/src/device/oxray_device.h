@@ -629,6 +629,56 @@ static __forceinline__ __device__ void __oxray_curve_vertex_data(float4* data, i
                               : nullptr;
     for (int k = 0; k < n; ++k) data[k] = curve ? rec[k] : make_float4(0.0f, 0.0f, 0.0f, 0.0f);
 }
+// Guide §9.3: the geometric normal of the hit ribbon at `ribbonParameters` (u, v): unit length,
+// object space, out of the front face; zeros when the hit is not a ribbon.
+// oxray_bvh::CurveSegment::ribbon_normal, operation for operation in double precision.
+static __forceinline__ __device__ float3 optixGetRibbonNormal(float2 ribbonParameters) {
+    __oxray_ThreadState& st = __oxray_state();
+    const __oxray_Traversable* g = __oxray_hit_gas();
+    const float3 zero = make_float3(0.0f, 0.0f, 0.0f);
+    if (g == nullptr || g->kind != __OXRAY_CURVE_GAS || st.ray.slot == 0xffffffffu) return zero;
+    const CurveRecord c = load_curve(reinterpret_cast<const float4*>(g->prims), st.ray.slot);
+    if (c.type != 0x2505u) return zero;
+    const double u = (double)ribbonParameters.x, v = (double)ribbonParameters.y;
+    double a[3][4];
+    for (int d = 0; d < 4; ++d) {
+        const double p0 = (double)c.p[0][d], p1 = (double)c.p[1][d], p2 = (double)c.p[2][d];
+        a[0][d] = 0.5 * (p0 + p1);
+        a[1][d] = p1 - p0;
+        a[2][d] = 0.5 * (p0 - 2.0 * p1 + p2);
+    }
+    auto add = [](D3 x, D3 y) { return d3(x.x + y.x, x.y + y.y, x.z + y.z); };
+    auto scale = [](D3 x, double k) { return d3(x.x * k, x.y * k, x.z * k); };
+    const D3 a1 = d3(a[1][0], a[1][1], a[1][2]), a2 = d3(a[2][0], a[2][1], a[2][2]);
+    const D3 tangent = add(a1, scale(a2, 2.0 * u));
+    const D3 second = scale(a2, 2.0);
+    const double r = (a[2][3] * u + a[1][3]) * u + a[0][3];
+    const double dr = 2.0 * a[2][3] * u + a[1][3];
+    D3 m, dm;
+    if ((c.flags & CURVE_HAS_NORMALS) != 0u) {
+        const D3 n0 = d3((double)c.normals[0][0], (double)c.normals[0][1], (double)c.normals[0][2]);
+        const D3 n1 = d3((double)c.normals[1][0], (double)c.normals[1][1], (double)c.normals[1][2]);
+        const D3 dn = d3_sub(n1, n0);
+        const D3 n = add(n0, scale(dn, u));
+        m = d3_cross(n, tangent);
+        dm = add(d3_cross(dn, tangent), d3_cross(n, second));
+    } else {
+        const float3 df = optixGetObjectRayDirection();
+        const D3 dir = d3((double)df.x, (double)df.y, (double)df.z);
+        m = d3_cross(tangent, dir);
+        dm = d3_cross(second, dir);
+    }
+    const double len = sqrt(d3_dot(m, m));
+    if (isnan(len) || len <= 0.0) return zero;
+    const D3 w = d3(m.x / len, m.y / len, m.z / len);
+    const D3 t = d3_sub(dm, scale(w, d3_dot(w, dm)));
+    const D3 dw = d3(t.x / len, t.y / len, t.z / len);
+    const D3 du = add(tangent, scale(add(scale(w, dr), scale(dw, r)), v));
+    const D3 normal = d3_cross(du, w);
+    const double nl = sqrt(d3_dot(normal, normal));
+    if (isnan(nl) || nl <= 0.0) return zero;
+    return make_float3((float)(normal.x / nl), (float)(normal.y / nl), (float)(normal.z / nl));
+}
 static __forceinline__ __device__ void optixGetLinearCurveVertexData(float4 data[2]) {
     __oxray_curve_vertex_data(data, 2);
 }

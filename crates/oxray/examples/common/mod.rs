@@ -31,9 +31,15 @@ pub fn rgba8(c: [f32; 3]) -> [u8; 4] {
 
 /// The output path: the first command-line argument, else `target/examples/<name>.png`.
 pub fn output_path(name: &str) -> std::path::PathBuf {
-    std::env::args().nth(1).map(Into::into).unwrap_or_else(|| {
-        Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../../target/examples")
-            .join(format!("{name}.png"))
-    })
+    std::env::args()
+        .nth(1)
+        .map(Into::into)
+        .unwrap_or_else(|| default_output(name))
+}
+
+/// `target/examples/<name>.png`, for examples whose first argument is not the output path.
+pub fn default_output(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../target/examples")
+        .join(format!("{name}.png"))
 }

@@ -94,3 +94,17 @@ extern "C" __global__ void __anyhit__skip_even() {
     optixSetPayload_0(optixGetPayload_0() + 16u);
     if ((optixGetPrimitiveIndex() & 1u) == 0u) optixIgnoreIntersection();
 }
+
+// A ribbon's normal at its hit (guide §9.3): primitive, hit kind, t, the normal and u.
+extern "C" __global__ void __closesthit__ribbon_normal() {
+    const float2 uv = optixGetRibbonParameters();
+    const float3 n = optixGetRibbonNormal(uv);
+    optixSetPayload_0((optixGetPayload_0() & ~0xFu) | 1u);
+    optixSetPayload_1(optixGetPrimitiveIndex());
+    optixSetPayload_2(optixGetHitKind());
+    optixSetPayload_3(__float_as_uint(optixGetRayTmax()));
+    optixSetPayload_4(__float_as_uint(n.x));
+    optixSetPayload_5(__float_as_uint(n.y));
+    optixSetPayload_6(__float_as_uint(n.z));
+    optixSetPayload_7(__float_as_uint(uv.y));
+}
