@@ -50,6 +50,17 @@ pub fn compute_memory_usage(
                 + crate::build::temp_bytes(refs);
         }
     }
+    if summary.kind == oxray_core::BuildInputKind::Curves {
+        if let Some(splits) = crate::gas::curve_splits(options) {
+            // Curve splitting (guide §9.2) references a segment from up to `max_pieces`
+            // leaves: more leaf slots and nodes, and the builder's references (ids and boxes).
+            let n = summary.num_primitives as usize;
+            let refs = n * splits.max_pieces.max(1) as usize;
+            sizes.output_size_in_bytes = output_bound(&summary, inputs.len(), refs);
+            sizes.temp_size_in_bytes +=
+                2 * refs * std::mem::size_of::<(u32, Aabb)>() + crate::build::temp_bytes(refs);
+        }
+    }
     if options.motion.has_motion() {
         // Every later key keeps its own copy of the primitives (no more than one block or box
         // per primitive each), and the builder decodes every key (guide §5.10.2).
@@ -99,6 +110,8 @@ fn output_bound(s: &InputSummary, num_inputs: usize, refs: usize) -> usize {
     // ceil(c / 4) <= c blocks, so at most one block (and four slots) per triangle.
     let (per_prim, slots) = match s.kind {
         oxray_core::BuildInputKind::Triangles => (std::mem::size_of::<Triangle4>(), 4),
+        // One segment record per leaf slot.
+        oxray_core::BuildInputKind::Curves => (std::mem::size_of::<crate::CurveSegment>(), 1),
         _ => (std::mem::size_of::<Aabb>(), 1),
     };
     // Slot-to-primitive map, and per-primitive SBT offsets (kept only when some input has more

@@ -953,6 +953,15 @@ fn s9_2_split_and_unsplit_builds_give_identical_closest_hits() {
                 "{ty} {flags:?}: {} references",
                 d.num_references()
             );
+            // §9.2: splitting costs memory; the memory query (§5) still bounds it.
+            let sizes =
+                oxray_bvh::compute_memory_usage(&BuildOptions::new(flags), &inputs).unwrap();
+            assert!(
+                d.memory().output_bytes <= sizes.output_size_in_bytes,
+                "{ty} {flags:?}: {} > {}",
+                d.memory().output_bytes,
+                sizes.output_size_in_bytes
+            );
             split.push(gas);
         }
         let (fast_trace, fast_build) = (split[1].data(), split[2].data());
