@@ -480,6 +480,68 @@ fn s9_3_ribbon_normals_on_every_device() {
     });
 }
 
+/// §9.1, §13.7: curves under an instance (scaled by 2, moved along z): the closest-hit
+/// program sees t along the world ray, the segment's object-space control points and its u,
+/// as the CPU's query through the same instance finds them; every device gives the same words.
+#[test]
+fn s9_1_instanced_curves_on_every_device() {
+    let mut rng = Rng::new(0x9_1_7);
+    let strands = Strands::random(&mut rng, CurveType::RoundCubicBSpline, 120, 0.9, false);
+    let xform = oxray::Transform::from_affine(&glam::Affine3A::from_scale_rotation_translation(
+        Vec3::splat(2.0),
+        glam::Quat::from_rotation_z(0.3),
+        Vec3::new(0.0, 0.0, -1.0),
+    ));
+    on_every_device(|device| {
+        let (gas, data) = strands.build(device);
+        let ias = device
+            .build_ias(
+                &BuildOptions::default(),
+                &[(&[oxray::Instance::new(gas.handle()).transform(xform)][..]).into()],
+            )
+            .unwrap();
+        let scene = Scene::new(device, CurveType::RoundCubicBSpline.type_flag());
+        let (out, report) = scene.run(ias.optix_handle().unwrap(), "hg", RayFlags::empty());
+        assert_eq!(report.exceptions, 0, "{report:?}");
+        // The reference: the CPU device's query through the same instance.
+        let cpu = Device::cpu();
+        let (cpu_gas, _) = strands.build(&cpu);
+        let cpu_ias = cpu
+            .build_ias(
+                &BuildOptions::default(),
+                &[(&[oxray::Instance::new(cpu_gas.handle()).transform(xform)][..]).into()],
+            )
+            .unwrap();
+        let rays: Vec<Ray> = (0..out.len()).map(pixel_ray).collect();
+        let mut hits = vec![None; rays.len()];
+        cpu.intersect_closest(&cpu_ias.handle(), &rays, &mut hits)
+            .unwrap();
+        let mut found = 0;
+        for (i, (o, h)) in out.iter().zip(&hits).enumerate() {
+            assert_eq!(o[0] & 0xF, h.is_some() as u32, "{} ray {i}", name(device));
+            if let Some(h) = h {
+                found += 1;
+                assert_eq!(o[1] & 0xFFFF, h.primitive_index);
+                assert_eq!(
+                    f32::from_bits(o[3]),
+                    h.t,
+                    "{} ray {i}: world t",
+                    name(device)
+                );
+                assert_eq!(f32::from_bits(o[4]), h.u);
+                let s = data.curves[slot_of(&data, h.primitive_index)];
+                assert_eq!(
+                    f32::from_bits(o[6]),
+                    s.points[0][0],
+                    "object-space vertex data"
+                );
+            }
+        }
+        assert!(found > 50, "{found} hits");
+        out
+    });
+}
+
 /// The leaf slot holding primitive `prim` (the first, where a segment has several).
 fn slot_of(data: &GasData, prim: u32) -> usize {
     (0..data.curves.len())
