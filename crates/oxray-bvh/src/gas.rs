@@ -534,7 +534,14 @@ impl GasData {
                     "a GAS with motion keys for a layout other than the CPU's",
                 ));
             }
-            crate::motion::build_motion(&mut gas, options.motion, inputs, &config, width);
+            crate::motion::build_motion(
+                &mut gas,
+                options.motion,
+                inputs,
+                &config,
+                width,
+                curve_splits,
+            );
             gas.shapes = Vec::new();
             if !options.flags.contains(BuildFlags::ALLOW_COMPACTION) {
                 gas.shrink_to_fit();
@@ -837,7 +844,7 @@ impl GasData {
     /// (guide §5.1: the any-hit program is then called once per primitive, and a primitive
     /// referenced from two leaves would be reported twice; §9.2 says the same of OptiX's
     /// curve splitting). `None` when no primitive may be split.
-    fn splittable(&self, ids: &[u32]) -> Option<Vec<bool>> {
+    pub(crate) fn splittable(&self, ids: &[u32]) -> Option<Vec<bool>> {
         let single = |record: usize| {
             self.record_flags
                 .get(record)
@@ -1232,7 +1239,7 @@ pub(crate) fn check_indices(at: InputLocation, t: &TriangleInput<'_>) -> Result<
     Ok(())
 }
 
-/// Decodes every segment of a validated curve input (its one motion key).
+/// Decodes every segment of a validated curve input (without motion: its one key).
 fn decode_curves<'a>(c: &'a CurveInput<'_>) -> impl Iterator<Item = CurveSegment> + 'a {
     (0..c.num_primitives as usize).map(move |i| decode_curve(c, i))
 }
@@ -1240,6 +1247,11 @@ fn decode_curves<'a>(c: &'a CurveInput<'_>) -> impl Iterator<Item = CurveSegment
 /// Segment `i` of a validated curve input: its control points and radii, its flat caps where
 /// it starts or ends a strand (guide §5.2), and a ribbon's normals `n[start]`, `n[start + 1]`.
 pub(crate) fn decode_curve(c: &CurveInput<'_>, i: usize) -> CurveSegment {
+    decode_curve_key(c, i, 0)
+}
+
+/// Segment `i` of a validated curve input at motion key `key` (see [`decode_curve`]).
+pub(crate) fn decode_curve_key(c: &CurveInput<'_>, i: usize, key: usize) -> CurveSegment {
     let start = c.segment_start(c.index_buffer, i) as usize;
     let mut points = [[0.0f32; 4]; 4];
     for (k, p) in points
@@ -1247,8 +1259,8 @@ pub(crate) fn decode_curve(c: &CurveInput<'_>, i: usize) -> CurveSegment {
         .enumerate()
         .take(c.curve_type.control_points())
     {
-        let v = c.point(c.vertex_buffers[0], start + k);
-        *p = [v.x, v.y, v.z, c.radius(c.width_buffers[0], start + k)];
+        let v = c.point(c.vertex_buffers[key], start + k);
+        *p = [v.x, v.y, v.z, c.radius(c.width_buffers[key], start + k)];
     }
     let mut flags = 0;
     if c.endcaps == CurveEndcaps::On {
@@ -1261,7 +1273,7 @@ pub(crate) fn decode_curve(c: &CurveInput<'_>, i: usize) -> CurveSegment {
     }
     let normals = c
         .normal_buffers
-        .first()
+        .get(key)
         .map(|n| [c.normal(n, start), c.normal(n, start + 1)]);
     CurveSegment::new(
         c.curve_type,

@@ -66,12 +66,25 @@ pub fn compute_memory_usage(
         // per primitive each), and the builder decodes every key (guide §5.10.2).
         let n = summary.num_primitives as usize;
         let later = options.motion.key_count() - 1;
-        let per_prim = match summary.kind {
-            oxray_core::BuildInputKind::Triangles => std::mem::size_of::<Triangle4>(),
-            _ => std::mem::size_of::<Aabb>(),
+        let (per_prim, decoded) = match summary.kind {
+            oxray_core::BuildInputKind::Triangles => (
+                std::mem::size_of::<Triangle4>(),
+                std::mem::size_of::<[[f32; 3]; 3]>(),
+            ),
+            // One segment record per leaf slot, up to `max_pieces` slots per segment where
+            // segments are split (§9.2); every key is decoded before the build.
+            oxray_core::BuildInputKind::Curves => {
+                let pieces = crate::gas::curve_splits(options).map_or(1, |s| s.max_pieces.max(1));
+                let record = std::mem::size_of::<crate::CurveSegment>();
+                (record * pieces as usize, record)
+            }
+            _ => (
+                std::mem::size_of::<Aabb>(),
+                std::mem::size_of::<[[f32; 3]; 3]>(),
+            ),
         };
         sizes.output_size_in_bytes += later * n * per_prim;
-        sizes.temp_size_in_bytes += later * n * std::mem::size_of::<[[f32; 3]; 3]>();
+        sizes.temp_size_in_bytes += (later + 1) * n * decoded;
     }
     if options.flags.contains(oxray_core::BuildFlags::ALLOW_UPDATE) {
         // A refit works in place: the table of input starts and the thread pool's jobs.

@@ -5,12 +5,15 @@
 //! primitives, so in the union of their boxes: the tree is built over the union of each
 //! primitive's key boxes (padded by a few ulps for the rounding of the interpolation), and its
 //! nodes are those of a static structure. Key 0 of the primitives lives where a static
-//! structure keeps its primitives (`GasData::triangles`, `aabbs`, `spheres`), in the same
+//! structure keeps its primitives (`GasData::triangles`, `aabbs`, `spheres`, `curves`), in the same
 //! leaf-slot order; keys 1, 2, … live in [`GasMotion`], each a copy of that layout.
 
 use crate::build::{build_bvh2, BuildConfig};
 use crate::bvh4::Bvh4;
-use crate::gas::{decode_sphere_key, decode_triangles, GasData, GasKind, NodeWidth};
+use crate::curve::{CurveSegment, CurveSplits};
+use crate::gas::{
+    decode_curve_key, decode_sphere_key, decode_triangles, GasData, GasKind, NodeWidth,
+};
 use crate::sphere::Sphere;
 use crate::triangle::is_degenerate;
 use crate::triangle4::Triangle4;
@@ -32,6 +35,8 @@ pub struct GasMotion {
     pub aabbs: Vec<Aabb>,
     /// Spheres of keys 1, 2, … (sphere GAS).
     pub spheres: Vec<Sphere>,
+    /// Curve segments of keys 1, 2, … (curve GAS), one per leaf slot like key 0's.
+    pub curves: Vec<CurveSegment>,
 }
 
 impl GasMotion {
@@ -50,6 +55,7 @@ impl GasMotion {
         self.triangles.shrink_to_fit();
         self.aabbs.shrink_to_fit();
         self.spheres.shrink_to_fit();
+        self.curves.shrink_to_fit();
     }
 
     /// Bytes of the later keys' primitives.
@@ -57,6 +63,7 @@ impl GasMotion {
         std::mem::size_of_val(&self.triangles[..])
             + std::mem::size_of_val(&self.aabbs[..])
             + std::mem::size_of_val(&self.spheres[..])
+            + std::mem::size_of_val(&self.curves[..])
     }
 }
 
@@ -77,6 +84,7 @@ pub(crate) fn build_motion(
     inputs: &[BuildInput<'_>],
     config: &BuildConfig,
     width: NodeWidth,
+    curve_splits: Option<CurveSplits>,
 ) {
     let keys = motion.key_count();
     let mut out = GasMotion {
@@ -84,6 +92,7 @@ pub(crate) fn build_motion(
         triangles: Vec::new(),
         aabbs: Vec::new(),
         spheres: Vec::new(),
+        curves: Vec::new(),
     };
     match gas.kind {
         GasKind::Triangles => {
@@ -219,7 +228,71 @@ pub(crate) fn build_motion(
                 }
             }
         }
-        GasKind::Curves => unreachable!("validation refuses curves with motion keys"),
+        GasKind::Curves => {
+            let per_key: Vec<Vec<CurveSegment>> = (0..keys)
+                .map(|key| {
+                    inputs
+                        .iter()
+                        .flat_map(|input| match input {
+                            BuildInput::Curves(c) => (0..c.num_primitives as usize)
+                                .map(move |i| decode_curve_key(c, i, key)),
+                            _ => unreachable!("inputs are homogeneous"),
+                        })
+                        .collect()
+                })
+                .collect();
+            // A segment interpolated between two keys has the interpolated control points, and
+            // every bound here is a hull of (linear combinations of) control points grown by a
+            // largest radius: the union of the keys' boxes bounds it. A segment is active
+            // where it is at every key.
+            let active: Vec<bool> = (0..per_key[0].len())
+                .into_par_iter()
+                .map(|i| per_key.iter().all(|k| k[i].is_active()))
+                .collect();
+            let ids: Vec<u32> = (0..active.len() as u32)
+                .filter(|&i| active[i as usize])
+                .collect();
+            // §9.2 splitting with motion: each piece bounded by the union of its keys' boxes
+            // of the same parameter interval, as many pieces as the longest key needs.
+            let splittable = curve_splits.and_then(|_| gas.splittable(&ids));
+            let (ref_ids, ref_bounds): (Vec<u32>, Vec<Aabb>) = ids
+                .par_iter()
+                .enumerate()
+                .flat_map_iter(|(j, &g)| {
+                    let segment = move |k: &Vec<CurveSegment>| k[g as usize];
+                    let n = match (curve_splits, &splittable) {
+                        (Some(cs), Some(split)) if split[j] => per_key
+                            .iter()
+                            .map(|k| segment(k).pieces(&cs))
+                            .max()
+                            .unwrap_or(1),
+                        _ => 1,
+                    };
+                    let per_key = &per_key;
+                    (0..n).map(move |p| {
+                        let u = |p: u32| p as f64 / n as f64;
+                        let b = union_boxes(per_key.iter().map(|k| {
+                            Some(if n == 1 {
+                                segment(k).bounds()
+                            } else {
+                                segment(k).bounds_over(u(p), u(p + 1))
+                            })
+                        }));
+                        (g, b.expect("every key's box is given"))
+                    })
+                })
+                .unzip();
+            let repeats = ref_ids.len() > ids.len();
+            gas.build_slot_refs(&ref_ids, &ref_bounds, repeats, config, width);
+            for (key, segments) in per_key.iter().enumerate() {
+                let slotted = gas.slot_prim.iter().map(|&g| segments[g as usize]);
+                if key == 0 {
+                    gas.curves = slotted.collect();
+                } else {
+                    out.curves.extend(slotted);
+                }
+            }
+        }
     }
     gas.motion = Some(out);
 }
@@ -261,6 +334,24 @@ pub fn lerp_sphere(a: &Sphere, b: &Sphere, f: f32) -> Sphere {
     }
 }
 
+/// A curve segment interpolated between two keys: control points, radii and ribbon normals
+/// linearly (guide §5.10.2); its type, caps and flags are key `a`'s (every key has the same).
+#[inline(always)]
+pub fn lerp_curve(a: &CurveSegment, b: &CurveSegment, f: f32) -> CurveSegment {
+    if f == 0.0 {
+        return *a;
+    }
+    CurveSegment {
+        points: std::array::from_fn(|i| {
+            std::array::from_fn(|d| lerp(a.points[i][d], b.points[i][d], f))
+        }),
+        normals: std::array::from_fn(|i| {
+            std::array::from_fn(|d| lerp(a.normals[i][d], b.normals[i][d], f))
+        }),
+        ..*a
+    }
+}
+
 impl GasData {
     /// The motion keys a ray at `time` sees (guide §5.10.1): [`KeySample::STATIC`] without
     /// motion, `None` where the structure vanishes.
@@ -292,8 +383,7 @@ impl GasData {
                         }
                         GasKind::CustomPrimitives => self.aabb_keys(s).0[slot],
                         GasKind::Spheres => self.sphere_keys(s).0[slot].bounds(),
-                        // Curves have one key (validation refuses them with motion).
-                        GasKind::Curves => self.curves[slot].bounds(),
+                        GasKind::Curves => self.curve_keys(s).0[slot].bounds(),
                     };
                     out = out.union(&b);
                 }
@@ -345,6 +435,18 @@ impl GasData {
         }
     }
 
+    /// The curve segments of two keys (both key 0 without motion).
+    #[inline]
+    pub fn curve_keys(&self, s: KeySample) -> (&[CurveSegment], &[CurveSegment]) {
+        match &self.motion {
+            None => (&self.curves, &self.curves),
+            Some(m) => (
+                GasMotion::key(&self.curves, &m.curves, s.key),
+                GasMotion::key(&self.curves, &m.curves, s.next),
+            ),
+        }
+    }
+
     /// The triangle of leaf slot `slot` at `time` (interpolated between its keys; clamped
     /// outside the range, and key 0's where the structure vanishes); `None` for a slot out of
     /// range or a structure of another kind.
@@ -367,5 +469,12 @@ impl GasData {
         let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
         let (a, b) = self.sphere_keys(s);
         Some(lerp_sphere(a.get(slot)?, b.get(slot)?, s.fraction))
+    }
+
+    /// The curve segment of leaf slot `slot` at `time` (see [`triangle_at`](Self::triangle_at)).
+    pub fn curve_at(&self, slot: usize, time: f32) -> Option<CurveSegment> {
+        let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
+        let (a, b) = self.curve_keys(s);
+        Some(lerp_curve(a.get(slot)?, b.get(slot)?, s.fraction))
     }
 }

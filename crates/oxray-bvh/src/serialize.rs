@@ -20,7 +20,8 @@
 //! `singleRadius` in its shape); version 4 added curve structures (a primitive kind, an array
 //! of curve segments after the input shapes, and a curve input's type, end caps and normals in
 //! its shape); version 5 added motion (guide §5.10.2: a GAS's motion options and its
-//! primitives at keys 1, 2, …, after the other arrays). Versions 1 to 4 are still read.
+//! primitives at keys 1, 2, …, after the other arrays); version 6 added curves with motion (a
+//! fourth array of later keys' primitives: curve segments). Versions 1 to 5 are still read.
 
 use crate::bvh4::{Bvh4, Bvh4Node};
 use crate::bvh8::{Bvh8, Bvh8Node};
@@ -42,7 +43,7 @@ use oxray_core::{
 /// The first bytes of every saved structure.
 pub const MAGIC: [u8; 8] = *b"OXRAYAS\0";
 /// The version this build writes. It reads it and every earlier version.
-pub const FORMAT_VERSION: u32 = 5;
+pub const FORMAT_VERSION: u32 = 6;
 /// The first version with a GAS's optional 8-wide layout (version 1 has none).
 const VERSION_BVH8: u32 = 2;
 /// The first version with spheres (earlier ones have no sphere array).
@@ -51,6 +52,8 @@ const VERSION_SPHERES: u32 = 3;
 const VERSION_CURVES: u32 = 4;
 /// The first version with motion (earlier ones have no motion section).
 const VERSION_MOTION: u32 = 5;
+/// The first version with curves with motion (earlier ones have three motion arrays).
+const VERSION_MOTION_CURVES: u32 = 6;
 const KIND_GAS: u32 = 1;
 const KIND_IAS: u32 = 2;
 const HEADER: usize = 8 + 4 + 4 + 8 + 8;
@@ -266,26 +269,32 @@ fn kind_of(code: u32, version: u32) -> Option<GasKind> {
     }
 }
 
-/// Reads a GAS's motion section (version 5): options valid for a structure, and exactly
-/// `keys - 1` copies of the primitive array of its kind (`lens`: triangle blocks, boxes,
-/// spheres of key 0), none of the others. An updatable structure has no motion.
+/// Reads a GAS's motion section (version 5; version 6 adds curves): options valid for a
+/// structure, and exactly `keys - 1` copies of the primitive array of its kind (`lens`:
+/// triangle blocks, boxes, spheres, curve segments of key 0), none of the others. An updatable
+/// structure has no motion.
 fn read_motion(
     r: &mut Reader<'_>,
+    version: u32,
     kind: GasKind,
     build_flags: BuildFlags,
-    lens: [u64; 3],
+    lens: [u64; 4],
 ) -> Result<Option<GasMotion>, LoadError> {
     let num_keys = r.u32("the motion keys")?;
     let flags = r.u32("the motion flags")?;
     let time_begin = f32::from_bits(r.u32("the motion begin")?);
     let time_end = f32::from_bits(r.u32("the motion end")?);
-    let mut counts = [0u64; 3];
-    for c in counts.iter_mut() {
-        *c = r.u64("the motion array lengths")?;
+    let mut counts = [0u64; 4];
+    for (i, c) in counts.iter_mut().enumerate() {
+        // Version 5 has no curve segments with motion.
+        if i != 3 || version >= VERSION_MOTION_CURVES {
+            *c = r.u64("the motion array lengths")?;
+        }
     }
     let triangles: Vec<Triangle4> = r.array(counts[0], "the motion triangles")?;
     let aabbs: Vec<Aabb> = r.array(counts[1], "the motion boxes")?;
     let spheres: Vec<Sphere> = r.array(counts[2], "the motion spheres")?;
+    let curves: Vec<CurveSegment> = r.array(counts[3], "the motion curve segments")?;
     let options = MotionOptions {
         num_keys: u16::try_from(num_keys).map_err(|_| invalid("motion keys", 0))?,
         flags: u16::try_from(flags)
@@ -297,7 +306,7 @@ fn read_motion(
     };
     if !options.has_motion() {
         // No motion: nothing else may be set.
-        if num_keys != 0 || flags != 0 || counts != [0; 3] || time_begin != 0.0 || time_end != 0.0 {
+        if num_keys != 0 || flags != 0 || counts != [0; 4] || time_begin != 0.0 || time_end != 0.0 {
             return Err(invalid("motion options", 0));
         }
         return Ok(None);
@@ -310,8 +319,7 @@ fn read_motion(
         GasKind::Triangles => 0,
         GasKind::CustomPrimitives => 1,
         GasKind::Spheres => 2,
-        // Curves are never built with motion keys.
-        GasKind::Curves => return Err(invalid("motion options", 0)),
+        GasKind::Curves => 3,
     };
     for (i, (&n, &base)) in counts.iter().zip(&lens).enumerate() {
         let expected = if i == own { later * base } else { 0 };
@@ -324,6 +332,7 @@ fn read_motion(
         triangles,
         aabbs,
         spheres,
+        curves,
     }))
 }
 
@@ -402,14 +411,17 @@ impl GasData {
         w.u32(options.flags.bits() as u32);
         w.u32(options.time_begin.to_bits());
         w.u32(options.time_end.to_bits());
-        let (mt, ma, ms): (&[Triangle4], &[Aabb], &[Sphere]) =
-            m.map_or((&[], &[], &[]), |m| (&m.triangles, &m.aabbs, &m.spheres));
-        for n in [mt.len(), ma.len(), ms.len()] {
+        let (mt, ma, ms, mc): (&[Triangle4], &[Aabb], &[Sphere], &[CurveSegment]) = m
+            .map_or((&[], &[], &[], &[]), |m| {
+                (&m.triangles, &m.aabbs, &m.spheres, &m.curves)
+            });
+        for n in [mt.len(), ma.len(), ms.len(), mc.len()] {
             w.u64(n as u64);
         }
         w.pod(mt);
         w.pod(ma);
         w.pod(ms);
+        w.pod(mc);
         frame(KIND_GAS, w.0)
     }
 
@@ -450,12 +462,23 @@ impl GasData {
         let raw_shapes: Vec<[u32; 5]> = r.array(nsh, "the input shapes")?;
         let curves: Vec<CurveSegment> = r.array(ncv, "the curve segments")?;
         let motion = if version >= VERSION_MOTION {
-            read_motion(&mut r, kind, build_flags, [nt, na, nsp])?
+            read_motion(&mut r, version, kind, build_flags, [nt, na, nsp, ncv])?
         } else {
             None
         };
         if !r.bytes.is_empty() {
             return Err(LoadError::TrailingBytes(r.bytes.len() as u64));
+        }
+        // A segment's type, caps and normals flag are those of every key: traversal reads
+        // them from the key it interpolates from, hits from key 0.
+        if let Some(m) = &motion {
+            let n = curves.len().max(1);
+            for (i, later) in m.curves.iter().enumerate() {
+                let base = &curves[i % n];
+                if (later.curve_type, later.flags) != (base.curve_type, base.flags) {
+                    return Err(invalid("motion curve segment", i));
+                }
+            }
         }
 
         // Primitive arrays and the slot table.

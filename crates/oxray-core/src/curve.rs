@@ -167,8 +167,10 @@ pub enum CurveEndcaps {
 /// segments, each segment one primitive.
 ///
 /// The control points (`float3`) and their radii (`f32`) are given per motion key, like a
-/// sphere input's; builds have no motion yet, so exactly one key
-/// ([`BuildError::MotionKeyCount`](crate::BuildError) otherwise). The index buffer (required)
+/// sphere input's: one buffer per key of the build's motion options
+/// ([`BuildError::MotionKeyCount`](crate::BuildError) otherwise); a ray at a time between two
+/// keys meets the segment whose control points, radii and normals are interpolated linearly
+/// between them (guide §5.10.2). The index buffer (required)
 /// holds one `u32` per segment: the index of its first control point. Segment `N` ends a strand
 /// unless `index[N + 1] == index[N] + 1` (§5.2), which is where end caps go. Ribbons may give
 /// one normal buffer per key (segment `i` interpolates `n[i]` and `n[i + 1]` linearly). A curve

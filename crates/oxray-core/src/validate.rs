@@ -266,13 +266,6 @@ fn validate_spheres(at: InputLocation, s: &SphereInput<'_>, keys: usize) -> Resu
 fn validate_curves(at: InputLocation, c: &CurveInput<'_>, keys: usize) -> Result<(), BuildError> {
     check_key_count(at, BufferKind::Vertices, c.vertex_buffers.len(), keys)?;
     check_key_count(at, BufferKind::Radii, c.width_buffers.len(), keys)?;
-    if keys != 1 {
-        // Curves are interpolated between keys nowhere yet: a build with motion keys and a
-        // curve input is refused rather than traced at one key.
-        return Err(BuildError::Unsupported(
-            "curves with motion keys (guide §5.10.2)",
-        ));
-    }
     if !c.normal_buffers.is_empty() {
         if !c.curve_type.is_ribbon() {
             return Err(BuildError::InvalidCurveInput {

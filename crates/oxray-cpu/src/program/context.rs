@@ -474,7 +474,8 @@ macro_rules! hit_queries {
         /// `optixGetRibbonVertexData` give them (guide §9.3; no build flag needed): as many as
         /// the type has (2, 3 or 4), then zeros. Zeros when the hit is not a curve.
         pub fn curve_vertex_data(&self) -> [[f32; 4]; 4] {
-            match self.gas.and_then(|g| g.curves.get(self.$hit.slot as usize)) {
+            // A segment with motion is the one at the ray's time (guide §5.10.2).
+            match self.hit_curve() {
                 Some(s) => s.points,
                 None => [[0.0; 4]; 4],
             }
@@ -485,7 +486,7 @@ macro_rules! hit_queries {
         /// [`CurveSegment::ribbon_normal`](oxray_bvh::CurveSegment::ribbon_normal)). Zero when
         /// the hit is not a ribbon.
         pub fn ribbon_normal(&self, ribbon_parameters: [f32; 2]) -> Vec3 {
-            match self.gas.and_then(|g| g.curves.get(self.$hit.slot as usize)) {
+            match self.hit_curve() {
                 Some(s) => s.ribbon_normal(
                     ribbon_parameters[0],
                     ribbon_parameters[1],
@@ -493,6 +494,12 @@ macro_rules! hit_queries {
                 ),
                 None => Vec3::ZERO,
             }
+        }
+        /// The hit curve segment at the ray's time; `None` when the hit is not a curve.
+        fn hit_curve(&self) -> Option<oxray_bvh::CurveSegment> {
+            self.gas
+                .filter(|g| g.kind == oxray_bvh::GasKind::Curves)
+                .and_then(|g| g.curve_at(self.$hit.slot as usize, self.ray.time))
         }
         /// `optixGetGASMotionTimeBegin`, `…TimeEnd` and `…StepCount` of the hit's GAS
         /// (guide §13.10): its motion options (the default, no motion, for a static GAS).

@@ -1,15 +1,16 @@
 //! Leaf intersectors of structures with motion (guide §5.10.2): the primitives of the two keys
 //! around the ray's time, interpolated as each leaf is tested, then the static tests (the
 //! watertight triangle test on the interpolated triangles, the box test on the interpolated
-//! boxes, the sphere test on the interpolated sphere). Nothing is allocated: a block of four
+//! boxes, the sphere test on the interpolated sphere, the curve test on the interpolated
+//! segment). Nothing is allocated: a block of four
 //! triangles is interpolated on the stack.
 
 use super::kernel::{Decision, Entry, GasVisitor};
 use super::leaf::{LeafEnd, LeafIntersector};
 use super::ray::PreparedRay;
 use glam::Vec3;
-use oxray_bvh::motion::{lerp_aabb, lerp_sphere, lerp_triangle4};
-use oxray_bvh::{Sphere, Triangle4};
+use oxray_bvh::motion::{lerp_aabb, lerp_curve, lerp_sphere, lerp_triangle4};
+use oxray_bvh::{CurveSegment, Sphere, Triangle4};
 use oxray_core::ray::min_ignore_nan;
 use oxray_core::Aabb;
 
@@ -133,6 +134,46 @@ impl<V: GasVisitor> LeafIntersector<V> for MotionSphereLeaves<'_> {
                 Decision::Accept => *tmax = t,
                 Decision::AcceptAndTerminate => {
                     *tmax = t;
+                    return LeafEnd::Stop;
+                }
+                Decision::Abort => return LeafEnd::Stop,
+            }
+        }
+        LeafEnd::Continue
+    }
+}
+
+/// Curve segments of two keys: control points, radii and normals interpolated (guide
+/// §5.10.2), then [`CurveSegment::intersect`].
+pub(crate) struct MotionCurveLeaves<'a> {
+    pub a: &'a [CurveSegment],
+    pub b: &'a [CurveSegment],
+    pub f: f32,
+}
+
+impl<V: GasVisitor> LeafIntersector<V> for MotionCurveLeaves<'_> {
+    #[inline(always)]
+    fn leaf(
+        &self,
+        start: u32,
+        count: u32,
+        ray: &PreparedRay,
+        tmin: f32,
+        tmax: &mut f32,
+        visitor: &mut V,
+        _spare: &mut [Entry],
+    ) -> LeafEnd {
+        let org = Vec3::from(ray.org);
+        for slot in start as usize..(start + count) as usize {
+            let s = lerp_curve(&self.a[slot], &self.b[slot], self.f);
+            let Some(hit) = s.intersect(org, ray.dir, tmin, *tmax) else {
+                continue;
+            };
+            match visitor.curve(slot as u32, &hit) {
+                Decision::Ignore => {}
+                Decision::Accept => *tmax = hit.t,
+                Decision::AcceptAndTerminate => {
+                    *tmax = hit.t;
                     return LeafEnd::Stop;
                 }
                 Decision::Abort => return LeafEnd::Stop,

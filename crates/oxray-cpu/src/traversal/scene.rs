@@ -7,7 +7,9 @@ use super::kernel::{traverse, Entry, GasVisitor};
 use super::leaf::{
     AabbLeaves, CurveLeaves, LeafEnd, LeafIntersector, SphereLeaves, TriangleLeaves,
 };
-use super::motion::{MotionAabbLeaves, MotionSphereLeaves, MotionTriangleLeaves};
+use super::motion::{
+    MotionAabbLeaves, MotionCurveLeaves, MotionSphereLeaves, MotionTriangleLeaves,
+};
 use super::node::{Bvh4, Bvh8Scalar};
 use super::ray::PreparedRay;
 use crate::gas::CpuNode;
@@ -293,9 +295,9 @@ fn traverse_motion_gas<V: GasVisitor>(
             let leaves = MotionSphereLeaves { a, b, f };
             traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
         }
-        // Curves have one key (validation refuses them with motion): their static leaves.
         GasKind::Curves => {
-            let leaves = CurveLeaves(&gas.curves);
+            let (a, b) = gas.curve_keys(s);
+            let leaves = MotionCurveLeaves { a, b, f };
             traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
         }
     }
