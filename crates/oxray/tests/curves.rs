@@ -7,14 +7,13 @@
 
 mod common;
 
-use common::{name, on_every_device};
+use common::{name, on_every_device, Scene, ScenePrograms};
 use glam::Vec3;
 use oxray::bvh::GasData;
-use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
     BuildError, BuildInputKind, BuildOptions, CurveEndcaps, CurveInput, CurveType, Device,
-    ExceptionCode, HitKind, LaunchReport, ModuleSource, PipelineCompileOptions,
-    PipelineLinkOptions, PrimitiveTypeFlags, Ray, RayFlags, SbtRegion, ShaderBindingTable,
+    ExceptionCode, HitKind, LaunchReport, PipelineCompileOptions, PipelineLinkOptions,
+    PrimitiveTypeFlags, Ray, RayFlags,
 };
 use oxray_testkit::rng::Rng;
 
@@ -239,12 +238,22 @@ fn s9_3_queries_hit_every_curve_type_alike_on_every_device() {
     }
 }
 
-/// A pipeline of `curves.cu` on one device.
-struct Scene {
-    device: Device,
-    pipeline: Pipeline,
-    groups: Vec<(&'static str, ProgramGroup)>,
-}
+/// The programs of `curves.cu`, for a [`Scene`].
+const CURVES: ScenePrograms = ScenePrograms {
+    source: PROGRAMS,
+    params: "cp",
+    raygen: "__raygen__curves",
+    miss: "__miss__curves",
+    hit_groups: &[
+        ("hg", "__closesthit__curve", None),
+        (
+            "hg_skip_even",
+            "__closesthit__curve",
+            Some("__anyhit__skip_even"),
+        ),
+        ("hg_normal", "__closesthit__ribbon_normal", None),
+    ],
+};
 
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
@@ -261,84 +270,16 @@ const W: u32 = 48;
 const H: u32 = 48;
 
 impl Scene {
-    fn new(device: &Device, types: PrimitiveTypeFlags) -> Scene {
-        let m: Module = device
-            .create_module(ModuleSource::CudaCpp(PROGRAMS))
-            .unwrap_or_else(|e| panic!("{}: {e}", name(device)));
-        let hit = |ch: &'static str, ah: Option<&'static str>| {
-            ProgramGroup::hit_group(HitGroupDesc {
-                closest_hit: Some((&m, ch)),
-                any_hit: ah.map(|n| (&m, n)),
-                intersection: None,
-            })
-        };
-        let groups = vec![
-            ("rg", ProgramGroup::raygen(&m, "__raygen__curves").unwrap()),
-            ("ms", ProgramGroup::miss(&m, "__miss__curves").unwrap()),
-            ("hg", hit("__closesthit__curve", None).unwrap()),
-            (
-                "hg_skip_even",
-                hit("__closesthit__curve", Some("__anyhit__skip_even")).unwrap(),
-            ),
-            (
-                "hg_normal",
-                hit("__closesthit__ribbon_normal", None).unwrap(),
-            ),
-        ];
-        let list: Vec<ProgramGroup> = groups.iter().map(|(_, g)| g.clone()).collect();
-        let compile = PipelineCompileOptions {
-            num_payload_values: 8,
-            uses_primitive_type_flags: types,
-            ..Default::default()
-        };
-        let pipeline = device
-            .create_pipeline(
-                &compile,
-                &PipelineLinkOptions { max_trace_depth: 1 },
-                Some("cp"),
-                &list,
-            )
-            .unwrap_or_else(|e| panic!("{} pipeline: {e}", name(device)));
-        Scene {
-            device: device.clone(),
-            pipeline,
-            groups,
-        }
-    }
-
     /// A W x H launch over `handle` with hit group `hit`: 8 words per launch index.
     fn run(&self, handle: u64, hit: &str, flags: RayFlags) -> (Vec<[u32; 8]>, LaunchReport) {
-        let header = |l: &str| {
-            self.groups
-                .iter()
-                .find(|(n, _)| *n == l)
-                .unwrap()
-                .1
-                .pack_header()
-        };
-        let sbt = ShaderBindingTable {
-            raygen: SbtRegion::from_headers(&[header("rg")]),
-            miss: SbtRegion::from_headers(&[header("ms")]),
-            hitgroup: SbtRegion::from_headers(&[header(hit)]),
-            ..Default::default()
-        };
-        let out = self
-            .device
-            .create_buffer::<[u32; 8]>((W * H) as usize)
-            .unwrap();
-        let params = Params {
-            out: out.device_ptr(),
+        self.launch(&self.sbt(hit, 1), W, H, |out| Params {
+            out,
             handle,
             width: W,
             height: H,
             z: 5.0,
             ray_flags: flags.bits(),
-        };
-        let report = self
-            .pipeline
-            .launch_with(&params, &sbt, W, H, 1)
-            .unwrap_or_else(|e| panic!("{} launch: {e}", name(&self.device)));
-        (out.download().unwrap(), report)
+        })
     }
 }
 
@@ -366,7 +307,7 @@ fn s9_3_pipelines_hit_built_in_curves_on_every_device() {
         .map(|&ty| Strands::random(&mut rng, ty, 120, 1.8, ty.is_ribbon()))
         .collect();
     on_every_device(|device| {
-        let scene = Scene::new(device, all);
+        let scene = Scene::new(device, &CURVES, all);
         let mut results = Vec::new();
         for strands in &cases {
             let ty = strands.ty;
@@ -450,7 +391,7 @@ fn s9_3_ribbon_normals_on_every_device() {
         })
         .into();
     on_every_device(|device| {
-        let scene = Scene::new(device, CurveType::FlatQuadraticBSpline.type_flag());
+        let scene = Scene::new(device, &CURVES, CurveType::FlatQuadraticBSpline.type_flag());
         let mut results = Vec::new();
         for strands in &cases {
             let (gas, data) = strands.build(device);
@@ -500,7 +441,7 @@ fn s9_1_instanced_curves_on_every_device() {
                 &[(&[oxray::Instance::new(gas.handle()).transform(xform)][..]).into()],
             )
             .unwrap();
-        let scene = Scene::new(device, CurveType::RoundCubicBSpline.type_flag());
+        let scene = Scene::new(device, &CURVES, CurveType::RoundCubicBSpline.type_flag());
         let (out, report) = scene.run(ias.optix_handle().unwrap(), "hg", RayFlags::empty());
         assert_eq!(report.exceptions, 0, "{report:?}");
         // The reference: the CPU device's query through the same instance.
@@ -564,7 +505,8 @@ fn s9_1_curves_need_their_primitive_type_flag() {
             PrimitiveTypeFlags::empty(),
             PrimitiveTypeFlags::TRIANGLE | PrimitiveTypeFlags::ROUND_LINEAR,
         ] {
-            let (_, report) = Scene::new(device, types).run(handle, "hg", RayFlags::empty());
+            let (_, report) =
+                Scene::new(device, &CURVES, types).run(handle, "hg", RayFlags::empty());
             assert_eq!(
                 report.exceptions,
                 u64::from(W * H),
@@ -577,7 +519,7 @@ fn s9_1_curves_need_their_primitive_type_flag() {
             assert_eq!(code, ExceptionCode::UNSUPPORTED_PRIMITIVE_TYPE);
             codes.push(code);
         }
-        let (_, report) = Scene::new(device, PrimitiveTypeFlags::ROUND_CUBIC_BSPLINE).run(
+        let (_, report) = Scene::new(device, &CURVES, PrimitiveTypeFlags::ROUND_CUBIC_BSPLINE).run(
             handle,
             "hg",
             RayFlags::empty(),

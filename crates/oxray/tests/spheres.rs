@@ -7,13 +7,12 @@
 
 mod common;
 
-use common::{name, on_every_device};
+use common::{name, on_every_device, Scene, ScenePrograms};
 use glam::Vec3;
-use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
     BuildInputKind, BuildOptions, Device, ExceptionCode, GeometryFlags, HitKind, Instance,
-    LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions, PrimitiveTypeFlags,
-    Ray, RayFlags, SbtIndexOffsets, SbtRegion, ShaderBindingTable, Sphere, SphereInput, Transform,
+    LaunchReport, PipelineCompileOptions, PipelineLinkOptions, PrimitiveTypeFlags, Ray, RayFlags,
+    SbtIndexOffsets, Sphere, SphereInput, Transform,
 };
 use oxray_testkit::rng::Rng;
 
@@ -132,70 +131,23 @@ fn s9_4_queries_find_the_nearest_entry_on_every_device() {
     });
 }
 
-/// A pipeline of `spheres.cu` on one device.
-struct Scene {
-    device: Device,
-    pipeline: Pipeline,
-    groups: Vec<(&'static str, ProgramGroup)>,
-}
+/// The programs of `spheres.cu`, for a [`Scene`].
+const SPHERES: ScenePrograms = ScenePrograms {
+    source: PROGRAMS,
+    params: "sp",
+    raygen: "__raygen__spheres",
+    miss: "__miss__spheres",
+    hit_groups: &[
+        ("hg", "__closesthit__sphere", None),
+        (
+            "hg_skip_even",
+            "__closesthit__sphere",
+            Some("__anyhit__skip_even"),
+        ),
+    ],
+};
 
 impl Scene {
-    fn new(device: &Device, types: PrimitiveTypeFlags) -> Scene {
-        let m: Module = device
-            .create_module(ModuleSource::CudaCpp(PROGRAMS))
-            .unwrap_or_else(|e| panic!("{}: {e}", name(device)));
-        let hit = |ah: Option<&'static str>| {
-            ProgramGroup::hit_group(HitGroupDesc {
-                closest_hit: Some((&m, "__closesthit__sphere")),
-                any_hit: ah.map(|n| (&m, n)),
-                intersection: None,
-            })
-        };
-        let groups = vec![
-            ("rg", ProgramGroup::raygen(&m, "__raygen__spheres").unwrap()),
-            ("ms", ProgramGroup::miss(&m, "__miss__spheres").unwrap()),
-            ("hg", hit(None).unwrap()),
-            ("hg_skip_even", hit(Some("__anyhit__skip_even")).unwrap()),
-        ];
-        let list: Vec<ProgramGroup> = groups.iter().map(|(_, g)| g.clone()).collect();
-        let compile = PipelineCompileOptions {
-            num_payload_values: 8,
-            uses_primitive_type_flags: types,
-            ..Default::default()
-        };
-        let pipeline = device
-            .create_pipeline(
-                &compile,
-                &PipelineLinkOptions { max_trace_depth: 1 },
-                Some("sp"),
-                &list,
-            )
-            .unwrap_or_else(|e| panic!("{} pipeline: {e}", name(device)));
-        Scene {
-            device: device.clone(),
-            pipeline,
-            groups,
-        }
-    }
-
-    fn sbt(&self, hit: &str) -> ShaderBindingTable {
-        let h = |l: &str| {
-            self.groups
-                .iter()
-                .find(|(n, _)| *n == l)
-                .unwrap()
-                .1
-                .pack_header()
-        };
-        ShaderBindingTable {
-            raygen: SbtRegion::from_headers(&[h("rg")]),
-            miss: SbtRegion::from_headers(&[h("ms")]),
-            // Two records: the SBT-GAS indices 0 and 1 of the spheres' input.
-            hitgroup: SbtRegion::from_headers(&[h(hit), h(hit)]),
-            ..Default::default()
-        }
-    }
-
     /// A 24 x 8 launch over `handle`: the 8 words of every launch index and the report.
     fn run(
         &self,
@@ -205,12 +157,9 @@ impl Scene {
         mode: u32,
     ) -> (Vec<[u32; 8]>, LaunchReport) {
         let (w, h) = (24u32, 8u32);
-        let out = self
-            .device
-            .create_buffer::<[u32; 8]>((w * h) as usize)
-            .unwrap();
-        let params = Params {
-            out: out.device_ptr(),
+        // Two hit-group records: the SBT-GAS indices 0 and 1 of the spheres' input.
+        self.launch(&self.sbt(hit, 2), w, h, |out| Params {
+            out,
             handle,
             width: w,
             height: h,
@@ -218,12 +167,7 @@ impl Scene {
             ray_flags: flags.bits(),
             mode,
             pad: 0,
-        };
-        let report = self
-            .pipeline
-            .launch_with(&params, &self.sbt(hit), w, h, 1)
-            .unwrap_or_else(|e| panic!("{} launch: {e}", name(&self.device)));
-        (out.download().unwrap(), report)
+        })
     }
 }
 
@@ -310,7 +254,7 @@ fn s9_4_pipelines_hit_built_in_spheres_on_every_device() {
     on_every_device(|device| {
         let gas = scene_gas(device);
         let handle = gas.optix_handle().unwrap();
-        let s = Scene::new(device, PrimitiveTypeFlags::SPHERE);
+        let s = Scene::new(device, &SPHERES, PrimitiveTypeFlags::SPHERE);
         let (out, report) = s.run(handle, "hg", RayFlags::empty(), 0);
         assert_eq!(report.exceptions, 0, "{report:?}");
         let mut hits = 0;
@@ -404,7 +348,7 @@ fn s9_4_instanced_spheres_report_object_space_data() {
                 &[(&[Instance::new(gas.handle()).instance_id(9).transform(xform)][..]).into()],
             )
             .unwrap();
-        let s = Scene::new(device, PrimitiveTypeFlags::SPHERE);
+        let s = Scene::new(device, &SPHERES, PrimitiveTypeFlags::SPHERE);
         let (out, report) = s.run(ias.optix_handle().unwrap(), "hg", RayFlags::empty(), 0);
         assert_eq!(report.exceptions, 0, "{report:?}");
         let mut hits = 0;
@@ -447,7 +391,7 @@ fn s9_1_spheres_need_their_primitive_type_flag() {
             PrimitiveTypeFlags::empty(),
             PrimitiveTypeFlags::TRIANGLE | PrimitiveTypeFlags::CUSTOM,
         ] {
-            let s = Scene::new(device, types);
+            let s = Scene::new(device, &SPHERES, types);
             let (_, report) = s.run(handle, "hg", RayFlags::empty(), 0);
             assert_eq!(report.exceptions, 24 * 8, "{}: {report:?}", name(device));
             let code = report.first_exceptions[0].1.code;

@@ -969,6 +969,32 @@ static __noinline__ __device__ bool __oxray_walk_triangles(const TraceRay& r,
     return ended;
 }
 
+// A hit of a built-in primitive in the interval (a sphere's or a curve's, at leaf slot `s` of a
+// GAS whose slot and geometry-flag tables are `slots` and `gflags_of`, with attributes u and v):
+// no face culling; culled by its any-hit state (CULL_*_ANYHIT), or else offered as a candidate
+// (__oxray_candidate), and once accepted `tmax_` (the walk's) and `tmax` shrink to it. True when
+// traversal ends.
+static __forceinline__ __device__ bool __oxray_offer_builtin(const uint2* slots,
+                                                             const u32* gflags_of,
+                                                             const __oxray_TraceArgs& a,
+                                                             const __oxray_Path& path, u32 s,
+                                                             float t, float u, float v, u32 kind,
+                                                             float& tmax_, float& tmax,
+                                                             __oxray_Best& best) {
+    uint2 info = slots[s];
+    u32 gflags = gflags_of[info.y];
+    const char* record = __oxray_hit_record(a, path, info.y);
+    if (__oxray_culled_by_anyhit(a.flags, __oxray_anyhit_on(a.flags, path.iflags, gflags))) {
+        return false;
+    }
+    u32 attr[8] = {__float_as_uint(u), __float_as_uint(v), 0u, 0u, 0u, 0u, 0u, 0u};
+    u32 d = __oxray_candidate(a, path, gflags, record, t, info.x, info.y, kind, s, attr, best);
+    if (d == 0u) return false;
+    tmax_ = t;
+    tmax = t;
+    return d == 2u;
+}
+
 // The hit kind of a sphere's front face: 0x80 | (OPTIX_PRIMITIVE_TYPE_SPHERE & 0xFF) << 1.
 #define __OXRAY_HIT_KIND_SPHERE_FRONT_FACE 0x8Cu
 
@@ -989,19 +1015,8 @@ static __noinline__ __device__ bool __oxray_walk_spheres(const TraceRay& r,
         for (u32 s = start; s < start + count; ++s) {
             float t;
             if (!intersect_sphere(r, spheres[s], tmin, tmax_, t)) continue;
-            uint2 info = slots[s];
-            u32 gflags = gflags_of[info.y];
-            const char* record = __oxray_hit_record(a, path, info.y);
-            if (__oxray_culled_by_anyhit(a.flags, __oxray_anyhit_on(a.flags, path.iflags, gflags))) {
-                continue;
-            }
-            u32 attr[8] = {0u, 0u, 0u, 0u, 0u, 0u, 0u, 0u};
-            u32 d = __oxray_candidate(a, path, gflags, record, t, info.x, info.y,
-                                      __OXRAY_HIT_KIND_SPHERE_FRONT_FACE, s, attr, best);
-            if (d == 0u) continue;
-            tmax_ = t;
-            tmax = t;
-            if (d == 2u) {
+            if (__oxray_offer_builtin(slots, gflags_of, a, path, s, t, 0.0f, 0.0f,
+                                      __OXRAY_HIT_KIND_SPHERE_FRONT_FACE, tmax_, tmax, best)) {
                 ended = true;
                 return true;
             }
@@ -1030,19 +1045,8 @@ static __noinline__ __device__ bool __oxray_walk_curves(const TraceRay& r,
             const CurveRecord c = load_curve(curves, s);
             CurveHit h;
             if (!curve_intersect(c, r.org, r.dir, tmin, tmax_, h)) continue;
-            uint2 info = slots[s];
-            u32 gflags = gflags_of[info.y];
-            const char* record = __oxray_hit_record(a, path, info.y);
-            if (__oxray_culled_by_anyhit(a.flags, __oxray_anyhit_on(a.flags, path.iflags, gflags))) {
-                continue;
-            }
-            u32 attr[8] = {__float_as_uint(h.u), __float_as_uint(h.v), 0u, 0u, 0u, 0u, 0u, 0u};
-            u32 d = __oxray_candidate(a, path, gflags, record, h.t, info.x, info.y,
-                                      curve_hit_kind(c.type, h.back_face), s, attr, best);
-            if (d == 0u) continue;
-            tmax_ = h.t;
-            tmax = h.t;
-            if (d == 2u) {
+            if (__oxray_offer_builtin(slots, gflags_of, a, path, s, h.t, h.u, h.v,
+                                      curve_hit_kind(c.type, h.back_face), tmax_, tmax, best)) {
                 ended = true;
                 return true;
             }

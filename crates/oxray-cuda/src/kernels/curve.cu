@@ -624,59 +624,33 @@ __device__ __forceinline__ u32 curve_hit_kind(u32 type, bool back_face) {
     return 0x80u | ((type & 0xFFu) << 1) | (back_face ? 1u : 0u);
 }
 
-template <bool ANY>
-__device__ __forceinline__ Best trace_curves(const TraceRay& r, const float4* __restrict__ nodes,
-                                             const float4* __restrict__ curves) {
-    Best best;
-    best.t = F32_INF;
-    best.u = 0.0f;
-    best.v = 0.0f;
-    best.slot = MISS_SLOT;
-    walk_bvh2(r, nodes, r.tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
-        for (u32 s = start; s < start + count; ++s) {
-            CurveHit h;
-            if (!curve_intersect(load_curve(curves, s), r.org, r.dir, r.tmin, tmax, h)) continue;
-            best.t = h.t;
-            best.u = h.u;
-            best.v = h.v;
-            best.slot = s | (h.back_face ? BACK_FACE_BIT : 0u);
-            if (ANY) return true;
-            tmax = h.t;
-        }
-        return false;
-    });
-    return best;
-}
+// The curves' kind of built-in primitive for the query kernels (SphereLeaf in trace.cu).
+struct CurveLeaf {
+    static __device__ __forceinline__ bool hit(const TraceRay& r, const float4* __restrict__ curves,
+                                               u32 s, float tmax, Best& best) {
+        CurveHit h;
+        if (!curve_intersect(load_curve(curves, s), r.org, r.dir, r.tmin, tmax, h)) return false;
+        best.t = h.t;
+        best.u = h.u;
+        best.v = h.v;
+        best.slot = s | (h.back_face ? BACK_FACE_BIT : 0u);
+        return true;
+    }
+};
 
 #ifndef OXRAY_NO_QUERY_KERNELS
 
 extern "C" __global__ void __launch_bounds__(128)
     oxray_closest_curves(const float4* __restrict__ nodes, const float4* __restrict__ curves,
                          const float4* __restrict__ rays, uint4* __restrict__ hits, u32 n) {
-    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i >= n) return;
-    TraceRay r;
-    Best b;
-    if (load_ray(rays, i, r)) {
-        b = trace_curves<false>(r, nodes, curves);
-    } else {
-        b.t = F32_INF;
-        b.u = b.v = 0.0f;
-        b.slot = MISS_SLOT;
-    }
-    store_hit(hits, i, b);
+    builtin_entry<false, CurveLeaf>(nodes, curves, rays, hits, nullptr, n);
 }
 
 extern "C" __global__ void __launch_bounds__(128)
     oxray_occluded_curves(const float4* __restrict__ nodes, const float4* __restrict__ curves,
                           const float4* __restrict__ rays, unsigned char* __restrict__ occluded,
                           u32 n) {
-    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i >= n) return;
-    TraceRay r;
-    bool hit = false;
-    if (load_ray(rays, i, r)) hit = trace_curves<true>(r, nodes, curves).slot != MISS_SLOT;
-    occluded[i] = hit ? 1 : 0;
+    builtin_entry<true, CurveLeaf>(nodes, curves, rays, nullptr, occluded, n);
 }
 
 #endif  // OXRAY_NO_QUERY_KERNELS

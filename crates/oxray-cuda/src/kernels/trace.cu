@@ -589,9 +589,26 @@ __device__ __forceinline__ bool intersect_sphere(const TraceRay& r, float4 s, fl
     return t >= tmin && t <= tmax;
 }
 
-template <bool ANY>
-__device__ __forceinline__ Best trace_spheres(const TraceRay& r, const float4* __restrict__ nodes,
-                                              const float4* __restrict__ spheres) {
+// A kind of built-in primitive for the query kernels: `Leaf::hit(r, prims, s, tmax, best)`
+// tests leaf slot `s` of `prims` in [r.tmin, tmax] and writes a hit to `best`. SphereLeaf here;
+// CurveLeaf in curve.cu, after the curve intersector.
+struct SphereLeaf {
+    static __device__ __forceinline__ bool hit(const TraceRay& r,
+                                               const float4* __restrict__ spheres, u32 s,
+                                               float tmax, Best& best) {
+        float t;
+        if (!intersect_sphere(r, load_ro(spheres + s), r.tmin, tmax, t)) return false;
+        best.t = t;
+        best.slot = s;
+        return true;
+    }
+};
+
+// The closest hit (or, with ANY, any hit) of `r` in a GAS of built-in primitives of kind `Leaf`:
+// the binary BVH `nodes` over the leaf slots `prims`.
+template <bool ANY, typename Leaf>
+__device__ __forceinline__ Best trace_builtin(const TraceRay& r, const float4* __restrict__ nodes,
+                                              const float4* __restrict__ prims) {
     Best best;
     best.t = F32_INF;
     best.u = 0.0f;
@@ -599,12 +616,9 @@ __device__ __forceinline__ Best trace_spheres(const TraceRay& r, const float4* _
     best.slot = MISS_SLOT;
     walk_bvh2(r, nodes, r.tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
         for (u32 s = start; s < start + count; ++s) {
-            float t;
-            if (!intersect_sphere(r, load_ro(spheres + s), r.tmin, tmax, t)) continue;
-            best.t = t;
-            best.slot = s;
+            if (!Leaf::hit(r, prims, s, tmax, best)) continue;
             if (ANY) return true;
-            tmax = t;
+            tmax = best.t;
         }
         return false;
     });
@@ -715,33 +729,43 @@ extern "C" __global__ void __launch_bounds__(128)
     occluded[i] = hit ? 1 : 0;
 }
 
-extern "C" __global__ void __launch_bounds__(128)
-    oxray_closest_spheres(const float4* __restrict__ nodes, const float4* __restrict__ spheres,
-                          const float4* __restrict__ rays, uint4* __restrict__ hits, u32 n) {
+// The query kernels of a GAS of built-in primitives of kind `Leaf`: ray `i` traced for its
+// closest hit into `hits` or, with ANY, for occlusion into `occluded` (the other is unused).
+template <bool ANY, typename Leaf>
+__device__ __forceinline__ void builtin_entry(const float4* __restrict__ nodes,
+                                              const float4* __restrict__ prims,
+                                              const float4* __restrict__ rays,
+                                              uint4* __restrict__ hits,
+                                              unsigned char* __restrict__ occluded, u32 n) {
     u32 i = blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) return;
     TraceRay r;
     Best b;
     if (load_ray(rays, i, r)) {
-        b = trace_spheres<false>(r, nodes, spheres);
+        b = trace_builtin<ANY, Leaf>(r, nodes, prims);
     } else {
         b.t = F32_INF;
         b.u = b.v = 0.0f;
         b.slot = MISS_SLOT;
     }
-    store_hit(hits, i, b);
+    if (ANY) {
+        occluded[i] = b.slot != MISS_SLOT ? 1 : 0;
+    } else {
+        store_hit(hits, i, b);
+    }
+}
+
+extern "C" __global__ void __launch_bounds__(128)
+    oxray_closest_spheres(const float4* __restrict__ nodes, const float4* __restrict__ spheres,
+                          const float4* __restrict__ rays, uint4* __restrict__ hits, u32 n) {
+    builtin_entry<false, SphereLeaf>(nodes, spheres, rays, hits, nullptr, n);
 }
 
 extern "C" __global__ void __launch_bounds__(128)
     oxray_occluded_spheres(const float4* __restrict__ nodes, const float4* __restrict__ spheres,
                            const float4* __restrict__ rays, unsigned char* __restrict__ occluded,
                            u32 n) {
-    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
-    if (i >= n) return;
-    TraceRay r;
-    bool hit = false;
-    if (load_ray(rays, i, r)) hit = trace_spheres<true>(r, nodes, spheres).slot != MISS_SLOT;
-    occluded[i] = hit ? 1 : 0;
+    builtin_entry<true, SphereLeaf>(nodes, spheres, rays, nullptr, occluded, n);
 }
 
 #endif  // OXRAY_NO_QUERY_KERNELS

@@ -17,7 +17,11 @@ pub use oxray_testkit::oracle::{
 };
 pub use oxray_testkit::Rng;
 
-use oxray::{BackendKind, Device};
+use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
+use oxray::{
+    BackendKind, Device, LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions,
+    PrimitiveTypeFlags, SbtRegion, ShaderBindingTable,
+};
 
 /// A proptest configuration with a fixed seed, so that every run checks the same cases and a
 /// failure reproduces, and no regression files are written. `OXRAY_PROPTEST_SEED=<u64>` explores
@@ -98,5 +102,102 @@ pub fn on_every_device<R: PartialEq + std::fmt::Debug>(scenario: impl Fn(&Device
                 part(&b)
             );
         }
+    }
+}
+
+/// What a [`Scene`] is made of: a module of CUDA C++ programs, the name of its launch-parameter
+/// variable, its ray-generation and miss entries, and its hit groups as (label, closest hit,
+/// any hit).
+pub struct ScenePrograms {
+    pub source: &'static str,
+    pub params: &'static str,
+    pub raygen: &'static str,
+    pub miss: &'static str,
+    pub hit_groups: &'static [(&'static str, &'static str, Option<&'static str>)],
+}
+
+/// A pipeline of one module's programs on one device (8 payload values, trace depth 1), with
+/// its program groups by label: "rg", "ms", then the hit groups'.
+pub struct Scene {
+    pub device: Device,
+    pub pipeline: Pipeline,
+    pub groups: Vec<(&'static str, ProgramGroup)>,
+}
+
+impl Scene {
+    /// The pipeline of `programs` on `device` for the primitive types `types`.
+    pub fn new(device: &Device, programs: &ScenePrograms, types: PrimitiveTypeFlags) -> Scene {
+        let m: Module = device
+            .create_module(ModuleSource::CudaCpp(programs.source))
+            .unwrap_or_else(|e| panic!("{}: {e}", name(device)));
+        let mut groups = vec![
+            ("rg", ProgramGroup::raygen(&m, programs.raygen).unwrap()),
+            ("ms", ProgramGroup::miss(&m, programs.miss).unwrap()),
+        ];
+        for &(label, ch, ah) in programs.hit_groups {
+            let g = ProgramGroup::hit_group(HitGroupDesc {
+                closest_hit: Some((&m, ch)),
+                any_hit: ah.map(|n| (&m, n)),
+                intersection: None,
+            });
+            groups.push((label, g.unwrap()));
+        }
+        let list: Vec<ProgramGroup> = groups.iter().map(|(_, g)| g.clone()).collect();
+        let compile = PipelineCompileOptions {
+            num_payload_values: 8,
+            uses_primitive_type_flags: types,
+            ..Default::default()
+        };
+        let pipeline = device
+            .create_pipeline(
+                &compile,
+                &PipelineLinkOptions { max_trace_depth: 1 },
+                Some(programs.params),
+                &list,
+            )
+            .unwrap_or_else(|e| panic!("{} pipeline: {e}", name(device)));
+        Scene {
+            device: device.clone(),
+            pipeline,
+            groups,
+        }
+    }
+
+    /// The SBT of the raygen and miss groups and `records` hit-group records of group `hit`.
+    pub fn sbt(&self, hit: &str, records: usize) -> ShaderBindingTable {
+        let h = |l: &str| {
+            self.groups
+                .iter()
+                .find(|(n, _)| *n == l)
+                .unwrap()
+                .1
+                .pack_header()
+        };
+        ShaderBindingTable {
+            raygen: SbtRegion::from_headers(&[h("rg")]),
+            miss: SbtRegion::from_headers(&[h("ms")]),
+            hitgroup: SbtRegion::from_headers(&vec![h(hit); records]),
+            ..Default::default()
+        }
+    }
+
+    /// A `w` x `h` launch with the SBT `sbt` and the parameters `params` makes of the address
+    /// of the output, 8 words per launch index: the output and the report.
+    pub fn launch<P: bytemuck::Pod>(
+        &self,
+        sbt: &ShaderBindingTable,
+        w: u32,
+        h: u32,
+        params: impl FnOnce(u64) -> P,
+    ) -> (Vec<[u32; 8]>, LaunchReport) {
+        let out = self
+            .device
+            .create_buffer::<[u32; 8]>((w * h) as usize)
+            .unwrap();
+        let report = self
+            .pipeline
+            .launch_with(&params(out.device_ptr()), sbt, w, h, 1)
+            .unwrap_or_else(|e| panic!("{} launch: {e}", name(&self.device)));
+        (out.download().unwrap(), report)
     }
 }
