@@ -63,6 +63,7 @@ fn scene(n: Vec3, from: Vec3, mirror_u: bool) -> SceneDesc {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: Mat4::IDENTITY,
+            node: None,
         }],
         cameras: vec![Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 0.5)],
         lights: vec![PunctualLight {

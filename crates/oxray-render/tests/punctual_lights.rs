@@ -108,6 +108,7 @@ fn floor_lit_by(light: PunctualLight) -> f32 {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: Mat4::IDENTITY,
+            node: None,
         }],
         cameras: vec![Camera::look_at(
             Vec3::new(0.0, 1.0, 0.0),

@@ -122,6 +122,7 @@ fn inside_cube(material: MaterialDesc) -> SceneDesc {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: glam::Mat4::IDENTITY,
+            node: None,
         }],
         cameras: vec![Camera::look_at(Vec3::ZERO, Vec3::new(0.2, 0.1, 1.0), 1.0)],
         ..Default::default()
@@ -288,6 +289,7 @@ fn alpha_mask_cuts_holes_in_both_ray_types() {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: glam::Mat4::IDENTITY,
+            node: None,
         }],
         cameras: vec![Camera::look_at(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 1.2)],
         ..Default::default()
@@ -412,6 +414,7 @@ fn mirrored_instances_keep_their_front_faces_and_emission_side() {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: glam::Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0)),
+            node: None,
         }],
         ..Default::default()
     };
@@ -484,6 +487,7 @@ fn pixel_filters_spread_an_edge_by_their_width_and_keep_its_energy() {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: glam::Mat4::IDENTITY,
+            node: None,
         }],
         cameras: vec![Camera::look_at(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 1.0)],
         ..Default::default()

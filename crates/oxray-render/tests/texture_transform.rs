@@ -108,6 +108,7 @@ fn the_renderer_samples_through_the_transform() {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: Mat4::IDENTITY,
+            node: None,
         }],
         cameras: vec![Camera::look_at(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 1.0)],
         ..Default::default()

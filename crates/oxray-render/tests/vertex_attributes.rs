@@ -65,6 +65,7 @@ fn quad_scene(colors: Vec<[f32; 4]>, material: MaterialDesc) -> SceneDesc {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: Mat4::IDENTITY,
+            node: None,
         }],
         cameras: vec![Camera::look_at(Vec3::new(0.0, 0.0, 2.0), Vec3::ZERO, 1.0)],
         ..Default::default()

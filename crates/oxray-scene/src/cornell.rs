@@ -159,6 +159,7 @@ pub fn cornell_box() -> SceneDesc {
         instances: vec![InstanceDesc {
             mesh: 0,
             transform: Mat4::IDENTITY,
+            node: None,
         }],
         cameras: vec![Camera::look_at(
             eye,

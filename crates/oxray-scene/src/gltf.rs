@@ -11,15 +11,16 @@
 
 mod compression;
 
+use super::animation::{Animation, Channel, Interpolation, Property};
 use super::image::ImageError;
 use super::{
-    image, AlphaMode, Camera, InstanceDesc, LightKind, MaterialDesc, MeshDesc, Primitive,
+    image, AlphaMode, Camera, InstanceDesc, LightKind, MaterialDesc, MeshDesc, NodeDesc, Primitive,
     PunctualLight, SceneDesc, SceneError, Texture, TextureRef, Wrap,
 };
 use ::gltf::json;
 use ::gltf::mesh::{Mode, Semantic};
 use ::gltf::{accessor::DataType, accessor::Dimensions, Accessor, Document};
-use glam::{Mat4, Vec3};
+use glam::{Mat4, Quat, Vec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -111,6 +112,7 @@ pub(crate) fn load_impl(path: &Path, textures: bool) -> Result<SceneDesc, SceneE
     loader.materials(base, textures).map_err(malformed)?;
     loader.meshes().map_err(malformed)?;
     loader.nodes().map_err(malformed)?;
+    loader.animations();
     let scene = loader.scene;
     scene.validate().map_err(malformed)?;
     Ok(scene)
@@ -594,6 +596,13 @@ enum Kind {
     Color,
     /// Indices: SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT.
     Index,
+    /// Animation keyframe times: SCALAR of FLOAT.
+    Times,
+    /// Animated translation or scale: VEC3 of FLOAT.
+    Motion3,
+    /// Animated rotation: VEC4 of FLOAT or normalized BYTE, UNSIGNED_BYTE, SHORT or
+    /// UNSIGNED_SHORT.
+    Rotation,
 }
 
 impl Kind {
@@ -622,6 +631,15 @@ impl Kind {
                 dims == Dimensions::Scalar
                     && matches!(ty, DataType::U8 | DataType::U16 | DataType::U32)
             }
+            Kind::Times => dims == Dimensions::Scalar && ty == DataType::F32,
+            Kind::Motion3 => dims == Dimensions::Vec3 && ty == DataType::F32,
+            Kind::Rotation => {
+                dims == Dimensions::Vec4
+                    && matches!(
+                        ty,
+                        DataType::F32 | DataType::I8 | DataType::U8 | DataType::I16 | DataType::U16
+                    )
+            }
         }
     }
 
@@ -633,6 +651,11 @@ impl Kind {
                 "VEC3 or VEC4 of FLOAT, normalized UNSIGNED_BYTE or normalized UNSIGNED_SHORT"
             }
             Kind::Index => "SCALAR of UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT",
+            Kind::Times => "SCALAR of FLOAT",
+            Kind::Motion3 => "VEC3 of FLOAT",
+            Kind::Rotation => {
+                "VEC4 of FLOAT or normalized BYTE, UNSIGNED_BYTE, SHORT or UNSIGNED_SHORT"
+            }
         }
     }
 
@@ -641,8 +664,9 @@ impl Kind {
         match self {
             Kind::Vec3 => 12,
             Kind::Uv => 8,
-            Kind::Color => 16,
-            Kind::Index => 4,
+            Kind::Color | Kind::Rotation => 16,
+            Kind::Index | Kind::Times => 4,
+            Kind::Motion3 => 12,
         }
     }
 }
@@ -728,9 +752,10 @@ impl Loader<'_> {
                 a.data_type() == DataType::F32
                     || a.normalized() && matches!(a.data_type(), DataType::U8 | DataType::U16)
             }
-            Kind::Index => true,
+            Kind::Index | Kind::Times | Kind::Motion3 => true,
+            Kind::Rotation => a.data_type() == DataType::F32 || a.normalized(),
         };
-        if !core && matches!(kind, Kind::Color) {
+        if !core && matches!(kind, Kind::Color | Kind::Rotation) {
             return Err(format!(
                 "{what}: {:?} of {:?}{} where {} is expected",
                 a.dimensions(),
@@ -1328,6 +1353,25 @@ impl Loader<'_> {
         // shared between parents (which could multiply instances exponentially), is an error
         // instead of a stack overflow or a hang.
         let mut visited = vec![false; n];
+        self.scene.nodes = doc
+            .nodes()
+            .map(|node| match node.transform() {
+                ::gltf::scene::Transform::Matrix { matrix } => NodeDesc {
+                    matrix: Some(Mat4::from_cols_array_2d(&matrix)),
+                    ..Default::default()
+                },
+                ::gltf::scene::Transform::Decomposed {
+                    translation,
+                    rotation,
+                    scale,
+                } => NodeDesc {
+                    translation: translation.into(),
+                    rotation: Quat::from_array(rotation),
+                    scale: scale.into(),
+                    ..Default::default()
+                },
+            })
+            .collect();
         let mut stack: Vec<(usize, Mat4)> =
             roots.iter().rev().map(|&r| (r, Mat4::IDENTITY)).collect();
         let mut instances = Vec::new();
@@ -1347,6 +1391,7 @@ impl Loader<'_> {
                     InstanceDesc {
                         mesh: mesh.index() as u32,
                         transform: global,
+                        node: Some(ni as u32),
                     },
                 ));
             }
@@ -1366,6 +1411,9 @@ impl Loader<'_> {
                 }
             }
             for child in node.children().collect::<Vec<_>>().into_iter().rev() {
+                if let Some(c) = self.scene.nodes.get_mut(child.index()) {
+                    c.parent = Some(ni as u32);
+                }
                 stack.push((child.index(), global));
             }
         }
@@ -1384,6 +1432,7 @@ impl Loader<'_> {
                         InstanceDesc {
                             mesh: m as u32,
                             transform: Mat4::IDENTITY,
+                            node: None,
                         },
                     )
                 })
@@ -1397,6 +1446,135 @@ impl Loader<'_> {
         self.scene.instances = instances.into_iter().map(|(_, i)| i).collect();
         self.scene.cameras = cameras.into_iter().map(|(_, c)| c).collect();
         Ok(())
+    }
+
+    /// Reads the node animations. Animation is optional for a still image, so a channel that
+    /// cannot be used (a bad accessor, inconsistent keyframes, a matrix node, morph target
+    /// weights) is dropped with a warning instead of failing the file.
+    fn animations(&mut self) {
+        use json::animation::{Interpolation as J, Property as P};
+        use json::validation::Checked;
+        let doc = self.doc;
+        let root = doc.as_json();
+        let mut dropped: Vec<String> = Vec::new();
+        let mut morph = 0usize;
+        for (ai, a) in root.animations.iter().enumerate() {
+            let mut channels = Vec::new();
+            for (ci, c) in a.channels.iter().enumerate() {
+                let at = |why: String| format!("animation {ai} channel {ci}: {why}");
+                let node = c.target.node.value();
+                let property = match c.target.path {
+                    Checked::Valid(P::Translation) => Property::Translation,
+                    Checked::Valid(P::Rotation) => Property::Rotation,
+                    Checked::Valid(P::Scale) => Property::Scale,
+                    Checked::Valid(P::MorphTargetWeights) => {
+                        morph += 1;
+                        continue;
+                    }
+                    Checked::Invalid => {
+                        dropped.push(at("unknown target path".into()));
+                        continue;
+                    }
+                };
+                let Some(sampler) = a.samplers.get(c.sampler.value()) else {
+                    dropped.push(at(format!("missing sampler {}", c.sampler.value())));
+                    continue;
+                };
+                if self
+                    .scene
+                    .nodes
+                    .get(node)
+                    .is_none_or(|n| n.matrix.is_some())
+                {
+                    dropped.push(at(format!(
+                        "node {node} is missing or given by a matrix, which cannot be animated"
+                    )));
+                    continue;
+                }
+                let interpolation = match sampler.interpolation {
+                    Checked::Valid(J::Step) => Interpolation::Step,
+                    Checked::Valid(J::Linear) => Interpolation::Linear,
+                    Checked::Valid(J::CubicSpline) => Interpolation::CubicSpline,
+                    Checked::Invalid => {
+                        dropped.push(at("unknown interpolation".into()));
+                        continue;
+                    }
+                };
+                let read =
+                    self.channel_data(sampler.input.value(), sampler.output.value(), property);
+                let channel = match read {
+                    Ok((times, values)) => Channel {
+                        node: node as u32,
+                        property,
+                        interpolation,
+                        times,
+                        values,
+                    },
+                    Err(e) => {
+                        dropped.push(at(e));
+                        continue;
+                    }
+                };
+                match channel.problem() {
+                    None => channels.push(channel),
+                    Some(why) => dropped.push(at(why)),
+                }
+            }
+            let name = a.name.clone().unwrap_or_else(|| format!("animation {ai}"));
+            self.scene.animations.push(Animation { name, channels });
+        }
+        if morph > 0 {
+            self.warn(format!(
+                "{morph} animation channel{} of morph target weights ignored (the base shapes are rendered)",
+                if morph > 1 { "s" } else { "" }
+            ));
+        }
+        if let Some(first) = dropped.first() {
+            let more = match dropped.len() {
+                1 => String::new(),
+                n => format!(" (and {} more channels)", n - 1),
+            };
+            self.warn(format!("ignoring {first}{more}"));
+        }
+    }
+
+    /// The keyframe times and values of a sampler, checked and charged to the budget.
+    fn channel_data(
+        &mut self,
+        input: usize,
+        output: usize,
+        property: Property,
+    ) -> Result<(Vec<f32>, Vec<[f32; 4]>), String> {
+        use ::gltf::accessor::Iter;
+        let doc = self.doc;
+        let get = |i: usize| {
+            doc.accessors()
+                .nth(i)
+                .ok_or_else(|| format!("missing accessor {i}"))
+        };
+        let (ia, oa) = (get(input)?, get(output)?);
+        let times = match self.check_accessor(&ia, Kind::Times)? {
+            Layout::Zeros => vec![0.0; ia.count()],
+            Layout::Readable => Iter::<f32>::new(ia.clone(), |b| self.buffer(b))
+                .ok_or_else(|| format!("accessor {input} cannot be read"))?
+                .collect(),
+        };
+        let values = if property == Property::Rotation {
+            match self.check_accessor(&oa, Kind::Rotation)? {
+                Layout::Zeros => vec![[0.0; 4]; oa.count()],
+                Layout::Readable => self.read_floats::<4>(&oa)?,
+            }
+        } else {
+            match self.check_accessor(&oa, Kind::Motion3)? {
+                Layout::Zeros => vec![[0.0; 4]; oa.count()],
+                Layout::Readable => self
+                    .read_floats::<3>(&oa)?
+                    .into_iter()
+                    .map(|[x, y, z]| [x, y, z, 0.0])
+                    .collect(),
+            }
+        };
+        Ok((times, values))
     }
 
     /// The `KHR_lights_punctual` light `li` placed by `to_world` (it shines down its local -Z),

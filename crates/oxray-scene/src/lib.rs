@@ -31,6 +31,7 @@
 
 #![warn(missing_docs)]
 
+pub mod animation;
 mod cornell;
 pub mod files;
 pub mod gltf;
@@ -39,6 +40,7 @@ pub mod mesh;
 pub mod obj;
 mod text;
 
+pub use animation::NodeDesc;
 pub use cornell::cornell_box;
 
 use glam::{Mat4, Vec3};
@@ -69,6 +71,11 @@ pub struct SceneDesc {
     /// Every file the loader read (the scene file, its buffers, material libraries and
     /// images), so that a caller can refuse to write over one of them.
     pub sources: Vec<std::path::PathBuf>,
+    /// The node hierarchy (glTF `nodes`, by index; empty for formats without one), which
+    /// [`InstanceDesc::node`] and the animations refer to.
+    pub nodes: Vec<NodeDesc>,
+    /// Node animations ([`animation`]), played one at a time.
+    pub animations: Vec<animation::Animation>,
 }
 
 /// A mesh: one or more primitives, each with its own material.
@@ -277,8 +284,11 @@ impl Texture {
 pub struct InstanceDesc {
     /// Index into [`SceneDesc::meshes`].
     pub mesh: u32,
-    /// Object to world (glTF: the node's global transform).
+    /// Object to world (glTF: the node's global transform at rest).
     pub transform: Mat4,
+    /// The node that places the mesh (index into [`SceneDesc::nodes`]), through which
+    /// animations move it; `None` for a placement no animation can move.
+    pub node: Option<u32>,
 }
 
 /// The kind of a punctual light.
@@ -423,6 +433,7 @@ impl SceneDesc {
             instances: vec![InstanceDesc {
                 mesh: 0,
                 transform: Mat4::IDENTITY,
+                node: None,
             }],
             ..Default::default()
         }
@@ -464,6 +475,7 @@ impl SceneDesc {
         self.instances.push(InstanceDesc {
             mesh: self.meshes.len() as u32 - 1,
             transform: Mat4::IDENTITY,
+            node: None,
         });
     }
 
@@ -603,7 +615,7 @@ mod tests {
 
     #[test]
     fn placements_convert_exactly_and_refuse_singular_matrices() {
-        let at = |transform| InstanceDesc { mesh: 0, transform };
+        let at = |transform| InstanceDesc::new(0, transform);
         // The renderer traces an untransformed single instance as its GAS: that needs the
         // identity to convert to exactly the engine's identity.
         assert_eq!(

@@ -225,6 +225,7 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
         scene.instances.push(InstanceDesc {
             mesh: scene.meshes.len() as u32,
             transform: Mat4::IDENTITY,
+            node: None,
         });
         scene.meshes.push(MeshDesc {
             name: model.name,

@@ -474,9 +474,38 @@ fn shared_drone_loads() {
         return;
     };
     let s = SceneDesc::load(&p).unwrap();
-    // Only the unused texture coordinate sets are named.
-    assert_eq!(s.warnings.len(), 1, "{:#?}", s.warnings);
+    // Only the unused texture coordinate sets and the morph target weights are named.
+    assert_eq!(s.warnings.len(), 2, "{:#?}", s.warnings);
     assert!(s.warnings[0].contains("attributes TEXCOORD_2, TEXCOORD_3, TEXCOORD_4 "));
+    assert!(s.warnings[1].contains("1 animation channel of morph target weights ignored"));
+    // Its one 25-second animation: every translation, rotation and scale channel is kept,
+    // and it moves some of the instances but not all of them.
+    assert_eq!(s.animations.len(), 1);
+    assert_eq!(s.animations[0].channels.len(), 99);
+    assert_eq!(s.nodes.len(), 93);
+    let end = s.animations[0]
+        .channels
+        .iter()
+        .map(|c| *c.times.last().unwrap())
+        .fold(0.0f32, f32::max);
+    assert!((end - 25.0).abs() < 1e-3, "{end}");
+    let moving = (0..s.instances.len())
+        .filter(|&i| s.is_animated(i, 0))
+        .count();
+    assert!(moving > 0 && moving < s.instances.len(), "{moving}");
+    // A still instance keeps its rest placement at any time; a moving one is somewhere else
+    // a second later.
+    let still = (0..s.instances.len())
+        .find(|&i| !s.is_animated(i, 0))
+        .unwrap();
+    assert_eq!(
+        s.instance_transform_at(still, 0, 3.0),
+        s.instances[still].transform
+    );
+    assert!((0..s.instances.len()).any(|i| s.is_animated(i, 0)
+        && !s
+            .instance_transform_at(i, 0, 1.0)
+            .abs_diff_eq(s.instance_transform_at(i, 0, 2.0), 1e-4)));
     assert_eq!(s.materials.len(), 3);
     assert_eq!(s.textures.len(), 10);
     assert!(

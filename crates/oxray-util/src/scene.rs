@@ -5,8 +5,9 @@ use crate::layout::SbtLayout;
 use bytemuck::{Pod, Zeroable};
 use oxray::{
     Aabb, AabbBuffer, BuildError, BuildFlags, BuildInput, BuildOptions, CustomPrimitiveInput, Gas,
-    GeometryFlags, Ias, IndexBuffer, Instance, InstanceFlags, ProgramGroup, SbtIndexOffsets,
-    SbtRegion, Transform, TraversableHandle, TriangleInput, VertexBuffer,
+    GeometryFlags, Ias, IndexBuffer, Instance, InstanceFlags, MotionOptions, ProgramGroup,
+    SbtIndexOffsets, SbtRegion, SrtData, SrtMotionTransform, Transform, TraversableHandle,
+    TriangleInput, VertexBuffer,
 };
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -205,7 +206,19 @@ impl GasDesc {
     }
 }
 
-/// An instance in a scene IAS: a GAS with a material set, placed by a transform.
+/// An instance in a scene IAS: a GAS with a material set, placed by a transform, and moving
+/// with [`UtilInstance::motion`] where it is given.
+///
+/// ```
+/// use oxray::{MotionOptions, SrtData};
+/// use oxray_util::{GasId, UtilInstance};
+/// // A GAS that slides one unit along x while the shutter is open (times 0 to 1).
+/// let mut moving = UtilInstance::new(GasId(0), 0);
+/// moving.motion = Some((
+///     MotionOptions::new(2, 0.0, 1.0),
+///     vec![SrtData::IDENTITY, SrtData { tx: 1.0, ..SrtData::IDENTITY }],
+/// ));
+/// ```
 #[derive(Clone, Debug)]
 pub struct UtilInstance {
     /// The GAS.
@@ -220,6 +233,12 @@ pub struct UtilInstance {
     pub visibility_mask: u32,
     /// Flags.
     pub flags: InstanceFlags,
+    /// Motion of the GAS under the instance's transform: an SRT motion transform
+    /// ([`SrtMotionTransform`], guide §5.10.5) with these options and one key per motion key
+    /// is placed between the instance and its GAS, so that the object-to-world transform at a
+    /// ray's time is `transform · C(time)`. Tracing it needs a pipeline compiled with
+    /// `uses_motion_blur`. `None`: the GAS is placed by `transform` alone.
+    pub motion: Option<(MotionOptions, Vec<SrtData>)>,
 }
 
 impl UtilInstance {
@@ -233,6 +252,7 @@ impl UtilInstance {
             instance_id: 0,
             visibility_mask: 0xFF,
             flags: InstanceFlags::empty(),
+            motion: None,
         }
     }
 }
@@ -524,8 +544,15 @@ impl<P> Scene<P> {
                     gas: u.gas.0,
                     set: u.material_set,
                 })?;
+            // The GAS, or the motion transform that moves it (the keys are checked there).
+            let child: TraversableHandle = match &u.motion {
+                None => built.into(),
+                Some((options, keys)) => {
+                    SrtMotionTransform::new(built.into(), *options, keys)?.into()
+                }
+            };
             instances.push(
-                Instance::new(built.into())
+                Instance::new(child)
                     .transform(u.transform)
                     .instance_id(u.instance_id)
                     .visibility_mask(u.visibility_mask)
