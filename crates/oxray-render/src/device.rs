@@ -600,7 +600,7 @@ impl GpuScene {
         env: &Environment,
         geometry: &SceneGeometry,
     ) -> Result<Self, RenderError> {
-        let lit = prepare_lighting(scene, env)?;
+        let lit = prepare_lighting(scene, env, None)?;
         let mut up = Uploads::new(device);
         let g = &geometry.groups;
 

@@ -46,6 +46,8 @@
 //!     seed: 0,
 //!     aovs: false,
 //!     crop: None, // the whole image ([`crop`]: a window of it)
+//!     shutter: None, // no motion blur ([`motion`]: a shutter over the scene's animation)
+//!     animation: 0,
 //! };
 //! let dark = Environment::uniform(Vec3::ZERO); // the box is lit by its ceiling panel only
 //! let mut passes = 0;
@@ -68,6 +70,7 @@ pub mod crop;
 pub mod device;
 pub mod filter;
 pub mod lights;
+pub mod motion;
 pub mod output;
 pub mod programs;
 pub mod renderer;
@@ -119,12 +122,18 @@ pub struct RenderOptions {
     /// `width` x `height` image); the result has the window's size and each of its pixels is
     /// the same pixel of the full render, bit for bit. `None`: the whole image.
     pub crop: Option<crop::CropWindow>,
+    /// Motion blur: the shutter interval over which camera rays take their times, with the
+    /// scene's animation [`RenderOptions::animation`] moving its instances ([`motion`]).
+    /// `None`: no motion, the instances at rest.
+    pub shutter: Option<motion::Shutter>,
+    /// Which of the scene's animations the shutter sees (ignored without a shutter).
+    pub animation: usize,
 }
 
 impl Default for RenderOptions {
     /// 640 x 480 pixels, 16 samples per pixel, paths of up to 8 vertices, the scene's camera,
     /// the Gaussian pixel filter, Russian roulette after 3 vertices, seed 0, no AOVs, the whole
-    /// image.
+    /// image, no motion blur.
     fn default() -> Self {
         RenderOptions {
             width: 640,
@@ -137,6 +146,8 @@ impl Default for RenderOptions {
             seed: 0,
             aovs: false,
             crop: None,
+            shutter: None,
+            animation: 0,
         }
     }
 }
@@ -283,6 +294,15 @@ pub(crate) struct Lighting {
     /// Whether the scene is one untransformed placement, traced as its GAS: the instance level
     /// would only add a transform per ray.
     pub single: bool,
+    /// Per scene instance, whether it moves while the shutter is open (empty when none does).
+    pub moving: Vec<bool>,
+}
+
+impl Lighting {
+    /// Whether any placement moves (the pipeline must then trace with motion blur).
+    pub fn has_motion(&self) -> bool {
+        self.placements.iter().any(|p| p.motion.is_some())
+    }
 }
 
 /// One instance to trace.
@@ -291,6 +311,9 @@ pub(crate) struct Placement {
     /// The instance id (the scene's instance index, in 28 bits).
     pub id: u32,
     pub transform: Transform,
+    /// Motion keys over the shutter, for an instance that moves while it is open (then
+    /// `transform` is the identity and the keys place the mesh).
+    pub motion: Option<(oxray::MotionOptions, Vec<oxray::SrtData>)>,
 }
 
 /// Whether a primitive is traced (it has triangles).
@@ -307,19 +330,38 @@ pub(crate) fn prepare(
     let camera = camera_frame(scene, opts)?;
     Ok(Prepared {
         camera,
-        lit: prepare_lighting(scene, env)?,
+        lit: prepare_lighting(scene, env, opts.shutter.map(|s| (s, opts.animation)))?,
         max_depth: opts.max_depth.max(1),
         filter: opts.filter.table(),
         roulette_depth: opts.roulette_depth.max(1),
     })
 }
 
-/// The lighting of a validated scene.
+/// The lighting of a validated scene, with its instances posed over `shutter` by the scene's
+/// animation of that index (`None`: at rest).
 pub(crate) fn prepare_lighting(
     scene: &SceneDesc,
     env: &Environment,
+    shutter: Option<(motion::Shutter, usize)>,
 ) -> Result<Lighting, RenderError> {
-    let lights = TriangleLights::new(scene);
+    if let Some((_, a)) = shutter {
+        if a > 0 && a >= scene.animations.len() {
+            return Err(RenderError::Scene(format!(
+                "animation {a} does not exist (the scene has {})",
+                scene.animations.len()
+            )));
+        }
+    }
+    let poses: Vec<Option<motion::Pose>> = (0..scene.instances.len())
+        .map(|i| match shutter {
+            None => Some(motion::Pose::Still(scene.instances[i].transform)),
+            Some((s, a)) => motion::pose(scene, i, a, s),
+        })
+        .collect();
+    let lights = TriangleLights::placed(scene, |i| match &poses[i] {
+        Some(motion::Pose::Still(m)) => Some(*m),
+        _ => None,
+    });
     let p_env = match (lights.is_empty(), env.is_black()) {
         (_, true) => 0.0,
         (true, false) => 1.0,
@@ -330,20 +372,29 @@ pub(crate) fn prepare_lighting(
         .map_or(1e-4, |(lo, hi)| (hi - lo).max_element() * 1e-5)
         .max(1e-7);
     let mut placements = Vec::new();
-    for (i, inst) in scene.instances.iter().enumerate() {
+    for (i, (inst, pose)) in scene.instances.iter().zip(poses).enumerate() {
         let Some(mesh) = scene.meshes.get(inst.mesh as usize) else {
             continue;
         };
         if !mesh.primitives.iter().any(traced) {
             continue;
         }
-        let Some(transform) = inst.placement() else {
-            continue;
+        let (transform, motion) = match pose {
+            Some(motion::Pose::Still(m)) => {
+                let at = oxray_scene::InstanceDesc::new(inst.mesh, m);
+                let Some(t) = at.placement() else {
+                    continue;
+                };
+                (t, None)
+            }
+            Some(motion::Pose::Moving(options, keys)) => (Transform::IDENTITY, Some((options, keys))),
+            None => continue,
         };
         placements.push(Placement {
             mesh: inst.mesh as usize,
             id: i as u32 & 0x0FFF_FFFF,
             transform,
+            motion,
         });
     }
     if placements.is_empty() {
@@ -351,13 +402,23 @@ pub(crate) fn prepare_lighting(
             "the scene has no visible instance".into(),
         ));
     }
-    let single = placements.len() == 1 && placements[0].transform == Transform::IDENTITY;
+    let single = placements.len() == 1
+        && placements[0].transform == Transform::IDENTITY
+        && placements[0].motion.is_none();
+    let mut moving = Vec::new();
+    if placements.iter().any(|p| p.motion.is_some()) {
+        moving = vec![false; scene.instances.len()];
+        for p in placements.iter().filter(|p| p.motion.is_some()) {
+            moving[p.id as usize] = true;
+        }
+    }
     Ok(Lighting {
         lights,
         p_env,
         eps,
         placements,
         single,
+        moving,
     })
 }
 
@@ -501,6 +562,7 @@ pub fn render_passes(
         let mut u = UtilInstance::new(gas, 0);
         u.transform = p.transform;
         u.instance_id = p.id;
+        u.motion = p.motion.clone();
         instances.push(u);
     }
     // A single untransformed instance's SBT offset is 0 either way, as the scene's only chunk
@@ -518,6 +580,7 @@ pub fn render_passes(
         &DeviceContext::new(),
         PipelineCompileOptions {
             num_payload_values: programs::WORDS as u32,
+            uses_motion_blur: prep.lit.has_motion(),
             ..Default::default()
         },
         PipelineLinkOptions { max_trace_depth: 2 },
@@ -549,6 +612,8 @@ pub fn render_passes(
             aov: aov.as_ref(),
             window: [window.x0(), window.y0()],
             image: [opts.width, opts.height],
+            shutter: opts.shutter.filter(|s| s.is_open() && prep.lit.has_motion()),
+            moving: &prep.lit.moving,
         };
         // One launch index per pixel of the window.
         let report = pipeline.launch(&mut util, &params, w, h, 1)?;

@@ -46,6 +46,16 @@ pub struct TriangleLights {
 impl TriangleLights {
     /// Collects every emissive triangle of every instance.
     pub fn new(scene: &SceneDesc) -> TriangleLights {
+        Self::placed(scene, |i| scene.instances.get(i).map(|inst| inst.transform))
+    }
+
+    /// Collects the emissive triangles of every instance that `placement` places (by instance
+    /// index; `None` leaves an instance's triangles out: a moving emitter, which next-event
+    /// estimation cannot sample at a ray's time).
+    pub fn placed(
+        scene: &SceneDesc,
+        placement: impl Fn(usize) -> Option<glam::Mat4>,
+    ) -> TriangleLights {
         let tex_mean: Vec<Vec3> = scene
             .textures
             .iter()
@@ -72,8 +82,11 @@ impl TriangleLights {
             .collect();
         let mut triangles = Vec::new();
         let mut power = Vec::new();
-        for inst in &scene.instances {
+        for (index, inst) in scene.instances.iter().enumerate() {
             let Some(mesh) = scene.meshes.get(inst.mesh as usize) else {
+                continue;
+            };
+            let Some(transform) = placement(index) else {
                 continue;
             };
             for prim in &mesh.primitives {
@@ -96,14 +109,13 @@ impl TriangleLights {
                 };
                 for t in &prim.triangles {
                     let p = t.map(|i| {
-                        inst.transform
-                            .transform_point3(prim.positions[i as usize].into())
+                        transform.transform_point3(prim.positions[i as usize].into())
                     });
                     let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
                     let area = 0.5 * e1.cross(e2).length();
                     // A mirroring placement turns the winding order around.
                     let normal =
-                        e1.cross(e2).normalize_or_zero() * inst.transform.determinant().signum();
+                        e1.cross(e2).normalize_or_zero() * transform.determinant().signum();
                     if !(area > 0.0 && area.is_finite()) {
                         continue;
                     }

@@ -75,6 +75,12 @@ pub struct Params<'a> {
     /// The full image's width and height: the camera's image plane and the pixels' random
     /// streams are those of the full image, so a window's pixels are the full render's.
     pub image: [u32; 2],
+    /// The open shutter camera rays take their times in, when something moves while it is
+    /// open (`None`: every ray at time 0, and no random number spent on it).
+    pub shutter: Option<crate::motion::Shutter>,
+    /// Per instance id, whether the instance moves (empty when none does): its emission is
+    /// not sampled by next-event estimation, so a hit on it weighs in full.
+    pub moving: &'a [bool],
 }
 
 /// Floats per pixel of the auxiliary sums: albedo (3), shading normal (3), distance, hits.
@@ -332,6 +338,7 @@ fn visible(
     let mut words = [seed, 0u32];
     let ray = TraceRay::new(&p.handle, from, dir)
         .interval(0.0, tmax)
+        .time(ctx.ray_time())
         .flags(RayFlags::TERMINATE_ON_FIRST_HIT | RayFlags::DISABLE_CLOSESTHIT)
         .sbt(SHADOW, RAY_TYPES, SHADOW);
     ctx.trace(&ray, &mut words)?;
@@ -400,7 +407,11 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
         let w = if s.pdf > 0.0 {
             let t = ctx.ray_tmax();
             let cos_l = sh.ng.dot(wo).abs().max(1e-6);
-            let light_pdf = (1.0 - p.p_env) * p.lights.area_pdf(data.material) * t * t / cos_l;
+            let sampled = !p.moving.get(ctx.instance_id() as usize).copied().unwrap_or(false);
+            let light_pdf = match sampled {
+                true => (1.0 - p.p_env) * p.lights.area_pdf(data.material) * t * t / cos_l,
+                false => 0.0,
+            };
             power_heuristic(s.pdf, light_pdf)
         } else {
             1.0
@@ -613,6 +624,9 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             let sy = 1.0 - 2.0 * (y as f32 + oy) / h as f32;
             let c = &p.camera;
             let dir = (c.forward + c.right * sx + c.up * sy).normalize();
+            // The path's time, drawn after the pixel's offsets so that a render without motion
+            // keeps its random sequence.
+            let time = p.shutter.map_or(0.0, |s| s.time(rng.uniform()));
             let mut s = PathState {
                 seed: rng.0,
                 throughput: [1.0; 3],
@@ -625,6 +639,7 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
                 let mut words = [0u32; WORDS];
                 store(&s, |i, w| words[i] = w);
                 let ray = TraceRay::new(&p.handle, s.origin.into(), s.direction.into())
+                    .time(time)
                     .sbt(RADIANCE, RAY_TYPES, RADIANCE);
                 ctx.trace(&ray, &mut words)?;
                 s = load(&words);

@@ -198,6 +198,16 @@ impl<'s> Renderer<'s> {
     ) -> Result<Rendered, RenderError> {
         let window = crop::window_of(opts.width, opts.height, opts.crop)?;
         let (width, height) = (window.width(), window.height());
+        // The CUDA C++ programs trace the scene at rest: a shutter over an animation that
+        // moves something would be ignored, so it is refused rather than rendered still.
+        if opts.shutter.is_some()
+            && (0..self.scene.instances.len()).any(|i| self.scene.is_animated(i, opts.animation))
+        {
+            return Err(RenderError::Unsupported {
+                renderer: format!("the CUDA C++ path tracer on {}", self.device.describe()),
+                feature: "motion blur (a shutter over an animated scene; the Rust programs on the CPU render it)".into(),
+            });
+        }
         let camera = camera_frame_with(&self.scene, opts, self.camera)?;
         let tables = match &mut self.tables {
             Some(t) => t,

@@ -255,6 +255,29 @@ impl SceneDesc {
         })
     }
 
+    /// How many keyframes of animation `animation` that move instance `instance` (on its node
+    /// or an ancestor) fall strictly between `open` and `close`: how finely the motion must be
+    /// keyed to follow them.
+    pub fn keyframes_between(
+        &self,
+        instance: usize,
+        animation: usize,
+        open: f32,
+        close: f32,
+    ) -> usize {
+        let Some(a) = self.animations.get(animation) else {
+            return 0;
+        };
+        self.chain(instance)
+            .flat_map(|node| a.channels.iter().filter(move |c| c.node == node))
+            .map(|c| {
+                let lo = c.times.partition_point(|&t| t <= open);
+                let hi = c.times.partition_point(|&t| t < close);
+                hi.saturating_sub(lo)
+            })
+            .sum()
+    }
+
     /// The object-to-world transform of instance `instance` at `time` under animation
     /// `animation`: the product of its node's and its ancestors' animated local transforms. An
     /// instance the animation does not move keeps [`InstanceDesc::transform`].
@@ -407,6 +430,9 @@ mod tests {
         });
         assert!(scene.is_animated(0, 0));
         assert!(!scene.is_animated(0, 1));
+        assert_eq!(scene.keyframes_between(0, 0, 0.0, 1.0), 0);
+        assert_eq!(scene.keyframes_between(0, 0, -1.0, 1.0), 1);
+        assert_eq!(scene.keyframes_between(0, 0, -1.0, 2.0), 2);
         let p = scene
             .instance_transform_at(0, 0, 1.0)
             .transform_point3(Vec3::ZERO);
