@@ -30,110 +30,7 @@ enum Command {
     ///
     /// Scenes: glTF 2.0 (.gltf, .glb), OBJ (+MTL) or PLY. Without SCENE, the built-in Cornell
     /// box. Ctrl-C stops after the pass in flight and writes the samples done.
-    Render {
-        /// The scene file; omit for the built-in Cornell box.
-        scene: Option<PathBuf>,
-        /// Output image: .png (tone-mapped sRGB) or .exr (linear).
-        ///
-        /// An existing file is replaced (atomically), but never one the render reads. Default:
-        /// NAME.oxray.png in the current directory, NAME being the scene file's name without
-        /// extension (cornell without a scene); an existing file of that name is replaced only
-        /// if oxray wrote it.
-        #[arg(short, long)]
-        output: Option<PathBuf>,
-        /// Image size, WxH.
-        #[arg(long, default_value = "512x512")]
-        size: String,
-        /// Samples per pixel.
-        #[arg(long, default_value_t = 64)]
-        spp: u32,
-        /// Path vertices at most.
-        #[arg(long, default_value_t = 8)]
-        max_depth: u32,
-        /// Worker threads (default: all cores).
-        #[arg(short = 't', long)]
-        threads: Option<usize>,
-        /// Which of the scene's cameras to use (default: the first, else one framing the scene).
-        #[arg(long)]
-        camera: Option<usize>,
-        /// Put the camera at X,Y,Z (world space; default: where the chosen camera is).
-        #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-        look_from: Option<Vec3>,
-        /// Aim the camera at X,Y,Z.
-        ///
-        /// Default: the scene's centre with --look-from, else where the chosen camera looks.
-        #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-        look_at: Option<Vec3>,
-        /// The camera's up direction (default: +Y).
-        #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-        up: Option<Vec3>,
-        /// Vertical field of view in degrees (default: the chosen camera's).
-        #[arg(long, value_name = "DEGREES")]
-        fov: Option<f32>,
-        /// Environment light: sky, none, a grey level, or an .hdr/.exr map.
-        ///
-        /// "sky" is a procedural daylight (the default for scene files), "none" is black (the
-        /// default for the Cornell box), a number such as "0.5" a constant grey, and a .hdr or
-        /// .exr file an equirectangular map.
-        #[arg(long)]
-        env: Option<String>,
-        /// Multiplies the environment's radiance.
-        #[arg(long, default_value_t = 1.0)]
-        env_intensity: f32,
-        /// Exposure in stops applied before tone mapping (PNG only; EXR stays linear).
-        #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-        exposure: f32,
-        /// Tone curve of a PNG: aces, neutral or linear.
-        ///
-        /// "aces": Hill's ACES fit, radiance divided by 0.6 first (mid-grey 0.18 becomes
-        /// 127/255). "neutral": Khronos PBR Neutral (colours below 0.76 kept, mid-grey
-        /// 105/255). "linear": clamped (mid-grey 118/255).
-        #[arg(long, default_value = "aces")]
-        tonemap: String,
-        /// Pixel filter: gaussian, blackman-harris or box.
-        ///
-        /// Applied by filter importance sampling: "gaussian" (sigma 0.5 pixel, radius 1.5),
-        /// "blackman-harris" (radius 1.5) or "box" (the pixel's square).
-        #[arg(long, default_value = "gaussian")]
-        filter: String,
-        /// Put the scene on a large grey ground plane.
-        #[arg(long)]
-        ground: bool,
-        /// Seed of the random sequence.
-        ///
-        /// The same seed gives the same image, another seed an independent one.
-        #[arg(long, default_value_t = 0)]
-        seed: u32,
-        /// Stop after this many seconds (at the end of a pass) and write the samples done.
-        #[arg(long, value_name = "SECONDS")]
-        time: Option<f64>,
-        /// Write the image so far every SECONDS while rendering (replaced atomically).
-        #[arg(long, value_name = "SECONDS")]
-        checkpoint: Option<f64>,
-        /// Render only the pixels X0..X1, Y0..Y1 of the image (X1 and Y1 excluded).
-        ///
-        /// The output has the window's size and each of its pixels is the same pixel of the
-        /// full --size render, bit for bit (same camera, same random numbers); row 0 is the top.
-        #[arg(long, value_name = "X0,Y0,X1,Y1")]
-        crop: Option<String>,
-        /// Also write AOVs (albedo, normal, depth, samples) as layers of the .exr output.
-        ///
-        /// The first hit's albedo, shading normal, distance and sample count, as the layers
-        /// albedo.RGB, normal.XYZ, depth.Z and samples.Y of the output (an .exr file).
-        #[arg(long)]
-        aov: bool,
-        /// No progress bar.
-        #[arg(short, long)]
-        quiet: bool,
-        /// Which path tracer on which device: cpu, cpu-cxx, cuda, cuda:N or auto.
-        ///
-        /// cpu: the path tracer's Rust programs on the CPU. cpu-cxx: its CUDA C++ programs on
-        /// the CPU (compiled by the host's C++ compiler). cuda, cuda:N: the CUDA C++ programs on
-        /// that GPU (asking for one this machine lacks is an error). auto: a GPU where there is
-        /// one, else cpu.
-        #[arg(long, default_value = "cpu", value_parser = render_device::parse)]
-        backend: String,
-    },
+    Render(Box<RenderArgs>),
     /// Cast a file of rays at a mesh and write the hits.
     ///
     /// Rays are little-endian `f32[8]`: ox, oy, oz, tmin, dx, dy, dz, tmax. Hits are f32 t,
@@ -229,6 +126,123 @@ enum Command {
         /// The shell.
         shell: clap_complete::Shell,
     },
+}
+
+/// The options of `oxray render`.
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// The scene file; omit for the built-in Cornell box.
+    scene: Option<PathBuf>,
+    /// Output image: .png (tone-mapped sRGB) or .exr (linear).
+    ///
+    /// An existing file is replaced (atomically), but never one the render reads. Default:
+    /// NAME.oxray.png in the current directory, NAME being the scene file's name without
+    /// extension (cornell without a scene); an existing file of that name is replaced only
+    /// if oxray wrote it.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
+    /// Image size, WxH.
+    #[arg(long, default_value = "512x512")]
+    size: String,
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 64)]
+    spp: u32,
+    /// Path vertices at most.
+    #[arg(long, default_value_t = 8)]
+    max_depth: u32,
+    /// Worker threads (default: all cores).
+    #[arg(short = 't', long)]
+    threads: Option<usize>,
+    /// Which of the scene's cameras to use (default: the first, else one framing the scene).
+    #[arg(long)]
+    camera: Option<usize>,
+    /// Put the camera at X,Y,Z (world space; default: where the chosen camera is).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    look_from: Option<Vec3>,
+    /// Aim the camera at X,Y,Z.
+    ///
+    /// Default: the scene's centre with --look-from, else where the chosen camera looks.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    look_at: Option<Vec3>,
+    /// The camera's up direction (default: +Y).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    up: Option<Vec3>,
+    /// Vertical field of view in degrees (default: the chosen camera's).
+    #[arg(long, value_name = "DEGREES")]
+    fov: Option<f32>,
+    /// Environment light: sky, none, a grey level, or an .hdr/.exr map.
+    ///
+    /// "sky" is a procedural daylight (the default for scene files), "none" is black (the
+    /// default for the Cornell box), a number such as "0.5" a constant grey, and a .hdr or
+    /// .exr file an equirectangular map.
+    #[arg(long)]
+    env: Option<String>,
+    /// Multiplies the environment's radiance.
+    #[arg(long, default_value_t = 1.0)]
+    env_intensity: f32,
+    /// Exposure in stops applied before tone mapping (PNG only; EXR stays linear).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    exposure: f32,
+    /// Tone curve of a PNG: aces, neutral or linear.
+    ///
+    /// "aces": Hill's ACES fit, radiance divided by 0.6 first (mid-grey 0.18 becomes
+    /// 127/255). "neutral": Khronos PBR Neutral (colours below 0.76 kept, mid-grey
+    /// 105/255). "linear": clamped (mid-grey 118/255).
+    #[arg(long, default_value = "aces")]
+    tonemap: String,
+    /// Pixel filter: gaussian, blackman-harris or box.
+    ///
+    /// Applied by filter importance sampling: "gaussian" (sigma 0.5 pixel, radius 1.5),
+    /// "blackman-harris" (radius 1.5) or "box" (the pixel's square).
+    #[arg(long, default_value = "gaussian")]
+    filter: String,
+    /// Put the scene on a large grey ground plane.
+    #[arg(long)]
+    ground: bool,
+    /// Seed of the random sequence.
+    ///
+    /// The same seed gives the same image, another seed an independent one.
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Stop after this many seconds (at the end of a pass) and write the samples done.
+    #[arg(long, value_name = "SECONDS")]
+    time: Option<f64>,
+    /// Write the image so far every SECONDS while rendering (replaced atomically).
+    #[arg(long, value_name = "SECONDS")]
+    checkpoint: Option<f64>,
+    /// Render only the pixels X0..X1, Y0..Y1 of the image (X1 and Y1 excluded).
+    ///
+    /// The output has the window's size and each of its pixels is the same pixel of the
+    /// full --size render, bit for bit (same camera, same random numbers); row 0 is the top.
+    #[arg(long, value_name = "X0,Y0,X1,Y1")]
+    crop: Option<String>,
+    /// Motion blur: the shutter is open from OPEN to CLOSE seconds of the scene's animation.
+    ///
+    /// Each camera ray takes a time in the interval, and the glTF animation (translation,
+    /// rotation and scale of nodes) moves the instances during it. OPEN = CLOSE renders the
+    /// pose at that time without blur. Rendered by the cpu backend's programs.
+    #[arg(long, value_name = "OPEN,CLOSE")]
+    shutter: Option<String>,
+    /// Which of the scene's animations --shutter plays (0: the first).
+    #[arg(long, value_name = "N", default_value_t = 0, requires = "shutter")]
+    animation: usize,
+    /// Also write AOVs (albedo, normal, depth, samples) as layers of the .exr output.
+    ///
+    /// The first hit's albedo, shading normal, distance and sample count, as the layers
+    /// albedo.RGB, normal.XYZ, depth.Z and samples.Y of the output (an .exr file).
+    #[arg(long)]
+    aov: bool,
+    /// No progress bar.
+    #[arg(short, long)]
+    quiet: bool,
+    /// Which path tracer on which device: cpu, cpu-cxx, cuda, cuda:N or auto.
+    ///
+    /// cpu: the path tracer's Rust programs on the CPU. cpu-cxx: its CUDA C++ programs on
+    /// the CPU (compiled by the host's C++ compiler). cuda, cuda:N: the CUDA C++ programs on
+    /// that GPU (asking for one this machine lacks is an error). auto: a GPU where there is
+    /// one, else cpu.
+    #[arg(long, default_value = "cpu", value_parser = render_device::parse)]
+    backend: String,
 }
 
 const LIMITS_HELP: &str = "Limits (checked before allocating; raise them with these environment variables): input files up to OXRAY_MAX_FILE_MB (default 2048), one decoded image up to OXRAY_MAX_IMAGE_MB (256), a scene's textures up to OXRAY_MAX_TEXTURES_MB (1024), geometry flattened for raycast up to OXRAY_MAX_GEOMETRY_MB (2048), ray files up to OXRAY_MAX_RAYS rays (33554432).";
@@ -361,32 +375,35 @@ fn run(cli: Cli) -> Result<()> {
             clap_complete::generate(shell, &mut Cli::command(), "oxray", &mut out);
             say(String::from_utf8_lossy(&out).trim_end())
         }
-        Command::Render {
-            scene,
-            output,
-            size,
-            spp,
-            max_depth,
-            threads,
-            camera,
-            look_from,
-            look_at,
-            up,
-            fov,
-            env,
-            env_intensity,
-            exposure,
-            tonemap,
-            filter,
-            ground,
-            seed,
-            time,
-            checkpoint,
-            crop,
-            aov,
-            quiet,
-            backend,
-        } => {
+        Command::Render(args) => {
+            let RenderArgs {
+                scene,
+                output,
+                size,
+                spp,
+                max_depth,
+                threads,
+                camera,
+                look_from,
+                look_at,
+                up,
+                fov,
+                env,
+                env_intensity,
+                exposure,
+                tonemap,
+                filter,
+                ground,
+                seed,
+                time,
+                checkpoint,
+                crop,
+                shutter,
+                animation,
+                aov,
+                quiet,
+                backend,
+            } = *args;
             let (w, h) = size
                 .split_once('x')
                 .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
@@ -405,6 +422,13 @@ fn run(cli: Cli) -> Result<()> {
                         .map_err(|e| anyhow::anyhow!("--crop: {e} (--size {w}x{h})"))?;
                     Some(window)
                 }
+                None => None,
+            };
+            let shutter = match shutter {
+                Some(text) => Some(
+                    text.parse::<oxray_render::motion::Shutter>()
+                        .map_err(|e| anyhow::anyhow!("--shutter: {e}"))?,
+                ),
                 None => None,
             };
             if spp == 0 || spp > 1 << 16 {
@@ -514,8 +538,21 @@ fn run(cli: Cli) -> Result<()> {
                 seed,
                 aovs: aov,
                 crop,
+                shutter,
+                animation,
                 ..Default::default()
             };
+            if shutter.is_some() {
+                if desc.animations.is_empty() {
+                    eprintln!("warning: the scene has no animation: --shutter blurs nothing");
+                } else if animation >= desc.animations.len() {
+                    bail!(
+                        "--animation {animation}: the scene has {} animation{}",
+                        desc.animations.len(),
+                        if desc.animations.len() == 1 { "" } else { "s" }
+                    );
+                }
+            }
             if look_from.is_some() || look_at.is_some() || up.is_some() || fov.is_some() {
                 let chosen = oxray_render::camera_frame(&desc, &opts)?;
                 let view = CameraOverride {

@@ -722,3 +722,94 @@ fn crop_renders_a_window_of_the_image() {
         assert!(!bad.exists());
     }
 }
+
+/// A glTF scene whose one node slides a square from x = -1 to x = +1 in one second, lit by
+/// the default environment, with its own camera.
+fn sliding_gltf() -> PathBuf {
+    let mut bin: Vec<u8> = Vec::new();
+    let square = [
+        -0.5f32, -0.5, 0.0, 0.5, -0.5, 0.0, 0.5, 0.5, 0.0, -0.5, 0.5, 0.0,
+    ];
+    let keys = [0.0f32, 1.0, -1.0, 0.0, 0.0, 1.0, 0.0, 0.0];
+    for x in square.iter().chain(&keys) {
+        bin.extend(x.to_le_bytes());
+    }
+    for i in [0u16, 1, 2, 0, 2, 3] {
+        bin.extend(i.to_le_bytes());
+    }
+    std::fs::write(tmp("slide.bin"), &bin).unwrap();
+    let gltf = tmp("slide.gltf");
+    std::fs::write(
+        &gltf,
+        r#"{"asset": {"version": "2.0"},
+  "buffers": [{"uri": "slide.bin", "byteLength": 92}],
+  "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 80},
+                  {"buffer": 0, "byteOffset": 80, "byteLength": 12}],
+  "accessors": [
+    {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+     "min": [-0.5, -0.5, 0], "max": [0.5, 0.5, 0]},
+    {"bufferView": 0, "byteOffset": 48, "componentType": 5126, "count": 2, "type": "SCALAR",
+     "min": [0], "max": [1]},
+    {"bufferView": 0, "byteOffset": 56, "componentType": 5126, "count": 2, "type": "VEC3"},
+    {"bufferView": 1, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+  "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 3}]}],
+  "cameras": [{"type": "perspective", "perspective": {"yfov": 0.8, "znear": 0.1}}],
+  "nodes": [{"mesh": 0}, {"camera": 0, "translation": [0, 0, 4]}],
+  "scenes": [{"nodes": [0, 1]}],
+  "animations": [{"samplers": [{"input": 1, "output": 2}],
+                  "channels": [{"sampler": 0, "target": {"node": 0, "path": "translation"}}]}]
+}"#,
+    )
+    .unwrap();
+    gltf
+}
+
+/// `--shutter OPEN,CLOSE` blurs what the glTF animation moves; a closed shutter poses the
+/// scene at its time; bad intervals, missing animations and backends that cannot render
+/// motion are one error line each.
+#[test]
+fn shutter_renders_the_gltf_animation_as_motion_blur() {
+    let scene = sliding_gltf();
+    let render = |out: &Path, extra: &[&str]| render_small(&scene, out, extra);
+    let (rest, blur, posed) = (
+        tmp("slide-rest.png"),
+        tmp("slide-blur.png"),
+        tmp("slide-posed.png"),
+    );
+    for (out, extra) in [
+        (&rest, &[][..]),
+        (&blur, &["--shutter", "0,1"][..]),
+        (&posed, &["--shutter", "0,0"][..]),
+    ] {
+        let o = render(out, extra);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    }
+    let (_, _, rest) = read_png(&rest);
+    let (_, _, blur) = read_png(&blur);
+    let (_, _, posed) = read_png(&posed);
+    // At rest the square is in the middle; at t = 0 it is one unit to the left; blurred it
+    // is smeared over both.
+    assert_ne!(rest, posed);
+    assert_ne!(rest, blur);
+    assert_ne!(posed, blur);
+    let bad = tmp("slide-bad.png");
+    for (extra, needle) in [
+        (&["--shutter", "1,0"][..], "CLOSE not before OPEN"),
+        (&["--shutter", "0"][..], "expected OPEN,CLOSE"),
+        (
+            &["--shutter", "0,1", "--animation", "2"][..],
+            "the scene has 1 animation",
+        ),
+        (
+            &["--shutter", "0,1", "--backend", "cpu-cxx"][..],
+            "cannot render motion blur",
+        ),
+    ] {
+        assert_one_error(&render(&bad, extra), needle);
+        assert!(!bad.exists());
+    }
+    // A scene without animation renders, with a warning that nothing moves.
+    let obj = render_small(&obj_scene(), &tmp("still.png"), &["--shutter", "0,1"]);
+    assert!(obj.status.success());
+    assert!(String::from_utf8_lossy(&obj.stderr).contains("--shutter blurs nothing"));
+}

@@ -387,7 +387,9 @@ pub(crate) fn prepare_lighting(
                 };
                 (t, None)
             }
-            Some(motion::Pose::Moving(options, keys)) => (Transform::IDENTITY, Some((options, keys))),
+            Some(motion::Pose::Moving(options, keys)) => {
+                (Transform::IDENTITY, Some((options, keys)))
+            }
             None => continue,
         };
         placements.push(Placement {
@@ -612,7 +614,9 @@ pub fn render_passes(
             aov: aov.as_ref(),
             window: [window.x0(), window.y0()],
             image: [opts.width, opts.height],
-            shutter: opts.shutter.filter(|s| s.is_open() && prep.lit.has_motion()),
+            shutter: opts
+                .shutter
+                .filter(|s| s.is_open() && prep.lit.has_motion()),
             moving: &prep.lit.moving,
         };
         // One launch index per pixel of the window.

@@ -108,9 +108,8 @@ impl TriangleLights {
                     &prim.uvs
                 };
                 for t in &prim.triangles {
-                    let p = t.map(|i| {
-                        transform.transform_point3(prim.positions[i as usize].into())
-                    });
+                    let p =
+                        t.map(|i| transform.transform_point3(prim.positions[i as usize].into()));
                     let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
                     let area = 0.5 * e1.cross(e2).length();
                     // A mirroring placement turns the winding order around.

@@ -208,14 +208,14 @@ pub(crate) fn srt_of(m: Mat4) -> Option<SrtData> {
     let l = Mat3::from_mat4(m);
     let (c0, c1, c2) = (l.x_axis, l.y_axis, l.z_axis);
     let sx = c0.length();
-    if !(sx > 1e-30) {
+    if sx <= 1e-30 {
         return None;
     }
     let r0 = c0 / sx;
     let a = r0.dot(c1);
     let u1 = c1 - r0 * a;
     let sy = u1.length();
-    if !(sy > 1e-30 * sx) {
+    if sy <= 1e-30 * sx {
         return None;
     }
     let r1 = u1 / sy;
@@ -223,7 +223,7 @@ pub(crate) fn srt_of(m: Mat4) -> Option<SrtData> {
     let c = r1.dot(c2);
     let u2 = c2 - r0 * b - r1 * c;
     let mut sz = u2.length();
-    if !(sz > 1e-30 * sx) {
+    if sz <= 1e-30 * sx {
         return None;
     }
     let mut r2 = u2 / sz;
@@ -275,7 +275,13 @@ mod tests {
         for m in cases {
             let key = srt_of(m).unwrap();
             let back = key.to_transform();
-            for p in [Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::new(1.0, -2.0, 0.5)] {
+            for p in [
+                Vec3::ZERO,
+                Vec3::X,
+                Vec3::Y,
+                Vec3::Z,
+                Vec3::new(1.0, -2.0, 0.5),
+            ] {
                 let d = (m.transform_point3(p) - back.transform_point(p)).length();
                 assert!(d < 1e-5, "{m}: {p} off by {d}");
             }
@@ -303,7 +309,8 @@ mod tests {
         let times = (0..=steps).map(|k| k as f32 / steps as f32).collect();
         let values = (0..=steps)
             .map(|k| {
-                let q = Quat::from_rotation_z(std::f32::consts::TAU * turns * k as f32 / steps as f32);
+                let q =
+                    Quat::from_rotation_z(std::f32::consts::TAU * turns * k as f32 / steps as f32);
                 q.to_array()
             })
             .collect();
@@ -333,7 +340,9 @@ mod tests {
             .expect("the keys are a valid SRT motion transform");
         for i in 0..=100 {
             let t = i as f32 / 100.0;
-            let want = scene.instance_transform_at(0, 0, t).transform_point3(Vec3::X);
+            let want = scene
+                .instance_transform_at(0, 0, t)
+                .transform_point3(Vec3::X);
             let got = m.object_to_world_at(t).unwrap().transform_point(Vec3::X);
             assert!((want - got).length() < 2e-3, "t = {t}: {want} vs {got}");
         }
@@ -357,12 +366,24 @@ mod tests {
 
     #[test]
     fn shutters_parse_and_refuse() {
-        assert_eq!(" 1 , 2 ".parse::<Shutter>().unwrap(), Shutter { open: 1.0, close: 2.0 });
+        assert_eq!(
+            " 1 , 2 ".parse::<Shutter>().unwrap(),
+            Shutter {
+                open: 1.0,
+                close: 2.0
+            }
+        );
         for bad in ["", "1", "1,", "a,b", "1,2,3"] {
-            assert!(matches!(bad.parse::<Shutter>(), Err(ShutterError::Malformed(_))), "{bad}");
+            assert!(
+                matches!(bad.parse::<Shutter>(), Err(ShutterError::Malformed(_))),
+                "{bad}"
+            );
         }
         for bad in ["2,1", "nan,1", "0,inf"] {
-            assert!(matches!(bad.parse::<Shutter>(), Err(ShutterError::Invalid { .. })), "{bad}");
+            assert!(
+                matches!(bad.parse::<Shutter>(), Err(ShutterError::Invalid { .. })),
+                "{bad}"
+            );
         }
         let s = Shutter::new(1.0, 3.0).unwrap();
         assert_eq!(s.time(0.0), 1.0);

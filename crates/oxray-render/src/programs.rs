@@ -407,7 +407,11 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
         let w = if s.pdf > 0.0 {
             let t = ctx.ray_tmax();
             let cos_l = sh.ng.dot(wo).abs().max(1e-6);
-            let sampled = !p.moving.get(ctx.instance_id() as usize).copied().unwrap_or(false);
+            let sampled = !p
+                .moving
+                .get(ctx.instance_id() as usize)
+                .copied()
+                .unwrap_or(false);
             let light_pdf = match sampled {
                 true => (1.0 - p.p_env) * p.lights.area_pdf(data.material) * t * t / cos_l,
                 false => 0.0,

@@ -279,7 +279,7 @@ fn feature_scene() -> SceneDesc {
         mesh("bumpy", vec![cube(5, Vec3::ZERO, true)]),
         mesh("veil", vec![quad(6)]),
     ];
-    let at = |mesh: u32, t: Mat4| InstanceDesc { mesh, transform: t };
+    let at = InstanceDesc::new;
     let instances = vec![
         at(0, Mat4::from_scale(Vec3::new(8.0, 1.0, 8.0))),
         at(1, Mat4::IDENTITY),

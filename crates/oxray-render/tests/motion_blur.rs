@@ -63,8 +63,11 @@ fn scene(animated: bool, rest: Vec3) -> SceneDesc {
         });
     }
     // tan(yfov / 2) = 0.02: half the image's height is 0.1 and half its width 2 at z = 0.
-    s.cameras
-        .push(Camera::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, 2.0 * 0.02f32.atan()));
+    s.cameras.push(Camera::look_at(
+        Vec3::new(0.0, 0.0, 5.0),
+        Vec3::ZERO,
+        2.0 * 0.02f32.atan(),
+    ));
     s
 }
 
@@ -179,7 +182,9 @@ fn the_cuda_cpp_programs_refuse_motion_blur_rather_than_render_a_still() {
         Ok(_) => panic!("rendered a still where motion blur was asked for"),
     }
     // Without the shutter it renders.
-    assert!(r.render(&options(1, None), |_| ControlFlow::Continue(())).is_ok());
+    assert!(r
+        .render(&options(1, None), |_| ControlFlow::Continue(()))
+        .is_ok());
 }
 
 /// A white floor lit by an emissive panel above it, the panel drifting by 1/1000 of its size
@@ -254,9 +259,8 @@ fn s5_10_a_moving_emitter_lights_the_scene_as_much_as_a_still_one() {
     // The moving panel is not sampled by next-event estimation: its light reaches the floor
     // only through paths that hit it, weighted in full. The mean brightness must be the still
     // panel's (found by both strategies, weighted by MIS), within noise.
-    let mean = |img: &Image| {
-        img.pixels.iter().map(|p| p[0] as f64).sum::<f64>() / img.pixels.len() as f64
-    };
+    let mean =
+        |img: &Image| img.pixels.iter().map(|p| p[0] as f64).sum::<f64>() / img.pixels.len() as f64;
     let o = |shutter| RenderOptions {
         width: 16,
         height: 16,

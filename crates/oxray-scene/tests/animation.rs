@@ -132,9 +132,14 @@ fn unusable_channels_are_dropped_with_one_warning() {
     assert_eq!(broken.channels[0].node, 0);
     let q = broken.channels[0].sample(1.0);
     assert!(
-        (q - glam::Vec4::new(0.0, 0.0, 0.70711, 0.70711))
-            .abs()
-            .max_element()
+        (q - glam::Vec4::new(
+            0.0,
+            0.0,
+            std::f32::consts::FRAC_1_SQRT_2,
+            std::f32::consts::FRAC_1_SQRT_2
+        ))
+        .abs()
+        .max_element()
             < 1e-4
     );
     assert!((origin_at(&s, 0, 1, 1.0) - Vec3::Y).length() < 1e-4);
