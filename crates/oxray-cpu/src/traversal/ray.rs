@@ -26,8 +26,9 @@ pub(crate) struct PreparedRay {
 pub(crate) struct Lanes(pub [f32; 4]);
 
 impl PreparedRay {
-    /// `None` for an invalid ray, which can hit nothing.
-    #[inline]
+    /// `None` for an invalid ray, which can hit nothing. Inlined into every caller: the
+    /// structure is large, and a call would build it on the stack and copy it out.
+    #[inline(always)]
     pub fn new(ray: &Ray) -> Option<Self> {
         ray.validate().ok()?;
         let d = ray.direction.to_array();
