@@ -204,6 +204,13 @@ struct RenderArgs {
     /// The same seed gives the same image, another seed an independent one.
     #[arg(long, default_value_t = 0)]
     seed: u32,
+    /// Random numbers: sobol or independent.
+    ///
+    /// "sobol": Owen-scrambled Sobol points per pixel, one dimension per use (pixel offset,
+    /// time, each bounce's light and BSDF samples and Russian roulette), lower noise at equal
+    /// samples. "independent": independent hash-based random numbers.
+    #[arg(long, default_value = "sobol")]
+    sampler: String,
     /// Stop after this many seconds (at the end of a pass) and write the samples done.
     #[arg(long, value_name = "SECONDS")]
     time: Option<f64>,
@@ -395,6 +402,7 @@ fn run(cli: Cli) -> Result<()> {
                 filter,
                 ground,
                 seed,
+                sampler,
                 time,
                 checkpoint,
                 crop,
@@ -443,6 +451,9 @@ fn run(cli: Cli) -> Result<()> {
             let filter: oxray_render::filter::Filter = filter
                 .parse()
                 .map_err(|e| anyhow::anyhow!("--filter: {e}"))?;
+            let sampler: oxray_render::Sampler = sampler
+                .parse()
+                .map_err(|e| anyhow::anyhow!("--sampler: {e}"))?;
             let checkpoint = match checkpoint {
                 Some(t) if t.is_finite() && t > 0.0 && t <= 1e7 => {
                     Some(std::time::Duration::from_secs_f64(t))
@@ -536,6 +547,7 @@ fn run(cli: Cli) -> Result<()> {
                 camera,
                 filter,
                 seed,
+                sampler,
                 aovs: aov,
                 crop,
                 shutter,

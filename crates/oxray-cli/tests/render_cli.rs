@@ -447,6 +447,39 @@ fn tone_curves_and_pixel_filters_are_chosen_on_the_command_line() {
     );
 }
 
+#[test]
+fn the_sampler_is_chosen_on_the_command_line() {
+    let render = |args: &[&str]| {
+        let png = tmp(&format!("sampler-{}.png", args.join("-")));
+        let mut all = vec![
+            "render",
+            "-o",
+            s(&png),
+            "--size",
+            "16x16",
+            "--spp",
+            "4",
+            "--quiet",
+        ];
+        all.extend_from_slice(args);
+        let out = oxray(&all);
+        assert!(
+            out.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        std::fs::read(&png).unwrap()
+    };
+    // Sobol is the default; independent numbers make another image.
+    let sobol = render(&["--sampler", "sobol"]);
+    assert_eq!(render(&[]), sobol);
+    assert_ne!(render(&["--sampler", "independent"]), sobol);
+    assert_one_error(
+        &oxray(&["render", "-o", s(&tmp("s.png")), "--sampler", "halton"]),
+        "--sampler: unknown sampler",
+    );
+}
+
 /// `oxray render SCENE -o OUT` at 24x16 pixels and 2 spp, quietly, with `extra` options.
 fn render_small(scene: &Path, out: &Path, extra: &[&str]) -> Output {
     let mut args = vec![

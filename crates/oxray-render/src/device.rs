@@ -227,7 +227,8 @@ struct ParamsGpu {
     /// The full image's size (the camera's and the random streams'; the launch is the window).
     image_width: u32,
     image_height: u32,
-    pad: u32,
+    /// Where the random numbers come from ([`crate::Sampler::code`]).
+    sampler: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
@@ -754,7 +755,7 @@ impl GpuScene {
             crop_y0: 0,
             image_width: 0,
             image_height: 0,
-            pad: 0,
+            sampler: 0,
         };
         let sbt = ShaderBindingTable {
             raygen: SbtRegion::from_headers(&[g.raygen.pack_header()]),
@@ -796,6 +797,7 @@ impl GpuScene {
         params.max_depth = opts.max_depth.max(1);
         params.roulette_depth = opts.roulette_depth.max(1);
         params.seed = opts.seed;
+        params.sampler = opts.sampler.code();
         params.crop_x0 = window.x0();
         params.crop_y0 = window.y0();
         params.image_width = opts.width;

@@ -10,7 +10,7 @@
 // ray types run; next-event estimation on emissive triangles (chosen by power) and on the
 // environment (chosen by importance over its texels), combined with BSDF sampling by the power
 // heuristic; punctual lights; Russian roulette. Random numbers follow the Rust sequence draw by
-// draw (same PCG hash, same seeds, same order).
+// draw (same PCG hash, same seeds, same order; the same Owen-scrambled Sobol dimensions).
 //
 // Device functions used: launch index and dimensions, optixTrace with payload words, payload
 // get/set, barycentrics, primitive and instance index, SBT data pointer, ray origin, direction
@@ -122,7 +122,7 @@ struct Params {
     // launch covers the window, and accum and aov hold its pixels.
     u32 crop_x0, crop_y0;
     u32 image_width, image_height;
-    u32 pad;
+    u32 sampler;  // 0: independent hash numbers, 1: Owen-scrambled Sobol (sampler.rs)
 };
 
 }  // namespace pt
@@ -239,6 +239,116 @@ struct Rng {
 
 PTI Rng rng_new(u32 pixel, u32 sample, u32 salt) {
     return Rng{hash(pixel ^ hash(sample + hash(salt)))};
+}
+
+// The salt of a pixel's random streams for the user's seed (programs.rs stream_salt).
+PTI u32 stream_salt() { return 0x5eedu ^ (params.seed * 0x9E3779B9u); }
+
+// ---------------------------------------------------------------------------------------------
+// Owen-scrambled Sobol points (sampler.rs): one dimension per use, in groups of four; a group
+// is the first four Sobol dimensions at a sample index shuffled by a nested uniform scramble,
+// each coordinate Owen-scrambled by a Laine-Karras hash; past PT_SOBOL_DIMS, hash numbers.
+// ---------------------------------------------------------------------------------------------
+
+// Direction numbers, most significant bit first (sampler.rs SOBOL_DIRECTIONS).
+static __constant__ const u32 PT_SOBOL[4][32] = {
+    {0x80000000u, 0x40000000u, 0x20000000u, 0x10000000u, 0x08000000u, 0x04000000u,
+     0x02000000u, 0x01000000u, 0x00800000u, 0x00400000u, 0x00200000u, 0x00100000u,
+     0x00080000u, 0x00040000u, 0x00020000u, 0x00010000u, 0x00008000u, 0x00004000u,
+     0x00002000u, 0x00001000u, 0x00000800u, 0x00000400u, 0x00000200u, 0x00000100u,
+     0x00000080u, 0x00000040u, 0x00000020u, 0x00000010u, 0x00000008u, 0x00000004u,
+     0x00000002u, 0x00000001u},
+    {0x80000000u, 0xc0000000u, 0xa0000000u, 0xf0000000u, 0x88000000u, 0xcc000000u,
+     0xaa000000u, 0xff000000u, 0x80800000u, 0xc0c00000u, 0xa0a00000u, 0xf0f00000u,
+     0x88880000u, 0xcccc0000u, 0xaaaa0000u, 0xffff0000u, 0x80008000u, 0xc000c000u,
+     0xa000a000u, 0xf000f000u, 0x88008800u, 0xcc00cc00u, 0xaa00aa00u, 0xff00ff00u,
+     0x80808080u, 0xc0c0c0c0u, 0xa0a0a0a0u, 0xf0f0f0f0u, 0x88888888u, 0xccccccccu,
+     0xaaaaaaaau, 0xffffffffu},
+    {0x80000000u, 0xc0000000u, 0x60000000u, 0x90000000u, 0xe8000000u, 0x5c000000u,
+     0x8e000000u, 0xc5000000u, 0x68800000u, 0x9cc00000u, 0xee600000u, 0x55900000u,
+     0x80680000u, 0xc09c0000u, 0x60ee0000u, 0x90550000u, 0xe8808000u, 0x5cc0c000u,
+     0x8e606000u, 0xc5909000u, 0x6868e800u, 0x9c9c5c00u, 0xeeee8e00u, 0x5555c500u,
+     0x8000e880u, 0xc0005cc0u, 0x60008e60u, 0x9000c590u, 0xe8006868u, 0x5c009c9cu,
+     0x8e00eeeeu, 0xc5005555u},
+    {0x80000000u, 0xc0000000u, 0x20000000u, 0x50000000u, 0xf8000000u, 0x74000000u,
+     0xa2000000u, 0x93000000u, 0xd8800000u, 0x25400000u, 0x59e00000u, 0xe6d00000u,
+     0x78080000u, 0xb40c0000u, 0x82020000u, 0xc3050000u, 0x208f8000u, 0x51474000u,
+     0xfbea2000u, 0x75d93000u, 0xa0858800u, 0x914e5400u, 0xdbe79e00u, 0x25db6d00u,
+     0x58800080u, 0xe54000c0u, 0x79e00020u, 0xb6d00050u, 0x800800f8u, 0xc00c0074u,
+     0x200200a2u, 0x50050093u},
+};
+
+// Dimensions (sampler.rs dim): the camera's, then PT_DIM_PER_VERTEX per path vertex.
+#define PT_DIM_PIXEL 0u
+#define PT_DIM_CAMERA 4u
+#define PT_DIM_PER_VERTEX 12u
+#define PT_DIM_LIGHT_0 2u
+#define PT_DIM_LIGHT_1 0u
+#define PT_DIM_LIGHT_2 1u
+#define PT_DIM_LIGHT_PICK 3u
+#define PT_DIM_BSDF_0 6u
+#define PT_DIM_BSDF_1 4u
+#define PT_DIM_BSDF_2 5u
+#define PT_DIM_ROULETTE 7u
+#define PT_DIM_PUNCTUAL 8u
+#define PT_SOBOL_DIMS (PT_DIM_CAMERA + 5u * PT_DIM_PER_VERTEX)
+
+PTI u32 reverse_bits(u32 x) {
+    x = ((x >> 1) & 0x55555555u) | ((x & 0x55555555u) << 1);
+    x = ((x >> 2) & 0x33333333u) | ((x & 0x33333333u) << 2);
+    x = ((x >> 4) & 0x0f0f0f0fu) | ((x & 0x0f0f0f0fu) << 4);
+    x = ((x >> 8) & 0x00ff00ffu) | ((x & 0x00ff00ffu) << 8);
+    return (x >> 16) | (x << 16);
+}
+
+PTI u32 sobol(u32 index, u32 d) {
+    u32 x = 0u;
+    for (u32 bit = 0u; bit < 32u; ++bit) {
+        x ^= PT_SOBOL[d & 3u][bit] & (0u - ((index >> bit) & 1u));
+    }
+    return x;
+}
+
+PTI u32 lk_permute(u32 x, u32 seed) {
+    x ^= x * 0x3d20adeau;
+    x += seed;
+    x *= (seed >> 16) | 1u;
+    x ^= x * 0x05526c56u;
+    x ^= x * 0x53a22864u;
+    return x;
+}
+
+PTI u32 owen_scramble(u32 x, u32 seed) { return reverse_bits(lk_permute(reverse_bits(x), seed)); }
+
+PTI u32 pixel_seed(u32 pixel, u32 salt) { return hash(pixel ^ hash(salt ^ 0x50b01e5du)); }
+
+PTI float sobol_sample(u32 index, u32 dim, u32 seed) {
+    u32 group = hash(seed ^ hash(dim >> 2));
+    u32 x = sobol(owen_scramble(index, group), dim & 3u);
+    x = owen_scramble(x, hash(group ^ hash((dim & 3u) + 1u)));
+    return (float)(x >> 8) * (1.0f / 16777216.0f);
+}
+
+// The draws of one path (sampler.rs Draws): the hash stream advances once per draw whatever the
+// sampler, so the seeds shadow rays take from it do not depend on it.
+struct Draws {
+    Rng rng;
+    u32 sobol_seed, sobol_on, index, base;
+    __device__ float get(u32 k) {
+        float u = rng.uniform();
+        u32 d = base + k;
+        return (sobol_on != 0u && d < PT_SOBOL_DIMS) ? sobol_sample(index, d, sobol_seed) : u;
+    }
+};
+
+PTI Draws draws_new(Rng rng, u32 pixel, u32 index, u32 salt) {
+    Draws d;
+    d.rng = rng;
+    d.sobol_on = params.sampler == 1u ? 1u : 0u;
+    d.sobol_seed = d.sobol_on != 0u ? pixel_seed(pixel, salt) : 0u;
+    d.index = index;
+    d.base = 0u;
+    return d;
 }
 
 PTI float luminance(V3 c) { return dot(c, v3(0.2126f, 0.7152f, 0.0722f)); }
@@ -787,12 +897,12 @@ PTI bool visible(u32 seed, V3 from, V3 dir, float tmax) {
 PTI float inf() { return __uint_as_float(0x7f800000u); }
 
 // One light sample (a triangle or the environment), weighted against BSDF sampling.
-PTF V3 next_event(Rng& rng, const Surface& surf, const Shading& sh, V3 wo) {
-    float pick = rng.uniform();
+PTF V3 next_event(Draws& rng, const Surface& surf, const Shading& sh, V3 wo) {
+    float pick = rng.get(PT_DIM_LIGHT_PICK);
     float u[3];
-    u[0] = rng.uniform();
-    u[1] = rng.uniform();
-    u[2] = rng.uniform();
+    u[0] = rng.get(PT_DIM_LIGHT_0);
+    u[1] = rng.get(PT_DIM_LIGHT_1);
+    u[2] = rng.get(PT_DIM_LIGHT_2);
     if (pick < params.p_env) {
         V3 wi, l;
         float pdf;
@@ -801,7 +911,7 @@ PTF V3 next_event(Rng& rng, const Surface& surf, const Shading& sh, V3 wo) {
         float bsdf_pdf;
         V3 f = bsdf_eval(surf, sh.ns, wo, wi, bsdf_pdf);
         if (is_zero(f) || dot(wi, sh.ng) <= 0.0f) return v3s(0.0f);
-        if (!visible(rng.s, offset(sh, wi), wi, inf())) return v3s(0.0f);
+        if (!visible(rng.rng.s, offset(sh, wi), wi, inf())) return v3s(0.0f);
         return f * l * (power_heuristic(pdf, bsdf_pdf) / pdf);
     }
     if (params.num_lights == 0u) return v3s(0.0f);
@@ -835,7 +945,7 @@ PTF V3 next_event(Rng& rng, const Surface& surf, const Shading& sh, V3 wo) {
     float pdf = (1.0f - params.p_env) * area_pdf * dist * dist / cos_l;
     if (is_zero(le) || !(pdf > 0.0f)) return v3s(0.0f);
     // Stop short of the light itself.
-    if (!visible(rng.s, from, wi, dist * (1.0f - 1e-4f) - params.eps)) return v3s(0.0f);
+    if (!visible(rng.rng.s, from, wi, dist * (1.0f - 1e-4f) - params.eps)) return v3s(0.0f);
     return f * le * (power_heuristic(pdf, bsdf_pdf) / pdf);
 }
 
@@ -843,10 +953,10 @@ PTF V3 next_event(Rng& rng, const Surface& surf, const Shading& sh, V3 wo) {
 #define PT_LUMENS_PER_WATT 683.0f
 
 // One punctual light, chosen uniformly, sampled exactly.
-PTF V3 punctual_light(Rng& rng, const Surface& surf, const Shading& sh, V3 wo) {
+PTF V3 punctual_light(Draws& rng, const Surface& surf, const Shading& sh, V3 wo) {
     u32 n = params.num_punctual;
     if (n == 0u) return v3s(0.0f);
-    float fi = rng.uniform() * (float)n;
+    float fi = rng.get(PT_DIM_PUNCTUAL) * (float)n;
     u32 i = fi > 0.0f ? (u32)fi : 0u;
     if (i > n - 1u) i = n - 1u;
     const Punctual& l = ptr<Punctual>(params.punctual)[i];
@@ -883,7 +993,7 @@ PTF V3 punctual_light(Rng& rng, const Surface& surf, const Shading& sh, V3 wo) {
     if (is_zero(f)) return v3s(0.0f);
     V3 from = offset(sh, wi);
     float tmax = finite_dist ? length(v3a(l.position) - from) * (1.0f - 1e-4f) : inf();
-    if (!visible(rng.s, from, wi, tmax)) return v3s(0.0f);
+    if (!visible(rng.rng.s, from, wi, tmax)) return v3s(0.0f);
     return f * e * (float)n;
 }
 
@@ -935,9 +1045,10 @@ extern "C" __global__ void __raygen__camera() {
     const u32 x = params.crop_x0 + idx.x, y = params.crop_y0 + idx.y;
     const u32 w = params.image_width, h = params.image_height;
     u32 pixel = idx.y * dim.x + idx.x;
-    Rng rng = rng_new(y * w + x, params.sample, 0x5eedu ^ (params.seed * 0x9E3779B9u));
-    float jx = rng.uniform();
-    float jy = rng.uniform();
+    const u32 salt = stream_salt();
+    Draws rng = draws_new(rng_new(y * w + x, params.sample, salt), y * w + x, params.sample, salt);
+    float jx = rng.get(PT_DIM_PIXEL);
+    float jy = rng.get(PT_DIM_PIXEL + 1u);
     // Filter importance sampling: the offset from the pixel's centre follows the filter.
     float ox = 0.5f + filter_offset(jx);
     float oy = 0.5f + filter_offset(jy);
@@ -946,7 +1057,7 @@ extern "C" __global__ void __raygen__camera() {
     V3 dir = normalize(v3a(params.cam_forward) + v3a(params.cam_right) * sx +
                        v3a(params.cam_up) * sy);
     PathState s;
-    s.seed = rng.s;
+    s.seed = rng.rng.s;
     s.done = 0u;
     s.depth = 0u;
     s.pdf = 0.0f;
@@ -989,7 +1100,10 @@ extern "C" __global__ void __closesthit__radiance() {
     if (params.aov != 0ull && s.depth == 0u) write_aov(m, sh);
     V3 dir = from_f3(optixGetWorldRayDirection());
     V3 wo = -dir;
-    Rng rng{s.seed};
+    const uint3 idx = optixGetLaunchIndex();
+    const u32 px = params.crop_x0 + idx.x, py = params.crop_y0 + idx.y;
+    Draws rng = draws_new(Rng{s.seed}, py * params.image_width + px, params.sample, stream_salt());
+    rng.base = PT_DIM_CAMERA + s.depth * PT_DIM_PER_VERTEX;
     V3 thr = s.throughput;
     V3 rad = s.radiance;
 
@@ -1022,9 +1136,9 @@ extern "C" __global__ void __closesthit__radiance() {
             rad = rad + thr * next_event(rng, surf, sh, wo);
             rad = rad + thr * punctual_light(rng, surf, sh, wo);
         }
-        float u0 = rng.uniform();
-        float u1 = rng.uniform();
-        float u2 = rng.uniform();
+        float u0 = rng.get(PT_DIM_BSDF_0);
+        float u1 = rng.get(PT_DIM_BSDF_1);
+        float u2 = rng.get(PT_DIM_BSDF_2);
         BsdfSample b;
         if (bsdf_sample(surf, sh.ns, wo, sh.front, u0, u1, u2, b) &&
             (surf.dielectric || dot(b.wi, sh.ng) > 0.0f)) {
@@ -1034,7 +1148,7 @@ extern "C" __global__ void __closesthit__radiance() {
             s.direction = b.wi;
             if (s.depth >= params.roulette_depth) {
                 float q = clampf(max_element(thr), 0.05f, 1.0f);
-                if (rng.uniform() >= q) {
+                if (rng.get(PT_DIM_ROULETTE) >= q) {
                     s.done = 1u;
                 } else {
                     thr = thr / q;
@@ -1045,7 +1159,7 @@ extern "C" __global__ void __closesthit__radiance() {
             s.done = 1u;
         }
     }
-    s.seed = rng.s;
+    s.seed = rng.rng.s;
     s.radiance = rad;
     s.throughput = thr;
     store_payload(s);

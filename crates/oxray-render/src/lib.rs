@@ -32,7 +32,7 @@
 //! use glam::Vec3;
 //! use oxray_render::lights::Environment;
 //! use oxray_render::filter::Filter;
-//! use oxray_render::{render, RenderOptions};
+//! use oxray_render::{render, RenderOptions, Sampler};
 //!
 //! let scene = oxray_scene::cornell_box();
 //! let opts = RenderOptions {
@@ -44,6 +44,7 @@
 //!     filter: Filter::Gaussian,
 //!     roulette_depth: 3,
 //!     seed: 0,
+//!     sampler: Sampler::Sobol, // Owen-scrambled Sobol points ([`sampler`])
 //!     aovs: false,
 //!     crop: None, // the whole image ([`crop`]: a window of it)
 //!     shutter: None, // no motion blur ([`motion`]: a shutter over the scene's animation)
@@ -74,6 +75,7 @@ pub mod motion;
 pub mod output;
 pub mod programs;
 pub mod renderer;
+pub mod sampler;
 pub mod texture;
 pub mod tonemap;
 
@@ -93,6 +95,7 @@ use thiserror::Error;
 
 pub use output::Image;
 pub use renderer::{Aovs, Progress, Rendered, Renderer};
+pub use sampler::Sampler;
 
 /// Render settings.
 #[derive(Clone, Debug)]
@@ -115,6 +118,9 @@ pub struct RenderOptions {
     /// Chooses the random sequence: renders with the same seed are identical, renders with
     /// different seeds independent (0 is the default sequence).
     pub seed: u32,
+    /// Where the random numbers come from: Owen-scrambled Sobol points (the default, lower
+    /// error at equal samples) or independent ones ([`sampler`]).
+    pub sampler: sampler::Sampler,
     /// Also render the first hit's auxiliary images ([`Aovs`]: albedo, shading normal,
     /// distance, samples), returned by [`Renderer::render`] and [`render_passes`].
     pub aovs: bool,
@@ -132,8 +138,8 @@ pub struct RenderOptions {
 
 impl Default for RenderOptions {
     /// 640 x 480 pixels, 16 samples per pixel, paths of up to 8 vertices, the scene's camera,
-    /// the Gaussian pixel filter, Russian roulette after 3 vertices, seed 0, no AOVs, the whole
-    /// image, no motion blur.
+    /// the Gaussian pixel filter, Russian roulette after 3 vertices, seed 0, the Sobol
+    /// sampler, no AOVs, the whole image, no motion blur.
     fn default() -> Self {
         RenderOptions {
             width: 640,
@@ -144,6 +150,7 @@ impl Default for RenderOptions {
             filter: filter::Filter::default(),
             roulette_depth: 3,
             seed: 0,
+            sampler: sampler::Sampler::default(),
             aovs: false,
             crop: None,
             shutter: None,
@@ -611,6 +618,7 @@ pub fn render_passes(
             filter: &prep.filter,
             roulette_depth: prep.roulette_depth,
             seed: opts.seed,
+            sampler: opts.sampler,
             aov: aov.as_ref(),
             window: [window.x0(), window.y0()],
             image: [opts.width, opts.height],

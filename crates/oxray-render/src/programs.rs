@@ -6,6 +6,7 @@
 use super::bsdf::{hash, Rng, Surface};
 use super::filter::sample_offset;
 use super::lights::{Environment, TriangleLights};
+use super::sampler::{dim, Draws, Sampler};
 use super::texture::sample;
 use glam::{Vec2, Vec3, Vec4};
 use oxray::{
@@ -66,6 +67,8 @@ pub struct Params<'a> {
     pub roulette_depth: u32,
     /// Chooses the image's random sequence (0: the default one).
     pub seed: u32,
+    /// Where the random numbers come from ([`crate::sampler`]).
+    pub sampler: Sampler,
     /// Sums per pixel of the first hit's albedo, shading normal and distance, and the number
     /// of samples that hit ([`AOV_WORDS`] floats), or `None`.
     pub aov: Option<&'a OutputBuffer<[f32; AOV_WORDS]>>,
@@ -391,7 +394,14 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
     }
     let dir = ctx.world_ray_direction();
     let wo = -dir;
-    let mut rng = Rng(s.seed);
+    let mut rng = {
+        let [lx, ly, _] = ctx.launch_index();
+        let (x, y) = (p.window[0] + lx, p.window[1] + ly);
+        let pixel = y * p.image[0] + x;
+        let mut d = Draws::new(p.sampler, Rng(s.seed), pixel, p.sample, stream_salt(p.seed));
+        d.base = dim::vertex(s.depth);
+        d
+    };
     let mut thr = Vec3::from(s.throughput);
     let mut rad = Vec3::from(s.radiance);
 
@@ -443,12 +453,8 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
             rad += thr * next_event(ctx, &mut rng, &surf, &sh, wo)?;
             rad += thr * punctual_light(ctx, &mut rng, &surf, &sh, wo)?;
         }
-        match surf.sample(
-            sh.ns,
-            wo,
-            sh.front,
-            [rng.uniform(), rng.uniform(), rng.uniform()],
-        ) {
+        let u = dim::BSDF.map(|k| rng.get(k));
+        match surf.sample(sh.ns, wo, sh.front, u) {
             Some(b) if surf.dielectric || b.wi.dot(sh.ng) > 0.0 => {
                 thr *= b.weight;
                 s.pdf = b.pdf;
@@ -456,7 +462,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
                 s.direction = b.wi.to_array();
                 if s.depth >= p.roulette_depth {
                     let q = thr.max_element().clamp(0.05, 1.0);
-                    if rng.uniform() >= q {
+                    if rng.get(dim::ROULETTE) >= q {
                         s.done = 1;
                     } else {
                         thr /= q;
@@ -469,7 +475,7 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
             _ => s.done = 1,
         }
     }
-    s.seed = rng.0;
+    s.seed = rng.rng.0;
     s.radiance = rad.to_array();
     s.throughput = thr.to_array();
     store(&s, |i, w| ctx.set_payload(i, w));
@@ -479,14 +485,14 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
 /// One light sample (a triangle or the environment) with its MIS weight against BSDF sampling.
 fn next_event(
     ctx: &ClosestHitCtx<Params>,
-    rng: &mut Rng,
+    rng: &mut Draws,
     surf: &Surface,
     sh: &Shading,
     wo: Vec3,
 ) -> Result<Vec3, oxray::Interrupt> {
     let p = ctx.params();
-    let pick = rng.uniform();
-    let u = [rng.uniform(), rng.uniform(), rng.uniform()];
+    let pick = rng.get(dim::LIGHT_PICK);
+    let u = dim::LIGHT.map(|k| rng.get(k));
     if pick < p.p_env {
         let Some((wi, l, pdf)) = p.env.sample([u[0], u[1]]) else {
             return Ok(Vec3::ZERO);
@@ -496,7 +502,7 @@ fn next_event(
         if f == Vec3::ZERO || wi.dot(sh.ng) <= 0.0 {
             return Ok(Vec3::ZERO);
         }
-        if !visible(ctx, rng.0, offset(p, sh, wi), wi, f32::INFINITY)? {
+        if !visible(ctx, rng.rng.0, offset(p, sh, wi), wi, f32::INFINITY)? {
             return Ok(Vec3::ZERO);
         }
         return Ok(f * l * (power_heuristic(pdf, bsdf_pdf) / pdf));
@@ -532,7 +538,7 @@ fn next_event(
         return Ok(Vec3::ZERO);
     }
     // Stop short of the light itself.
-    if !visible(ctx, rng.0, from, wi, dist * (1.0 - 1e-4) - p.eps)? {
+    if !visible(ctx, rng.rng.0, from, wi, dist * (1.0 - 1e-4) - p.eps)? {
         return Ok(Vec3::ZERO);
     }
     Ok(f * le * (power_heuristic(pdf, bsdf_pdf) / pdf))
@@ -546,7 +552,7 @@ const LUMENS_PER_WATT: f32 = 683.0;
 /// never find it, so there is nothing to weigh it against).
 fn punctual_light(
     ctx: &ClosestHitCtx<Params>,
-    rng: &mut Rng,
+    rng: &mut Draws,
     surf: &Surface,
     sh: &Shading,
     wo: Vec3,
@@ -556,7 +562,7 @@ fn punctual_light(
     if lights.is_empty() {
         return Ok(Vec3::ZERO);
     }
-    let i = ((rng.uniform() * lights.len() as f32) as usize).min(lights.len() - 1);
+    let i = ((rng.get(dim::PUNCTUAL) * lights.len() as f32) as usize).min(lights.len() - 1);
     let l = &lights[i];
     let (wi, dist, mut e) = match l.kind {
         LightKind::Directional => (-l.direction, f32::INFINITY, l.intensity),
@@ -601,7 +607,7 @@ fn punctual_light(
     } else {
         f32::INFINITY
     };
-    if !visible(ctx, rng.0, from, wi, tmax)? {
+    if !visible(ctx, rng.rng.0, from, wi, tmax)? {
         return Ok(Vec3::ZERO);
     }
     Ok(f * e * lights.len() as f32)
@@ -618,10 +624,17 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             // camera ray; the sums go to the window's pixel.
             let (x, y) = (p.window[0] + lx, p.window[1] + ly);
             let [w, h] = p.image;
-            let mut rng = Rng::new(y * w + x, p.sample, stream_salt(p.seed));
+            let (index, salt) = (y * w + x, stream_salt(p.seed));
+            let mut rng = Draws::new(
+                p.sampler,
+                Rng::new(index, p.sample, salt),
+                index,
+                p.sample,
+                salt,
+            );
             let pixel = ly * lw + lx;
             // Filter importance sampling: the offset from the pixel's centre follows the filter.
-            let (jx, jy) = (rng.uniform(), rng.uniform());
+            let (jx, jy) = (rng.get(dim::PIXEL), rng.get(dim::PIXEL + 1));
             let ox = 0.5 + sample_offset(p.filter, jx);
             let oy = 0.5 + sample_offset(p.filter, jy);
             let sx = 2.0 * (x as f32 + ox) / w as f32 - 1.0;
@@ -630,9 +643,9 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             let dir = (c.forward + c.right * sx + c.up * sy).normalize();
             // The path's time, drawn after the pixel's offsets so that a render without motion
             // keeps its random sequence.
-            let time = p.shutter.map_or(0.0, |s| s.time(rng.uniform()));
+            let time = p.shutter.map_or(0.0, |s| s.time(rng.get(dim::TIME)));
             let mut s = PathState {
-                seed: rng.0,
+                seed: rng.rng.0,
                 throughput: [1.0; 3],
                 origin: c.origin.to_array(),
                 direction: dir.to_array(),

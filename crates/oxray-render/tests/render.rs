@@ -423,12 +423,14 @@ fn mirrored_instances_keep_their_front_faces_and_emission_side() {
         let img = render(scene, &black(), &opts(4, 4, 1, 2), |_| {}).unwrap();
         img.pixels[5][0]
     };
+    // From above: nothing but a numerical residue (the Sobol sampler's numbers find one of
+    // about 4e-10 in one pixel, independent ones none).
     assert_eq!(seen_from(-3.0, &mut scene), 2.0);
-    assert_eq!(seen_from(3.0, &mut scene), 0.0);
+    assert!(seen_from(3.0, &mut scene) < 1e-6);
     // Unmirrored: the same.
     scene.instances[0].transform = glam::Mat4::IDENTITY;
     assert_eq!(seen_from(-3.0, &mut scene), 2.0);
-    assert_eq!(seen_from(3.0, &mut scene), 0.0);
+    assert!(seen_from(3.0, &mut scene) < 1e-6);
 }
 
 #[test]
