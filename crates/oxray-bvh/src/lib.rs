@@ -45,6 +45,7 @@ pub mod sbvh;
 pub mod serialize;
 pub mod sphere;
 mod stats;
+pub mod transfer;
 pub mod triangle;
 pub mod triangle4;
 pub mod wide;
@@ -65,6 +66,7 @@ pub use motion::GasMotion;
 pub use sbvh::{build_sbvh2, SpatialSplits};
 pub use sphere::Sphere;
 pub use stats::BvhStats;
+pub use transfer::SlotPrimitives;
 pub use triangle4::Triangle4;
 pub use wide::WideNode;
 

@@ -379,16 +379,6 @@ impl GasData {
                 self.bounds = refit_curve_boxes(self);
             }
         }
-        if !self.sbt_offsets.is_empty() {
-            let mut at = 0;
-            for input in inputs {
-                let n = input.num_primitives() as usize;
-                let offsets = input.sbt_index_offsets();
-                for (p, o) in self.sbt_offsets[at..at + n].iter_mut().enumerate() {
-                    *o = offsets.map_or(0, |o| o.get(p));
-                }
-                at += n;
-            }
-        }
+        self.update_sbt_offsets(inputs);
     }
 }

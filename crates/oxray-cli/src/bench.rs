@@ -207,6 +207,99 @@ pub fn run(
     Ok(res)
 }
 
+/// What the life of a structure costs on a device (guide §5.6–§5.8): an updatable build, its
+/// refit against a rebuild, its memory before and after compaction, saving and loading.
+#[derive(Clone, Debug, Default)]
+pub struct LifeResult {
+    /// Median ms of a build with `ALLOW_UPDATE | ALLOW_COMPACTION`.
+    pub updatable_build_ms: f64,
+    /// Median ms of an update (refit) of that structure with moved vertices.
+    pub refit_ms: f64,
+    /// Median ms of a build with no flags (on a GPU: the device's builder).
+    pub rebuild_ms: f64,
+    /// Bytes of the updatable structure as built.
+    pub built_bytes: usize,
+    /// Its emitted compacted size.
+    pub compacted_bytes: u64,
+    /// Median ms of saving it to bytes, and of loading them back with every check.
+    pub save_ms: f64,
+    /// See `save_ms`.
+    pub load_ms: f64,
+}
+
+/// Measures [`LifeResult`] for a mesh on `device`, `runs` times each.
+pub fn life(
+    device: &oxray::Device,
+    mesh: &Mesh,
+    runs: usize,
+) -> Result<LifeResult, Box<dyn std::error::Error>> {
+    let flags = BuildFlags::ALLOW_UPDATE | BuildFlags::ALLOW_COMPACTION;
+    let timed = |f: &mut dyn FnMut() -> Result<(), Box<dyn std::error::Error>>| {
+        let mut ts = Vec::with_capacity(runs);
+        for _ in 0..runs {
+            let t = Instant::now();
+            f()?;
+            ts.push(t.elapsed().as_secs_f64() * 1e3);
+        }
+        Ok::<f64, Box<dyn std::error::Error>>(median(ts))
+    };
+    let updatable_build_ms = timed(&mut || {
+        build_gas_on(device, mesh, flags)?;
+        Ok(())
+    })?;
+    let rebuild_ms = timed(&mut || {
+        build_gas_on(device, mesh, BuildFlags::empty())?;
+        Ok(())
+    })?;
+    let mut gas = build_gas_on(device, mesh, flags)?;
+    let built_bytes = gas.memory().output_bytes;
+    let compacted_bytes = match gas.emit_property(oxray::AccelProperty::CompactedSize)? {
+        oxray::EmittedProperty::CompactedSize(s) => s,
+        _ => 0,
+    };
+    // Two poses, a small wave apart, alternated so that every update moves the vertices.
+    let (c, r) = center_radius(mesh);
+    let wave: Vec<[f32; 3]> = mesh
+        .positions
+        .iter()
+        .map(|&p| {
+            let p = Vec3::from(p);
+            (p + Vec3::new(((p - c).y * 9.0 / r).sin(), 0.0, 0.0) * (0.01 * r)).to_array()
+        })
+        .collect();
+    let poses = [&wave, &mesh.positions];
+    let update = BuildOptions {
+        operation: oxray::BuildOperation::Update,
+        ..BuildOptions::new(flags)
+    };
+    let mut k = 0;
+    let refit_ms = timed(&mut || {
+        k += 1;
+        let input = oxray::TriangleInput::new(oxray::VertexBuffer::f32x3(poses[k % 2]))
+            .indices(oxray::IndexBuffer::u32x3(&mesh.triangles));
+        device.update_gas(&mut gas, &update, &[input.into()])?;
+        Ok(())
+    })?;
+    let mut bytes = Vec::new();
+    let save_ms = timed(&mut || {
+        bytes = gas.to_bytes()?;
+        Ok(())
+    })?;
+    let load_ms = timed(&mut || {
+        device.load_gas(&bytes)?;
+        Ok(())
+    })?;
+    Ok(LifeResult {
+        updatable_build_ms,
+        refit_ms,
+        rebuild_ms,
+        built_bytes,
+        compacted_bytes,
+        save_ms,
+        load_ms,
+    })
+}
+
 /// The ray sets of a benchmark: primary (camera), diffuse and shadow rays.
 pub use oxray_testkit::rays::BenchRays;
 

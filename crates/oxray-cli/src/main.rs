@@ -857,6 +857,35 @@ fn run(cli: Cli) -> Result<()> {
                     100.0 * r.hit_rate[2]
                 );
             }
+            // The life of a structure (guide §5.6-5.8) on the benchmark's device.
+            let on = device.clone().unwrap_or_default();
+            say("")?;
+            say(format_args!(
+                "structure life on {} (ALLOW_UPDATE | ALLOW_COMPACTION)",
+                pool.install(|| on.describe())
+            ))?;
+            say(format_args!("| mesh | tris | updatable build ms | refit ms | rebuild ms (no flags) | rebuild/refit | B/triangle as built | B/triangle compacted | save ms | load ms |"))?;
+            say(format_args!(
+                "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+            ))?;
+            for (name, mesh) in &sets {
+                let r = pool
+                    .install(|| bench::life(&on, mesh, runs).map_err(|e| e.to_string()))
+                    .map_err(anyhow::Error::msg)?;
+                let n = mesh.triangles.len().max(1) as f64;
+                say(format_args!(
+                    "| {name} | {} | {:.2} | {:.3} | {:.2} | {:.1}x | {:.1} | {:.1} | {:.2} | {:.2} |",
+                    mesh.triangles.len(),
+                    r.updatable_build_ms,
+                    r.refit_ms,
+                    r.rebuild_ms,
+                    r.rebuild_ms / r.refit_ms.max(1e-9),
+                    r.built_bytes as f64 / n,
+                    r.compacted_bytes as f64 / n,
+                    r.save_ms,
+                    r.load_ms
+                ))?;
+            }
             if let (Some(n), Some((name, mesh))) = (instances, sets.first()) {
                 if n == 0 || n > 1 << 28 {
                     bail!("--instances must be in 1..=2^28, got {n}");

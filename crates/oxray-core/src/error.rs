@@ -573,6 +573,9 @@ pub enum LoadError {
     /// The device cannot hold this structure (yet).
     #[error("{0} is not supported by this backend")]
     Unsupported(&'static str),
+    /// The device failed while the structure was copied to or from its memory.
+    #[error("device error: {0}")]
+    Device(String),
 }
 
 impl LoadError {

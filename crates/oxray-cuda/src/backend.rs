@@ -14,6 +14,7 @@ use oxray_core::{
     AccelBackend, BackendKind, BatchKind, BuildError, BuildInput, BuildOptions, Hit, QueryError,
     Ray, TraversableHandle,
 };
+use std::sync::Arc;
 
 /// The CUDA backend: one device, its compiled kernels, a node layout for the GASes it builds
 /// and where it builds them.
@@ -64,6 +65,11 @@ impl Cuda {
     pub fn with_builder(mut self, builder: GasBuilder) -> Self {
         self.builder = builder;
         self
+    }
+
+    /// The node layout triangle GASes are uploaded in.
+    pub fn layout(&self) -> NodeLayout {
+        self.layout
     }
 
     /// Where triangle GASes are built.
@@ -228,6 +234,39 @@ impl AccelBackend for Cuda {
             return Err(BuildError::Unsupported(MOTION_UNSUPPORTED));
         }
         CudaIas::upload(&self.ctx, data, &tree)
+    }
+
+    fn update_gas(
+        &self,
+        gas: &mut Arc<CudaGas>,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        if let Some(g) = Arc::get_mut(gas) {
+            return g.update(options, inputs);
+        }
+        // Shared: checked before the copy, so that a refused update copies nothing.
+        gas.meta.check_update(options, inputs)?;
+        let mut copy = gas.duplicate().map_err(build_error)?;
+        copy.update(options, inputs)?;
+        *gas = Arc::new(copy);
+        Ok(())
+    }
+
+    fn update_ias(
+        &self,
+        ias: &mut Arc<CudaIas>,
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        if let Some(i) = Arc::get_mut(ias) {
+            return i.update(options, inputs);
+        }
+        ias.data().check_update(options, inputs)?;
+        let mut copy = ias.duplicate()?;
+        copy.update(options, inputs)?;
+        *ias = Arc::new(copy);
+        Ok(())
     }
 
     fn intersect_closest(

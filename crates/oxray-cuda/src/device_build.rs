@@ -186,10 +186,12 @@ pub(crate) struct BuildKernels {
     scan_down: CudaFunction,
     write_nodes: CudaFunction,
     write_triangles: CudaFunction,
+    pub(crate) refit_triangles: CudaFunction,
+    pub(crate) refit_nodes: CudaFunction,
 }
 
 /// Every kernel entry of [`BUILD_SOURCE`].
-pub const BUILD_ENTRIES: [&str; 17] = [
+pub const BUILD_ENTRIES: [&str; 19] = [
     "oxray_build_bounds",
     "oxray_build_morton32",
     "oxray_build_morton64",
@@ -207,6 +209,8 @@ pub const BUILD_ENTRIES: [&str; 17] = [
     "oxray_scan_down",
     "oxray_build_write_nodes",
     "oxray_build_write_triangles",
+    "oxray_refit_triangles",
+    "oxray_refit_nodes",
 ];
 
 /// NVRTC options of the builder: the trace kernels' (no FMA contraction, which the degeneracy
@@ -267,6 +271,8 @@ impl BuildKernels {
             scan_down: f("oxray_scan_down")?,
             write_nodes: f("oxray_build_write_nodes")?,
             write_triangles: f("oxray_build_write_triangles")?,
+            refit_triangles: f("oxray_refit_triangles")?,
+            refit_nodes: f("oxray_refit_nodes")?,
         })
     }
 }
@@ -454,6 +460,99 @@ pub fn build_triangles(
     if n > MAX_SLOTS {
         return Err(CudaError::TooLarge(format!("{n} triangles; at most {MAX_SLOTS}")).into());
     }
+    let kernels = ctx.build_kernels()?;
+    let prepare_start = start.elapsed().as_secs_f64() * 1e3;
+    let d_inputs = upload_inputs(ctx, &prepared.inputs, inputs)?;
+    let prepare_ms = prepare_start + d_inputs.prepare_ms;
+    let upload_ms = start.elapsed().as_secs_f64() * 1e3 - prepare_ms;
+    let s = &ctx.stream;
+
+    let timing = |what| driver(what);
+    let t0 = s.record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT));
+    let t0 = t0.map_err(timing("recording an event"))?;
+    let result = run_kernels(ctx, kernels, &d_inputs.table, d_inputs.count, n, config)?;
+    let t1 = s
+        .record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT))
+        .map_err(timing("recording an event"))?;
+    let kernels_ms = t0.elapsed_ms(&t1).map_err(timing("reading an event"))? as f64;
+    drop(d_inputs);
+
+    // The slot table: the sorted triangle ids, resolved on the host.
+    let mut ids = vec![0u32; result.active];
+    if result.active > 0 {
+        s.memcpy_dtoh(&result.values.slice(..result.active), &mut ids[..])
+            .map_err(driver("copying the slot table to the host"))?;
+    }
+    ctx.synchronize()?;
+    drop(result.values);
+    let slots: Vec<SlotInfo> = ids
+        .par_iter()
+        .with_min_len(1 << 14)
+        .map(|&g| {
+            let (primitive_index, sbt_gas_index, build_input) = prepared.resolve_global(g);
+            SlotInfo {
+                primitive_index,
+                sbt_gas_index,
+                build_input,
+            }
+        })
+        .collect();
+    prepared.bounds = result.bounds;
+    // Device builds are never updatable: only an update reads the inputs' shapes.
+    prepared.shapes = Vec::new();
+    let info = GasInfo {
+        kind: prepared.kind(),
+        build_flags: prepared.build_flags,
+        num_primitives: prepared.num_primitives,
+        num_active_primitives: result.active as u32,
+        num_build_inputs: prepared.inputs.len(),
+        record_flags: prepared.record_flags.clone(),
+        bounds: result.bounds,
+        stats: result.stats,
+    };
+    let gas = CudaGas::from_device_build(
+        ctx,
+        result.nodes,
+        result.num_nodes,
+        result.triangles,
+        slots,
+        info,
+        prepared,
+    );
+    let total_ms = start.elapsed().as_secs_f64() * 1e3;
+    Ok((
+        gas,
+        BuildTimes {
+            prepare_ms,
+            upload_ms,
+            kernels_ms,
+            total_ms,
+        },
+    ))
+}
+
+/// The inputs' vertices and indices in device memory and their table of `InputDesc`s (8 words
+/// each): what the build and update kernels fetch triangles through.
+pub(crate) struct DeviceInputs {
+    /// The buffers the table points into, kept until the kernels that read them are done.
+    _buffers: Vec<CudaSlice<u8>>,
+    /// The `InputDesc` table.
+    pub(crate) table: CudaSlice<u32>,
+    /// Entries of the table.
+    pub(crate) count: u32,
+    /// Host milliseconds spent converting formats before the copies.
+    pub(crate) prepare_ms: f64,
+}
+
+/// Copies the triangle inputs to the device (in place where the device reads their format,
+/// converted on the host otherwise; see [`Staged`]), `records` giving each input's first global
+/// triangle. Returns when the copies are done.
+pub(crate) fn upload_inputs(
+    ctx: &CudaContext,
+    records: &[oxray_bvh::InputRecord],
+    inputs: &[BuildInput<'_>],
+) -> Result<DeviceInputs, CudaError> {
+    let start = Instant::now();
     let staged: Vec<Staged<'_>> = inputs
         .par_iter()
         .map(|i| match i {
@@ -461,15 +560,12 @@ pub fn build_triangles(
             _ => Staged::Soup(Vec::new()),
         })
         .collect();
-    let kernels = ctx.build_kernels()?;
     let prepare_ms = start.elapsed().as_secs_f64() * 1e3;
-
-    // Inputs to the device, and their table.
     let s = &ctx.stream;
     let up = || driver("copying build inputs to the device");
     let mut buffers: Vec<CudaSlice<u8>> = Vec::new();
     let mut table: Vec<u32> = Vec::with_capacity(8 * inputs.len());
-    for (input, st) in prepared.inputs.iter().zip(&staged) {
+    for (input, st) in records.iter().zip(&staged) {
         let (v, vstride, ix, istride): (&[u8], u32, Option<&[u8]>, u32) = match st {
             Staged::Direct {
                 vertices,
@@ -513,73 +609,18 @@ pub fn build_triangles(
             0,
         ]);
     }
-    let d_inputs = s.clone_htod(&table[..]).map_err(up())?;
+    if table.is_empty() {
+        table.resize(8, 0);
+    }
+    let d_table = s.clone_htod(&table[..]).map_err(up())?;
     drop(staged);
     ctx.synchronize()?;
-    let upload_ms = start.elapsed().as_secs_f64() * 1e3 - prepare_ms;
-
-    let timing = |what| driver(what);
-    let t0 = s.record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT));
-    let t0 = t0.map_err(timing("recording an event"))?;
-    let result = run_kernels(ctx, kernels, &d_inputs, inputs.len() as u32, n, config)?;
-    let t1 = s
-        .record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT))
-        .map_err(timing("recording an event"))?;
-    let kernels_ms = t0.elapsed_ms(&t1).map_err(timing("reading an event"))? as f64;
-    drop(buffers);
-    drop(d_inputs);
-
-    // The slot table: the sorted triangle ids, resolved on the host.
-    let mut ids = vec![0u32; result.active];
-    if result.active > 0 {
-        s.memcpy_dtoh(&result.values.slice(..result.active), &mut ids[..])
-            .map_err(driver("copying the slot table to the host"))?;
-    }
-    ctx.synchronize()?;
-    drop(result.values);
-    let slots: Vec<SlotInfo> = ids
-        .par_iter()
-        .with_min_len(1 << 14)
-        .map(|&g| {
-            let (primitive_index, sbt_gas_index, build_input) = prepared.resolve_global(g);
-            SlotInfo {
-                primitive_index,
-                sbt_gas_index,
-                build_input,
-            }
-        })
-        .collect();
-    prepared.bounds = result.bounds;
-    let info = GasInfo {
-        kind: prepared.kind(),
-        build_flags: prepared.build_flags,
-        num_primitives: prepared.num_primitives,
-        num_active_primitives: result.active as u32,
-        num_build_inputs: prepared.inputs.len(),
-        record_flags: prepared.record_flags.clone(),
-        bounds: result.bounds,
-        stats: result.stats,
-    };
-    let record_flags = prepared.record_flags.iter().map(|f| f.bits()).collect();
-    let gas = CudaGas::from_device_build(
-        ctx,
-        result.nodes,
-        result.num_nodes,
-        result.triangles,
-        slots,
-        info,
-        record_flags,
-    );
-    let total_ms = start.elapsed().as_secs_f64() * 1e3;
-    Ok((
-        gas,
-        BuildTimes {
-            prepare_ms,
-            upload_ms,
-            kernels_ms,
-            total_ms,
-        },
-    ))
+    Ok(DeviceInputs {
+        _buffers: buffers,
+        table: d_table,
+        count: records.len() as u32,
+        prepare_ms,
+    })
 }
 
 /// What the kernels leave: the layout's arrays and what the host keeps of the build.

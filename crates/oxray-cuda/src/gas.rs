@@ -244,26 +244,31 @@ pub(crate) fn check_batch(len: usize) -> Result<(), CudaError> {
 /// queries refuse it ([`CudaError::CustomPrimitives`]).
 #[derive(Debug)]
 pub struct CudaGas {
-    ctx: CudaContext,
-    kind: GasKind,
-    layout: NodeLayout,
-    nodes: CudaSlice<u32>,
-    triangles: CudaSlice<u32>,
-    slots: Vec<SlotInfo>,
-    info: GasInfo,
-    num_nodes: usize,
-    device_bytes: usize,
+    pub(crate) ctx: CudaContext,
+    pub(crate) kind: GasKind,
+    pub(crate) layout: NodeLayout,
+    pub(crate) nodes: CudaSlice<u32>,
+    pub(crate) triangles: CudaSlice<u32>,
+    pub(crate) slots: Vec<SlotInfo>,
+    pub(crate) info: GasInfo,
+    pub(crate) num_nodes: usize,
+    pub(crate) device_bytes: usize,
     /// Which builder made the tree.
-    builder: GasBuilder,
+    pub(crate) builder: GasBuilder,
     /// Buffers of the one-call queries, kept between calls (grown as batches grow) so that a
     /// call allocates and page-faults nothing once warm.
-    scratch: Mutex<Scratch>,
+    pub(crate) scratch: Mutex<Scratch>,
     /// Geometry flags of each SBT record (by SBT-GAS index).
-    record_flags: Vec<u32>,
+    pub(crate) record_flags: Vec<u32>,
     /// What a pipeline's traversal reads, made on first use ([`CudaGas::optix_handle`]).
-    program_view: Mutex<Option<ProgramView>>,
+    pub(crate) program_view: Mutex<Option<ProgramView>>,
     /// The curve type of each leaf slot of a curve GAS (empty otherwise): a hit's kind.
-    curve_types: Vec<CurveType>,
+    pub(crate) curve_types: Vec<CurveType>,
+    /// The structure's tables without its tree and primitives ([`GasData::skeleton`]): the
+    /// inputs' records and shapes, SBT offsets, counts and lineage, for updates and saving.
+    pub(crate) meta: GasData,
+    /// What a device update needs (structures built with `ALLOW_UPDATE`).
+    pub(crate) refit: Option<crate::refit::RefitPlan>,
 }
 
 /// The device tables a pipeline's traversal reads beyond the query kernels' (slot
@@ -321,6 +326,28 @@ impl ProgramView {
             _descriptor: descriptor,
             address,
         })
+    }
+}
+
+impl ProgramView {
+    /// Writes `words` over table `index` in place (the same length as it was uploaded with),
+    /// so that handles given out stay valid after an update.
+    pub(crate) fn rewrite_table(
+        &mut self,
+        ctx: &CudaContext,
+        index: usize,
+        words: &[u32],
+    ) -> Result<(), CudaError> {
+        let Some(t) = self._tables.get_mut(index) else {
+            return Ok(());
+        };
+        if words.is_empty() || words.len() > t.len() {
+            return Ok(());
+        }
+        ctx.stream
+            .memcpy_htod(words, &mut t.slice_mut(..words.len()))
+            .map_err(driver("updating a traversal table"))?;
+        ctx.synchronize()
     }
 }
 
@@ -627,6 +654,7 @@ impl CudaGas {
             .stream
             .clone_htod(&tri_words[..])
             .map_err(driver("copying triangles to the device"))?;
+        let refit = crate::refit::RefitPlan::for_upload(ctx, gas, &host.nodes, host.layout)?;
         ctx.synchronize()?;
         Ok(CudaGas {
             ctx: ctx.clone(),
@@ -643,6 +671,8 @@ impl CudaGas {
             record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
             program_view: Mutex::new(None),
             curve_types: Vec::new(),
+            meta: gas.skeleton(),
+            refit,
         })
     }
 
@@ -695,6 +725,7 @@ impl CudaGas {
             .stream
             .clone_htod(&words[..])
             .map_err(driver("copying primitives to the device"))?;
+        let refit = crate::refit::RefitPlan::for_upload(ctx, gas, &nodes_host, NodeLayout::Bvh2)?;
         ctx.synchronize()?;
         Ok(CudaGas {
             ctx: ctx.clone(),
@@ -711,6 +742,8 @@ impl CudaGas {
             record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
             program_view: Mutex::new(None),
             curve_types: Vec::new(),
+            meta: gas.skeleton(),
+            refit,
         })
     }
 
@@ -723,7 +756,7 @@ impl CudaGas {
         triangles: CudaSlice<u32>,
         slots: Vec<SlotInfo>,
         info: GasInfo,
-        record_flags: Vec<u32>,
+        meta: GasData,
     ) -> CudaGas {
         CudaGas {
             ctx: ctx.clone(),
@@ -737,9 +770,11 @@ impl CudaGas {
             slots,
             info,
             scratch: Mutex::new(Scratch::default()),
-            record_flags,
+            record_flags: meta.record_flags.iter().map(|f| f.bits()).collect(),
             program_view: Mutex::new(None),
             curve_types: Vec::new(),
+            meta,
+            refit: None,
         }
     }
 
@@ -1102,6 +1137,10 @@ impl Traversable for CudaGas {
 
     fn backend(&self) -> BackendKind {
         BackendKind::Cuda
+    }
+
+    fn lineage(&self) -> Option<u64> {
+        Some(self.meta.lineage)
     }
 
     fn describe(&self) -> String {

@@ -28,6 +28,8 @@ pub struct CudaIas {
     instances: CudaSlice<u32>,
     /// The instances, boxes and flags, in slot order (it keeps the children alive too).
     data: IasData,
+    /// The top-level binary tree the device nodes were made from (refit by updates).
+    tree: Bvh2,
     /// The child of every slot (`None`: null), for resolving hits and making handles.
     children: Vec<Option<CudaChild>>,
     /// Whether every child is a triangle GAS (or null): what the batched query kernels trace.
@@ -48,33 +50,7 @@ impl CudaIas {
     ///
     /// [`StaticTransform`]: oxray_core::StaticTransform
     pub fn upload(ctx: &CudaContext, data: IasData, tree: &Bvh2) -> Result<CudaIas, BuildError> {
-        let mut children = Vec::with_capacity(data.instances.len());
-        let mut refs = Vec::with_capacity(data.instances.len());
-        let mut addresses: std::collections::HashMap<usize, (u64, u64)> = Default::default();
-        let mut queryable = true;
-        for (slot, inst) in data.instances.iter().enumerate() {
-            let child = resolve_child(ctx, &inst.child, Some(inst.index))?;
-            let child = child.filter(|_| inst.mask != 0);
-            let gas = child.as_ref().and_then(CudaChild::triangle_gas);
-            queryable &= child.is_none() || gas.is_some();
-            refs.push(gas.map(|gas| {
-                // Many instances share a child: its addresses are looked up once (each lookup
-                // records a stream event).
-                let key = std::sync::Arc::as_ptr(gas) as usize;
-                let addrs = *addresses.entry(key).or_insert_with(|| {
-                    let (n, t) = gas.device_arrays();
-                    let (nodes_addr, _n) = n.device_ptr(&ctx.stream);
-                    let (triangles_addr, _t) = t.device_ptr(&ctx.stream);
-                    (nodes_addr, triangles_addr)
-                });
-                ChildRef {
-                    index: slot as u32,
-                    nodes_addr: addrs.0,
-                    triangles_addr: addrs.1,
-                }
-            }));
-            children.push(child);
-        }
+        let (children, refs, queryable) = resolve_children(ctx, &data)?;
         let host = IasLayout::new(&data, tree, &refs).map_err(BuildError::Device)?;
         let upload = |words: &[u32], what: &'static str| {
             let words: &[u32] = if words.is_empty() { &[0; 4] } else { words };
@@ -93,11 +69,114 @@ impl CudaIas {
             instances,
             device_bytes: host.device_bytes(),
             data,
+            tree: tree.clone(),
             children,
             queryable,
             scratch: Mutex::new(Scratch::default()),
             program_view: Mutex::new(None),
         })
+    }
+
+    /// Updates (refits) the IAS in place (guide §5.6): new transforms, ids, SBT offsets, masks
+    /// and flags for the same instances over the same children, where a child may be an update
+    /// of the structure the IAS was built over (its new bounds and device arrays are taken).
+    /// The rules are those of [`IasData::update`], with its typed errors; on an error nothing
+    /// has changed. The instance boxes and the top-level tree's boxes are recomputed on the
+    /// host (an IAS is small) and written over the device's copies, so the handle a pipeline
+    /// got stays valid.
+    pub fn update(
+        &mut self,
+        options: &oxray_core::BuildOptions,
+        inputs: &[oxray_core::BuildInput<'_>],
+    ) -> Result<(), BuildError> {
+        let mut data = self.data.clone();
+        data.update(options, inputs)?;
+        let (children, refs, queryable) = resolve_children(&self.ctx, &data)?;
+        let mut tree = self.tree.clone();
+        tree.refit(|first, count| {
+            data.boxes
+                .get(first as usize..(first + count) as usize)
+                .unwrap_or(&[])
+                .iter()
+                .fold(Aabb::EMPTY, |a, b| a.union(b))
+        });
+        let host = IasLayout::new(&data, &tree, &refs).map_err(BuildError::Device)?;
+        let dev = |e: CudaError| BuildError::Device(e.to_string());
+        if host.nodes.len() > self.nodes.len() || host.instances.len() > self.instances.len() {
+            return Err(BuildError::Device(
+                "the updated IAS does not fit its device arrays".into(),
+            ));
+        }
+        // The instance records a pipeline reads, before anything changes.
+        let records = match self
+            .program_view
+            .get_mut()
+            .unwrap_or_else(|e| e.into_inner())
+        {
+            Some(_) => Some(instance_records(&data, &children).map_err(dev)?),
+            None => None,
+        };
+        let s = &self.ctx.stream;
+        if !host.nodes.is_empty() {
+            s.memcpy_htod(
+                &host.nodes[..],
+                &mut self.nodes.slice_mut(..host.nodes.len()),
+            )
+            .map_err(driver("copying IAS nodes to the device"))
+            .map_err(dev)?;
+        }
+        if !host.instances.is_empty() {
+            s.memcpy_htod(
+                &host.instances[..],
+                &mut self.instances.slice_mut(..host.instances.len()),
+            )
+            .map_err(driver("copying instances to the device"))
+            .map_err(dev)?;
+        }
+        self.ctx.synchronize().map_err(dev)?;
+        if let (Some(records), Some(view)) = (
+            records,
+            self.program_view
+                .get_mut()
+                .unwrap_or_else(|e| e.into_inner())
+                .as_mut(),
+        ) {
+            view.rewrite_table(&self.ctx, 0, &records).map_err(dev)?;
+        }
+        self.data = data;
+        self.tree = tree;
+        self.children = children;
+        self.queryable = queryable;
+        Ok(())
+    }
+
+    /// The emitted property `COMPACTED_SIZE` (guide §5.8): the device bytes of the compacted
+    /// IAS (its own; the children are their own); `None` unless built with `ALLOW_COMPACTION`.
+    pub fn compacted_size(&self) -> Option<usize> {
+        self.data
+            .build_flags
+            .contains(oxray_core::BuildFlags::ALLOW_COMPACTION)
+            .then_some(self.device_bytes)
+    }
+
+    /// A copy of the IAS in new device memory over the same children: what an update of an IAS
+    /// that is shared writes into.
+    pub fn duplicate(&self) -> Result<CudaIas, BuildError> {
+        CudaIas::upload(&self.ctx, self.data.clone(), &self.tree)
+    }
+
+    /// The compacted IAS (guide §5.8): the same instances over the same children, exactly
+    /// sized (device IASes are exactly sized from the start). Refused without
+    /// `ALLOW_COMPACTION`.
+    pub fn compact(&self) -> Result<CudaIas, BuildError> {
+        CudaIas::upload(&self.ctx, self.data.compact()?, &self.tree)
+    }
+
+    /// An IAS given as host data ([`IasData::from_bytes`], over children that live on this
+    /// device) uploaded to the device: its binary tree is made from the data's 4-wide one.
+    pub fn from_data(ctx: &CudaContext, data: IasData) -> Result<CudaIas, BuildError> {
+        let tree = Bvh2::from_wide(&data.bvh.nodes);
+        CudaIas::upload(ctx, data, &tree)
     }
 
     /// The `OptixTraversableHandle` of this IAS for programs of a [`CudaPipeline`](crate::CudaPipeline):
@@ -109,14 +188,7 @@ impl CudaIas {
         if let Some(v) = view.as_ref() {
             return Ok(v.address);
         }
-        let mut info = Vec::with_capacity(INSTANCE_RECORD_WORDS * self.data.instances.len());
-        for (slot, inst) in self.data.instances.iter().enumerate() {
-            let child = match self.children.get(slot).and_then(|c| c.as_ref()) {
-                Some(c) => c.optix_handle()?,
-                None => 0,
-            };
-            info.extend_from_slice(&instance_record(inst, child));
-        }
+        let info = instance_records(&self.data, &self.children)?;
         let (nodes, _g1) = self.nodes.device_ptr(&self.ctx.stream);
         let (insts, _g2) = self.instances.device_ptr(&self.ctx.stream);
         let v = ProgramView::upload(
@@ -321,6 +393,56 @@ impl CudaIas {
     }
 }
 
+/// The device view of every instance's child: the children (`None`: null or masked out), the
+/// query kernels' references to triangle GASes, and whether every child is one (or null).
+#[allow(clippy::type_complexity)]
+fn resolve_children(
+    ctx: &CudaContext,
+    data: &IasData,
+) -> Result<(Vec<Option<CudaChild>>, Vec<Option<ChildRef>>, bool), BuildError> {
+    let mut children = Vec::with_capacity(data.instances.len());
+    let mut refs = Vec::with_capacity(data.instances.len());
+    let mut addresses: std::collections::HashMap<usize, (u64, u64)> = Default::default();
+    let mut queryable = true;
+    for (slot, inst) in data.instances.iter().enumerate() {
+        let child = resolve_child(ctx, &inst.child, Some(inst.index))?;
+        let child = child.filter(|_| inst.mask != 0);
+        let gas = child.as_ref().and_then(CudaChild::triangle_gas);
+        queryable &= child.is_none() || gas.is_some();
+        refs.push(gas.map(|gas| {
+            // Many instances share a child: its addresses are looked up once (each lookup
+            // records a stream event).
+            let key = std::sync::Arc::as_ptr(gas) as usize;
+            let addrs = *addresses.entry(key).or_insert_with(|| {
+                let (n, t) = gas.device_arrays();
+                let (nodes_addr, _n) = n.device_ptr(&ctx.stream);
+                let (triangles_addr, _t) = t.device_ptr(&ctx.stream);
+                (nodes_addr, triangles_addr)
+            });
+            ChildRef {
+                index: slot as u32,
+                nodes_addr: addrs.0,
+                triangles_addr: addrs.1,
+            }
+        }));
+        children.push(child);
+    }
+    Ok((children, refs, queryable))
+}
+
+/// The instance records of every slot, as pipelines read them.
+fn instance_records(data: &IasData, children: &[Option<CudaChild>]) -> Result<Vec<u32>, CudaError> {
+    let mut info = Vec::with_capacity(INSTANCE_RECORD_WORDS * data.instances.len());
+    for (slot, inst) in data.instances.iter().enumerate() {
+        let child = match children.get(slot).and_then(|c| c.as_ref()) {
+            Some(c) => c.optix_handle()?,
+            None => 0,
+        };
+        info.extend_from_slice(&instance_record(inst, child));
+    }
+    Ok(info)
+}
+
 /// Words of an instance record as pipelines read it (`__oxray_Instance`: 128 bytes).
 pub(crate) const INSTANCE_RECORD_WORDS: usize = 32;
 
@@ -365,6 +487,10 @@ impl Traversable for CudaIas {
 
     fn backend(&self) -> BackendKind {
         BackendKind::Cuda
+    }
+
+    fn lineage(&self) -> Option<u64> {
+        Some(self.data.lineage)
     }
 
     fn describe(&self) -> String {

@@ -47,6 +47,8 @@ mod layout;
 mod program;
 #[cfg(test)]
 mod reference;
+mod refit;
+mod relocate;
 mod transform;
 
 pub use backend::{Cuda, CudaBatch};

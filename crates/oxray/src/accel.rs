@@ -151,8 +151,8 @@ impl Gas {
     }
 
     /// A property of the built structure (guide §5.8): its compacted size (needs
-    /// `ALLOW_COMPACTION`; [`BuildError::CompactionNotAllowed`] without it) or its box. The
-    /// CUDA backend emits the box and refuses the compacted size with `Unsupported`.
+    /// `ALLOW_COMPACTION`; [`BuildError::CompactionNotAllowed`] without it) or its box, on
+    /// every device.
     pub fn emit_property(&self, property: AccelProperty) -> Result<EmittedProperty, BuildError> {
         match property {
             // One box per motion key (guide §5.10.2); the CUDA backend has no motion.
@@ -167,22 +167,20 @@ impl Gas {
                     .compacted_size()
                     .map(|s| EmittedProperty::CompactedSize(s as u64))
                     .ok_or(BuildError::CompactionNotAllowed),
-                {
-                    let _ = g;
-                    Err(BuildError::Unsupported("compaction on the CUDA backend"))
-                }
+                g.compacted_size()
+                    .map(|s| EmittedProperty::CompactedSize(s as u64))
+                    .ok_or(BuildError::CompactionNotAllowed)
             ),
         }
     }
 
     /// Saves the structure as bytes (versioned and checksummed) that
-    /// [`Device::load_gas`] loads back into a structure with bit-identical hits. The CUDA
-    /// backend refuses with `Unsupported`.
+    /// [`Device::load_gas`] loads back on any device. On the CPU the loaded structure gives
+    /// bit-identical hits; a structure saved from a GPU is read back from its memory and
+    /// assembled into the CPU's layout, so its hits are the same up to which of two primitives
+    /// at exactly the same distance is reported (`docs/gpu-backend.md`).
     pub fn to_bytes(&self) -> Result<Vec<u8>, LoadError> {
-        on_gas!(self, g => Ok(g.data().to_bytes()), {
-            let _ = g;
-            Err(LoadError::Unsupported("saving a GAS of the CUDA backend"))
-        })
+        on_gas!(self, g => Ok(g.data().to_bytes()), Ok(g.to_data()?.to_bytes()))
     }
 
     /// Closest hits of a batch on the structure's device; the same hits on every device and
@@ -372,14 +370,10 @@ impl Ias {
         self.data().build_flags
     }
 
-    /// Saves the IAS without its children; [`Device::load_ias`] loads it back over children
-    /// given by instance index. The CUDA backend refuses with `Unsupported`.
+    /// Saves the IAS without its children; [`Device::load_ias`] loads it back, on any
+    /// device, over children given by instance index.
     pub fn to_bytes(&self) -> Result<Vec<u8>, LoadError> {
-        match &self.0 {
-            IasRepr::Cpu(i) => Ok(i.data().to_bytes()),
-            #[cfg(feature = "cuda")]
-            IasRepr::Cuda(_) => Err(LoadError::Unsupported("saving an IAS of the CUDA backend")),
-        }
+        Ok(self.data().to_bytes())
     }
 
     /// Bytes of the IAS's own tables (its children are not counted).
@@ -388,19 +382,17 @@ impl Ias {
     }
 
     /// A property of the built IAS (guide §5.8): its compacted size (needs
-    /// `ALLOW_COMPACTION`) or its box. The CUDA backend refuses the compacted size with
-    /// `Unsupported`.
+    /// `ALLOW_COMPACTION`; on a GPU, its device tables' bytes) or its box.
     pub fn emit_property(&self, property: AccelProperty) -> Result<EmittedProperty, BuildError> {
         match property {
             AccelProperty::Aabbs => Ok(EmittedProperty::Aabbs(vec![self.bounds()])),
-            AccelProperty::CompactedSize => match self.device_kind() {
-                BackendKind::Cpu => self
-                    .data()
-                    .compacted_size()
-                    .map(|s| EmittedProperty::CompactedSize(s as u64))
-                    .ok_or(BuildError::CompactionNotAllowed),
-                _ => Err(BuildError::Unsupported("compaction on the CUDA backend")),
-            },
+            AccelProperty::CompactedSize => on_ias!(
+                self,
+                i => i.data().compacted_size(),
+                i.compacted_size()
+            )
+            .map(|s| EmittedProperty::CompactedSize(s as u64))
+            .ok_or(BuildError::CompactionNotAllowed),
         }
     }
 

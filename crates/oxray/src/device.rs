@@ -232,8 +232,9 @@ impl Device {
     /// shares it (a clone, a handle, an IAS built over it) it is copy-on-write: `gas` then
     /// refers to the updated copy and the sharers keep the old structure — as in OptiX, an IAS
     /// over the GAS must itself be updated ([`update_ias`](Self::update_ias), with instances of
-    /// `gas.handle()`) or rebuilt to see the change. The CUDA backend refuses with
-    /// `Unsupported`.
+    /// `gas.handle()`) or rebuilt to see the change. On a GPU the refit runs on the device
+    /// (a structure in the BVH4 node layout is refused with `Unsupported`), with the hits of
+    /// the CPU's update of the same build.
     ///
     /// ```
     /// use oxray::{BuildFlags, BuildOperation, BuildOptions, Device, Ray, TriangleInput, VertexBuffer};
@@ -273,7 +274,7 @@ impl Device {
     /// instance transforms, ids, SBT offsets, masks and flags for the same number of
     /// instances over the same children — where a child is an update of the structure the IAS
     /// was built over (see [`update_gas`](Self::update_gas)), its new bounds are taken. In
-    /// place or copy-on-write as `update_gas`. The CUDA backend refuses with `Unsupported`.
+    /// place or copy-on-write as `update_gas`, on every device.
     pub fn update_ias(
         &self,
         ias: &mut Ias,
@@ -293,8 +294,8 @@ impl Device {
 
     /// Compacts a GAS built with `ALLOW_COMPACTION` (`optixAccelCompact`, guide §5.8): a new
     /// structure of [`AccelProperty::CompactedSize`](oxray_core::AccelProperty::CompactedSize) bytes with the same hits, independent of
-    /// the source. It can be traced, updated (if built with `ALLOW_UPDATE`) and saved. The CUDA
-    /// backend refuses with `Unsupported`.
+    /// the source. It can be traced, updated (if built with `ALLOW_UPDATE`) and saved. A GPU's
+    /// structures are exactly sized when built, so there it is an exact copy.
     ///
     /// ```
     /// use oxray::{AccelProperty, BuildFlags, BuildOptions, Device, EmittedProperty, TriangleInput, VertexBuffer};
@@ -315,8 +316,8 @@ impl Device {
                 oxray_cpu::Gas::from(g.data().compact()?),
             )))),
             #[cfg(feature = "cuda")]
-            (DeviceRepr::Cuda(_), GasRepr::Cuda(_)) => {
-                Err(BuildError::Unsupported("compaction on the CUDA backend"))
+            (DeviceRepr::Cuda(_), GasRepr::Cuda(g)) => {
+                Ok(Gas::from_repr(GasRepr::Cuda(Arc::new(g.compact()?))))
             }
             #[cfg(feature = "cuda")]
             _ => Err(BuildError::Unsupported(
@@ -325,16 +326,15 @@ impl Device {
         }
     }
 
-    /// Compacts an IAS built with `ALLOW_COMPACTION` (guide §5.8), over the same children. The
-    /// CUDA backend refuses with `Unsupported`.
+    /// Compacts an IAS built with `ALLOW_COMPACTION` (guide §5.8), over the same children.
     pub fn compact_ias(&self, ias: &Ias) -> Result<Ias, BuildError> {
         match (&self.repr, ias.repr()) {
             (DeviceRepr::Cpu(_), IasRepr::Cpu(i)) => Ok(Ias::from_repr(IasRepr::Cpu(Arc::new(
                 oxray_cpu::Ias::from_data(i.data().compact()?)?,
             )))),
             #[cfg(feature = "cuda")]
-            (DeviceRepr::Cuda(_), IasRepr::Cuda(_)) => {
-                Err(BuildError::Unsupported("compaction on the CUDA backend"))
+            (DeviceRepr::Cuda(_), IasRepr::Cuda(i)) => {
+                Ok(Ias::from_repr(IasRepr::Cuda(Arc::new(i.compact()?))))
             }
             #[cfg(feature = "cuda")]
             _ => Err(BuildError::Unsupported(
@@ -345,8 +345,12 @@ impl Device {
 
     /// Loads a GAS saved by [`Gas::to_bytes`] into this device's memory. The bytes are checked
     /// before use (format, version, checksum, every size and index), so that damaged or
-    /// hostile bytes give a typed [`LoadError`]; the structure traces bit-identical hits. The
-    /// CUDA backend refuses with `Unsupported`.
+    /// hostile bytes give a typed [`LoadError`]. Bytes saved on any device load on any device
+    /// (beyond guide §5.7: OptiX relocates only between buffers of one device). Loaded on the
+    /// device it was saved from the structure traces bit-identical hits on the CPU; on another
+    /// device, the same hits up to which of two primitives at exactly the same distance is
+    /// reported (a GPU derives its binary tree from the saved 4-wide one). A structure with
+    /// motion keys has no GPU layout yet: [`LoadError::Unsupported`] there.
     ///
     /// ```
     /// use oxray::{BuildOptions, Device, Ray, TriangleInput, VertexBuffer};
@@ -367,34 +371,45 @@ impl Device {
                 oxray_cpu::Gas::from(oxray_bvh::GasData::from_bytes(bytes)?),
             )))),
             #[cfg(feature = "cuda")]
-            DeviceRepr::Cuda(_) => Err(LoadError::Unsupported("loading a GAS on the CUDA backend")),
+            DeviceRepr::Cuda(b) => {
+                let data = oxray_bvh::GasData::from_bytes(bytes)?;
+                let gas = oxray_cuda::CudaGas::from_data(b.context(), &data, b.layout()).map_err(
+                    |e| match e {
+                        oxray_cuda::CudaError::Unsupported(what) => LoadError::Unsupported(what),
+                        other => LoadError::Device(other.to_string()),
+                    },
+                )?;
+                Ok(Gas::from_repr(GasRepr::Cuda(Arc::new(gas))))
+            }
         }
     }
 
     /// Loads an IAS saved by [`Ias::to_bytes`] over `children`, one per instance by instance
     /// index — the structures it was built over or copies of them (loaded, compacted), as
     /// OptiX's relocation takes one relocated traversable per instance (guide §5.7); the
-    /// saved world boxes are kept. Children must live on this device. The CUDA backend refuses
-    /// with `Unsupported`.
+    /// saved world boxes are kept. Children must live on this device (an IAS saved on one
+    /// device loads on another over children loaded there).
     pub fn load_ias(&self, bytes: &[u8], children: &[TraversableHandle]) -> Result<Ias, LoadError> {
+        let data = oxray_bvh::IasData::from_bytes(bytes, children)?;
+        let child_error = |e: BuildError| match e {
+            BuildError::ForeignTraversable { instance, .. } => LoadError::Child {
+                instance,
+                reason: e.to_string(),
+            },
+            other => LoadError::Child {
+                instance: 0,
+                reason: other.to_string(),
+            },
+        };
         match &self.repr {
             DeviceRepr::Cpu(_) => {
-                let data = oxray_bvh::IasData::from_bytes(bytes, children)?;
-                let ias = oxray_cpu::Ias::from_data(data).map_err(|e| match e {
-                    BuildError::ForeignTraversable { instance, .. } => LoadError::Child {
-                        instance,
-                        reason: e.to_string(),
-                    },
-                    other => LoadError::Child {
-                        instance: 0,
-                        reason: other.to_string(),
-                    },
-                })?;
+                let ias = oxray_cpu::Ias::from_data(data).map_err(child_error)?;
                 Ok(Ias::from_repr(IasRepr::Cpu(Arc::new(ias))))
             }
             #[cfg(feature = "cuda")]
-            DeviceRepr::Cuda(_) => {
-                Err(LoadError::Unsupported("loading an IAS on the CUDA backend"))
+            DeviceRepr::Cuda(b) => {
+                let ias = oxray_cuda::CudaIas::from_data(b.context(), data).map_err(child_error)?;
+                Ok(Ias::from_repr(IasRepr::Cuda(Arc::new(ias))))
             }
         }
     }

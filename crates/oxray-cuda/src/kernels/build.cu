@@ -683,3 +683,88 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     fetch(in, n_in, values[s], p);
     for (int k = 0; k < 3; ++k) out[3 * (size_t)s + k] = make_float4(p[k].x, p[k].y, p[k].z, 0.0f);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Updates (refits, guide §5.6) of a GAS in the binary layout: the same tree and slots, new
+// primitives. `src/refit.rs` launches them.
+//
+//   oxray_refit_triangles  per leaf slot: its triangle fetched again from the inputs, written as
+//                          the layout's three float4, NaN where the CPU's degeneracy rule makes
+//                          it inactive (no ray hits NaN), as `GasData::update` writes it.
+//   oxray_refit_nodes      one launch per depth of the tree, deepest first, one thread per node:
+//                          a leaf child's box from its slots, an inner child's as the union of
+//                          that node's two boxes (written by the launch before). fminf / fmaxf
+//                          skip NaN, so inactive triangles add nothing, as on the CPU.
+
+extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
+    oxray_refit_triangles(const InputDesc* __restrict__ in, u32 n_in,
+                          const u32* __restrict__ slot_prim, u32 n_slots,
+                          float4* __restrict__ out) {
+    const u32 s = blockIdx.x * BUILD_BLOCK + threadIdx.x;
+    if (s >= n_slots) return;
+    const u32 g = slot_prim[s];
+    if (g == NO_NODE) return;
+    float3 p[3];
+    fetch(in, n_in, g, p);
+    if (degenerate(p)) {
+        const float nan = __int_as_float(0x7fc00000);
+        for (int k = 0; k < 3; ++k) out[3 * (size_t)s + k] = make_float4(nan, nan, nan, 0.0f);
+    } else {
+        for (int k = 0; k < 3; ++k)
+            out[3 * (size_t)s + k] = make_float4(p[k].x, p[k].y, p[k].z, 0.0f);
+    }
+}
+
+extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
+    oxray_refit_nodes(u32* __restrict__ nodes, const u32* __restrict__ order, u32 begin, u32 count,
+                      const float4* __restrict__ prims, u32 triangles) {
+    const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
+    if (i >= count) return;
+    u32* w = nodes + 16 * (size_t)order[begin + i];
+    float* f = reinterpret_cast<float*>(w);
+    for (int k = 0; k < 2; ++k) {
+        const u32 child = w[12 + k], n = w[14 + k];
+        float lo[3] = {F32_INF, F32_INF, F32_INF};
+        float hi[3] = {-F32_INF, -F32_INF, -F32_INF};
+        if (n > 0) {
+            for (u32 s = child; s < child + n; ++s) {
+                if (triangles) {
+                    for (int v = 0; v < 3; ++v) {
+                        const float4 p = prims[3 * (size_t)s + v];
+                        lo[0] = fminf(lo[0], p.x);
+                        lo[1] = fminf(lo[1], p.y);
+                        lo[2] = fminf(lo[2], p.z);
+                        hi[0] = fmaxf(hi[0], p.x);
+                        hi[1] = fmaxf(hi[1], p.y);
+                        hi[2] = fmaxf(hi[2], p.z);
+                    }
+                } else {
+                    const float4 a = prims[2 * (size_t)s], b = prims[2 * (size_t)s + 1];
+                    lo[0] = fminf(lo[0], a.x);
+                    lo[1] = fminf(lo[1], a.y);
+                    lo[2] = fminf(lo[2], a.z);
+                    hi[0] = fmaxf(hi[0], b.x);
+                    hi[1] = fmaxf(hi[1], b.y);
+                    hi[2] = fmaxf(hi[2], b.z);
+                }
+            }
+        } else if (child != NO_NODE) {
+            const float* c = reinterpret_cast<const float*>(nodes + 16 * (size_t)child);
+            lo[0] = fminf(c[0], c[4]);
+            hi[0] = fmaxf(c[1], c[5]);
+            lo[1] = fminf(c[2], c[6]);
+            hi[1] = fmaxf(c[3], c[7]);
+            lo[2] = fminf(c[8], c[10]);
+            hi[2] = fmaxf(c[9], c[11]);
+        } else {
+            continue;
+        }
+        // Rows: l0.x h0.x l0.y h0.y | l1.x h1.x l1.y h1.y | l0.z h0.z l1.z h1.z (layout.rs).
+        f[4 * k] = lo[0];
+        f[4 * k + 1] = hi[0];
+        f[4 * k + 2] = lo[1];
+        f[4 * k + 3] = hi[1];
+        f[8 + 2 * k] = lo[2];
+        f[9 + 2 * k] = hi[2];
+    }
+}
