@@ -161,7 +161,11 @@ impl IasData {
         }
         options.motion.validate_for_structure()?;
         let list = instance_list(inputs)?;
-        let keep_inactive = options.flags.contains(BuildFlags::ALLOW_UPDATE);
+        // An update may give an instance that cannot be hit now a box, and random instance
+        // access (guide §13.12) reaches every instance: both keep a slot for each.
+        let keep_inactive = options
+            .flags
+            .intersects(BuildFlags::ALLOW_UPDATE | BuildFlags::ALLOW_RANDOM_INSTANCE_ACCESS);
         let records: Vec<InstanceData> = list
             .par_iter()
             .enumerate()

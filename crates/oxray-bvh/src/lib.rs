@@ -39,6 +39,7 @@ pub mod ias;
 pub mod memory;
 pub mod motion;
 mod poly;
+pub mod random_access;
 mod refit;
 mod ribbon;
 pub mod sbvh;
@@ -63,6 +64,7 @@ pub use gas::{
 pub use ias::{IasData, InstanceData};
 pub use memory::{compute_memory_usage, AccelBufferSizes};
 pub use motion::GasMotion;
+pub use random_access::NO_SLOT;
 pub use sbvh::{build_sbvh2, SpatialSplits};
 pub use sphere::Sphere;
 pub use stats::BvhStats;

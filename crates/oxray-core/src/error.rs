@@ -591,6 +591,47 @@ impl LoadError {
     }
 }
 
+/// Why a random access to a structure's primitives or instances (guide §13.9, §13.12) was
+/// refused. On OptiX these cases are undefined behaviour; here they are errors.
+#[derive(Debug, Error, Clone, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum RandomAccessError {
+    /// The structure was not built with the flag the access needs
+    /// (`ALLOW_RANDOM_VERTEX_ACCESS`, `ALLOW_RANDOM_INSTANCE_ACCESS`).
+    #[error("the structure was not built with {flag} (guide §13.9, §13.12)")]
+    NotAllowed {
+        /// The build flag.
+        flag: &'static str,
+    },
+    /// No build input holds that SBT-GAS index, or its primitives do not reach that index.
+    #[error("no primitive {primitive_index} under SBT-GAS index {sbt_gas_index} in this GAS")]
+    NoSuchPrimitive {
+        /// The primitive index asked (with the input's primitive index offset).
+        primitive_index: u32,
+        /// The SBT-GAS index asked.
+        sbt_gas_index: u32,
+    },
+    /// The GAS holds primitives of another kind than the access reads.
+    #[error("the GAS holds {holds}, not {asked}")]
+    WrongKind {
+        /// What the GAS holds.
+        holds: &'static str,
+        /// What the access reads.
+        asked: &'static str,
+    },
+    /// The IAS has no instance of that index.
+    #[error("no instance {index}: the IAS has {count}")]
+    NoSuchInstance {
+        /// The index asked.
+        index: u32,
+        /// Instances in the IAS.
+        count: u32,
+    },
+    /// The device failed while the data was read.
+    #[error("device error: {0}")]
+    Device(String),
+}
+
 /// Why a batched query was refused.
 #[derive(Debug, Error, Clone, PartialEq, Eq)]
 #[non_exhaustive]

@@ -48,7 +48,7 @@ pub use backend::{AccelBackend, BatchKind};
 pub use curve::{CurveEndcaps, CurveInput, CurveType};
 pub use error::{
     BufferKind, BuildError, ErrorCode, InputLocation, LaunchError, LoadError, PipelineError,
-    QueryError, UpdateRule,
+    QueryError, RandomAccessError, UpdateRule,
 };
 pub use exception::{Exception, ExceptionCode, ExceptionFlags};
 pub use handle::{

@@ -2,10 +2,11 @@
 //! memory, traversed in place.
 
 use crate::Isa;
-use oxray_bvh::{GasData, NodeWidth};
+use glam::Vec3;
+use oxray_bvh::{GasData, GasKind, NodeWidth};
 use oxray_core::{
-    Aabb, BackendKind, BuildError, BuildInput, BuildOptions, PrimitiveTypeFlags, Traversable,
-    TraversableKind,
+    Aabb, BackendKind, BuildError, BuildInput, BuildOptions, PrimitiveTypeFlags, RandomAccessError,
+    Traversable, TraversableKind,
 };
 use std::sync::Arc;
 
@@ -37,6 +38,9 @@ pub struct Gas {
     /// The pipeline flags of the curve types it holds (empty for other kinds), read by every
     /// trace that enters it (guide §9.1). Updates keep the curve types (§5.6).
     curve_types: PrimitiveTypeFlags,
+    /// The first leaf slot of every primitive, for random vertex access (guide §13.9): only
+    /// with `ALLOW_RANDOM_VERTEX_ACCESS`. Updates keep the slots (§5.6).
+    prim_slots: Option<Arc<Vec<u32>>>,
 }
 
 impl Gas {
@@ -73,10 +77,15 @@ impl Gas {
             .fold(PrimitiveTypeFlags::empty(), |f, s| {
                 f | s.curve_type().type_flag()
             });
+        let prim_slots = data
+            .build_flags
+            .contains(oxray_core::BuildFlags::ALLOW_RANDOM_VERTEX_ACCESS)
+            .then(|| Arc::new(data.primitive_slots()));
         Gas {
             data,
             isa,
             curve_types,
+            prim_slots,
         }
     }
 
@@ -115,6 +124,83 @@ impl Gas {
         inputs: &[BuildInput<'_>],
     ) -> Result<(), BuildError> {
         self.data.update(options, inputs)
+    }
+}
+
+/// Random vertex access (guide §13.9): the primitives of a GAS built with
+/// `ALLOW_RANDOM_VERTEX_ACCESS`, named as programs know them (the primitive index, with its
+/// input's offset, and the SBT-GAS index), at a time (interpolated between motion keys as
+/// traversal does). A primitive the builder left out (a degenerate triangle, a sphere without a
+/// positive radius) reads NaN. Programs written as Rust closures call these on the GAS they
+/// capture; CUDA C++ programs call the guide's `optixGet…FromHandle` functions.
+impl Gas {
+    fn random_slot(
+        &self,
+        asked: GasKind,
+        primitive_index: u32,
+        sbt_gas_index: u32,
+    ) -> Result<Option<usize>, RandomAccessError> {
+        let slots = self.prim_slots.as_deref().map_or(&[][..], |v| &v[..]);
+        self.data
+            .random_access_slot(slots, asked, primitive_index, sbt_gas_index)
+    }
+
+    /// `optixGetTriangleVertexDataFromHandle`: the object-space vertices of a triangle at
+    /// `time`.
+    ///
+    /// ```
+    /// use oxray_cpu::Gas;
+    /// use oxray_core::{BuildFlags, BuildOptions, TriangleInput, VertexBuffer};
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let input = TriangleInput::new(VertexBuffer::f32x3(&v)).primitive_index_offset(5);
+    /// let gas = Gas::build(&BuildOptions::new(BuildFlags::ALLOW_RANDOM_VERTEX_ACCESS), &[input.into()])?;
+    /// assert_eq!(gas.triangle_vertex_data(5, 0, 0.0).unwrap()[1].x, 1.0);
+    /// assert!(gas.triangle_vertex_data(4, 0, 0.0).is_err());
+    /// # Ok::<(), oxray_core::BuildError>(())
+    /// ```
+    #[doc(alias = "optixGetTriangleVertexDataFromHandle")]
+    pub fn triangle_vertex_data(
+        &self,
+        primitive_index: u32,
+        sbt_gas_index: u32,
+        time: f32,
+    ) -> Result<[Vec3; 3], RandomAccessError> {
+        let slot = self.random_slot(GasKind::Triangles, primitive_index, sbt_gas_index)?;
+        Ok(slot
+            .and_then(|s| self.data.triangle_at(s, time))
+            .map_or([Vec3::NAN; 3], |t| t.map(Vec3::from)))
+    }
+
+    /// `optixGetSphereDataFromHandle`: a sphere's object-space centre and radius
+    /// `(x, y, z, r)` at `time`.
+    #[doc(alias = "optixGetSphereDataFromHandle")]
+    pub fn sphere_data(
+        &self,
+        primitive_index: u32,
+        sbt_gas_index: u32,
+        time: f32,
+    ) -> Result<[f32; 4], RandomAccessError> {
+        let slot = self.random_slot(GasKind::Spheres, primitive_index, sbt_gas_index)?;
+        Ok(slot
+            .and_then(|s| self.data.sphere_at(s, time))
+            .map_or([f32::NAN; 4], |s| s.to_array()))
+    }
+
+    /// `optixGetLinearCurveVertexDataFromHandle`, `…QuadraticBSpline…`, `…CubicBSpline…`,
+    /// `…CatmullRom…`, `…CubicBezier…`, their Rocaps variants and
+    /// `optixGetRibbonVertexDataFromHandle`: a curve segment's control points
+    /// `(x, y, z, radius)` at `time`, as many as its type has, then zeros.
+    #[doc(alias = "optixGetCubicBSplineVertexDataFromHandle")]
+    pub fn curve_vertex_data(
+        &self,
+        primitive_index: u32,
+        sbt_gas_index: u32,
+        time: f32,
+    ) -> Result<[[f32; 4]; 4], RandomAccessError> {
+        let slot = self.random_slot(GasKind::Curves, primitive_index, sbt_gas_index)?;
+        Ok(slot
+            .and_then(|s| self.data.curve_at(s, time))
+            .map_or([[f32::NAN; 4]; 4], |c| c.points))
     }
 }
 

@@ -269,6 +269,8 @@ pub struct CudaGas {
     pub(crate) meta: GasData,
     /// What a device update needs (structures built with `ALLOW_UPDATE`).
     pub(crate) refit: Option<crate::refit::RefitPlan>,
+    /// Each primitive's first leaf slot, for random vertex access (made on first use).
+    pub(crate) random_slots: std::sync::OnceLock<Vec<u32>>,
 }
 
 /// The device tables a pipeline's traversal reads beyond the query kernels' (slot
@@ -312,6 +314,10 @@ impl ProgramView {
         };
         let mut words = descriptor_words(kind, depth, count, nodes, prims, addr(0), addr(1));
         words[11] = types;
+        // A GAS's random vertex access table (`random` in `__oxray_Traversable`), if any.
+        let random = addr(2);
+        words[14] = random as u32;
+        words[15] = (random >> 32) as u32;
         let descriptor = ctx
             .stream
             .clone_htod(&words[..])
@@ -673,6 +679,7 @@ impl CudaGas {
             curve_types: Vec::new(),
             meta: gas.skeleton(),
             refit,
+            random_slots: Default::default(),
         })
     }
 
@@ -744,6 +751,7 @@ impl CudaGas {
             curve_types: Vec::new(),
             meta: gas.skeleton(),
             refit,
+            random_slots: Default::default(),
         })
     }
 
@@ -775,6 +783,7 @@ impl CudaGas {
             curve_types: Vec::new(),
             meta,
             refit: None,
+            random_slots: Default::default(),
         }
     }
 
@@ -830,7 +839,10 @@ impl CudaGas {
             self.record_flags.len() as u32,
             nodes,
             tris,
-            vec![slots, self.record_flags.clone()],
+            match self.random_access_words() {
+                Some(r) => vec![slots, self.record_flags.clone(), r],
+                None => vec![slots, self.record_flags.clone()],
+            },
         )?;
         let address = v.address;
         *view = Some(v);

@@ -102,7 +102,9 @@ impl DeviceLayout {
                     });
                 }
                 None => {
-                    triangles.extend_from_slice(&[0.0; 12]);
+                    // NaN, as the CPU's inactive lanes: no ray hits it, and a random vertex
+                    // access reads NaN (guide §13.9).
+                    triangles.extend_from_slice(&[f32::NAN; 12]);
                     slots.push(SlotInfo {
                         primitive_index: u32::MAX,
                         sbt_gas_index: 0,

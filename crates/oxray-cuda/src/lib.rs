@@ -45,6 +45,7 @@ mod gas;
 mod ias;
 mod layout;
 mod program;
+mod random_access;
 #[cfg(test)]
 mod reference;
 mod refit;

@@ -64,6 +64,7 @@ impl CudaGas {
             curve_types: self.curve_types.clone(),
             meta: self.meta.clone(),
             refit,
+            random_slots: self.random_slots.clone(),
         };
         self.ctx.synchronize()?;
         Ok(gas)
@@ -171,7 +172,7 @@ impl CudaGas {
     }
 
     /// The global primitive of every leaf slot ([`NO_PRIMITIVE`] for padding).
-    fn slot_globals(&self) -> Vec<u32> {
+    pub(crate) fn slot_globals(&self) -> Vec<u32> {
         if let Some(plan) = &self.refit {
             return plan.slot_prim.clone();
         }

@@ -4,8 +4,8 @@ use crate::device::Device;
 use oxray_bvh::{BvhStats, GasMemory};
 use oxray_core::{
     Aabb, AccelProperty, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind,
-    BuildOptions, EmittedProperty, GeometryFlags, Hit, LoadError, QueryError, Ray, Traversable,
-    TraversableHandle, TraversableKind,
+    BuildOptions, EmittedProperty, GeometryFlags, Hit, LoadError, QueryError, RandomAccessError,
+    Ray, Traversable, TraversableHandle, TraversableKind,
 };
 use std::sync::Arc;
 
@@ -134,6 +134,68 @@ impl Gas {
     /// The box around every active primitive (empty when there is none).
     pub fn bounds(&self) -> Aabb {
         on_gas!(self, g => g.bounds, g.info().bounds)
+    }
+
+    /// Random vertex access (`optixGetTriangleVertexDataFromHandle`, guide §13.9): the
+    /// object-space vertices of the triangle programs know as `primitive_index` (with its
+    /// input's offset) under `sbt_gas_index`, at `time`, on any device (a GPU's are read from
+    /// its memory). Needs `ALLOW_RANDOM_VERTEX_ACCESS`; a triangle the builder left out
+    /// (degenerate) reads NaN; what OptiX leaves undefined is a [`RandomAccessError`].
+    ///
+    /// ```
+    /// use oxray::{BuildFlags, BuildOptions, Device, TriangleInput, VertexBuffer};
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let options = BuildOptions::new(BuildFlags::ALLOW_RANDOM_VERTEX_ACCESS);
+    /// let gas = Device::cpu().build_gas(&options, &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()])?;
+    /// assert_eq!(gas.triangle_vertex_data(0, 0, 0.0)?[2].y, 1.0);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    #[doc(alias = "optixGetTriangleVertexDataFromHandle")]
+    pub fn triangle_vertex_data(
+        &self,
+        primitive_index: u32,
+        sbt_gas_index: u32,
+        time: f32,
+    ) -> Result<[glam::Vec3; 3], RandomAccessError> {
+        on_gas!(
+            self,
+            g => g.triangle_vertex_data(primitive_index, sbt_gas_index, time),
+            g.triangle_vertex_data(primitive_index, sbt_gas_index, time)
+                .map(|t| t.map(glam::Vec3::from))
+        )
+    }
+
+    /// Random vertex access to a sphere (`optixGetSphereDataFromHandle`, guide §13.9): its
+    /// centre and radius `(x, y, z, r)`; see [`triangle_vertex_data`](Self::triangle_vertex_data).
+    #[doc(alias = "optixGetSphereDataFromHandle")]
+    pub fn sphere_data(
+        &self,
+        primitive_index: u32,
+        sbt_gas_index: u32,
+        time: f32,
+    ) -> Result<[f32; 4], RandomAccessError> {
+        on_gas!(
+            self,
+            g => g.sphere_data(primitive_index, sbt_gas_index, time),
+            g.sphere_data(primitive_index, sbt_gas_index, time)
+        )
+    }
+
+    /// Random vertex access to a curve segment (the `optixGet…VertexDataFromHandle` functions
+    /// of curves, guide §13.9): its control points `(x, y, z, radius)`, as many as its type
+    /// has, then zeros; see [`triangle_vertex_data`](Self::triangle_vertex_data).
+    #[doc(alias = "optixGetCubicBSplineVertexDataFromHandle")]
+    pub fn curve_vertex_data(
+        &self,
+        primitive_index: u32,
+        sbt_gas_index: u32,
+        time: f32,
+    ) -> Result<[[f32; 4]; 4], RandomAccessError> {
+        on_gas!(
+            self,
+            g => g.curve_vertex_data(primitive_index, sbt_gas_index, time),
+            g.curve_vertex_data(primitive_index, sbt_gas_index, time)
+        )
     }
 
     /// Statistics of the BVH it was built with: nodes, depth, SAH cost.
@@ -353,6 +415,24 @@ impl Ias {
     /// The world box of every instance that can be hit.
     pub fn bounds(&self) -> Aabb {
         self.data().bounds
+    }
+
+    /// Random instance access (`optixGetInstanceTraversableFromIAS`, guide §13.12): the
+    /// instance of index `index` in the build input, with its transforms, id, SBT offset,
+    /// mask, flags and child. Needs `ALLOW_RANDOM_INSTANCE_ACCESS`.
+    ///
+    /// ```
+    /// use oxray::{BuildFlags, BuildOptions, Device, Instance, TraversableHandle};
+    /// let list = [Instance::new(TraversableHandle::NULL).instance_id(7)];
+    /// let options = BuildOptions::new(BuildFlags::ALLOW_RANDOM_INSTANCE_ACCESS);
+    /// let ias = Device::cpu().build_ias(&options, &[(&list[..]).into()])?;
+    /// assert_eq!(ias.instance(0)?.instance_id, 7);
+    /// assert!(ias.instance(1).is_err());
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    #[doc(alias = "optixGetInstanceTraversableFromIAS")]
+    pub fn instance(&self, index: u32) -> Result<&oxray_bvh::InstanceData, RandomAccessError> {
+        self.data().instance_by_index(index)
     }
 
     /// Levels of the traversable graph from this IAS down (an IAS over GASes is 2).

@@ -100,12 +100,12 @@ pub use oxray_core::{
     HitKind, IndexBuffer, IndexFormat, InputLocation, Instance, InstanceFlags, KeySample,
     LaunchError, LaunchReport, LoadError, LogLevel, MatrixMotionTransform, MotionFlags,
     MotionKeyRule, MotionOptions, MotionRule, PipelineCompileOptions, PipelineError,
-    PipelineLinkOptions, PrimitiveType, PrimitiveTypeFlags, QueryError, Ray, RayError, RayFlags,
-    RayRecord, SbtHeader, SbtIndexOffsets, SbtIndexSize, SbtRegion, ShaderBindingTable,
-    SphereInput, SrtData, SrtMotionTransform, StaticTransform, Transform, Traversable,
-    TraversableGraphFlags, TraversableHandle, TraversableKind, TriangleInput, UpdateRule,
-    VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID, MAX_PRIMITIVES_PER_GAS,
-    MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
+    PipelineLinkOptions, PrimitiveType, PrimitiveTypeFlags, QueryError, RandomAccessError, Ray,
+    RayError, RayFlags, RayRecord, SbtHeader, SbtIndexOffsets, SbtIndexSize, SbtRegion,
+    ShaderBindingTable, SphereInput, SrtData, SrtMotionTransform, StaticTransform, Transform,
+    Traversable, TraversableGraphFlags, TraversableHandle, TraversableKind, TriangleInput,
+    UpdateRule, VertexBuffer, VertexFormat, MAX_INSTANCES_PER_IAS, MAX_INSTANCE_ID,
+    MAX_PRIMITIVES_PER_GAS, MAX_SBT_OFFSET, MAX_SBT_RECORDS_PER_GAS, MAX_TRAVERSABLE_GRAPH_DEPTH,
 };
 
 pub use oxray_bvh::{

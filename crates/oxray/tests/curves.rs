@@ -12,8 +12,7 @@ use glam::Vec3;
 use oxray::bvh::GasData;
 use oxray::{
     BuildError, BuildInputKind, BuildOptions, CurveEndcaps, CurveInput, CurveType, Device,
-    ExceptionCode, HitKind, LaunchReport, PipelineCompileOptions, PipelineLinkOptions,
-    PrimitiveTypeFlags, Ray, RayFlags,
+    ExceptionCode, HitKind, LaunchReport, PrimitiveTypeFlags, Ray, RayFlags,
 };
 use oxray_testkit::rng::Rng;
 
@@ -550,29 +549,9 @@ fn the_curve_programs_compile_with_nvrtc() {
         }),
     ]
     .map(Result::unwrap);
-    let compile = PipelineCompileOptions {
-        num_payload_values: 8,
-        uses_primitive_type_flags: PrimitiveTypeFlags::ROUND_CUBIC_BSPLINE,
-        ..Default::default()
-    };
-    match oxray::cuda::compile_pipeline_ptx(
-        (9, 0),
-        &compile,
-        &PipelineLinkOptions::default(),
+    common::assert_compiles_with_nvrtc(
+        "the curve programs",
         &groups,
-    ) {
-        Ok(ptx) => assert!(ptx.contains(".entry"), "no kernel in the PTX"),
-        Err(e) => {
-            let nvrtc_missing = matches!(e, oxray::cuda::CudaError::NoNvrtc(_));
-            assert!(
-                nvrtc_missing,
-                "the curve programs do not compile for the GPU: {e}"
-            );
-            assert!(
-                std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
-                "OXRAY_REQUIRE_NVRTC is set but NVRTC fails: {e}"
-            );
-            println!("skipping: NVRTC is not available ({e})");
-        }
-    }
+        PrimitiveTypeFlags::ROUND_CUBIC_BSPLINE,
+    );
 }

@@ -11,8 +11,8 @@ use common::{name, on_every_device, Scene, ScenePrograms};
 use glam::Vec3;
 use oxray::{
     BuildInputKind, BuildOptions, Device, ExceptionCode, GeometryFlags, HitKind, Instance,
-    LaunchReport, PipelineCompileOptions, PipelineLinkOptions, PrimitiveTypeFlags, Ray, RayFlags,
-    SbtIndexOffsets, Sphere, SphereInput, Transform,
+    LaunchReport, PrimitiveTypeFlags, Ray, RayFlags, SbtIndexOffsets, Sphere, SphereInput,
+    Transform,
 };
 use oxray_testkit::rng::Rng;
 
@@ -418,29 +418,5 @@ fn the_sphere_programs_compile_with_nvrtc() {
         }),
     ]
     .map(Result::unwrap);
-    let compile = PipelineCompileOptions {
-        num_payload_values: 8,
-        uses_primitive_type_flags: PrimitiveTypeFlags::SPHERE,
-        ..Default::default()
-    };
-    match oxray::cuda::compile_pipeline_ptx(
-        (9, 0),
-        &compile,
-        &PipelineLinkOptions::default(),
-        &groups,
-    ) {
-        Ok(ptx) => assert!(ptx.contains(".entry"), "no kernel in the PTX"),
-        Err(e) => {
-            let nvrtc_missing = matches!(e, oxray::cuda::CudaError::NoNvrtc(_));
-            assert!(
-                nvrtc_missing,
-                "the sphere programs do not compile for the GPU: {e}"
-            );
-            assert!(
-                std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
-                "OXRAY_REQUIRE_NVRTC is set but NVRTC fails: {e}"
-            );
-            println!("skipping: NVRTC is not available ({e})");
-        }
-    }
+    common::assert_compiles_with_nvrtc("the sphere programs", &groups, PrimitiveTypeFlags::SPHERE);
 }

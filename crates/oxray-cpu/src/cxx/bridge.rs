@@ -147,6 +147,8 @@ pub(crate) struct CApi {
     motion_transform: unsafe extern "C" fn(*mut CFrame, u32, u32) -> *const c_void,
     gas_motion: unsafe extern "C" fn(*mut CFrame, u64, *mut f32) -> u32,
     ribbon_normal: unsafe extern "C" fn(*mut CFrame, f32, f32, *mut f32),
+    vertex_data_from_handle:
+        unsafe extern "C" fn(*mut CFrame, u64, u32, u32, u32, f32, *mut f32) -> u32,
 }
 
 static API: CApi = CApi {
@@ -162,6 +164,7 @@ static API: CApi = CApi {
     motion_transform: api_motion_transform,
     gas_motion: api_gas_motion,
     ribbon_normal: api_ribbon_normal,
+    vertex_data_from_handle: api_vertex_data_from_handle,
 };
 
 /// A wrapped program: `__oxray_entry_<name>(frame)`, 0 when it returned, 1 when it unwound.
@@ -872,6 +875,64 @@ unsafe extern "C" fn api_gas_motion(f: *mut CFrame, gas: u64, times: *mut f32) -
         *times.add(1) = m.time_end;
     }
     m.key_count() as u32
+}
+
+/// Random vertex access (guide §13.9) through a GAS handle: `kind` 0 a triangle (9 floats),
+/// 1 a sphere (4), 2 a curve segment (16). Returns 0 and writes NaN where the access is
+/// refused (a value that names no GAS, a GAS without `ALLOW_RANDOM_VERTEX_ACCESS` or of
+/// another kind, no such primitive), which OptiX leaves undefined.
+unsafe extern "C" fn api_vertex_data_from_handle(
+    f: *mut CFrame,
+    gas: u64,
+    kind: u32,
+    prim: u32,
+    sbt: u32,
+    time: f32,
+    out: *mut f32,
+) -> u32 {
+    // SAFETY: the header passes the running program's frame.
+    let f = unsafe { &mut *f };
+    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
+    let hit_gas = unsafe {
+        match f.kind {
+            KIND_CH => ctx_of::<Ch>(f).gas,
+            KIND_AH => ctx_of::<Ah>(f).gas,
+            _ => None,
+        }
+    };
+    let words: usize = match kind {
+        0 => 9,
+        1 => 4,
+        _ => 16,
+    };
+    // The hit's GAS by its address, or a registered one: a value is never followed.
+    let read = |g: &crate::Gas| -> Option<Vec<f32>> {
+        match kind {
+            0 => g
+                .triangle_vertex_data(prim, sbt, time)
+                .ok()
+                .map(|t| t.iter().flat_map(|p| p.to_array()).collect()),
+            1 => g.sphere_data(prim, sbt, time).ok().map(|s| s.to_vec()),
+            _ => g
+                .curve_vertex_data(prim, sbt, time)
+                .ok()
+                .map(|c| c.iter().flatten().copied().collect()),
+        }
+    };
+    let found = match hit_gas.filter(|g| *g as *const crate::Gas as usize as u64 == gas) {
+        Some(g) => read(g),
+        None => launch_of(f)
+            .and_then(|l| l.handle(gas))
+            .and_then(|h| h.downcast_ref::<crate::Gas>())
+            .and_then(read),
+    };
+    let ok = found.is_some();
+    let values = found.unwrap_or_else(|| vec![f32::NAN; words]);
+    for (k, v) in values.iter().take(words).enumerate() {
+        // SAFETY: the header passes `words` floats for this kind.
+        unsafe { *out.add(k) = *v };
+    }
+    u32::from(ok)
 }
 
 unsafe extern "C" fn api_gas_handle(f: *mut CFrame) -> u64 {

@@ -237,6 +237,13 @@ struct __oxray_Api {
     // The unit object-space normal of the hit ribbon at (u, v), out of its front face (3
     // floats; zeros for another primitive type).
     void (*ribbon_normal)(__oxray_Frame* f, float u, float v, float* n);
+    // Random vertex access (guide §13.9) through a GAS handle at `time`: kind 0 a triangle's
+    // vertices (9 floats), 1 a sphere (4), 2 a curve segment's control points (16). Returns 0
+    // and writes NaN where refused (no such GAS, no ALLOW_RANDOM_VERTEX_ACCESS, another kind,
+    // no such primitive).
+    unsigned int (*vertex_data_from_handle)(__oxray_Frame* f, unsigned long long gas,
+                                            unsigned int kind, unsigned int prim,
+                                            unsigned int sbt, float time, float* out);
 };
 
 // Program kinds, as the runtime numbers them.
@@ -463,6 +470,52 @@ static inline void optixGetCubicBezierRocapsVertexData(float4 data[4]) {
     __oxray_curve_data(data, 4);
 }
 static inline void optixGetRibbonVertexData(float4 data[3]) { __oxray_curve_data(data, 3); }
+
+// Guide §13.9: random vertex access, from any program, to a GAS built with
+// OPTIX_BUILD_FLAG_ALLOW_RANDOM_VERTEX_ACCESS. A primitive the builder left out reads NaN; so
+// does an access OptiX leaves undefined (no flag, another kind, an index out of range).
+static inline void optixGetTriangleVertexDataFromHandle(OptixTraversableHandle gas,
+                                                        unsigned int primIdx,
+                                                        unsigned int sbtGASIdx, float time,
+                                                        float3 data[3]) {
+    float v[9];
+    __oxray_frame->api->vertex_data_from_handle(__oxray_frame, gas, 0u, primIdx, sbtGASIdx,
+                                                time, v);
+    for (int k = 0; k < 3; ++k) data[k] = make_float3(v[3 * k], v[3 * k + 1], v[3 * k + 2]);
+}
+static inline void optixGetSphereDataFromHandle(OptixTraversableHandle gas, unsigned int primIdx,
+                                                unsigned int sbtGASIdx, float time,
+                                                float4 data[1]) {
+    float v[4];
+    __oxray_frame->api->vertex_data_from_handle(__oxray_frame, gas, 1u, primIdx, sbtGASIdx,
+                                                time, v);
+    data[0] = make_float4(v[0], v[1], v[2], v[3]);
+}
+static inline void __oxray_curve_data_from_handle(OptixTraversableHandle gas,
+                                                  unsigned int primIdx, unsigned int sbtGASIdx,
+                                                  float time, float4* data, int n) {
+    float v[16];
+    __oxray_frame->api->vertex_data_from_handle(__oxray_frame, gas, 2u, primIdx, sbtGASIdx,
+                                                time, v);
+    for (int k = 0; k < n; ++k)
+        data[k] = make_float4(v[4 * k], v[4 * k + 1], v[4 * k + 2], v[4 * k + 3]);
+}
+#define __OXRAY_CURVE_FROM_HANDLE(name, n)                                                      \
+    static inline void name(OptixTraversableHandle gas, unsigned int primIdx,                  \
+                            unsigned int sbtGASIdx, float time, float4 data[n]) {              \
+        __oxray_curve_data_from_handle(gas, primIdx, sbtGASIdx, time, data, n);                \
+    }
+__OXRAY_CURVE_FROM_HANDLE(optixGetLinearCurveVertexDataFromHandle, 2)
+__OXRAY_CURVE_FROM_HANDLE(optixGetQuadraticBSplineVertexDataFromHandle, 3)
+__OXRAY_CURVE_FROM_HANDLE(optixGetQuadraticBSplineRocapsVertexDataFromHandle, 3)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCubicBSplineVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCubicBSplineRocapsVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCatmullRomVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCatmullRomRocapsVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCubicBezierVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCubicBezierRocapsVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetRibbonVertexDataFromHandle, 3)
+#undef __OXRAY_CURVE_FROM_HANDLE
 
 static inline OptixTraversableHandle optixGetGASTraversableHandle() {
     __oxray_allow(__OXRAY_HIT_KINDS, 15);

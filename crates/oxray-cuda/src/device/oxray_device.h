@@ -102,7 +102,8 @@ struct __oxray_Traversable {
     unsigned long long geom_flags; // GAS: one u32 per SBT-GAS index
     u32 depth;                     // traversable graph depth (a GAS is 1)
     u32 types;                     // curve GAS: the OptixPrimitiveTypeFlags of its curve types
-    unsigned long long pad;
+    unsigned long long random;     // GAS built with ALLOW_RANDOM_VERTEX_ACCESS: its inputs and
+                                   // each primitive's leaf slot (__oxray_random_slot); else 0
 };
 #define __OXRAY_GAS 1u
 #define __OXRAY_IAS 2u
@@ -709,6 +710,92 @@ static __forceinline__ __device__ void optixGetCubicBezierRocapsVertexData(float
 static __forceinline__ __device__ void optixGetRibbonVertexData(float4 data[3]) {
     __oxray_curve_vertex_data(data, 3);
 }
+
+// Guide §13.9: random vertex access, from any program, to a GAS built with
+// OPTIX_BUILD_FLAG_ALLOW_RANDOM_VERTEX_ACCESS. The GAS keeps a table (words): the number of
+// inputs and of primitives, then per input its first global primitive, primitive index offset,
+// first SBT-GAS index and the end of its SBT-GAS indices, then each primitive's leaf slot
+// (~0u: left out by the builder). A primitive left out reads NaN; so does an access OptiX leaves
+// undefined (no flag, another kind, an index out of range), as on the CPU.
+static __forceinline__ __device__ u32 __oxray_random_slot(OptixTraversableHandle gas, u32 kind,
+                                                          u32 prim, u32 sbt) {
+    if (__oxray_kind_of(gas) != kind) return 0xffffffffu;
+    const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(gas);
+    if (t->random == 0ull) return 0xffffffffu;
+    const u32* w = reinterpret_cast<const u32*>(t->random);
+    const u32 n = w[0], np = w[1];
+    const u32* in = w + 2;
+    u32 lo = 0, hi = n;  // the last input whose first SBT-GAS index is at most sbt
+    while (lo < hi) {
+        const u32 mid = (lo + hi) >> 1;
+        if (in[4 * mid + 2] <= sbt) lo = mid + 1;
+        else hi = mid;
+    }
+    if (lo == 0) return 0xffffffffu;
+    const u32 i = lo - 1;
+    if (sbt >= in[4 * i + 3] || prim < in[4 * i + 1]) return 0xffffffffu;
+    const unsigned long long g = (unsigned long long)in[4 * i] + (prim - in[4 * i + 1]);
+    const u32 end = i + 1 < n ? in[4 * (i + 1)] : np;
+    if (g >= end) return 0xffffffffu;
+    return w[2 + 4 * (size_t)n + g];
+}
+static __forceinline__ __device__ void optixGetTriangleVertexDataFromHandle(
+    OptixTraversableHandle gas, unsigned int primIdx, unsigned int sbtGASIdx, float time,
+    float3 data[3]) {
+    (void)time;  // no GAS has motion keys on this device
+    const u32 slot = __oxray_random_slot(gas, __OXRAY_GAS, primIdx, sbtGASIdx);
+    const float nan = __int_as_float(0x7fc00000);
+    const float4* p =
+        slot == 0xffffffffu
+            ? nullptr
+            : reinterpret_cast<const float4*>(
+                  reinterpret_cast<const __oxray_Traversable*>(gas)->prims) + 3 * (size_t)slot;
+    for (int k = 0; k < 3; ++k)
+        data[k] = p ? make_float3(p[k].x, p[k].y, p[k].z) : make_float3(nan, nan, nan);
+}
+static __forceinline__ __device__ void optixGetSphereDataFromHandle(OptixTraversableHandle gas,
+                                                                    unsigned int primIdx,
+                                                                    unsigned int sbtGASIdx,
+                                                                    float time, float4 data[1]) {
+    (void)time;
+    const u32 slot = __oxray_random_slot(gas, __OXRAY_SPHERE_GAS, primIdx, sbtGASIdx);
+    const float nan = __int_as_float(0x7fc00000);
+    data[0] = slot == 0xffffffffu
+                  ? make_float4(nan, nan, nan, nan)
+                  : reinterpret_cast<const float4*>(
+                        reinterpret_cast<const __oxray_Traversable*>(gas)->prims)[slot];
+}
+static __forceinline__ __device__ void __oxray_curve_data_from_handle(OptixTraversableHandle gas,
+                                                                      unsigned int primIdx,
+                                                                      unsigned int sbtGASIdx,
+                                                                      float4* data, int n) {
+    const u32 slot = __oxray_random_slot(gas, __OXRAY_CURVE_GAS, primIdx, sbtGASIdx);
+    const float nan = __int_as_float(0x7fc00000);
+    const float4* rec =
+        slot == 0xffffffffu
+            ? nullptr
+            : reinterpret_cast<const float4*>(
+                  reinterpret_cast<const __oxray_Traversable*>(gas)->prims) + 6 * (size_t)slot;
+    for (int k = 0; k < n; ++k) data[k] = rec ? rec[k] : make_float4(nan, nan, nan, nan);
+}
+#define __OXRAY_CURVE_FROM_HANDLE(name, n)                                                      \
+    static __forceinline__ __device__ void name(OptixTraversableHandle gas, unsigned int primIdx, \
+                                                unsigned int sbtGASIdx, float time,             \
+                                                float4 data[n]) {                               \
+        (void)time;                                                                             \
+        __oxray_curve_data_from_handle(gas, primIdx, sbtGASIdx, data, n);                       \
+    }
+__OXRAY_CURVE_FROM_HANDLE(optixGetLinearCurveVertexDataFromHandle, 2)
+__OXRAY_CURVE_FROM_HANDLE(optixGetQuadraticBSplineVertexDataFromHandle, 3)
+__OXRAY_CURVE_FROM_HANDLE(optixGetQuadraticBSplineRocapsVertexDataFromHandle, 3)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCubicBSplineVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCubicBSplineRocapsVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCatmullRomVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCatmullRomRocapsVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCubicBezierVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetCubicBezierRocapsVertexDataFromHandle, 4)
+__OXRAY_CURVE_FROM_HANDLE(optixGetRibbonVertexDataFromHandle, 3)
+#undef __OXRAY_CURVE_FROM_HANDLE
 
 // ---------------------------------------------------------------------------------------------
 // Payload (guide §14): up to 32 words, copied in at the trace and out when it returns

@@ -201,3 +201,35 @@ impl Scene {
         (out.download().unwrap(), report)
     }
 }
+
+/// Compiles a pipeline of CUDA C++ program groups to PTX with NVRTC for sm_90, GPU or not: a
+/// program that does not compile fails the test; a missing NVRTC skips it, unless
+/// `OXRAY_REQUIRE_NVRTC` is set (as in CI). `what` names the programs in messages.
+pub fn assert_compiles_with_nvrtc(
+    what: &str,
+    groups: &[oxray::cuda::CudaProgramGroup],
+    types: PrimitiveTypeFlags,
+) {
+    let compile = PipelineCompileOptions {
+        num_payload_values: 8,
+        uses_primitive_type_flags: types,
+        ..Default::default()
+    };
+    match oxray::cuda::compile_pipeline_ptx(
+        (9, 0),
+        &compile,
+        &PipelineLinkOptions::default(),
+        groups,
+    ) {
+        Ok(ptx) => assert!(ptx.contains(".entry"), "no kernel in the PTX of {what}"),
+        Err(e) => {
+            let nvrtc_missing = matches!(e, oxray::cuda::CudaError::NoNvrtc(_));
+            assert!(nvrtc_missing, "{what} do not compile for the GPU: {e}");
+            assert!(
+                std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
+                "OXRAY_REQUIRE_NVRTC is set but NVRTC fails: {e}"
+            );
+            println!("skipping: NVRTC is not available ({e})");
+        }
+    }
+}
