@@ -191,6 +191,19 @@ impl CudaIas {
         let info = instance_records(&self.data, &self.children)?;
         let (nodes, _g1) = self.nodes.device_ptr(&self.ctx.stream);
         let (insts, _g2) = self.instances.device_ptr(&self.ctx.stream);
+        // Random instance access (guide §13.12): the slot of every instance index, as the
+        // third table (the descriptor's `random`).
+        let tables = if self
+            .data
+            .build_flags
+            .contains(oxray_core::BuildFlags::ALLOW_RANDOM_INSTANCE_ACCESS)
+        {
+            let mut slots = vec![self.data.slot_of.len() as u32];
+            slots.extend_from_slice(&self.data.slot_of);
+            vec![info, Vec::new(), slots]
+        } else {
+            vec![info]
+        };
         let v = ProgramView::upload(
             &self.ctx,
             DESCRIPTOR_IAS,
@@ -199,7 +212,7 @@ impl CudaIas {
             self.data.instances.len() as u32,
             nodes,
             insts,
-            vec![info],
+            tables,
         )?;
         let address = v.address;
         *view = Some(v);

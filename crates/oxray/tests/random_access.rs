@@ -224,7 +224,9 @@ fn s13_12_instances_are_read_by_index_on_every_device() {
 
 /// A ray-generation program that reads primitive `base + x` of the GAS in the launch
 /// parameters through the device functions of §13.9 and writes 8 words: mode 0, a triangle's
-/// first eight coordinates; 1, its last; 2, a sphere; 3, a linear curve segment.
+/// first eight coordinates; 1, its last; 2, a sphere; 3, a linear curve segment; 4, instance
+/// `base + x` of an IAS (§13.12): its id, transform type, translation, whether it has a child
+/// and the inverse's translation.
 const PROGRAMS: &str = r#"
 #include <optix.h>
 struct Params {
@@ -246,6 +248,13 @@ extern "C" __global__ void __raygen__read() {
         float4 s[1];
         optixGetSphereDataFromHandle(ra.gas, ra.base + i, ra.sbt, 0.0f, s);
         f[0] = s[0].x; f[1] = s[0].y; f[2] = s[0].z; f[3] = s[0].w;
+    } else if (ra.mode == 4) {
+        const OptixTraversableHandle h = optixGetInstanceTraversableFromIAS(ra.gas, ra.base + i);
+        f[0] = (float)optixGetInstanceIdFromHandle(h);
+        f[1] = (float)optixGetTransformTypeFromHandle(h);
+        f[2] = h != 0ull ? optixGetInstanceTransformFromHandle(h)[0].w : -1.0f;
+        f[3] = optixGetInstanceChildFromHandle(h) != 0ull ? 1.0f : 0.0f;
+        f[4] = h != 0ull ? optixGetInstanceInverseTransformFromHandle(h)[0].w : -1.0f;
     } else {
         float4 c[2];
         optixGetLinearCurveVertexDataFromHandle(ra.gas, ra.base + i, ra.sbt, 0.0f, c);
@@ -361,6 +370,43 @@ fn s13_9_programs_read_primitives_from_handles_on_every_device() {
         let k = run(&curves, 3, 0, 0, 2);
         assert_eq!(k[1], [1.0, 0.0, 0.0, 0.2, 2.0, 1.0, 0.0, 0.15]);
         all.push(k[0].map(f32::to_bits).to_vec());
+        // Instances by index (§13.12).
+        let list: Vec<Instance> = (0..5)
+            .map(|i| {
+                Instance::new(gas.handle())
+                    .transform(Transform::from_translation(glam::Vec3::new(
+                        2.0 * i as f32,
+                        0.0,
+                        0.0,
+                    )))
+                    .instance_id(50 + i)
+            })
+            .collect();
+        let _ = gas.optix_handle().unwrap(); // the child's handle, given before the launch
+        let opts = BuildOptions::new(BuildFlags::ALLOW_RANDOM_INSTANCE_ACCESS);
+        let ias = device.build_ias(&opts, &[(&list[..]).into()]).unwrap();
+        let handle = ias.optix_handle().unwrap();
+        let (out, report) = scene.launch(&sbt, 6, 1, |out| Params {
+            out,
+            gas: handle,
+            mode: 4,
+            base: 0,
+            sbt: 0,
+            pad: 0,
+        });
+        assert_eq!(report.exceptions, 0);
+        for (i, o) in out.iter().take(5).enumerate() {
+            let f = o.map(f32::from_bits);
+            assert_eq!(
+                f[..5],
+                [50.0 + i as f32, 4.0, 2.0 * i as f32, 1.0, -2.0 * i as f32],
+                "{} instance {i}",
+                name(device)
+            );
+        }
+        // Past the instances: a null handle.
+        assert_eq!(out[5].map(f32::from_bits)[..4], [0.0, 0.0, -1.0, 0.0]);
+        all.push(out.iter().flatten().copied().collect());
         all
     });
 }

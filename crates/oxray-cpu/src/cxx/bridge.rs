@@ -149,6 +149,16 @@ pub(crate) struct CApi {
     ribbon_normal: unsafe extern "C" fn(*mut CFrame, f32, f32, *mut f32),
     vertex_data_from_handle:
         unsafe extern "C" fn(*mut CFrame, u64, u32, u32, u32, f32, *mut f32) -> u32,
+    instance_from_ias: unsafe extern "C" fn(
+        *mut CFrame,
+        u64,
+        u32,
+        *mut u32,
+        *mut u32,
+        *mut f32,
+        *mut f32,
+        *mut u64,
+    ) -> u32,
 }
 
 static API: CApi = CApi {
@@ -165,6 +175,7 @@ static API: CApi = CApi {
     gas_motion: api_gas_motion,
     ribbon_normal: api_ribbon_normal,
     vertex_data_from_handle: api_vertex_data_from_handle,
+    instance_from_ias: api_instance_from_ias,
 };
 
 /// A wrapped program: `__oxray_entry_<name>(frame)`, 0 when it returned, 1 when it unwound.
@@ -933,6 +944,42 @@ unsafe extern "C" fn api_vertex_data_from_handle(
         unsafe { *out.add(k) = *v };
     }
     u32::from(ok)
+}
+
+/// Random instance access (guide §13.12): instance `index` of the IAS a registered handle
+/// names, if it was built with `ALLOW_RANDOM_INSTANCE_ACCESS`; 0 otherwise (OptiX leaves that
+/// undefined).
+#[allow(clippy::too_many_arguments)]
+unsafe extern "C" fn api_instance_from_ias(
+    f: *mut CFrame,
+    ias: u64,
+    index: u32,
+    id: *mut u32,
+    inst_index: *mut u32,
+    o2w: *mut f32,
+    w2o: *mut f32,
+    child: *mut u64,
+) -> u32 {
+    // SAFETY: the header passes the running program's frame.
+    let f = unsafe { &mut *f };
+    let Some(inst) = launch_of(f)
+        .and_then(|l| l.handle(ias))
+        .and_then(|h| h.downcast_ref::<crate::Ias>())
+        .and_then(|i| i.data().instance_by_index(index).ok())
+    else {
+        return 0;
+    };
+    // SAFETY: the header passes one u32 each, 12 floats per matrix and one u64.
+    unsafe {
+        *id = inst.instance_id;
+        *inst_index = inst.index;
+        for k in 0..12 {
+            *o2w.add(k) = inst.object_to_world.0[k];
+            *w2o.add(k) = inst.world_to_object.0[k];
+        }
+        *child = inst.child.address();
+    }
+    1
 }
 
 unsafe extern "C" fn api_gas_handle(f: *mut CFrame) -> u64 {

@@ -244,6 +244,13 @@ struct __oxray_Api {
     unsigned int (*vertex_data_from_handle)(__oxray_Frame* f, unsigned long long gas,
                                             unsigned int kind, unsigned int prim,
                                             unsigned int sbt, float time, float* out);
+    // Random instance access (guide §13.12): instance `index` of an IAS built with
+    // ALLOW_RANDOM_INSTANCE_ACCESS: its id, index, matrices (12 floats each) and child's handle.
+    // Returns 0 where refused (no such IAS, no flag, an index out of range).
+    unsigned int (*instance_from_ias)(__oxray_Frame* f, unsigned long long ias,
+                                      unsigned int index, unsigned int* id,
+                                      unsigned int* inst_index, float* o2w, float* w2o,
+                                      unsigned long long* child);
 };
 
 // Program kinds, as the runtime numbers them.
@@ -742,14 +749,34 @@ static inline OptixTraversableHandle optixGetTransformListHandle(unsigned int i)
 struct __oxray_ListEntry {
     unsigned int type, id, index;
     float o2w[12], w2o[12];
+    unsigned long long child;
 };
+// Instance handles from optixGetInstanceTraversableFromIAS (guide §13.12) name one of the last
+// 64 instances the thread asked for: a tag and the entry's position in a ring.
+#define __OXRAY_RANDOM_TAG 0x4F59000000000000ull
+#define __OXRAY_RANDOM_RING 64u
+static thread_local __oxray_ListEntry __oxray_random_ring[__OXRAY_RANDOM_RING];
+static thread_local unsigned int __oxray_random_next;
 static inline __oxray_ListEntry __oxray_entry_of(OptixTraversableHandle h) {
     __oxray_ListEntry e{};
     if ((h & 0xFFFF000000000000ull) == __OXRAY_LIST_TAG) {
         e.type = __oxray_frame->api->transform_list(__oxray_frame, (unsigned int)h, &e.id,
                                                     &e.index, e.o2w, e.w2o);
+    } else if ((h & 0xFFFF000000000000ull) == __OXRAY_RANDOM_TAG) {
+        e = __oxray_random_ring[(unsigned int)h % __OXRAY_RANDOM_RING];
     }
     return e;
+}
+static inline OptixTraversableHandle optixGetInstanceTraversableFromIAS(OptixTraversableHandle ias,
+                                                                        unsigned int instIdx) {
+    __oxray_ListEntry e{};
+    if (!__oxray_frame->api->instance_from_ias(__oxray_frame, ias, instIdx, &e.id, &e.index,
+                                               e.o2w, e.w2o, &e.child))
+        return 0ull;
+    e.type = (unsigned int)OPTIX_TRANSFORM_TYPE_INSTANCE;
+    const unsigned int k = __oxray_random_next++ % __OXRAY_RANDOM_RING;
+    __oxray_random_ring[k] = e;
+    return __OXRAY_RANDOM_TAG | (unsigned long long)k;
 }
 static inline OptixTransformType optixGetTransformTypeFromHandle(OptixTraversableHandle h) {
     return (OptixTransformType)__oxray_entry_of(h).type;
@@ -757,8 +784,11 @@ static inline OptixTransformType optixGetTransformTypeFromHandle(OptixTraversabl
 static inline unsigned int optixGetInstanceIdFromHandle(OptixTraversableHandle h) {
     return __oxray_entry_of(h).id;
 }
-static inline OptixTraversableHandle optixGetInstanceChildFromHandle(OptixTraversableHandle) {
-    return 0ull;  // children are not addressable from CPU programs
+static inline OptixTraversableHandle optixGetInstanceChildFromHandle(OptixTraversableHandle h) {
+    // The child of an instance from optixGetInstanceTraversableFromIAS: its handle value (it
+    // traces where the structure was given a handle before the launch). Transform-list
+    // children are not addressable from CPU programs.
+    return __oxray_entry_of(h).child;
 }
 static thread_local float4 __oxray_rows[2][3];
 static thread_local OptixStaticTransform __oxray_static;

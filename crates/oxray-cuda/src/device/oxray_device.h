@@ -461,6 +461,20 @@ static __forceinline__ __device__ const float4* optixGetInstanceInverseTransform
     const __oxray_Instance* i = __oxray_instance_of(handle);
     return i ? i->world_to_object : nullptr;
 }
+// Guide §13.12: the handle of instance `instIdx` of an IAS built with
+// OPTIX_BUILD_FLAG_ALLOW_RANDOM_INSTANCE_ACCESS: its record in the IAS's instance table. The IAS
+// keeps the slot of every instance index (`random`: the count, then the slots); 0 where OptiX
+// leaves the access undefined (no flag, an index out of range), as on the CPU.
+static __forceinline__ __device__ OptixTraversableHandle
+optixGetInstanceTraversableFromIAS(OptixTraversableHandle ias, unsigned int instIdx) {
+    if (__oxray_kind_of(ias) != __OXRAY_IAS) return 0ull;
+    const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(ias);
+    if (t->random == 0ull) return 0ull;
+    const u32* w = reinterpret_cast<const u32*>(t->random);
+    if (instIdx >= w[0]) return 0ull;
+    const u32 slot = w[1 + instIdx];
+    return slot == 0xffffffffu ? 0ull : t->info + sizeof(__oxray_Instance) * (size_t)slot;
+}
 static __forceinline__ __device__ const OptixStaticTransform* optixGetStaticTransformFromHandle(
     OptixTraversableHandle handle) {
     if (__oxray_kind_of(handle) != __OXRAY_STATIC) return nullptr;
