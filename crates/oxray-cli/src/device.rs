@@ -483,7 +483,7 @@ pub fn bench_builds(
     rays: &BenchRays,
     runs: usize,
 ) -> Result<Vec<BuildBenchRow>, DeviceCommandError> {
-    use oxray::cuda::device_build::{build_triangles, DeviceBuildConfig};
+    use oxray::cuda::device_build::{build_gas, DeviceBuildConfig};
     use oxray::cuda::{CudaGas, DeviceHits, DeviceRays};
     use oxray::{BuildOptions, IndexBuffer, TriangleInput, VertexBuffer};
     let Some(cuda) = device.as_cuda() else {
@@ -551,7 +551,7 @@ pub fn bench_builds(
             for k in 0..=runs {
                 drop(last.take());
                 let (gas, times) =
-                    build_triangles(ctx, &options, &inputs, &config).map_err(|e| gpu(&e))?;
+                    build_gas(ctx, &options, &inputs, &config).map_err(|e| gpu(&e))?;
                 if k > 0 {
                     kernels.push(times.kernels_ms);
                     total.push(times.total_ms);

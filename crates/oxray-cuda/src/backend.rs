@@ -83,8 +83,11 @@ impl Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Option<DeviceBuildConfig> {
-        let triangles = matches!(inputs.first(), Some(BuildInput::Triangles(_)));
-        if self.builder != GasBuilder::Device || self.layout != NodeLayout::Bvh2 || !triangles {
+        let device_kind = matches!(
+            inputs.first(),
+            Some(BuildInput::Triangles(_) | BuildInput::CustomPrimitives(_))
+        );
+        if self.builder != GasBuilder::Device || self.layout != NodeLayout::Bvh2 || !device_kind {
             return None;
         }
         // Saturating: a count past u32 fails validation whichever builder runs.
@@ -208,7 +211,7 @@ impl AccelBackend for Cuda {
             return Err(BuildError::Unsupported(MOTION_UNSUPPORTED));
         }
         if let Some(config) = self.device_build_config(options, inputs) {
-            match device_build::build_triangles(&self.ctx, options, inputs, &config) {
+            match device_build::build_gas(&self.ctx, options, inputs, &config) {
                 Ok((gas, _)) => return Ok(gas),
                 Err(DeviceBuildError::Invalid(e)) => return Err(e),
                 // Too deep for the traversal stacks: the host's builder bounds the depth.

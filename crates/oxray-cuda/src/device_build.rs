@@ -186,12 +186,14 @@ pub(crate) struct BuildKernels {
     scan_down: CudaFunction,
     write_nodes: CudaFunction,
     write_triangles: CudaFunction,
+    bounds_aabbs: CudaFunction,
+    write_aabbs: CudaFunction,
     pub(crate) refit_triangles: CudaFunction,
     pub(crate) refit_nodes: CudaFunction,
 }
 
 /// Every kernel entry of [`BUILD_SOURCE`].
-pub const BUILD_ENTRIES: [&str; 19] = [
+pub const BUILD_ENTRIES: [&str; 21] = [
     "oxray_build_bounds",
     "oxray_build_morton32",
     "oxray_build_morton64",
@@ -211,6 +213,8 @@ pub const BUILD_ENTRIES: [&str; 19] = [
     "oxray_build_write_triangles",
     "oxray_refit_triangles",
     "oxray_refit_nodes",
+    "oxray_build_bounds_aabbs",
+    "oxray_build_write_aabbs",
 ];
 
 /// NVRTC options of the builder: the trace kernels' (no FMA contraction, which the degeneracy
@@ -271,6 +275,8 @@ impl BuildKernels {
             scan_down: f("oxray_scan_down")?,
             write_nodes: f("oxray_build_write_nodes")?,
             write_triangles: f("oxray_build_write_triangles")?,
+            bounds_aabbs: f("oxray_build_bounds_aabbs")?,
+            write_aabbs: f("oxray_build_write_aabbs")?,
             refit_triangles: f("oxray_refit_triangles")?,
             refit_nodes: f("oxray_refit_nodes")?,
         })
@@ -407,11 +413,16 @@ pub fn memory_usage(
         .iter()
         .map(|i| match i {
             BuildInput::Triangles(t) => staged_bytes(t) + 32,
+            BuildInput::CustomPrimitives(c) => 24 * c.aabbs.count as usize,
             _ => 0,
         })
         .sum();
+    let per_prim = match inputs.first() {
+        Some(BuildInput::CustomPrimitives(_)) => 32,
+        _ => 48,
+    };
     Ok(AccelBufferSizes {
-        output_size_in_bytes: 64 * n.max(1) + 48 * n.max(1),
+        output_size_in_bytes: 64 * n.max(1) + per_prim * n.max(1),
         temp_size_in_bytes: staged + scratch_bytes(n, config.key_bytes()),
         temp_update_size_in_bytes: 0,
     })
@@ -443,9 +454,10 @@ fn scratch<T: cudarc::driver::DeviceRepr>(
     unsafe { ctx.stream.alloc::<T>(len.max(1)) }.map_err(driver("allocating build memory"))
 }
 
-/// Builds a triangle GAS on the device with `config`. Validation errors are the host builder's;
-/// a tree deeper than `config.max_depth` is [`CudaError::TreeTooDeep`] (nothing is kept).
-pub fn build_triangles(
+/// Builds a GAS of triangles or custom primitives (guide §5.3: boxes) on the device with
+/// `config`. Validation errors are the host builder's; a tree deeper than `config.max_depth` is
+/// [`CudaError::TreeTooDeep`] (nothing is kept). Spheres and curves are built by the host.
+pub fn build_gas(
     ctx: &CudaContext,
     options: &BuildOptions,
     inputs: &[BuildInput<'_>],
@@ -453,29 +465,55 @@ pub fn build_triangles(
 ) -> Result<(CudaGas, BuildTimes), DeviceBuildError> {
     let start = Instant::now();
     let mut prepared = GasData::prepare(options, inputs)?;
-    if prepared.kind != GasKind::Triangles {
-        return Err(CudaError::Unsupported("device builds of custom-primitive GASes").into());
+    if !matches!(
+        prepared.kind,
+        GasKind::Triangles | GasKind::CustomPrimitives
+    ) {
+        return Err(CudaError::Unsupported("device builds of sphere and curve GASes").into());
     }
     let n = prepared.num_primitives as usize;
     if n > MAX_SLOTS {
-        return Err(CudaError::TooLarge(format!("{n} triangles; at most {MAX_SLOTS}")).into());
+        return Err(CudaError::TooLarge(format!("{n} primitives; at most {MAX_SLOTS}")).into());
     }
     let kernels = ctx.build_kernels()?;
     let prepare_start = start.elapsed().as_secs_f64() * 1e3;
-    let d_inputs = upload_inputs(ctx, &prepared.inputs, inputs)?;
-    let prepare_ms = prepare_start + d_inputs.prepare_ms;
-    let upload_ms = start.elapsed().as_secs_f64() * 1e3 - prepare_ms;
     let s = &ctx.stream;
+    // Triangles are fetched by the kernels through their inputs' table; boxes are decoded by
+    // the host into one array of six floats each.
+    let (d_inputs, d_boxes, staged_ms) = if prepared.kind == GasKind::Triangles {
+        let d = upload_inputs(ctx, &prepared.inputs, inputs)?;
+        let ms = d.prepare_ms;
+        (Some(d), None, ms)
+    } else {
+        let t = Instant::now();
+        let boxes = stage_aabbs(inputs);
+        let ms = t.elapsed().as_secs_f64() * 1e3;
+        let d = s
+            .clone_htod(&boxes[..])
+            .map_err(driver("copying build inputs to the device"))?;
+        ctx.synchronize()?;
+        (None, Some(d), ms)
+    };
+    let prims = match (&d_inputs, &d_boxes) {
+        (Some(d), _) => DevicePrims::Triangles {
+            table: &d.table,
+            n_in: d.count,
+        },
+        (None, Some(b)) => DevicePrims::Boxes(b),
+        (None, None) => unreachable!("one of the two is staged"),
+    };
+    let prepare_ms = prepare_start + staged_ms;
+    let upload_ms = start.elapsed().as_secs_f64() * 1e3 - prepare_ms;
 
     let timing = |what| driver(what);
     let t0 = s.record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT));
     let t0 = t0.map_err(timing("recording an event"))?;
-    let result = run_kernels(ctx, kernels, &d_inputs.table, d_inputs.count, n, config)?;
+    let result = run_kernels(ctx, kernels, &prims, n, config)?;
     let t1 = s
         .record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT))
         .map_err(timing("recording an event"))?;
     let kernels_ms = t0.elapsed_ms(&t1).map_err(timing("reading an event"))? as f64;
-    drop(d_inputs);
+    drop((d_inputs, d_boxes));
 
     // The slot table: the sorted triangle ids, resolved on the host.
     let mut ids = vec![0u32; result.active];
@@ -635,12 +673,47 @@ struct Built {
     stats: BvhStats,
 }
 
-/// Queues the build's kernels over `n` triangles of the inputs described by `d_inputs`.
+/// What the build kernels read the primitives from.
+enum DevicePrims<'a> {
+    /// Triangles, through the inputs' table of `n_in` descriptors ([`upload_inputs`]).
+    Triangles {
+        table: &'a CudaSlice<u32>,
+        n_in: u32,
+    },
+    /// Boxes, six floats each ([`stage_aabbs`]).
+    Boxes(&'a CudaSlice<f32>),
+}
+
+/// The boxes of custom-primitive inputs as one array of six floats each (lower, upper corner),
+/// in global primitive order.
+fn stage_aabbs(inputs: &[BuildInput<'_>]) -> Vec<f32> {
+    let mut out = Vec::new();
+    for input in inputs {
+        if let BuildInput::CustomPrimitives(c) = input {
+            let a = c.aabbs;
+            let stride = a.effective_stride();
+            out.par_extend((0..a.count as usize).into_par_iter().flat_map_iter(|i| {
+                (0..6).map(move |k| {
+                    let at = i * stride + 4 * k;
+                    a.data
+                        .get(at..at + 4)
+                        .and_then(|b| b.try_into().ok())
+                        .map_or(f32::NAN, f32::from_le_bytes)
+                })
+            }));
+        }
+    }
+    if out.is_empty() {
+        out.resize(6, f32::NAN);
+    }
+    out
+}
+
+/// Queues the build's kernels over the `n` primitives of `prims`.
 fn run_kernels(
     ctx: &CudaContext,
     k: &BuildKernels,
-    d_inputs: &CudaSlice<u32>,
-    n_in: u32,
+    prims: &DevicePrims<'_>,
     n: usize,
     config: &DeviceBuildConfig,
 ) -> Result<Built, CudaError> {
@@ -655,18 +728,28 @@ fn run_kernels(
         .clone_htod(&init[..])
         .map_err(launch("copying the build counters"))?;
     let mut boxes: CudaSlice<f32> = scratch(ctx, 8 * n)?;
-    {
-        let mut b = s.launch_builder(&k.bounds);
-        b.arg(d_inputs)
-            .arg(&n_in)
-            .arg(&n32)
-            .arg(&mut boxes)
-            .arg(&mut counters);
-        // SAFETY: oxray_build_bounds(const InputDesc*, u32 n_in, u32 n, float4* boxes,
-        // u32* counters): the table holds n_in descriptors of buffers alive until the kernels are
-        // done, whose triangles 0..n have in-range indices (checked by `GasData::prepare`);
-        // boxes holds 8 floats per triangle, counters 8 words.
-        unsafe { b.launch(grid(n)) }.map_err(launch("launching the bounds kernel"))?;
+    match prims {
+        DevicePrims::Triangles { table, n_in } => {
+            let mut b = s.launch_builder(&k.bounds);
+            b.arg(*table)
+                .arg(n_in)
+                .arg(&n32)
+                .arg(&mut boxes)
+                .arg(&mut counters);
+            // SAFETY: oxray_build_bounds(const InputDesc*, u32 n_in, u32 n, float4* boxes,
+            // u32* counters): the table holds n_in descriptors of buffers alive until the
+            // kernels are done, whose triangles 0..n have in-range indices (checked by
+            // `GasData::prepare`); boxes holds 8 floats per triangle, counters 8 words.
+            unsafe { b.launch(grid(n)) }.map_err(launch("launching the bounds kernel"))?;
+        }
+        DevicePrims::Boxes(aabbs) => {
+            let mut b = s.launch_builder(&k.bounds_aabbs);
+            b.arg(*aabbs).arg(&n32).arg(&mut boxes).arg(&mut counters);
+            // SAFETY: oxray_build_bounds_aabbs(const float* aabbs, u32 n, float4* boxes,
+            // u32* counters): 6 floats per primitive for n primitives (`stage_aabbs` of inputs
+            // whose counts sum to n), 8 floats of boxes per primitive, counters 8 words.
+            unsafe { b.launch(grid(n)) }.map_err(launch("launching the bounds kernel"))?;
+        }
     }
 
     let wide = config.key_bytes() == 8;
@@ -844,21 +927,35 @@ fn run_kernels(
         unsafe { b.launch(grid(active.saturating_sub(1).max(1))) }
             .map_err(launch("launching the node writer"))?;
     }
-    let mut triangles: CudaSlice<u32> = scratch(ctx, 12 * active.max(1))?;
-    if active == 0 {
-        s.memset_zeros(&mut triangles)
-            .map_err(launch("clearing the triangle array"))?;
-    } else {
-        let a32 = active as u32;
-        let mut b = s.launch_builder(&k.write_triangles);
-        b.arg(d_inputs)
-            .arg(&n_in)
-            .arg(&values)
-            .arg(&a32)
-            .arg(&mut triangles);
-        // SAFETY: oxray_build_write_triangles(const InputDesc*, u32 n_in, const u32* values,
-        // u32 n_act, float4* out): `active` sorted ids of triangles of the inputs, 12 words each.
-        unsafe { b.launch(grid(active)) }.map_err(launch("launching the triangle writer"))?;
+    let per_slot = match prims {
+        DevicePrims::Triangles { .. } => 12,
+        DevicePrims::Boxes(_) => 8,
+    };
+    let mut triangles: CudaSlice<u32> = scratch(ctx, per_slot * active.max(1))?;
+    let a32 = active as u32;
+    match prims {
+        _ if active == 0 => s
+            .memset_zeros(&mut triangles)
+            .map_err(launch("clearing the primitive array"))?,
+        DevicePrims::Triangles { table, n_in } => {
+            let mut b = s.launch_builder(&k.write_triangles);
+            b.arg(*table)
+                .arg(n_in)
+                .arg(&values)
+                .arg(&a32)
+                .arg(&mut triangles);
+            // SAFETY: oxray_build_write_triangles(const InputDesc*, u32 n_in,
+            // const u32* values, u32 n_act, float4* out): `active` sorted ids of triangles of
+            // the inputs, 12 words each.
+            unsafe { b.launch(grid(active)) }.map_err(launch("launching the triangle writer"))?;
+        }
+        DevicePrims::Boxes(aabbs) => {
+            let mut b = s.launch_builder(&k.write_aabbs);
+            b.arg(*aabbs).arg(&values).arg(&a32).arg(&mut triangles);
+            // SAFETY: oxray_build_write_aabbs(const float* aabbs, const u32* values,
+            // u32 n_act, float4* out): `active` sorted ids of the staged boxes, 8 words each.
+            unsafe { b.launch(grid(active)) }.map_err(launch("launching the box writer"))?;
+        }
     }
     // The single-triangle tree's box: that triangle's.
     let bounds = if active == 1 {

@@ -755,8 +755,9 @@ impl CudaGas {
         })
     }
 
-    /// A triangle GAS the device built in the binary layout (`device_build`): its nodes and
-    /// triangles already in device memory, the host's slot table and summary.
+    /// A GAS of triangles or custom primitives (`meta.kind`) the device built in the binary
+    /// layout (`device_build`): its nodes and primitives already in device memory, the host's
+    /// slot table and summary.
     pub(crate) fn from_device_build(
         ctx: &CudaContext,
         nodes: CudaSlice<u32>,
@@ -766,12 +767,17 @@ impl CudaGas {
         info: GasInfo,
         meta: GasData,
     ) -> CudaGas {
+        let per_slot = if meta.kind == GasKind::CustomPrimitives {
+            32
+        } else {
+            48
+        };
         CudaGas {
             ctx: ctx.clone(),
-            kind: GasKind::Triangles,
+            kind: meta.kind,
             layout: NodeLayout::Bvh2,
             num_nodes,
-            device_bytes: 64 * num_nodes + 48 * slots.len(),
+            device_bytes: 64 * num_nodes + per_slot * slots.len(),
             builder: GasBuilder::Device,
             nodes,
             triangles,

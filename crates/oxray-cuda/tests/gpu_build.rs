@@ -9,7 +9,7 @@ use oxray_core::{
     AccelBackend, BuildFlags, BuildInput, BuildOptions, GeometryFlags, Hit, IndexBuffer, Ray,
     SbtIndexOffsets, TraversableHandle, TriangleInput, VertexBuffer,
 };
-use oxray_cuda::device_build::{build_triangles, DeviceBuildConfig};
+use oxray_cuda::device_build::{build_gas, DeviceBuildConfig};
 use oxray_cuda::{Cuda, CudaContext, CudaError, CudaGas, DeviceBuildError, GasBuilder};
 use oxray_testkit::mesh::{grid_cube, random_soup, soup, Tri};
 use oxray_testkit::oracle::{check_closest, reference_hits};
@@ -57,7 +57,7 @@ fn device_gas(
     flags: BuildFlags,
     inputs: &[BuildInput<'_>],
 ) -> CudaGas {
-    let (gas, times) = build_triangles(ctx, &BuildOptions::new(flags), inputs, config)
+    let (gas, times) = build_gas(ctx, &BuildOptions::new(flags), inputs, config)
         .unwrap_or_else(|e| panic!("device build failed: {e}"));
     assert_eq!(gas.builder(), GasBuilder::Device);
     assert!(
@@ -403,7 +403,7 @@ fn a_tree_deeper_than_allowed_is_refused_and_the_backend_builds_on_the_host() {
         max_depth: 3,
         ..DeviceBuildConfig::FAST_BUILD
     };
-    match build_triangles(&ctx, &BuildOptions::default(), &inputs, &shallow) {
+    match build_gas(&ctx, &BuildOptions::default(), &inputs, &shallow) {
         Err(DeviceBuildError::Device(CudaError::TreeTooDeep { depth, max: 3 })) => {
             assert!(depth > 3 && depth as usize <= oxray_bvh::MAX_BVH2_DEPTH)
         }
@@ -416,7 +416,7 @@ fn a_tree_deeper_than_allowed_is_refused_and_the_backend_builds_on_the_host() {
     let bad = [TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
         .indices(IndexBuffer::u32x3(&[[0, 1, 1_000_000]]))
         .into()];
-    let e = build_triangles(
+    let e = build_gas(
         &ctx,
         &BuildOptions::default(),
         &bad,
@@ -479,4 +479,76 @@ fn the_backend_builds_on_the_device_by_default_and_on_the_host_when_asked() {
     // Pipelines trace a device-built GAS through its handle.
     let gas = cuda.build_gas(&BuildOptions::default(), &inputs).unwrap();
     assert_ne!(gas.optix_handle().unwrap(), 0);
+}
+
+/// Custom primitives (guide §5.3) built by the device: every valid box in a leaf slot once,
+/// invalid ones (inverted, NaN, infinite) left out as the host's builder leaves them, the
+/// structure's bounds the host's, and a leaf box around each of its boxes (checked by the
+/// assembled CPU layout read back from device memory).
+#[test]
+fn custom_primitive_gases_build_on_the_device() {
+    let Some((ctx, _lock)) = gpu() else {
+        return;
+    };
+    let mut rng = Rng::new(0xAAB);
+    let boxes: Vec<oxray_core::Aabb> = (0..20_000)
+        .map(|i| {
+            let c = rng.vec3(-10.0, 10.0);
+            let e = rng.vec3(0.001, 0.3);
+            match i % 97 {
+                0 => oxray_core::Aabb::new(c + e, c - e),
+                1 => oxray_core::Aabb::new(c - e, glam::Vec3::new(f32::NAN, c.y, c.z)),
+                2 => oxray_core::Aabb::new(c - e, glam::Vec3::INFINITY),
+                _ => oxray_core::Aabb::new(c - e, c + e),
+            }
+        })
+        .collect();
+    let f = [GeometryFlags::empty(); 2];
+    let offsets: Vec<u32> = (0..boxes.len() as u32 / 2).map(|i| i % 2).collect();
+    let (a, b) = boxes.split_at(boxes.len() / 2);
+    let inputs = [
+        oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(a)).into(),
+        oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(b))
+            .flags(&f)
+            .sbt_index_offsets(SbtIndexOffsets::u32(&offsets))
+            .primitive_index_offset(1000)
+            .into(),
+    ];
+    for (name, flags, config) in PRESETS {
+        let gas = device_gas(&ctx, &config, flags, &inputs);
+        let host = oxray_bvh::GasData::build(&BuildOptions::new(flags), &inputs).unwrap();
+        assert_eq!(gas.info().bounds, host.bounds, "{name}");
+        assert_eq!(
+            gas.info().num_active_primitives,
+            host.num_active_primitives(),
+            "{name}"
+        );
+        let back = gas.to_data().unwrap();
+        let mut got: Vec<(u32, [u32; 6])> = back
+            .slot_prim
+            .iter()
+            .zip(&back.aabbs)
+            .filter(|(&g, _)| g != oxray_bvh::NO_PRIMITIVE)
+            .map(|(&g, b)| (g, bits(b)))
+            .collect();
+        got.sort_unstable();
+        let mut want: Vec<(u32, [u32; 6])> = host
+            .slot_prim
+            .iter()
+            .zip(&host.aabbs)
+            .map(|(&g, b)| (g, bits(b)))
+            .collect();
+        want.sort_unstable();
+        assert_eq!(
+            got, want,
+            "{name}: every valid box once, invalid ones left out"
+        );
+        // The resolution of a slot: input, primitive index with its offset, SBT-GAS index.
+        let s = back.slot_prim.iter().position(|&g| g == 10_001).unwrap();
+        assert_eq!(back.resolve(s as u32), (1001, 2, 1));
+    }
+}
+
+fn bits(b: &oxray_core::Aabb) -> [u32; 6] {
+    [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z].map(f32::to_bits)
 }

@@ -136,33 +136,25 @@ __device__ __forceinline__ float half_area(float3 lo, float3 hi) {
 // ---------------------------------------------------------------------------------------------
 // 1. Bounds.
 
-extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
-    oxray_build_bounds(const InputDesc* __restrict__ in, u32 n_in, u32 n, float4* __restrict__ boxes,
-                       u32* __restrict__ counters) {
-    const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
+// Stores primitive i's box (an empty one when inactive: never a leaf's, sorted last by its
+// key) and adds its centroid and activity to the block's reduction into `counters`. Every
+// thread of the block calls it (i past n: inactive).
+__device__ __forceinline__ void store_box(u32 i, u32 n, bool active, float3 lo, float3 hi,
+                                          float4* __restrict__ boxes, u32* __restrict__ counters) {
     float c_lo[3] = {F32_INF, F32_INF, F32_INF};
     float c_hi[3] = {-F32_INF, -F32_INF, -F32_INF};
-    u32 active = 0;
+    u32 act = 0;
     if (i < n) {
-        float3 p[3];
-        fetch(in, n_in, i, p);
-        if (degenerate(p)) {
-            // An empty box: never a leaf's, sorted last by its key.
+        if (!active) {
             boxes[2 * (size_t)i] = make_float4(F32_INF, F32_INF, F32_INF, 0.0f);
             boxes[2 * (size_t)i + 1] = make_float4(-F32_INF, -F32_INF, -F32_INF, 0.0f);
         } else {
-            float3 lo = make_float3(fminf(fminf(p[0].x, p[1].x), p[2].x),
-                                    fminf(fminf(p[0].y, p[1].y), p[2].y),
-                                    fminf(fminf(p[0].z, p[1].z), p[2].z));
-            float3 hi = make_float3(fmaxf(fmaxf(p[0].x, p[1].x), p[2].x),
-                                    fmaxf(fmaxf(p[0].y, p[1].y), p[2].y),
-                                    fmaxf(fmaxf(p[0].z, p[1].z), p[2].z));
             boxes[2 * (size_t)i] = make_float4(lo.x, lo.y, lo.z, 0.0f);
             boxes[2 * (size_t)i + 1] = make_float4(hi.x, hi.y, hi.z, 0.0f);
             c_lo[0] = c_hi[0] = 0.5f * (lo.x + hi.x);
             c_lo[1] = c_hi[1] = 0.5f * (lo.y + hi.y);
             c_lo[2] = c_hi[2] = 0.5f * (lo.z + hi.z);
-            active = 1;
+            act = 1;
         }
     }
     for (int off = 16; off > 0; off >>= 1) {
@@ -170,7 +162,7 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
             c_lo[k] = fminf(c_lo[k], __shfl_xor_sync(FULL_MASK, c_lo[k], off));
             c_hi[k] = fmaxf(c_hi[k], __shfl_xor_sync(FULL_MASK, c_hi[k], off));
         }
-        active += __shfl_xor_sync(FULL_MASK, active, off);
+        act += __shfl_xor_sync(FULL_MASK, act, off);
     }
     __shared__ float s_lo[3][SORT_WARPS], s_hi[3][SORT_WARPS];
     __shared__ u32 s_active[SORT_WARPS];
@@ -180,25 +172,62 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
             s_lo[k][warp] = c_lo[k];
             s_hi[k][warp] = c_hi[k];
         }
-        s_active[warp] = active;
+        s_active[warp] = act;
     }
     __syncthreads();
     if (threadIdx.x < 3) {
         const int k = threadIdx.x;
-        float lo = F32_INF, hi = -F32_INF;
+        float l = F32_INF, h = -F32_INF;
         for (int w = 0; w < SORT_WARPS; ++w) {
-            lo = fminf(lo, s_lo[k][w]);
-            hi = fmaxf(hi, s_hi[k][w]);
+            l = fminf(l, s_lo[k][w]);
+            h = fmaxf(h, s_hi[k][w]);
         }
-        if (lo <= hi) {
-            atomicMin(&counters[k], ordered(lo));
-            atomicMax(&counters[3 + k], ordered(hi));
+        if (l <= h) {
+            atomicMin(&counters[k], ordered(l));
+            atomicMax(&counters[3 + k], ordered(h));
         }
     } else if (threadIdx.x == 3) {
         u32 a = 0;
         for (int w = 0; w < SORT_WARPS; ++w) a += s_active[w];
         if (a) atomicAdd(&counters[C_ACTIVE], a);
     }
+}
+
+extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
+    oxray_build_bounds(const InputDesc* __restrict__ in, u32 n_in, u32 n, float4* __restrict__ boxes,
+                       u32* __restrict__ counters) {
+    const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
+    bool active = false;
+    float3 lo = make_float3(0.0f, 0.0f, 0.0f), hi = lo;
+    if (i < n) {
+        float3 p[3];
+        fetch(in, n_in, i, p);
+        active = !degenerate(p);
+        lo = make_float3(fminf(fminf(p[0].x, p[1].x), p[2].x), fminf(fminf(p[0].y, p[1].y), p[2].y),
+                         fminf(fminf(p[0].z, p[1].z), p[2].z));
+        hi = make_float3(fmaxf(fmaxf(p[0].x, p[1].x), p[2].x), fmaxf(fmaxf(p[0].y, p[1].y), p[2].y),
+                         fmaxf(fmaxf(p[0].z, p[1].z), p[2].z));
+    }
+    store_box(i, n, active, lo, hi, boxes, counters);
+}
+
+// Custom primitives (guide §5.3): `aabbs` holds 6 floats per primitive (lower, upper corner),
+// decoded by the host. A box is active when it is finite and not inverted
+// (`Aabb::is_finite_valid`), as on the CPU.
+extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
+    oxray_build_bounds_aabbs(const float* __restrict__ aabbs, u32 n, float4* __restrict__ boxes,
+                             u32* __restrict__ counters) {
+    const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
+    bool active = false;
+    float3 lo = make_float3(0.0f, 0.0f, 0.0f), hi = lo;
+    if (i < n) {
+        const float* a = aabbs + 6 * (size_t)i;
+        lo = make_float3(a[0], a[1], a[2]);
+        hi = make_float3(a[3], a[4], a[5]);
+        active = isfinite(lo.x) && isfinite(lo.y) && isfinite(lo.z) && isfinite(hi.x) &&
+                 isfinite(hi.y) && isfinite(hi.z) && lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z;
+    }
+    store_box(i, n, active, lo, hi, boxes, counters);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -682,6 +711,18 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     float3 p[3];
     fetch(in, n_in, values[s], p);
     for (int k = 0; k < 3; ++k) out[3 * (size_t)s + k] = make_float4(p[k].x, p[k].y, p[k].z, 0.0f);
+}
+
+// The boxes of a custom-primitive GAS in leaf-slot order: 2 float4 per slot (lower corner, 0,
+// upper corner, 0), the layout the pipelines' traversal reads.
+extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
+    oxray_build_write_aabbs(const float* __restrict__ aabbs, const u32* __restrict__ values,
+                            u32 n_act, float4* __restrict__ out) {
+    const u32 s = blockIdx.x * BUILD_BLOCK + threadIdx.x;
+    if (s >= n_act) return;
+    const float* a = aabbs + 6 * (size_t)values[s];
+    out[2 * (size_t)s] = make_float4(a[0], a[1], a[2], 0.0f);
+    out[2 * (size_t)s + 1] = make_float4(a[3], a[4], a[5], 0.0f);
 }
 
 // ---------------------------------------------------------------------------------------------
