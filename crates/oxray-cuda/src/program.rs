@@ -351,7 +351,7 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
         }
         let default = match ret {
             "bool" => "return false;",
-            "void*" => "return nullptr;",
+            "void*" | "const void*" => "return nullptr;",
             _ => "return;",
         };
         f.push_str(&format!("    default: {default}\n    }}\n}}\n"));
@@ -415,6 +415,23 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     s.push_str(&switch("__oxray_cc_of", "void*", &|g: &GroupInner| {
         g.continuation.as_ref().map(address)
     }));
+    // Each callable's signature, as a tag unique to its function type, which a call compares
+    // with its own (CALLABLE_PARAMETER_MISMATCH otherwise, as on the CPU).
+    let signature = |e: &Entry| format!("return __oxray_signature<decltype(&{})>();", e.name);
+    s.push_str(&switch(
+        "__oxray_dc_signature",
+        "const void*",
+        &|g: &GroupInner| {
+            (g.kind == CudaProgramGroupKind::Callables)
+                .then(|| g.main.as_ref().map(signature))
+                .flatten()
+        },
+    ));
+    s.push_str(&switch(
+        "__oxray_cc_signature",
+        "const void*",
+        &|g: &GroupInner| g.continuation.as_ref().map(signature),
+    ));
     s.push_str(
         r#"
 #ifndef OXRAY_PIPELINE_MIN_BLOCKS

@@ -671,6 +671,7 @@ fn direct_and_continuation_callables_15() {
             (1, ExceptionCode::CALLABLE_INVALID_SBT),
             (2, ExceptionCode::CALLABLE_NO_DC_SBT_RECORD),
             (3, ExceptionCode::CALLABLE_NO_CC_SBT_RECORD),
+            (4, ExceptionCode::CALLABLE_PARAMETER_MISMATCH),
         ] {
             let (o, report) = s.run(&sbt, dims, |o| ext(o, handle, dims, 0, mode));
             assert_eq!(report.exceptions, dims[0] as u64, "mode {mode}");

@@ -237,6 +237,17 @@ __device__ void __oxray_call_intersection(u32 group);
 // The address of a callables group's direct or continuation callable (null for none).
 __device__ void* __oxray_dc_of(u32 group);
 __device__ void* __oxray_cc_of(u32 group);
+// A tag unique to a function type: the address of a variable of its own. The generated
+// __oxray_dc_signature / __oxray_cc_signature give each callable's, which a call compares with
+// the tag of its own ReturnT(ArgTypes...) (the guide's CALLABLE_PARAMETER_MISMATCH otherwise).
+template <typename F>
+__device__ char __oxray_signature_tag = 0;
+template <typename F>
+static __forceinline__ __device__ const void* __oxray_signature() {
+    return &__oxray_signature_tag<F>;
+}
+__device__ const void* __oxray_dc_signature(u32 group);
+__device__ const void* __oxray_cc_signature(u32 group);
 
 static __forceinline__ __device__ u32 __oxray_group_of(const char* record) {
     return *reinterpret_cast<const u32*>(record);
@@ -1799,10 +1810,14 @@ static __forceinline__ __device__ ReturnT __oxray_call_callable(void* f, const c
 template <typename ReturnT, typename... ArgTypes>
 static __forceinline__ __device__ ReturnT optixDirectCall(unsigned int sbtIndex, ArgTypes... args) {
     const char* record = __oxray_callable_record(sbtIndex);
-    void* f = __oxray_dc_of(__oxray_group_of(record));
+    const u32 group = __oxray_group_of(record);
+    void* f = __oxray_dc_of(group);
+    u32 d[1] = {sbtIndex};
     if (f == nullptr) {
-        u32 d[1] = {sbtIndex};
         __oxray_throw(OPTIX_EXCEPTION_CODE_CALLABLE_NO_DC_SBT_RECORD, 1, d);
+    }
+    if (__oxray_dc_signature(group) != __oxray_signature<ReturnT (*)(ArgTypes...)>()) {
+        __oxray_throw(OPTIX_EXCEPTION_CODE_CALLABLE_PARAMETER_MISMATCH, 1, d);
     }
     return __oxray_call_callable<ReturnT, ArgTypes...>(f, record, args...);
 }
@@ -1814,10 +1829,14 @@ template <typename ReturnT, typename... ArgTypes>
 static __forceinline__ __device__ ReturnT optixContinuationCall(unsigned int sbtIndex,
                                                                 ArgTypes... args) {
     const char* record = __oxray_callable_record(sbtIndex);
-    void* f = __oxray_cc_of(__oxray_group_of(record));
+    const u32 group = __oxray_group_of(record);
+    void* f = __oxray_cc_of(group);
+    u32 d[1] = {sbtIndex};
     if (f == nullptr) {
-        u32 d[1] = {sbtIndex};
         __oxray_throw(OPTIX_EXCEPTION_CODE_CALLABLE_NO_CC_SBT_RECORD, 1, d);
+    }
+    if (__oxray_cc_signature(group) != __oxray_signature<ReturnT (*)(ArgTypes...)>()) {
+        __oxray_throw(OPTIX_EXCEPTION_CODE_CALLABLE_PARAMETER_MISMATCH, 1, d);
     }
     return __oxray_call_callable<ReturnT, ArgTypes...>(f, record, args...);
 }
