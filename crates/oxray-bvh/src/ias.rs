@@ -457,17 +457,14 @@ impl IasData {
         self.depth
     }
 
-    /// The child of instance `index` (`optixGetInstanceTraversableFromIAS`); needs
-    /// `ALLOW_RANDOM_INSTANCE_ACCESS`. `None` for an index out of range, an instance that is
-    /// never hit (null or empty child), or without the flag.
+    /// The child of instance `index` (`optixGetInstanceChildFromHandle` of
+    /// `optixGetInstanceTraversableFromIAS`); needs `ALLOW_RANDOM_INSTANCE_ACCESS`. `None` for
+    /// an index out of range, a null child, or without the flag; the whole instance is
+    /// [`instance_by_index`](Self::instance_by_index).
     pub fn instance_child(&self, index: u32) -> Option<&TraversableHandle> {
-        if !self
-            .build_flags
-            .contains(BuildFlags::ALLOW_RANDOM_INSTANCE_ACCESS)
-        {
-            return None;
-        }
-        let slot = *self.slot_of.get(index as usize)?;
-        self.instances.get(slot as usize).map(|r| &r.child)
+        self.instance_by_index(index)
+            .ok()
+            .map(|r| &r.child)
+            .filter(|c| !c.is_null())
     }
 }
