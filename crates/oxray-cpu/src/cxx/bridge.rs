@@ -610,12 +610,16 @@ unsafe extern "C" fn api_report(
     // SAFETY: the kind is checked above.
     let ctx = unsafe { ctx_of::<Is>(f) };
     let r = ctx.report_intersection(t, (kind & 0x7F) as u8, attr);
+    // An accepted hit shrinks the interval the program sees (guide §13.5: `optixGetRayTmax`
+    // in an intersection program is the closest accepted hit so far).
+    let tmax = ctx.ray_tmax();
     // The any-hit program may have written the payload through another borrow: take the
     // pointer again.
     let p = ctx.reporter.payload();
     let (ptr, len) = (p.as_mut_ptr(), p.len() as u32);
     f.payload = ptr;
     f.npayload = len;
+    f.tmax = tmax;
     match r {
         Ok(a) => {
             // SAFETY: the result word of the caller.
