@@ -316,8 +316,8 @@ impl ProgramView {
         words[11] = types;
         // A GAS's random vertex access table (`random` in `__oxray_Traversable`), if any.
         let random = addr(2);
-        words[14] = random as u32;
-        words[15] = (random >> 32) as u32;
+        words[12] = random as u32;
+        words[13] = (random >> 32) as u32;
         let descriptor = ctx
             .stream
             .clone_htod(&words[..])

@@ -557,6 +557,10 @@ pub fn pipeline_compile_options(
         "-DOXRAY_PRIMITIVE_TYPE_FLAGS={}u",
         compile.uses_primitive_type_flags.bits()
     ));
+    o.push(format!(
+        "-DOXRAY_USES_MOTION_BLUR={}",
+        u32::from(compile.uses_motion_blur)
+    ));
     // A binary walk pushes at most one entry per level of its tree.
     o.push(format!("-DOXRAY_BVH2_STACK={}", BVH2_STACK));
     // Tuning: `OXRAY_NVRTC_OPTIONS` adds NVRTC options (e.g. `-DOXRAY_PIPELINE_MIN_BLOCKS=8`).

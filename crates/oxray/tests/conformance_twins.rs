@@ -23,13 +23,22 @@ use common::{name, on_every_device};
 use glam::Vec3;
 use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
-    Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, Device, ExceptionCode,
-    GeometryFlags, LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions,
-    RayFlags, SbtRegion, ShaderBindingTable, TriangleInput, VertexBuffer,
+    Aabb, AabbBuffer, BackendKind, BuildInput, BuildOptions, CustomPrimitiveInput, Device,
+    ExceptionCode, GeometryFlags, LaunchReport, ModuleSource, PipelineCompileOptions,
+    PipelineLinkOptions, RayFlags, SbtRegion, ShaderBindingTable, TriangleInput, VertexBuffer,
 };
 use oxray_testkit::mesh::{soup, tri_at, Tri};
 
 const TWINS: &str = include_str!("conformance/twins.cu");
+
+/// Whether code after `optixIgnoreIntersection`, `optixTerminateRay` or a terminating report
+/// runs on `device`: on CUDA they take effect but return (the documented deviation of
+/// docs/gpu-backend.md, "Deviations": CUDA C++ has no way out of the calling program short of
+/// ending the thread); on the CPU they do not return, as in OptiX. Everything else about them
+/// is the same on every device.
+fn code_after_runs(device: &Device) -> bool {
+    device.kind() == BackendKind::Cuda
+}
 
 /// Words of a launch index's record (`TWIN_WORDS` in twins.cu), where its events and notes
 /// start, and how many of each fit.
@@ -747,8 +756,10 @@ fn ignore_intersection_13_13() {
         );
         let p = all.payload();
         assert_eq!(p[2] as usize, all.count(Prog::Ah));
-        assert_eq!(p[3], 0, "code after optixIgnoreIntersection does not run");
-        (top.ch(), p[1], all.ch_free(), p[3])
+        if !code_after_runs(device) {
+            assert_eq!(p[3], 0, "code after optixIgnoreIntersection does not run");
+        }
+        (top.ch(), p[1], all.ch_free())
     });
 }
 
@@ -790,13 +801,12 @@ fn terminate_ray_triangles_13_13() {
             (ch.prim, ch.tmax, ch.attrs),
             (ahs[0].prim, ahs[0].tmax, ahs[0].attrs)
         );
-        assert_eq!(
-            first.payload()[..2],
-            [0, 0],
-            "code after terminate does not run"
-        );
+        assert_eq!(first.payload()[0], 0);
+        if !code_after_runs(device) {
+            assert_eq!(first.payload()[1], 0, "code after terminate does not run");
+        }
         // Which primitive comes first depends on the traversal order: not compared.
-        (bottom.ch(), bottom.payload(), first.payload())
+        (bottom.ch(), bottom.payload(), first.payload()[0])
     });
 }
 
@@ -815,18 +825,20 @@ fn terminate_ray_custom_13_13() {
             RayIn::down(0.0, 0.0),
             &boxes,
         );
-        assert!(
-            out.notes.is_empty(),
-            "code after a terminated report ran: {:?}",
-            out.notes
-        );
+        if !code_after_runs(device) {
+            assert!(
+                out.notes.is_empty(),
+                "code after a terminated report ran: {:?}",
+                out.notes
+            );
+        }
         assert_eq!(out.count(Prog::Is), 1, "{:#?}", out.log);
         assert_eq!(out.count(Prog::Ah), 1);
         let ah = out.of(Prog::Ah)[0];
         let ch = out.ch();
         assert_eq!((ch.prim, ch.tmax, ch.attrs[0]), (ah.prim, ah.tmax, ah.prim));
         assert_eq!(ch.tmax, 9.5 + 2.0 * ch.prim as f32);
-        (out.count(Prog::Is), out.count(Prog::Ah), out.notes)
+        (out.count(Prog::Is), out.count(Prog::Ah))
     });
 }
 
@@ -872,10 +884,12 @@ fn terminate_on_first_hit_custom_13_2() {
         let h = handle(&gas);
         let first = RayIn::down(0.0, 0.0).flags(RayFlags::TERMINATE_ON_FIRST_HIT);
         let out = t.one("two_reports", h, first, &boxes);
-        assert!(
-            out.notes.is_empty(),
-            "the IS went on after a terminating report"
-        );
+        if !code_after_runs(device) {
+            assert!(
+                out.notes.is_empty(),
+                "the IS went on after a terminating report"
+            );
+        }
         assert_eq!(out.count(Prog::Is), 1);
         let ah = out.of(Prog::Ah);
         assert_eq!(ah.len(), 1);
@@ -886,7 +900,7 @@ fn terminate_on_first_hit_custom_13_2() {
             (plain.ch().prim, plain.ch().kind, plain.ch().tmax),
             (0, 2, 9.5)
         );
-        (out.notes, ch.kind, plain.ch())
+        (ch.kind, plain.ch())
     });
 }
 

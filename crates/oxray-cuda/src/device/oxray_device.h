@@ -28,8 +28,9 @@
 // program (see `__oxray_fast_root`); everything else takes the general traversal.
 //
 // Programs that never return in OptiX (`optixIgnoreIntersection`, `optixTerminateRay`) record
-// their effect and return; the traversal honours it when the any-hit program returns (as the
-// CPU backend does): write the payload before calling them and return right after.
+// their effect (the first one called) and return; the traversal honours it when the any-hit
+// program returns (the CPU backend does not return from them, as OptiX): write the payload
+// before calling them and return right after.
 // `optixThrowException` does not return: it runs the exception program, records the exception
 // for the host and ends the launch index.
 
@@ -321,7 +322,13 @@ static __forceinline__ __device__ float3 optixGetWorldRayDirection() {
 }
 static __forceinline__ __device__ float optixGetRayTmin() { return __oxray_state().ray.tmin; }
 static __forceinline__ __device__ float optixGetRayTmax() { return __oxray_state().ray.tmax; }
-static __forceinline__ __device__ float optixGetRayTime() { return __oxray_state().ray.time; }
+#ifndef OXRAY_USES_MOTION_BLUR
+#define OXRAY_USES_MOTION_BLUR 0
+#endif
+// Guide §13.5: the ray's time, 0 in a pipeline compiled without usesMotionBlur (as on the CPU).
+static __forceinline__ __device__ float optixGetRayTime() {
+    return OXRAY_USES_MOTION_BLUR ? __oxray_state().ray.time : 0.0f;
+}
 static __forceinline__ __device__ unsigned int optixGetRayFlags() {
     return __oxray_state().ray.flags;
 }
@@ -860,8 +867,16 @@ __OXRAY_PAYLOAD(28) __OXRAY_PAYLOAD(29) __OXRAY_PAYLOAD(30) __OXRAY_PAYLOAD(31)
 // Any-hit control and exceptions
 // ---------------------------------------------------------------------------------------------
 
-static __forceinline__ __device__ void optixIgnoreIntersection() { __oxray_state().ah_action = 1u; }
-static __forceinline__ __device__ void optixTerminateRay() { __oxray_state().ah_action = 2u; }
+// The first of the two an any-hit program calls takes effect (a later call does nothing), as on
+// the CPU, where the first does not return.
+static __forceinline__ __device__ void optixIgnoreIntersection() {
+    __oxray_ThreadState& s = __oxray_state();
+    if (s.ah_action == 0u) s.ah_action = 1u;
+}
+static __forceinline__ __device__ void optixTerminateRay() {
+    __oxray_ThreadState& s = __oxray_state();
+    if (s.ah_action == 0u) s.ah_action = 2u;
+}
 
 // User codes are 0 to 2^30 - 1; others are clamped to the largest, as on the CPU backend.
 static __forceinline__ __device__ int __oxray_user_code(int code) {
