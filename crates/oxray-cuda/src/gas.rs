@@ -661,17 +661,19 @@ impl CudaGas {
             .clone_htod(&tri_words[..])
             .map_err(driver("copying triangles to the device"))?;
         let refit = crate::refit::RefitPlan::for_upload(ctx, gas, &host.nodes, host.layout)?;
+        let device_bytes = host.device_bytes();
+        let slots = crate::refit::updatable_slots(gas, refit.as_ref(), host.slots);
         ctx.synchronize()?;
         Ok(CudaGas {
             ctx: ctx.clone(),
             kind: GasKind::Triangles,
             layout: host.layout,
             num_nodes: host.nodes.len() / (layout.node_bytes() / 4),
-            device_bytes: host.device_bytes(),
+            device_bytes,
             builder: GasBuilder::Host,
             nodes,
             triangles,
-            slots: host.slots,
+            slots,
             info: gas.info(),
             scratch: Mutex::new(Scratch::default()),
             record_flags: gas.record_flags.iter().map(|f| f.bits()).collect(),
@@ -733,6 +735,7 @@ impl CudaGas {
             .clone_htod(&words[..])
             .map_err(driver("copying primitives to the device"))?;
         let refit = crate::refit::RefitPlan::for_upload(ctx, gas, &nodes_host, NodeLayout::Bvh2)?;
+        let slots = crate::refit::updatable_slots(gas, refit.as_ref(), slots);
         ctx.synchronize()?;
         Ok(CudaGas {
             ctx: ctx.clone(),

@@ -241,9 +241,15 @@ impl CudaGas {
             _keep.push(p);
         }
         let bounds = root_bounds(&root);
-        self.meta.update_sbt_offsets(inputs);
         self.meta.bounds = bounds;
         self.info.bounds = bounds;
+        // The slot table names every slot's primitive from the upload on
+        // (`updatable_slots`); only per-primitive SBT index offsets, which an update may
+        // change, change it.
+        if self.meta.sbt_offsets.is_empty() {
+            return Ok(());
+        }
+        self.meta.update_sbt_offsets(inputs);
         let meta = &self.meta;
         self.slots = plan
             .slot_prim
@@ -265,6 +271,25 @@ impl CudaGas {
             v.rewrite_table(&self.ctx, 0, &words).map_err(device)?;
         }
         Ok(())
+    }
+}
+
+/// The slot table of an uploaded structure: with a refit plan, every slot that holds a
+/// primitive names it, inactive ones included, since an update may make them active (the
+/// upload's table leaves them out); else `slots` as they are.
+pub(crate) fn updatable_slots(
+    gas: &GasData,
+    plan: Option<&RefitPlan>,
+    slots: Vec<SlotInfo>,
+) -> Vec<SlotInfo> {
+    match plan {
+        Some(p) => p
+            .slot_prim
+            .par_iter()
+            .with_min_len(1 << 14)
+            .map(|&g| slot_info(gas, g))
+            .collect(),
+        None => slots,
     }
 }
 
