@@ -315,13 +315,17 @@ pub(crate) fn slot_info(meta: &GasData, g: u32) -> SlotInfo {
 /// and for spheres and curves each slot's box as two `float4` (custom primitives' records are
 /// their boxes).
 pub(crate) fn slot_words(slots: &SlotPrimitives) -> (Vec<u32>, Option<Vec<u32>>) {
-    let boxes = |b: &mut Vec<u32>, a: Aabb| {
-        for f in [
-            a.min.x, a.min.y, a.min.z, 0.0, a.max.x, a.max.y, a.max.z, 0.0,
-        ] {
-            b.push(f.to_bits());
-        }
-    };
+    // Two float4 per box (lower corner, 0, upper corner, 0); an inactive slot's box is empty.
+    fn boxes(all: impl Iterator<Item = Aabb>) -> Vec<u32> {
+        all.flat_map(|a| {
+            [
+                a.min.x, a.min.y, a.min.z, 0.0, a.max.x, a.max.y, a.max.z, 0.0,
+            ]
+        })
+        .map(f32::to_bits)
+        .collect()
+    }
+    let or_empty = |active: bool, b: Aabb| if active { b } else { Aabb::EMPTY };
     match slots {
         SlotPrimitives::Triangles(t) => (
             t.iter()
@@ -330,46 +334,17 @@ pub(crate) fn slot_words(slots: &SlotPrimitives) -> (Vec<u32>, Option<Vec<u32>>)
                 .collect(),
             None,
         ),
-        SlotPrimitives::Aabbs(a) => {
-            let mut w = Vec::with_capacity(8 * a.len());
-            for b in a {
-                boxes(&mut w, *b);
-            }
-            (w, None)
-        }
-        SlotPrimitives::Spheres(s) => {
-            let words = s
-                .iter()
+        SlotPrimitives::Aabbs(a) => (boxes(a.iter().copied()), None),
+        SlotPrimitives::Spheres(s) => (
+            s.iter()
                 .flat_map(|s| s.to_array().map(f32::to_bits))
-                .collect();
-            let mut b = Vec::with_capacity(8 * s.len());
-            for s in s {
-                boxes(
-                    &mut b,
-                    if s.is_active() {
-                        s.bounds()
-                    } else {
-                        Aabb::EMPTY
-                    },
-                );
-            }
-            (words, Some(b))
-        }
-        SlotPrimitives::Curves(c) => {
-            let words = bytemuck::cast_slice(c).to_vec();
-            let mut b = Vec::with_capacity(8 * c.len());
-            for s in c {
-                boxes(
-                    &mut b,
-                    if s.is_active() {
-                        s.bounds()
-                    } else {
-                        Aabb::EMPTY
-                    },
-                );
-            }
-            (words, Some(b))
-        }
+                .collect(),
+            Some(boxes(s.iter().map(|s| or_empty(s.is_active(), s.bounds())))),
+        ),
+        SlotPrimitives::Curves(c) => (
+            bytemuck::cast_slice(c).to_vec(),
+            Some(boxes(c.iter().map(|s| or_empty(s.is_active(), s.bounds())))),
+        ),
     }
 }
 

@@ -383,6 +383,29 @@ pub fn load_bunny(test: &str) -> Option<Mesh> {
     Some(parse_obj(&text).unwrap_or_else(|e| panic!("cannot parse {}: {e}", path.display())))
 }
 
+/// Deformation `round` of `base` into `m` (same topology): a smooth wave whose amplitude grows
+/// with the round, random jitter, a few vertices thrown far away, a few triangles collapsed to
+/// a point (inactive) and earlier collapsed ones restored: what the update tests (guide §5.6)
+/// refit to.
+pub fn deform(rng: &mut Rng, base: &Mesh, m: &mut Mesh, round: u32) {
+    let amp = 0.05 * round as f32;
+    for (p, b) in m.positions.iter_mut().zip(&base.positions) {
+        let b = Vec3::from(*b);
+        let wave = Vec3::new((b.y * 3.0).sin(), (b.z * 2.0).cos(), (b.x * 5.0).sin()) * amp;
+        *p = (b + wave + rng.vec3(-0.02, 0.02)).to_array();
+    }
+    for _ in 0..3 {
+        let k = rng.below(m.positions.len());
+        m.positions[k] = (Vec3::from(m.positions[k]) * 4.0).to_array();
+    }
+    for _ in 0..5 {
+        let t = m.triangles[rng.below(m.triangles.len())];
+        let p = m.positions[t[0] as usize];
+        m.positions[t[1] as usize] = p;
+        m.positions[t[2] as usize] = p;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

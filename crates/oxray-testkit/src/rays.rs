@@ -277,6 +277,27 @@ pub fn ray_hash(rays: &[Ray]) -> u64 {
     h
 }
 
+/// `n` rays from random points around `mesh` (0.2 to 1.5 of its diagonal from its centre)
+/// towards random points inside its box, a quarter of them with a shortened interval: the rays
+/// the update tests trace after each deformation.
+pub fn rays_around(rng: &mut Rng, mesh: &crate::mesh::Mesh, n: usize) -> Vec<Ray> {
+    let (lo, hi) = mesh.bounds();
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    let c = (lo + hi) * 0.5;
+    let r = (hi - lo).length().max(1e-3);
+    (0..n)
+        .map(|_| {
+            let o = c + rng.unit() * r * rng.range(0.2, 1.5);
+            let target = lo + (hi - lo) * Vec3::new(rng.f32(), rng.f32(), rng.f32());
+            let mut ray = Ray::new(o, (target - o).normalize_or(Vec3::X));
+            if rng.below(4) == 0 {
+                ray.tmax = r * rng.f32();
+            }
+            ray
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -13,6 +13,8 @@ use oxray::{
     LoadError, Ray, SphereInput, Transform, TraversableHandle, TriangleInput, UpdateRule,
     VertexBuffer,
 };
+use oxray_testkit::mesh::deform;
+use oxray_testkit::rays::rays_around as rays;
 
 fn input(m: &Mesh) -> BuildInput<'_> {
     TriangleInput::new(VertexBuffer::f32x3(&m.positions))
@@ -25,46 +27,6 @@ fn update(flags: BuildFlags) -> BuildOptions {
         flags,
         operation: BuildOperation::Update,
         ..Default::default()
-    }
-}
-
-/// Rays from random points around the mesh towards random points inside its box.
-fn rays(rng: &mut Rng, m: &Mesh, n: usize) -> Vec<Ray> {
-    let (lo, hi) = m.bounds();
-    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
-    let c = (lo + hi) * 0.5;
-    let r = (hi - lo).length().max(1e-3);
-    (0..n)
-        .map(|_| {
-            let o = c + rng.unit() * r * rng.range(0.2, 1.5);
-            let target = lo + (hi - lo) * Vec3::new(rng.f32(), rng.f32(), rng.f32());
-            let mut ray = Ray::new(o, (target - o).normalize_or(Vec3::X));
-            if rng.below(4) == 0 {
-                ray.tmax = r * rng.f32();
-            }
-            ray
-        })
-        .collect()
-}
-
-/// Moves every vertex (a wave and jitter), throws a few far away, collapses a few triangles to
-/// a point (inactive) and restores earlier ones.
-fn deform(rng: &mut Rng, base: &Mesh, m: &mut Mesh, round: u32) {
-    let amp = 0.05 * round as f32;
-    for (p, b) in m.positions.iter_mut().zip(&base.positions) {
-        let b = Vec3::from(*b);
-        let wave = Vec3::new((b.y * 3.0).sin(), (b.z * 2.0).cos(), (b.x * 5.0).sin()) * amp;
-        *p = (b + wave + rng.vec3(-0.02, 0.02)).to_array();
-    }
-    for _ in 0..3 {
-        let k = rng.below(m.positions.len());
-        m.positions[k] = (Vec3::from(m.positions[k]) * 4.0).to_array();
-    }
-    for _ in 0..5 {
-        let t = m.triangles[rng.below(m.triangles.len())];
-        let p = m.positions[t[0] as usize];
-        m.positions[t[1] as usize] = p;
-        m.positions[t[2] as usize] = p;
     }
 }
 

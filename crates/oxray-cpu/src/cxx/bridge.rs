@@ -863,24 +863,7 @@ motion_lookup!(Ch, Ah, Is);
 unsafe extern "C" fn api_gas_motion(f: *mut CFrame, gas: u64, times: *mut f32) -> u32 {
     // SAFETY: the header passes the running program's frame.
     let f = unsafe { &mut *f };
-    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
-    let hit_gas = unsafe {
-        match f.kind {
-            KIND_CH => ctx_of::<Ch>(f).gas,
-            KIND_AH => ctx_of::<Ah>(f).gas,
-            _ => None,
-        }
-    };
-    // The hit's GAS by its address, or a registered one: a value is never followed.
-    let found = hit_gas
-        .filter(|g| *g as *const crate::Gas as usize as u64 == gas)
-        .map(|g| g.motion_options())
-        .or_else(|| {
-            launch_of(f)
-                .and_then(|l| l.handle(gas))
-                .and_then(|h| h.downcast_ref::<crate::Gas>())
-                .map(|g| g.motion_options())
-        });
+    let found = gas_by_handle(f, gas).map(|g| g.motion_options());
     let Some(m) = found else {
         return 0;
     };
@@ -907,20 +890,11 @@ unsafe extern "C" fn api_vertex_data_from_handle(
 ) -> u32 {
     // SAFETY: the header passes the running program's frame.
     let f = unsafe { &mut *f };
-    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
-    let hit_gas = unsafe {
-        match f.kind {
-            KIND_CH => ctx_of::<Ch>(f).gas,
-            KIND_AH => ctx_of::<Ah>(f).gas,
-            _ => None,
-        }
-    };
     let words: usize = match kind {
         0 => 9,
         1 => 4,
         _ => 16,
     };
-    // The hit's GAS by its address, or a registered one: a value is never followed.
     let read = |g: &crate::Gas| -> Option<Vec<f32>> {
         match kind {
             0 => g
@@ -934,13 +908,7 @@ unsafe extern "C" fn api_vertex_data_from_handle(
                 .map(|c| c.iter().flatten().copied().collect()),
         }
     };
-    let found = match hit_gas.filter(|g| *g as *const crate::Gas as usize as u64 == gas) {
-        Some(g) => read(g),
-        None => launch_of(f)
-            .and_then(|l| l.handle(gas))
-            .and_then(|h| h.downcast_ref::<crate::Gas>())
-            .and_then(read),
-    };
+    let found = gas_by_handle(f, gas).and_then(read);
     let ok = found.is_some();
     let values = found.unwrap_or_else(|| vec![f32::NAN; words]);
     for (k, v) in values.iter().take(words).enumerate() {
@@ -984,6 +952,25 @@ unsafe extern "C" fn api_instance_from_ias(
         *child = inst.child.address();
     }
     1
+}
+
+/// The GAS a handle value names: the hit's GAS by its address, or a structure registered for
+/// the launch; a value is never followed as a pointer.
+fn gas_by_handle(f: &mut CFrame, gas: u64) -> Option<&crate::Gas> {
+    // SAFETY (each arm): `f.kind` names the type of `f.ctx`.
+    let hit_gas = unsafe {
+        match f.kind {
+            KIND_CH => ctx_of::<Ch>(f).gas,
+            KIND_AH => ctx_of::<Ah>(f).gas,
+            _ => None,
+        }
+    };
+    match hit_gas.filter(|g| *g as *const crate::Gas as usize as u64 == gas) {
+        Some(g) => Some(g),
+        None => launch_of(f)
+            .and_then(|l| l.handle(gas))
+            .and_then(|h| h.downcast_ref::<crate::Gas>()),
+    }
 }
 
 unsafe extern "C" fn api_gas_handle(f: *mut CFrame) -> u64 {
