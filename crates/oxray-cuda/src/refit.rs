@@ -415,6 +415,24 @@ mod tests {
     }
 
     #[test]
+    fn updated_slots_are_encoded_as_the_upload_encodes_them() {
+        use oxray_bvh::Sphere;
+        let b = Aabb::new([1.0, 2.0, 3.0].into(), [4.0, 5.0, 6.0].into());
+        let (words, boxes) = slot_words(&SlotPrimitives::Aabbs(vec![b, Aabb::EMPTY]));
+        let f: Vec<f32> = words.iter().map(|&w| f32::from_bits(w)).collect();
+        assert_eq!(f[..8], [1.0, 2.0, 3.0, 0.0, 4.0, 5.0, 6.0, 0.0]);
+        assert_eq!(f[8], f32::INFINITY);
+        assert!(boxes.is_none(), "a box is its own record");
+        let s = [Sphere::new([1.0, 1.0, 1.0].into(), 0.5), Sphere::INACTIVE];
+        let (words, boxes) = slot_words(&SlotPrimitives::Spheres(s.to_vec()));
+        assert_eq!(f32::from_bits(words[3]), 0.5);
+        let boxes: Vec<f32> = boxes.unwrap().iter().map(|&w| f32::from_bits(w)).collect();
+        let (lo, hi) = (s[0].bounds().min, s[0].bounds().max);
+        assert_eq!(boxes[..8], [lo.x, lo.y, lo.z, 0.0, hi.x, hi.y, hi.z, 0.0]);
+        assert_eq!((boxes[8], boxes[12]), (f32::INFINITY, f32::NEG_INFINITY));
+    }
+
+    #[test]
     fn the_root_box_is_the_union_of_its_children() {
         let mut w = [0u32; NODE_WORDS];
         let rows = [
