@@ -19,26 +19,17 @@
 
 mod common;
 
-use common::{name, on_every_device};
+use common::{code_after_runs, name, on_every_device};
 use glam::Vec3;
 use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
-    Aabb, AabbBuffer, BackendKind, BuildInput, BuildOptions, CustomPrimitiveInput, Device,
-    ExceptionCode, GeometryFlags, LaunchReport, ModuleSource, PipelineCompileOptions,
-    PipelineLinkOptions, RayFlags, SbtRegion, ShaderBindingTable, TriangleInput, VertexBuffer,
+    Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, Device, ExceptionCode,
+    GeometryFlags, LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions,
+    RayFlags, SbtRegion, ShaderBindingTable, TriangleInput, VertexBuffer,
 };
 use oxray_testkit::mesh::{soup, tri_at, Tri};
 
 const TWINS: &str = include_str!("conformance/twins.cu");
-
-/// Whether code after `optixIgnoreIntersection`, `optixTerminateRay` or a terminating report
-/// runs on `device`: on CUDA they take effect but return (the documented deviation of
-/// docs/gpu-backend.md, "Deviations": CUDA C++ has no way out of the calling program short of
-/// ending the thread); on the CPU they do not return, as in OptiX. Everything else about them
-/// is the same on every device.
-fn code_after_runs(device: &Device) -> bool {
-    device.kind() == BackendKind::Cuda
-}
 
 /// Words of a launch index's record (`TWIN_WORDS` in twins.cu), where its events and notes
 /// start, and how many of each fit.

@@ -233,3 +233,12 @@ pub fn assert_compiles_with_nvrtc(
         }
     }
 }
+
+/// Whether code after `optixIgnoreIntersection`, `optixTerminateRay` or a terminating report
+/// runs on `device`: on CUDA they take effect but return (the documented deviation of
+/// docs/gpu-backend.md, "Deviations": CUDA C++ has no way out of the calling program short of
+/// ending the thread); on the CPU they do not return, as in OptiX. Everything else about them
+/// is the same on every device.
+pub fn code_after_runs(device: &Device) -> bool {
+    device.kind() == BackendKind::Cuda
+}
