@@ -19,13 +19,12 @@
 
 mod common;
 
-use common::{code_after_runs, name, on_every_device};
+use common::{code_after_runs, name, on_every_device, HitSpec, LabelledPipeline, PipelineSpec};
 use glam::Vec3;
-use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
     Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, Device, ExceptionCode,
-    GeometryFlags, LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions,
-    RayFlags, SbtRegion, ShaderBindingTable, TriangleInput, VertexBuffer,
+    GeometryFlags, LaunchReport, PipelineCompileOptions, RayFlags, SbtRegion, ShaderBindingTable,
+    TriangleInput, VertexBuffer,
 };
 use oxray_testkit::mesh::{soup, tri_at, Tri};
 
@@ -38,14 +37,6 @@ const EVENTS_AT: usize = 16;
 const MAX_EVENTS: usize = 48;
 const NOTES_AT: usize = 400;
 const MAX_NOTES: usize = 112;
-
-/// A hit group: (label, closest hit, any hit, intersection).
-type HitSpec = (
-    &'static str,
-    Option<&'static str>,
-    Option<&'static str>,
-    Option<&'static str>,
-);
 
 const CH: Option<&str> = Some("__closesthit__log");
 const AH: Option<&str> = Some("__anyhit__log");
@@ -266,60 +257,33 @@ impl Rec {
 }
 
 /// The twins' pipeline on one device, with its program groups by label.
-struct Twins {
-    device: Device,
-    pipeline: Pipeline,
-    groups: Vec<(&'static str, ProgramGroup)>,
+struct Twins(LabelledPipeline);
+
+impl std::ops::Deref for Twins {
+    type Target = LabelledPipeline;
+
+    fn deref(&self) -> &LabelledPipeline {
+        &self.0
+    }
 }
 
 impl Twins {
     fn new(device: &Device, max_trace_depth: u32) -> Twins {
-        let m: Module = device
-            .create_module(ModuleSource::CudaCpp(TWINS))
-            .unwrap_or_else(|e| panic!("{}: {e}", name(device)));
-        let e = |n: Option<&'static str>| n.map(|n| (&m, n));
-        let mut groups = vec![("rg", ProgramGroup::raygen(&m, RAYGEN).unwrap())];
-        for (label, entry) in MISSES {
-            groups.push((label, ProgramGroup::miss(&m, entry).unwrap()));
-        }
-        groups.push(("ms_none", ProgramGroup::miss_none(device).unwrap()));
-        for (label, ch, ah, is) in HIT_GROUPS {
-            let g = ProgramGroup::hit_group(HitGroupDesc {
-                closest_hit: e(ch),
-                any_hit: e(ah),
-                intersection: e(is),
-            });
-            groups.push((label, g.unwrap_or_else(|e| panic!("{label}: {e}"))));
-        }
-        groups.push(("ex", ProgramGroup::exception(&m, EXCEPTION).unwrap()));
-        let list: Vec<ProgramGroup> = groups.iter().map(|(_, g)| g.clone()).collect();
-        let compile = PipelineCompileOptions {
-            num_payload_values: 8,
-            num_attribute_values: 2,
-            ..Default::default()
+        let spec = PipelineSpec {
+            source: TWINS,
+            params: "twin",
+            raygens: &[("rg", RAYGEN)],
+            misses: &MISSES,
+            hit_groups: &HIT_GROUPS,
+            exception: ("ex", EXCEPTION),
+            compile: PipelineCompileOptions {
+                num_payload_values: 8,
+                num_attribute_values: 2,
+                ..Default::default()
+            },
+            max_trace_depth,
         };
-        let pipeline = device
-            .create_pipeline(
-                &compile,
-                &PipelineLinkOptions { max_trace_depth },
-                Some("twin"),
-                &list,
-            )
-            .unwrap_or_else(|e| panic!("{} pipeline: {e}", name(device)));
-        Twins {
-            device: device.clone(),
-            pipeline,
-            groups,
-        }
-    }
-
-    fn header(&self, label: &str) -> oxray::SbtHeader {
-        self.groups
-            .iter()
-            .find(|(n, _)| *n == label)
-            .unwrap_or_else(|| panic!("no group {label}"))
-            .1
-            .pack_header()
+        Twins(LabelledPipeline::new(device, &spec))
     }
 
     /// The SBT of the hit records `hits` and miss records `misses` (each record's data is its

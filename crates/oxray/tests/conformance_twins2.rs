@@ -18,13 +18,12 @@
 
 mod common;
 
-use common::{code_after_runs, name, on_every_device};
+use common::{code_after_runs, name, on_every_device, HitSpec, LabelledPipeline, PipelineSpec};
 use glam::Vec3;
-use oxray::programs::{HitGroupDesc, Module, Pipeline, ProgramGroup};
 use oxray::{
     Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, Device, GeometryFlags,
-    LaunchReport, ModuleSource, PipelineCompileOptions, PipelineLinkOptions, SbtIndexOffsets,
-    SbtRegion, ShaderBindingTable, TriangleInput, VertexBuffer,
+    LaunchReport, PipelineCompileOptions, SbtIndexOffsets, SbtRegion, ShaderBindingTable,
+    TriangleInput, VertexBuffer,
 };
 use oxray_testkit::mesh::{soup, tri_at, Tri};
 
@@ -35,14 +34,6 @@ const TWINS2: &str = include_str!("conformance/twins2.cu");
 const WORDS: usize = 128;
 const NOTES_AT: usize = 16;
 const MAX_NOTES: usize = 112;
-
-/// A hit group: (label, closest hit, any hit, intersection).
-type HitSpec = (
-    &'static str,
-    Option<&'static str>,
-    Option<&'static str>,
-    Option<&'static str>,
-);
 
 const HIT_GROUPS: [HitSpec; 13] = [
     (
@@ -204,63 +195,33 @@ type Records<'a, T> = &'a [(&'a str, T)];
 
 /// The twins' pipeline on one device (8 payload words, 8 attribute words, trace depth 2), with
 /// its program groups by label.
-struct Twins {
-    device: Device,
-    pipeline: Pipeline,
-    groups: Vec<(&'static str, ProgramGroup)>,
+struct Twins(LabelledPipeline);
+
+impl std::ops::Deref for Twins {
+    type Target = LabelledPipeline;
+
+    fn deref(&self) -> &LabelledPipeline {
+        &self.0
+    }
 }
 
 impl Twins {
     fn new(device: &Device) -> Twins {
-        let m: Module = device
-            .create_module(ModuleSource::CudaCpp(TWINS2))
-            .unwrap_or_else(|e| panic!("{}: {e}", name(device)));
-        let e = |n: Option<&'static str>| n.map(|n| (&m, n));
-        let mut groups = Vec::new();
-        for (label, entry) in RAYGENS {
-            groups.push((label, ProgramGroup::raygen(&m, entry).unwrap()));
-        }
-        for (label, entry) in MISSES {
-            groups.push((label, ProgramGroup::miss(&m, entry).unwrap()));
-        }
-        groups.push(("ms_none", ProgramGroup::miss_none(device).unwrap()));
-        for (label, ch, ah, is) in HIT_GROUPS {
-            let g = ProgramGroup::hit_group(HitGroupDesc {
-                closest_hit: e(ch),
-                any_hit: e(ah),
-                intersection: e(is),
-            });
-            groups.push((label, g.unwrap_or_else(|e| panic!("{label}: {e}"))));
-        }
-        groups.push(("ex", ProgramGroup::exception(&m, EXCEPTION).unwrap()));
-        let list: Vec<ProgramGroup> = groups.iter().map(|(_, g)| g.clone()).collect();
-        let compile = PipelineCompileOptions {
-            num_payload_values: 8,
-            num_attribute_values: 8,
-            ..Default::default()
+        let spec = PipelineSpec {
+            source: TWINS2,
+            params: "t2",
+            raygens: &RAYGENS,
+            misses: &MISSES,
+            hit_groups: &HIT_GROUPS,
+            exception: ("ex", EXCEPTION),
+            compile: PipelineCompileOptions {
+                num_payload_values: 8,
+                num_attribute_values: 8,
+                ..Default::default()
+            },
+            max_trace_depth: 2,
         };
-        let pipeline = device
-            .create_pipeline(
-                &compile,
-                &PipelineLinkOptions { max_trace_depth: 2 },
-                Some("t2"),
-                &list,
-            )
-            .unwrap_or_else(|e| panic!("{} pipeline: {e}", name(device)));
-        Twins {
-            device: device.clone(),
-            pipeline,
-            groups,
-        }
-    }
-
-    fn header(&self, label: &str) -> oxray::SbtHeader {
-        self.groups
-            .iter()
-            .find(|(n, _)| *n == label)
-            .unwrap_or_else(|| panic!("no group {label}"))
-            .1
-            .pack_header()
+        Twins(LabelledPipeline::new(device, &spec))
     }
 
     fn region<T: bytemuck::Pod>(&self, records: Records<'_, T>) -> SbtRegion {

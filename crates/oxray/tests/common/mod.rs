@@ -242,3 +242,86 @@ pub fn assert_compiles_with_nvrtc(
 pub fn code_after_runs(device: &Device) -> bool {
     device.kind() == BackendKind::Cuda
 }
+
+/// A hit group of a [`LabelledPipeline`]: (label, closest hit, any hit, intersection).
+pub type HitSpec = (
+    &'static str,
+    Option<&'static str>,
+    Option<&'static str>,
+    Option<&'static str>,
+);
+
+/// What a [`LabelledPipeline`] is made of: one module of CUDA C++ programs, its
+/// launch-parameter variable, its ray-generation, miss and hit groups and exception program by
+/// label, and the compile and link options.
+pub struct PipelineSpec<'a> {
+    pub source: &'static str,
+    pub params: &'static str,
+    pub raygens: &'a [(&'static str, &'static str)],
+    pub misses: &'a [(&'static str, &'static str)],
+    pub hit_groups: &'a [HitSpec],
+    pub exception: (&'static str, &'static str),
+    pub compile: PipelineCompileOptions,
+    pub max_trace_depth: u32,
+}
+
+/// A pipeline of one module's programs on one device with its program groups by label: the
+/// spec's, and "ms_none", a miss group without a program.
+pub struct LabelledPipeline {
+    pub device: Device,
+    pub pipeline: Pipeline,
+    pub groups: Vec<(&'static str, ProgramGroup)>,
+}
+
+impl LabelledPipeline {
+    pub fn new(device: &Device, spec: &PipelineSpec<'_>) -> LabelledPipeline {
+        let m: Module = device
+            .create_module(ModuleSource::CudaCpp(spec.source))
+            .unwrap_or_else(|e| panic!("{}: {e}", name(device)));
+        let e = |n: Option<&'static str>| n.map(|n| (&m, n));
+        let mut groups = Vec::new();
+        for &(label, entry) in spec.raygens {
+            groups.push((label, ProgramGroup::raygen(&m, entry).unwrap()));
+        }
+        for &(label, entry) in spec.misses {
+            groups.push((label, ProgramGroup::miss(&m, entry).unwrap()));
+        }
+        groups.push(("ms_none", ProgramGroup::miss_none(device).unwrap()));
+        for &(label, ch, ah, is) in spec.hit_groups {
+            let g = ProgramGroup::hit_group(HitGroupDesc {
+                closest_hit: e(ch),
+                any_hit: e(ah),
+                intersection: e(is),
+            });
+            groups.push((label, g.unwrap_or_else(|e| panic!("{label}: {e}"))));
+        }
+        let (label, entry) = spec.exception;
+        groups.push((label, ProgramGroup::exception(&m, entry).unwrap()));
+        let list: Vec<ProgramGroup> = groups.iter().map(|(_, g)| g.clone()).collect();
+        let pipeline = device
+            .create_pipeline(
+                &spec.compile,
+                &PipelineLinkOptions {
+                    max_trace_depth: spec.max_trace_depth,
+                },
+                Some(spec.params),
+                &list,
+            )
+            .unwrap_or_else(|e| panic!("{} pipeline: {e}", name(device)));
+        LabelledPipeline {
+            device: device.clone(),
+            pipeline,
+            groups,
+        }
+    }
+
+    /// The SBT header of the group labelled `label`.
+    pub fn header(&self, label: &str) -> oxray::SbtHeader {
+        self.groups
+            .iter()
+            .find(|(n, _)| *n == label)
+            .unwrap_or_else(|| panic!("no group {label}"))
+            .1
+            .pack_header()
+    }
+}
