@@ -1334,12 +1334,12 @@ pub(crate) fn decode_triangle(t: &TriangleInput<'_>, k: usize) -> [Vec3; 3] {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use oxray_core::{AabbBuffer, CustomPrimitiveInput, IndexBuffer, VertexBuffer};
 
     /// The leaf slot ranges reachable in a binary tree, sorted.
-    fn tree_leaves(tree: &Bvh2) -> Vec<(u32, u32)> {
+    pub(crate) fn tree_leaves(tree: &Bvh2) -> Vec<(u32, u32)> {
         let mut out = Vec::new();
         let mut stack = if tree.nodes.is_empty() {
             vec![]
@@ -1358,7 +1358,8 @@ mod tests {
         out
     }
 
-    fn layout_leaves(gas: &GasData) -> Vec<(u32, u32)> {
+    /// The leaf slot ranges of the 4-wide layout, sorted.
+    pub(crate) fn layout_leaves(gas: &GasData) -> Vec<(u32, u32)> {
         let mut out: Vec<(u32, u32)> = gas
             .bvh
             .nodes

@@ -488,6 +488,7 @@ fn leaf_node(bounds: Aabb, first: u32, count: u32) -> Bvh2Node {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::gas::tests::{layout_leaves, tree_leaves};
     use crate::gas::GasData;
     use oxray_core::{BuildFlags, BuildOptions, TriangleInput, VertexBuffer};
 
@@ -504,33 +505,6 @@ mod tests {
             .collect()
     }
 
-    fn leaves(tree: &Bvh2) -> Vec<(u32, u32)> {
-        let mut v: Vec<_> = tree
-            .nodes
-            .iter()
-            .enumerate()
-            .filter(|(i, n)| n.is_leaf() && reachable(tree, *i))
-            .map(|(_, n)| (n.left_first, n.count))
-            .collect();
-        v.sort_unstable();
-        v
-    }
-
-    fn reachable(tree: &Bvh2, target: usize) -> bool {
-        let mut stack = vec![0usize];
-        while let Some(i) = stack.pop() {
-            if i == target {
-                return true;
-            }
-            let n = tree.nodes[i];
-            if !n.is_leaf() {
-                stack.push(n.left_first as usize);
-                stack.push(n.left_first as usize + 1);
-            }
-        }
-        false
-    }
-
     #[test]
     fn a_binary_tree_from_the_wide_layout_has_its_leaves_and_boxes() {
         let v = mesh(2000);
@@ -540,18 +514,7 @@ mod tests {
         )
         .unwrap();
         let tree = Bvh2::from_wide(&gas.bvh.nodes);
-        let mut wide: Vec<(u32, u32)> = gas
-            .bvh
-            .nodes
-            .iter()
-            .flat_map(|n| {
-                (0..4)
-                    .filter(|&l| n.count[l] > 0)
-                    .map(|l| (n.child[l], n.count[l]))
-            })
-            .collect();
-        wide.sort_unstable();
-        assert_eq!(leaves(&tree), wide);
+        assert_eq!(tree_leaves(&tree), layout_leaves(&gas));
         assert_eq!(tree.nodes[0].bounds(), gas.bounds);
         // Every inner box is the union of its children's.
         for n in tree.nodes.iter().filter(|n| !n.is_leaf()) {
