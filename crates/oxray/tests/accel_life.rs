@@ -30,6 +30,17 @@ fn update(flags: BuildFlags) -> BuildOptions {
     }
 }
 
+/// `n` rays from random points at distance `from` of the origin towards random points of the
+/// cube of half-side `half` around it.
+fn rays_into_cube(rng: &mut Rng, n: usize, from: f32, half: f32) -> Vec<Ray> {
+    (0..n)
+        .map(|_| {
+            let o = rng.dir() * from;
+            Ray::new(o, (rng.vec3(-half, half) - o).normalize())
+        })
+        .collect()
+}
+
 fn closest(device: &Device, root: &TraversableHandle, rays: &[Ray]) -> Vec<Option<Hit>> {
     let mut hits = vec![None; rays.len()];
     device
@@ -259,12 +270,7 @@ fn updated_sphere_gases_agree_across_devices() {
     let (c0, r0) = sphere_scene(&mut rng, 3000);
     let (c1, mut r1) = sphere_scene(&mut rng, 3000);
     r1[0] = 0.3; // an inactive sphere comes back
-    let r: Vec<Ray> = (0..4000)
-        .map(|_| {
-            let o = rng.dir() * 9.0;
-            Ray::new(o, (rng.vec3(-4.0, 4.0) - o).normalize())
-        })
-        .collect();
+    let r = rays_into_cube(&mut rng, 4000, 9.0, 4.0);
     let flags = BuildFlags::ALLOW_UPDATE;
     common::on_every_device(|device| {
         let bytes = |v: &[[f32; 3]]| bytemuck::cast_slice::<[f32; 3], u8>(v).to_vec();
@@ -377,12 +383,7 @@ fn updated_ias_follows_new_transforms_and_children_on_every_device() {
         let mut ias = device
             .build_ias(&BuildOptions::new(flags), &[(&insts[..]).into()])
             .unwrap();
-        let r: Vec<Ray> = (0..3000)
-            .map(|_| {
-                let o = rng.dir() * 12.0;
-                Ray::new(o, (rng.vec3(-6.0, 6.0) - o).normalize())
-            })
-            .collect();
+        let r = rays_into_cube(&mut rng, 3000, 12.0, 6.0);
         // New transforms.
         let a1 = place(&mut rng, 24);
         let insts = instances(&gas, &a1);
@@ -549,12 +550,7 @@ fn saved_spheres_and_boxes_load_on_every_device() {
     let cb = bytemuck::cast_slice::<[f32; 3], u8>(&c).to_vec();
     let rb = bytemuck::cast_slice::<f32, u8>(&rad).to_vec();
     let (vb, rbs) = ([&cb[..]], [&rb[..]]);
-    let r: Vec<Ray> = (0..3000)
-        .map(|_| {
-            let o = rng.dir() * 9.0;
-            Ray::new(o, (rng.vec3(-4.0, 4.0) - o).normalize())
-        })
-        .collect();
+    let r = rays_into_cube(&mut rng, 3000, 9.0, 4.0);
     let devices = devices();
     for src in &devices {
         let spheres = SphereInput::new(&vb, c.len() as u32, &rbs);
