@@ -108,6 +108,59 @@ impl Transform {
         inv.0.iter().all(|x| x.is_finite()).then_some(inv)
     }
 
+    /// The inverse by cofactors, in a fixed order of scalar `f32` operations (no SIMD lanes, no
+    /// fused multiply-add), or `None` where [`inverse`](Self::inverse) gives `None`. The CUDA
+    /// device repeats these operations bit for bit, so transforms made at trace time (a motion
+    /// transform at the ray's time, guide §5.10.4) are inverted alike on every device.
+    ///
+    /// ```
+    /// use oxray_core::Transform;
+    /// use glam::Vec3;
+    /// let t = Transform([2.0, 0.0, 0.0, 1.0, 0.0, 4.0, 0.0, 2.0, 0.0, 0.0, 1.0, 3.0]);
+    /// let inv = t.inverse_cofactors().unwrap();
+    /// assert_eq!(inv.transform_point(Vec3::new(1.0, 2.0, 3.0)), Vec3::ZERO);
+    /// ```
+    pub fn inverse_cofactors(&self) -> Option<Transform> {
+        let m = &self.0;
+        let (a, b, c, tx) = (m[0], m[1], m[2], m[3]);
+        let (d, e, f, ty) = (m[4], m[5], m[6], m[7]);
+        let (g, h, i, tz) = (m[8], m[9], m[10], m[11]);
+        let c00 = e * i - f * h;
+        let c01 = f * g - d * i;
+        let c02 = d * h - e * g;
+        let det = a * c00 + b * c01 + c * c02;
+        if !(det.is_finite() && det != 0.0 && m.iter().all(|x| x.is_finite())) {
+            return None;
+        }
+        let r = 1.0 / det;
+        let l = [
+            c00 * r,
+            (c * h - b * i) * r,
+            (b * f - c * e) * r,
+            c01 * r,
+            (a * i - c * g) * r,
+            (c * d - a * f) * r,
+            c02 * r,
+            (b * g - a * h) * r,
+            (a * e - b * d) * r,
+        ];
+        let inv = Transform([
+            l[0],
+            l[1],
+            l[2],
+            -(l[0] * tx + l[1] * ty + l[2] * tz),
+            l[3],
+            l[4],
+            l[5],
+            -(l[3] * tx + l[4] * ty + l[5] * tz),
+            l[6],
+            l[7],
+            l[8],
+            -(l[6] * tx + l[7] * ty + l[8] * tz),
+        ]);
+        inv.0.iter().all(|x| x.is_finite()).then_some(inv)
+    }
+
     /// The box around the transformed corners of `b` (empty stays empty).
     pub fn transform_aabb(&self, b: &Aabb) -> Aabb {
         if !b.is_valid() {
@@ -123,5 +176,42 @@ impl Transform {
             out.grow(self.transform_point(c));
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cofactor_inverse_inverts_as_the_glam_one_does() {
+        // A small LCG: no dependency for a handful of numbers.
+        let mut s = 0x2545_f491_u32;
+        let mut next = || {
+            s = s.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (s >> 8) as f32 / (1u32 << 24) as f32 * 4.0 - 2.0
+        };
+        for _ in 0..200 {
+            let t = Transform(std::array::from_fn(|_| next()));
+            let (Some(a), Some(b)) = (t.inverse(), t.inverse_cofactors()) else {
+                continue;
+            };
+            let p = Vec3::new(0.3, -1.2, 0.7);
+            let back = b.transform_point(t.transform_point(p));
+            assert!((back - p).length() < 1e-2, "{t:?}: {back:?}");
+            let scale = a.0.iter().fold(1.0f32, |m, x| m.max(x.abs()));
+            for (x, y) in a.0.iter().zip(&b.0) {
+                assert!((x - y).abs() <= 1e-3 * scale, "{a:?} vs {b:?}");
+            }
+        }
+        let singular = Transform([1.0, 2.0, 3.0, 0.0, 2.0, 4.0, 6.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
+        assert_eq!(singular.inverse_cofactors(), None);
+        let mut infinite = Transform::IDENTITY;
+        infinite.0[3] = f32::INFINITY;
+        assert_eq!(infinite.inverse_cofactors(), None);
+        assert_eq!(
+            Transform::IDENTITY.inverse_cofactors(),
+            Some(Transform::IDENTITY)
+        );
     }
 }

@@ -87,7 +87,12 @@ impl Cuda {
             inputs.first(),
             Some(BuildInput::Triangles(_) | BuildInput::CustomPrimitives(_))
         );
-        if self.builder != GasBuilder::Device || self.layout != NodeLayout::Bvh2 || !device_kind {
+        // Structures with motion keys are built on the host (their tree bounds every key).
+        if self.builder != GasBuilder::Device
+            || self.layout != NodeLayout::Bvh2
+            || !device_kind
+            || options.motion.has_motion()
+        {
             return None;
         }
         // Saturating: a count past u32 fails validation whichever builder runs.
@@ -151,10 +156,6 @@ fn query_error(e: CudaError) -> QueryError {
     }
 }
 
-/// Motion blur (guide §5.10) is traced by the CPU backend only: structures with motion keys
-/// are refused after validation, and motion transforms under instances when the IAS is built.
-pub(crate) const MOTION_UNSUPPORTED: &str = "motion blur (guide §5.10) on the CUDA backend";
-
 fn build_error(e: CudaError) -> BuildError {
     BuildError::Device(e.to_string())
 }
@@ -207,9 +208,6 @@ impl AccelBackend for Cuda {
     ) -> Result<CudaGas, BuildError> {
         // Validated first, so that bad inputs get the same errors on every device.
         oxray_core::validate::validate_structure(options, inputs)?;
-        if options.motion.has_motion() {
-            return Err(BuildError::Unsupported(MOTION_UNSUPPORTED));
-        }
         if let Some(config) = self.device_build_config(options, inputs) {
             match device_build::build_gas(&self.ctx, options, inputs, &config) {
                 Ok((gas, _)) => return Ok(gas),
@@ -233,9 +231,6 @@ impl AccelBackend for Cuda {
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaIas, BuildError> {
         let (data, tree) = IasData::build_with_tree(options, inputs)?;
-        if options.motion.has_motion() {
-            return Err(BuildError::Unsupported(MOTION_UNSUPPORTED));
-        }
         CudaIas::upload(&self.ctx, data, &tree)
     }
 

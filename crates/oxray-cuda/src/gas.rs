@@ -8,7 +8,8 @@ use bytemuck::{Pod, Zeroable};
 use cudarc::driver::{CudaSlice, DevicePtr, LaunchConfig, PushKernelArg};
 use oxray_bvh::{Bvh2, GasData, GasInfo, GasKind};
 use oxray_core::{
-    Aabb, BackendKind, CurveType, Hit, HitKind, Ray, RayRecord, Traversable, TraversableKind,
+    Aabb, BackendKind, CurveType, Hit, HitKind, MotionOptions, Ray, RayRecord, Traversable,
+    TraversableKind,
 };
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -271,6 +272,118 @@ pub struct CudaGas {
     pub(crate) refit: Option<crate::refit::RefitPlan>,
     /// Each primitive's first leaf slot, for random vertex access (made on first use).
     pub(crate) random_slots: std::sync::OnceLock<Vec<u32>>,
+    /// A GAS built with motion (guide §5.10.2): its `__oxray_Motion` table on the device (the
+    /// options, then the primitives at keys 1, 2, … in the layout of `triangles`).
+    pub(crate) motion: Option<DeviceMotion>,
+}
+
+/// The motion of a GAS on the device.
+#[derive(Debug)]
+pub(crate) struct DeviceMotion {
+    pub(crate) options: MotionOptions,
+    pub(crate) words: CudaSlice<u32>,
+    /// The box of the primitives at each key (the emitted `AABBS`, guide §5.10.2).
+    pub(crate) key_bounds: Vec<Aabb>,
+}
+
+impl DeviceMotion {
+    /// Uploads the motion table of `gas`, if it has motion keys.
+    pub(crate) fn upload(ctx: &CudaContext, gas: &GasData) -> Result<Option<Self>, CudaError> {
+        let Some(host) = motion_words(gas) else {
+            return Ok(None);
+        };
+        let words = ctx
+            .stream
+            .clone_htod(&host[..])
+            .map_err(driver("copying motion keys to the device"))?;
+        Ok(Some(DeviceMotion {
+            options: gas.motion_options(),
+            words,
+            key_bounds: gas.key_bounds(),
+        }))
+    }
+
+    /// A copy in new device memory.
+    pub(crate) fn duplicate(&self, ctx: &CudaContext) -> Result<Self, CudaError> {
+        Ok(DeviceMotion {
+            options: self.options,
+            words: ctx
+                .stream
+                .clone_dtod(&self.words)
+                .map_err(driver("copying motion keys on the device"))?,
+            key_bounds: self.key_bounds.clone(),
+        })
+    }
+
+    /// Its device address (the descriptor's `motion`).
+    pub(crate) fn address(&self, ctx: &CudaContext) -> u64 {
+        let (p, _g) = self.words.device_ptr(&ctx.stream);
+        p
+    }
+}
+
+/// Words of the header of a `__oxray_Motion` table.
+const MOTION_HEADER_WORDS: usize = 8;
+
+/// The header of a `__oxray_Motion` table: keys, flags, the two times and the stride (in
+/// `float4`) of one key's primitive table.
+pub(crate) fn motion_header(m: &MotionOptions, stride_words: usize) -> [u32; MOTION_HEADER_WORDS] {
+    [
+        m.num_keys as u32,
+        m.flags.bits() as u32,
+        m.time_begin.to_bits(),
+        m.time_end.to_bits(),
+        (stride_words / 4) as u32,
+        0,
+        0,
+        0,
+    ]
+}
+
+/// The `__oxray_Motion` table of a GAS with motion keys: its options, then its primitives at
+/// keys 1, 2, … each in the layout of the key-0 table (`triangle_key_words`, `box_words`,
+/// `sphere_key_words`, the curve records); `None` for a GAS without motion.
+pub(crate) fn motion_words(gas: &GasData) -> Option<Vec<u32>> {
+    use oxray_bvh::GasMotion;
+    let m = gas.motion.as_ref()?;
+    let keys = m.options.key_count();
+    let key_words = |k: usize| -> Vec<u32> {
+        match gas.kind {
+            GasKind::Triangles => {
+                triangle_key_words(gas, GasMotion::key(&gas.triangles, &m.triangles, k))
+            }
+            GasKind::CustomPrimitives => box_words(GasMotion::key(&gas.aabbs, &m.aabbs, k)),
+            GasKind::Spheres => sphere_key_words(GasMotion::key(&gas.spheres, &m.spheres, k)),
+            GasKind::Curves => {
+                bytemuck::cast_slice(GasMotion::key(&gas.curves, &m.curves, k)).to_vec()
+            }
+        }
+    };
+    let later: Vec<Vec<u32>> = (1..keys).map(key_words).collect();
+    let stride = later.first().map_or(0, Vec::len);
+    let mut words = motion_header(&m.options, stride).to_vec();
+    words.reserve(stride * later.len());
+    for k in later {
+        words.extend_from_slice(&k);
+    }
+    Some(words)
+}
+
+/// One key's triangles as uploaded (12 words per leaf slot: the three vertices as `float4`),
+/// NaN in the slots that are not active.
+fn triangle_key_words(gas: &GasData, blocks: &[oxray_bvh::Triangle4]) -> Vec<u32> {
+    let n = gas.slot_prim.len();
+    let mut words = Vec::with_capacity(12 * n);
+    for slot in 0..n {
+        if gas.slot_is_active(slot) {
+            for p in blocks[slot / 4].get(slot % 4) {
+                words.extend_from_slice(&[p[0], p[1], p[2], 0.0].map(f32::to_bits));
+            }
+        } else {
+            words.extend_from_slice(&[f32::NAN.to_bits(); 12]);
+        }
+    }
+    words
 }
 
 /// The device tables a pipeline's traversal reads beyond the query kernels' (slot
@@ -284,8 +397,9 @@ pub(crate) struct ProgramView {
 }
 
 impl ProgramView {
-    /// Uploads `tables` and a descriptor of `kind` over `nodes`, `prims` and the tables'
-    /// addresses; `types` is a curve GAS's `OptixPrimitiveTypeFlags` (0 otherwise).
+    /// Uploads `tables` and a descriptor of `kind` over `nodes`, `prims`, the tables'
+    /// addresses and `motion` (a `__oxray_Motion` table's address, 0 for none); `types` is a
+    /// curve GAS's `OptixPrimitiveTypeFlags` (0 otherwise).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn upload(
         ctx: &CudaContext,
@@ -296,6 +410,7 @@ impl ProgramView {
         nodes: u64,
         prims: u64,
         tables: Vec<Vec<u32>>,
+        motion: u64,
     ) -> Result<ProgramView, CudaError> {
         let tables: Vec<CudaSlice<u32>> = tables
             .into_iter()
@@ -318,6 +433,8 @@ impl ProgramView {
         let random = addr(2);
         words[12] = random as u32;
         words[13] = (random >> 32) as u32;
+        words[14] = motion as u32;
+        words[15] = (motion >> 32) as u32;
         let descriptor = ctx
             .stream
             .clone_htod(&words[..])
@@ -357,6 +474,10 @@ impl ProgramView {
     }
 }
 
+/// What the batched query kernels do not trace: their rays carry no time.
+pub(crate) const MOTION_QUERIES: &str =
+    "batched queries over structures with motion on the CUDA backend (their rays carry no time; pipelines trace them at each ray's time)";
+
 /// Descriptor kinds (`__OXRAY_GAS`… in `oxray_device.h`).
 pub(crate) const DESCRIPTOR_GAS: u32 = 1;
 pub(crate) const DESCRIPTOR_IAS: u32 = 2;
@@ -365,6 +486,8 @@ pub(crate) const DESCRIPTOR_INSTANCE: u32 = 4;
 pub(crate) const DESCRIPTOR_CUSTOM_GAS: u32 = 5;
 pub(crate) const DESCRIPTOR_SPHERE_GAS: u32 = 6;
 pub(crate) const DESCRIPTOR_CURVE_GAS: u32 = 7;
+pub(crate) const DESCRIPTOR_MATRIX_MOTION: u32 = 8;
+pub(crate) const DESCRIPTOR_SRT_MOTION: u32 = 9;
 
 /// The 16 words of a traversable descriptor (`__oxray_Traversable`): kind, count, four
 /// addresses, the graph depth.
@@ -392,29 +515,39 @@ pub(crate) fn descriptor_words(
 /// upper corner, 0) and what a hit on each slot reports. Inactive slots keep their empty box,
 /// which no ray enters.
 pub(crate) fn custom_words(gas: &GasData) -> (Vec<u32>, Vec<SlotInfo>) {
-    let mut words = Vec::with_capacity(8 * gas.aabbs.len().max(1));
-    for b in &gas.aabbs {
-        for f in [
-            b.min.x, b.min.y, b.min.z, 0.0, b.max.x, b.max.y, b.max.z, 0.0,
-        ] {
-            words.push(f.to_bits());
-        }
-    }
+    let mut words = box_words(&gas.aabbs);
     if words.is_empty() {
         words.resize(8, 0);
     }
     (words, slot_infos(gas, gas.aabbs.len()))
 }
 
+/// Boxes as uploaded: 8 words each (lower corner, 0, upper corner, 0).
+fn box_words(boxes: &[Aabb]) -> Vec<u32> {
+    boxes
+        .iter()
+        .flat_map(|b| {
+            [
+                b.min.x, b.min.y, b.min.z, 0.0, b.max.x, b.max.y, b.max.z, 0.0,
+            ]
+        })
+        .map(f32::to_bits)
+        .collect()
+}
+
+/// Spheres as uploaded: 4 words each (centre, radius).
+fn sphere_key_words(spheres: &[oxray_bvh::Sphere]) -> Vec<u32> {
+    spheres
+        .iter()
+        .flat_map(|s| s.to_array().map(f32::to_bits))
+        .collect()
+}
+
 /// The spheres of a sphere GAS as uploaded (4 words per leaf slot: the centre and the radius,
 /// `optixGetSphereData`'s `float4`) and what a hit on each slot reports. Inactive slots keep
 /// their NaN record, which no ray hits.
 pub(crate) fn sphere_words(gas: &GasData) -> (Vec<u32>, Vec<SlotInfo>) {
-    let mut words: Vec<u32> = gas
-        .spheres
-        .iter()
-        .flat_map(|s| s.to_array().map(f32::to_bits))
-        .collect();
+    let mut words = sphere_key_words(&gas.spheres);
     if words.is_empty() {
         words.resize(4, 0);
     }
@@ -634,11 +767,6 @@ impl CudaGas {
         tree: &Bvh2,
         layout: NodeLayout,
     ) -> Result<CudaGas, CudaError> {
-        // The device layouts have no motion keys: uploading key 0 alone would trace another
-        // scene (guide §5.10).
-        if gas.motion.is_some() {
-            return Err(CudaError::Unsupported(crate::backend::MOTION_UNSUPPORTED));
-        }
         match gas.kind {
             GasKind::CustomPrimitives => return Self::upload_custom(ctx, gas, tree),
             GasKind::Spheres => return Self::upload_spheres(ctx, gas, tree),
@@ -661,7 +789,8 @@ impl CudaGas {
             .clone_htod(&tri_words[..])
             .map_err(driver("copying triangles to the device"))?;
         let refit = crate::refit::RefitPlan::for_upload(ctx, gas, &host.nodes, host.layout)?;
-        let device_bytes = host.device_bytes();
+        let motion = DeviceMotion::upload(ctx, gas)?;
+        let device_bytes = host.device_bytes() + motion.as_ref().map_or(0, |m| 4 * m.words.len());
         let slots = crate::refit::updatable_slots(gas, refit.as_ref(), host.slots);
         ctx.synchronize()?;
         Ok(CudaGas {
@@ -682,6 +811,7 @@ impl CudaGas {
             meta: gas.skeleton(),
             refit,
             random_slots: Default::default(),
+            motion,
         })
     }
 
@@ -736,13 +866,15 @@ impl CudaGas {
             .map_err(driver("copying primitives to the device"))?;
         let refit = crate::refit::RefitPlan::for_upload(ctx, gas, &nodes_host, NodeLayout::Bvh2)?;
         let slots = crate::refit::updatable_slots(gas, refit.as_ref(), slots);
+        let motion = DeviceMotion::upload(ctx, gas)?;
+        let motion_bytes = motion.as_ref().map_or(0, |m| 4 * m.words.len());
         ctx.synchronize()?;
         Ok(CudaGas {
             ctx: ctx.clone(),
             kind,
             layout: NodeLayout::Bvh2,
             num_nodes: nodes_host.len() / 16,
-            device_bytes: 4 * (nodes_host.len() + words.len()),
+            device_bytes: 4 * (nodes_host.len() + words.len()) + motion_bytes,
             builder: GasBuilder::Host,
             nodes,
             triangles: boxes,
@@ -755,6 +887,7 @@ impl CudaGas {
             meta: gas.skeleton(),
             refit,
             random_slots: Default::default(),
+            motion,
         })
     }
 
@@ -793,6 +926,7 @@ impl CudaGas {
             meta,
             refit: None,
             random_slots: Default::default(),
+            motion: None,
         }
     }
 
@@ -805,6 +939,9 @@ impl CudaGas {
     /// Refuses the batched queries on a GAS of custom primitives (which need a pipeline's
     /// intersection programs); triangles and spheres have query kernels.
     fn check_queryable(&self) -> Result<(), CudaError> {
+        if self.motion.is_some() {
+            return Err(CudaError::Unsupported(MOTION_QUERIES));
+        }
         match self.kind {
             GasKind::Triangles | GasKind::Spheres | GasKind::Curves => Ok(()),
             GasKind::CustomPrimitives => Err(CudaError::CustomPrimitives),
@@ -852,10 +989,27 @@ impl CudaGas {
                 Some(r) => vec![slots, self.record_flags.clone(), r],
                 None => vec![slots, self.record_flags.clone()],
             },
+            self.motion.as_ref().map_or(0, |m| m.address(&self.ctx)),
         )?;
         let address = v.address;
         *view = Some(v);
         Ok(address)
+    }
+
+    /// The box around the primitives at each motion key (guide §5.10.2: the emitted property
+    /// `AABBS`); one box, the structure's, without motion.
+    pub fn key_bounds(&self) -> Vec<Aabb> {
+        match &self.motion {
+            Some(m) => m.key_bounds.clone(),
+            None => vec![self.bounds()],
+        }
+    }
+
+    /// The motion options it was built with ([`MotionOptions::NONE`] without motion).
+    pub fn motion_options(&self) -> MotionOptions {
+        self.motion
+            .as_ref()
+            .map_or(MotionOptions::NONE, |m| m.options)
     }
 
     /// The node layout.

@@ -38,6 +38,9 @@ pub struct CudaIas {
     scratch: Mutex<Scratch>,
     /// What a pipeline's traversal reads, made on first use ([`CudaIas::optix_handle`]).
     program_view: Mutex<Option<ProgramView>>,
+    /// The `__oxray_Motion` header of an IAS built with motion options (guide §5.10.3), whose
+    /// vanish flags hide its instances outside its time range.
+    motion: Option<CudaSlice<u32>>,
 }
 
 impl CudaIas {
@@ -61,6 +64,14 @@ impl CudaIas {
         };
         let nodes = upload(&host.nodes, "copying IAS nodes to the device")?;
         let instances = upload(&host.instances, "copying instances to the device")?;
+        let motion = if data.motion.has_motion() {
+            let header = crate::gas::motion_header(&data.motion, 0);
+            Some(upload(&header, "copying motion options to the device")?)
+        } else {
+            None
+        };
+        // The query kernels' rays carry no time: an IAS that can vanish is traced by pipelines.
+        let queryable = queryable && motion.is_none();
         ctx.synchronize()
             .map_err(|e| BuildError::Device(e.to_string()))?;
         Ok(CudaIas {
@@ -74,6 +85,7 @@ impl CudaIas {
             queryable,
             scratch: Mutex::new(Scratch::default()),
             program_view: Mutex::new(None),
+            motion,
         })
     }
 
@@ -146,7 +158,7 @@ impl CudaIas {
         self.data = data;
         self.tree = tree;
         self.children = children;
-        self.queryable = queryable;
+        self.queryable = queryable && self.motion.is_none();
         Ok(())
     }
 
@@ -213,6 +225,10 @@ impl CudaIas {
             nodes,
             insts,
             tables,
+            self.motion.as_ref().map_or(0, |m| {
+                let (p, _g) = m.device_ptr(&self.ctx.stream);
+                p
+            }),
         )?;
         let address = v.address;
         *view = Some(v);
@@ -230,7 +246,7 @@ impl CudaIas {
             Ok(())
         } else {
             Err(CudaError::Unsupported(
-                "batched queries over instances of IASes, static transforms or custom primitives (CudaPipeline traces them)",
+                "batched queries over instances of IASes, transforms, custom primitives or structures with motion (CudaPipeline traces them)",
             ))
         }
     }

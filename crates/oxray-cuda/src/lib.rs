@@ -65,7 +65,7 @@ pub use program::{
     CudaPipeline, CudaProgramGroup, CudaProgramGroupKind, PackedRegion, PackedSbt,
     DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH, DEVICE_HEADER, PIPELINE_BLOCK,
 };
-pub use transform::CudaStaticTransform;
+pub use transform::{CudaMotionTransform, CudaStaticTransform, MotionTransform};
 
 #[cfg(test)]
 #[path = "../tests/common/mod.rs"]

@@ -47,6 +47,10 @@ impl CudaGas {
             Some(p) => Some(p.duplicate(&self.ctx)?),
             None => None,
         };
+        let motion = match &self.motion {
+            Some(m) => Some(m.duplicate(&self.ctx)?),
+            None => None,
+        };
         let gas = CudaGas {
             ctx: self.ctx.clone(),
             kind: self.kind,
@@ -65,6 +69,7 @@ impl CudaGas {
             meta: self.meta.clone(),
             refit,
             random_slots: self.random_slots.clone(),
+            motion,
         };
         self.ctx.synchronize()?;
         Ok(gas)
@@ -99,6 +104,11 @@ impl CudaGas {
     /// which of two primitives at exactly the same distance is reported. What comes back from
     /// the device is checked as a loader checks bytes.
     pub fn to_data(&self) -> Result<GasData, LoadError> {
+        if self.motion.is_some() {
+            return Err(LoadError::Unsupported(
+                "reading a GAS with motion keys back from the CUDA backend",
+            ));
+        }
         let dev = |e: CudaError| LoadError::Device(e.to_string());
         let nodes = download(
             &self.ctx,
@@ -197,7 +207,7 @@ impl CudaGas {
     /// uploaded to this device in `layout` (custom primitives, spheres and curves always in the
     /// binary layout): the binary tree is made from the data's 4-wide one
     /// ([`Bvh2::from_wide`]). It traces the data's hits and can be updated and compacted as the
-    /// structure it was saved from. Structures with motion keys are refused, as for builds.
+    /// structure it was saved from, motion keys included.
     pub fn from_data(
         ctx: &CudaContext,
         data: &GasData,

@@ -1,15 +1,16 @@
-//! Static transforms on the device, and the children of instances and transforms as pipelines
-//! traverse them: any traversable graph of CUDA GASes, IASes and static transforms.
+//! Static and motion transforms on the device, and the children of instances and transforms as
+//! pipelines traverse them: any traversable graph of CUDA GASes, IASes and transforms.
 
 use crate::context::CudaContext;
 use crate::error::{driver, CudaError};
-use crate::gas::{CudaGas, DESCRIPTOR_STATIC};
+use crate::gas::{CudaGas, DESCRIPTOR_MATRIX_MOTION, DESCRIPTOR_SRT_MOTION, DESCRIPTOR_STATIC};
 use crate::ias::CudaIas;
 use crate::layout::NodeLayout;
 use cudarc::driver::{CudaSlice, DevicePtr};
 use oxray_bvh::GasKind;
 use oxray_core::{
-    Aabb, BackendKind, BuildError, StaticTransform, Traversable, TraversableHandle, TraversableKind,
+    Aabb, BackendKind, BuildError, MatrixMotionTransform, SrtMotionTransform, StaticTransform,
+    Traversable, TraversableHandle, TraversableKind,
 };
 use std::sync::{Arc, Mutex};
 
@@ -19,6 +20,7 @@ pub(crate) enum CudaChild {
     Gas(Arc<CudaGas>),
     Ias(Arc<CudaIas>),
     Static(Arc<CudaStaticTransform>),
+    Motion(Arc<CudaMotionTransform>),
 }
 
 impl CudaChild {
@@ -28,13 +30,14 @@ impl CudaChild {
             CudaChild::Gas(g) => g.optix_handle(),
             CudaChild::Ias(i) => i.optix_handle(),
             CudaChild::Static(s) => s.optix_handle(),
+            CudaChild::Motion(m) => m.optix_handle(),
         }
     }
 
-    /// The child as a triangle GAS, which the batched query kernels trace.
+    /// The child as a triangle GAS without motion, which the batched query kernels trace.
     pub(crate) fn triangle_gas(&self) -> Option<&Arc<CudaGas>> {
         match self {
-            CudaChild::Gas(g) if g.kind() == GasKind::Triangles => Some(g),
+            CudaChild::Gas(g) if g.kind() == GasKind::Triangles && g.motion.is_none() => Some(g),
             _ => None,
         }
     }
@@ -80,13 +83,27 @@ pub(crate) fn resolve_child(
         }
         return Ok(Some(CudaChild::Static(st)));
     }
+    if let Some(m) = handle.downcast_arc::<CudaMotionTransform>() {
+        if !m.context().same_context(ctx) {
+            return Err(other_context());
+        }
+        return Ok(Some(CudaChild::Motion(m)));
+    }
     if backend == BackendKind::Cuda || backend == BackendKind::Any {
         if let Some(st) = handle.downcast_ref::<StaticTransform>() {
             let st = CudaStaticTransform::new(ctx, st.clone())?;
             return Ok(Some(CudaChild::Static(Arc::new(st))));
         }
+        if let Some(m) = handle.downcast_ref::<MatrixMotionTransform>() {
+            let m = CudaMotionTransform::new(ctx, MotionTransform::Matrix(m.clone()))?;
+            return Ok(Some(CudaChild::Motion(Arc::new(m))));
+        }
+        if let Some(m) = handle.downcast_ref::<SrtMotionTransform>() {
+            let m = CudaMotionTransform::new(ctx, MotionTransform::Srt(m.clone()))?;
+            return Ok(Some(CudaChild::Motion(Arc::new(m))));
+        }
         return Err(BuildError::Unsupported(
-            "this kind of traversable (motion transforms) on the CUDA backend",
+            "this kind of traversable on the CUDA backend",
         ));
     }
     Err(BuildError::ForeignTraversable {
@@ -208,6 +225,146 @@ impl Traversable for CudaStaticTransform {
 
     fn describe(&self) -> String {
         format!("CUDA {}", self.transform.describe())
+    }
+}
+
+/// A motion transform of the core (guide §5.10.4, §5.10.5).
+#[derive(Clone, Debug)]
+pub enum MotionTransform {
+    /// `OptixMatrixMotionTransform`.
+    Matrix(MatrixMotionTransform),
+    /// `OptixSRTMotionTransform`.
+    Srt(SrtMotionTransform),
+}
+
+impl MotionTransform {
+    fn child(&self) -> &TraversableHandle {
+        match self {
+            MotionTransform::Matrix(m) => m.child(),
+            MotionTransform::Srt(m) => m.child(),
+        }
+    }
+
+    fn traversable(&self) -> &dyn Traversable {
+        match self {
+            MotionTransform::Matrix(m) => m,
+            MotionTransform::Srt(m) => m,
+        }
+    }
+}
+
+/// A motion transform over a structure of this device, for pipelines: on the device, a
+/// descriptor followed by the guide's struct (`OptixMatrixMotionTransform` or
+/// `OptixSRTMotionTransform`: the child's handle, the motion options, padding, every key), which
+/// `optixGetMatrixMotionTransformFromHandle` and `optixGetSRTMotionTransformFromHandle` return.
+/// Traversal interpolates its keys at each ray's time with the CPU backend's arithmetic.
+/// Instances whose child is a core motion transform over CUDA structures get one made by
+/// [`CudaIas::upload`]; make one to trace from a motion transform at the root.
+#[derive(Debug)]
+pub struct CudaMotionTransform {
+    ctx: CudaContext,
+    transform: MotionTransform,
+    child: Option<CudaChild>,
+    /// The descriptor, made on first use ([`optix_handle`](Self::optix_handle)).
+    view: Mutex<Option<(CudaSlice<u32>, u64)>>,
+}
+
+/// The device words of a motion transform whose descriptor is at `address` (the guide's
+/// struct follows at `address + 64`, its child handle patched in) over `child`.
+pub(crate) fn motion_transform_words(
+    t: &MotionTransform,
+    address: u64,
+    child: u64,
+    depth: u32,
+) -> Vec<u32> {
+    let (kind, layout) = match t {
+        MotionTransform::Matrix(m) => (DESCRIPTOR_MATRIX_MOTION, m.optix_layout()),
+        MotionTransform::Srt(m) => (DESCRIPTOR_SRT_MOTION, m.optix_layout()),
+    };
+    let mut w = crate::gas::descriptor_words(kind, depth, 1, address + 64, 0, 0, 0).to_vec();
+    let start = w.len();
+    w.extend(
+        layout
+            .chunks_exact(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+    );
+    w[start] = child as u32;
+    w[start + 1] = (child >> 32) as u32;
+    w
+}
+
+impl CudaMotionTransform {
+    /// A motion transform over a structure of `ctx` (a CUDA GAS, IAS or transform, or a core
+    /// transform over those), or over nothing.
+    pub fn new(ctx: &CudaContext, transform: MotionTransform) -> Result<Self, BuildError> {
+        let child = resolve_child(ctx, transform.child(), None)?;
+        Ok(CudaMotionTransform {
+            ctx: ctx.clone(),
+            transform,
+            child,
+            view: Mutex::new(None),
+        })
+    }
+
+    /// The transform.
+    pub fn transform(&self) -> &MotionTransform {
+        &self.transform
+    }
+
+    /// The context it lives in.
+    pub fn context(&self) -> &CudaContext {
+        &self.ctx
+    }
+
+    /// The `OptixTraversableHandle` of this transform for programs of a
+    /// [`CudaPipeline`](crate::CudaPipeline), made on first use and kept with it.
+    pub fn optix_handle(&self) -> Result<u64, CudaError> {
+        let mut view = self.view.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, a)) = view.as_ref() {
+            return Ok(*a);
+        }
+        let child = match &self.child {
+            Some(c) => c.optix_handle()?,
+            None => 0,
+        };
+        let stream = &self.ctx.stream;
+        let len = motion_transform_words(&self.transform, 0, 0, 0).len();
+        let mut words = stream
+            .alloc_zeros::<u32>(len)
+            .map_err(driver("allocating a motion transform"))?;
+        let address = {
+            let (p, _g) = words.device_ptr(stream);
+            p
+        };
+        let host = motion_transform_words(&self.transform, address, child, self.graph_depth());
+        stream
+            .memcpy_htod(&host[..], &mut words)
+            .map_err(driver("copying a motion transform to the device"))?;
+        self.ctx.synchronize()?;
+        *view = Some((words, address));
+        Ok(address)
+    }
+}
+
+impl Traversable for CudaMotionTransform {
+    fn traversable_kind(&self) -> TraversableKind {
+        self.transform.traversable().traversable_kind()
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.transform.traversable().bounds()
+    }
+
+    fn graph_depth(&self) -> u32 {
+        self.transform.traversable().graph_depth()
+    }
+
+    fn backend(&self) -> BackendKind {
+        BackendKind::Cuda
+    }
+
+    fn describe(&self) -> String {
+        format!("CUDA {}", self.transform.traversable().describe())
     }
 }
 

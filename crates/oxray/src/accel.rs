@@ -217,11 +217,11 @@ impl Gas {
     /// every device.
     pub fn emit_property(&self, property: AccelProperty) -> Result<EmittedProperty, BuildError> {
         match property {
-            // One box per motion key (guide §5.10.2); the CUDA backend has no motion.
+            // One box per motion key (guide §5.10.2).
             AccelProperty::Aabbs => Ok(EmittedProperty::Aabbs(on_gas!(
                 self,
                 g => g.data().key_bounds(),
-                vec![g.bounds()]
+                g.key_bounds()
             ))),
             AccelProperty::CompactedSize => on_gas!(
                 self,

@@ -47,9 +47,10 @@ impl Level<'_> {
         match self {
             Level::Instance(i) => i.world_to_object,
             Level::Static(s) => *s.inverse(),
-            Level::MatrixMotion(..) | Level::SrtMotion(..) => {
-                self.object_to_world().inverse().unwrap_or_default()
-            }
+            Level::MatrixMotion(..) | Level::SrtMotion(..) => self
+                .object_to_world()
+                .inverse_cofactors()
+                .unwrap_or_default(),
         }
     }
 }
@@ -252,7 +253,7 @@ fn traverse_motion_transform<'s, V: SceneVisitor<'s>>(
     visitor: &mut V,
     stack: &mut [Entry],
 ) -> (f32, bool) {
-    let Some(w2o) = o2w.and_then(|m| m.inverse()) else {
+    let Some(w2o) = o2w.and_then(|m| m.inverse_cofactors()) else {
         return (ray.tmax, false);
     };
     let Some(child) = NodeRef::of(child) else {

@@ -105,6 +105,8 @@ struct __oxray_Traversable {
     u32 types;                     // curve GAS: the OptixPrimitiveTypeFlags of its curve types
     unsigned long long random;     // GAS built with ALLOW_RANDOM_VERTEX_ACCESS: its inputs and
                                    // each primitive's leaf slot (__oxray_random_slot); else 0
+    unsigned long long motion;     // GAS or IAS built with motion (guide §5.10): its
+                                   // __oxray_Motion; else 0
 };
 #define __OXRAY_GAS 1u
 #define __OXRAY_IAS 2u
@@ -113,6 +115,19 @@ struct __oxray_Traversable {
 #define __OXRAY_CUSTOM_GAS 5u
 #define __OXRAY_SPHERE_GAS 6u
 #define __OXRAY_CURVE_GAS 7u
+// Motion transforms (§5.10.4, §5.10.5): like a static transform, the descriptor is followed by
+// the guide's struct (OptixMatrixMotionTransform, OptixSRTMotionTransform), at `nodes`.
+#define __OXRAY_MATRIX_MOTION 8u
+#define __OXRAY_SRT_MOTION 9u
+
+// The motion of a GAS or an IAS (§5.10.1): its options; for a GAS, its primitives at keys 1,
+// 2, ... follow, each key a copy of the `prims` table (`stride` float4 apiece).
+struct __oxray_Motion {
+    u32 keys, flags;  // numKeys (> 1), OptixMotionFlags
+    float begin, end;
+    u32 stride;
+    u32 pad[3];
+};
 // Whether a descriptor kind is a GAS.
 #define __OXRAY_IS_GAS(k)                                                                    \
     ((k) == __OXRAY_GAS || (k) == __OXRAY_CUSTOM_GAS || (k) == __OXRAY_SPHERE_GAS ||           \
@@ -450,9 +465,11 @@ static __forceinline__ __device__ u32 __oxray_kind_of(OptixTraversableHandle han
 static __forceinline__ __device__ OptixTransformType
 optixGetTransformTypeFromHandle(OptixTraversableHandle handle) {
     u32 k = __oxray_kind_of(handle);
-    return k == __OXRAY_INSTANCE ? OPTIX_TRANSFORM_TYPE_INSTANCE
-           : k == __OXRAY_STATIC ? OPTIX_TRANSFORM_TYPE_STATIC_TRANSFORM
-                                 : OPTIX_TRANSFORM_TYPE_NONE;
+    return k == __OXRAY_INSTANCE        ? OPTIX_TRANSFORM_TYPE_INSTANCE
+           : k == __OXRAY_STATIC        ? OPTIX_TRANSFORM_TYPE_STATIC_TRANSFORM
+           : k == __OXRAY_MATRIX_MOTION ? OPTIX_TRANSFORM_TYPE_MATRIX_MOTION_TRANSFORM
+           : k == __OXRAY_SRT_MOTION    ? OPTIX_TRANSFORM_TYPE_SRT_MOTION_TRANSFORM
+                                        : OPTIX_TRANSFORM_TYPE_NONE;
 }
 static __forceinline__ __device__ const __oxray_Instance* __oxray_instance_of(
     OptixTraversableHandle handle) {
@@ -500,34 +517,244 @@ static __forceinline__ __device__ const OptixStaticTransform* optixGetStaticTran
         reinterpret_cast<const __oxray_Traversable*>(handle)->nodes);
 }
 
-// Motion transforms and GASes with motion (guide §5.10) are refused by the CUDA backend when
-// a structure is built, so no transform-list entry is a motion transform (these give null) and
-// no GAS has motion (one key, times 0).
+// ---------------------------------------------------------------------------------------------
+// Motion (guide §5.10): the CPU backend's arithmetic, operation for operation (the pipeline is
+// compiled without fused multiply-add), so that both devices see the same scene at each time
+// ---------------------------------------------------------------------------------------------
+
+// The traversal's time: the ray's, or 0 in a pipeline compiled without usesMotionBlur (§13.5).
+#define __OXRAY_TIME(t) (OXRAY_USES_MOTION_BLUR ? (t) : 0.0f)
+
+// a + (b - a) * f, as every motion key is interpolated (oxray_core::motion::lerp).
+static __forceinline__ __device__ float __oxray_lerp(float a, float b, float f) {
+    return a + (b - a) * f;
+}
+static __forceinline__ __device__ float4 __oxray_lerp4(float4 a, float4 b, float f) {
+    return make_float4(__oxray_lerp(a.x, b.x, f), __oxray_lerp(a.y, b.y, f),
+                       __oxray_lerp(a.z, b.z, f), __oxray_lerp(a.w, b.w, f));
+}
+
+// Whether a traversable with these motion options vanishes at `time` (§5.10.1).
+static __forceinline__ __device__ bool __oxray_vanishes(u32 keys, u32 flags, float begin,
+                                                        float end, float time) {
+    return keys > 1u && (((flags & OPTIX_MOTION_FLAG_START_VANISH) && time < begin) ||
+                         ((flags & OPTIX_MOTION_FLAG_END_VANISH) && time > end));
+}
+
+// The keys `time` falls between and the fraction past the first (MotionOptions::sample): false
+// where the traversable vanishes. Keys are evenly spaced from `begin` to `end`; a time outside
+// is clamped, a NaN time is `begin`.
+static __forceinline__ __device__ bool __oxray_sample(u32 keys, u32 flags, float begin, float end,
+                                                      float time, u32& key, u32& next,
+                                                      float& f) {
+    key = 0u;
+    next = 0u;
+    f = 0.0f;
+    if (keys <= 1u) return true;
+    if (__oxray_vanishes(keys, flags, begin, end, time)) return false;
+    const u32 last = keys - 1u;
+    const float span = end - begin;
+    if (span <= 0.0f) {
+        key = time > end ? last : 0u;
+        next = key;
+        return true;
+    }
+    const float t = isnan(time) ? begin : fminf(fmaxf(time, begin), end);
+    const float pos = (t - begin) / span * (float)last;
+    const float fl = floorf(pos);
+    u32 k = fl > 0.0f ? (u32)fl : 0u;
+    if (k >= last) {
+        key = last;
+        next = last;
+        return true;
+    }
+    key = k;
+    next = k + 1u;
+    f = fminf(fmaxf(pos - (float)k, 0.0f), 1.0f);
+    return true;
+}
+
+// The motion of a GAS or an IAS; null without.
+static __forceinline__ __device__ const __oxray_Motion* __oxray_motion_of(
+    const __oxray_Traversable* t) {
+    return reinterpret_cast<const __oxray_Motion*>(t->motion);
+}
+
+// Key `key`'s table of a GAS's primitives (the descriptor's `prims` for key 0).
+static __forceinline__ __device__ const float4* __oxray_key_table(const __oxray_Traversable* g,
+                                                                 const __oxray_Motion* m,
+                                                                 u32 key) {
+    if (key == 0u) return reinterpret_cast<const float4*>(g->prims);
+    return reinterpret_cast<const float4*>(m + 1) + (size_t)(key - 1u) * m->stride;
+}
+
+// The two key tables of a GAS at `time` and the fraction between them: for a GAS without
+// motion, its table twice and 0. False where the GAS vanishes.
+static __forceinline__ __device__ bool __oxray_gas_keys(const __oxray_Traversable* g, float time,
+                                                        const float4*& ka, const float4*& kb,
+                                                        float& f) {
+    const __oxray_Motion* m = __oxray_motion_of(g);
+    ka = reinterpret_cast<const float4*>(g->prims);
+    kb = ka;
+    f = 0.0f;
+    if (m == nullptr) return true;
+    u32 key, next;
+    if (!__oxray_sample(m->keys, m->flags, m->begin, m->end, time, key, next, f)) return false;
+    ka = __oxray_key_table(g, m, key);
+    kb = __oxray_key_table(g, m, next);
+    return true;
+}
+
+// The same keys where a vanished GAS reads as its first key (random vertex access and vertex
+// data, GasData::triangle_at).
+static __forceinline__ __device__ void __oxray_gas_keys_at(const __oxray_Traversable* g,
+                                                          float time, const float4*& ka,
+                                                          const float4*& kb, float& f) {
+    if (!__oxray_gas_keys(g, time, ka, kb, f)) {
+        ka = reinterpret_cast<const float4*>(g->prims);
+        kb = ka;
+        f = 0.0f;
+    }
+}
+
+// The inverse of a 3x4 matrix by cofactors (Transform::inverse_cofactors): false where it is
+// singular or not finite.
+static __forceinline__ __device__ bool __oxray_inverse(const float* m, float* out) {
+    const float a = m[0], b = m[1], c = m[2], tx = m[3];
+    const float d = m[4], e = m[5], f = m[6], ty = m[7];
+    const float g = m[8], h = m[9], i = m[10], tz = m[11];
+    const float c00 = e * i - f * h;
+    const float c01 = f * g - d * i;
+    const float c02 = d * h - e * g;
+    const float det = a * c00 + b * c01 + c * c02;
+    bool finite = isfinite(det) && det != 0.0f;
+    for (int k = 0; k < 12; ++k) finite = finite && isfinite(m[k]);
+    if (!finite) return false;
+    const float r = 1.0f / det;
+    const float l[9] = {c00 * r,           (c * h - b * i) * r, (b * f - c * e) * r,
+                        c01 * r,           (a * i - c * g) * r, (c * d - a * f) * r,
+                        c02 * r,           (b * g - a * h) * r, (a * e - b * d) * r};
+    out[0] = l[0];
+    out[1] = l[1];
+    out[2] = l[2];
+    out[3] = -(l[0] * tx + l[1] * ty + l[2] * tz);
+    out[4] = l[3];
+    out[5] = l[4];
+    out[6] = l[5];
+    out[7] = -(l[3] * tx + l[4] * ty + l[5] * tz);
+    out[8] = l[6];
+    out[9] = l[7];
+    out[10] = l[8];
+    out[11] = -(l[6] * tx + l[7] * ty + l[8] * tz);
+    for (int k = 0; k < 12; ++k) {
+        if (!isfinite(out[k])) return false;
+    }
+    return true;
+}
+
+// The object-to-world matrix of an SRT key (SrtData::to_transform): C = T * R * S with the
+// quaternion normalised first (§5.10.5).
+static __forceinline__ __device__ void __oxray_srt_matrix(const float* k, float* m) {
+    const float sx = k[0], sa = k[1], sb = k[2], pvx = k[3], sy = k[4], sc = k[5], pvy = k[6];
+    const float sz = k[7], pvz = k[8], qx = k[9], qy = k[10], qz = k[11], qw = k[12];
+    const float n = sqrtf(qx * qx + qy * qy + qz * qz + qw * qw);
+    const float x = qx / n, y = qy / n, z = qz / n, w = qw / n;
+    const float r[3][3] = {
+        {1.0f - 2.0f * (y * y + z * z), 2.0f * (x * y - z * w), 2.0f * (x * z + y * w)},
+        {2.0f * (x * y + z * w), 1.0f - 2.0f * (x * x + z * z), 2.0f * (y * z - x * w)},
+        {2.0f * (x * z - y * w), 2.0f * (y * z + x * w), 1.0f - 2.0f * (x * x + y * y)}};
+    const float s[3][4] = {{sx, sa, sb, pvx}, {0.0f, sy, sc, pvy}, {0.0f, 0.0f, sz, pvz}};
+    const float t[3] = {k[13], k[14], k[15]};
+    for (int row = 0; row < 3; ++row) {
+        for (int col = 0; col < 4; ++col) {
+            float v = 0.0f;
+            for (int q = 0; q < 3; ++q) v += r[row][q] * s[q][col];
+            if (col == 3) v += t[row];
+            m[row * 4 + col] = v;
+        }
+    }
+}
+
+// The object-to-world matrix of the motion transform `t` (descriptor kind __OXRAY_MATRIX_MOTION
+// or __OXRAY_SRT_MOTION) at `time`: false where it vanishes.
+static __forceinline__ __device__ bool __oxray_motion_matrix(const __oxray_Traversable* t,
+                                                             float time, float* m) {
+    const OptixMatrixMotionTransform* mt =
+        reinterpret_cast<const OptixMatrixMotionTransform*>(t->nodes);
+    const OptixMotionOptions o = mt->motionOptions;
+    u32 key, next;
+    float f;
+    if (!__oxray_sample(o.numKeys, o.flags, o.timeBegin, o.timeEnd, time, key, next, f)) {
+        return false;
+    }
+    if (t->kind == __OXRAY_MATRIX_MOTION) {
+        const float* a = mt->transform[0] + 12 * (size_t)key;
+        const float* b = mt->transform[0] + 12 * (size_t)next;
+        for (int k = 0; k < 12; ++k) m[k] = __oxray_lerp(a[k], b[k], f);
+    } else {
+        const OptixSRTMotionTransform* st =
+            reinterpret_cast<const OptixSRTMotionTransform*>(t->nodes);
+        const float* a = &st->srtData[0].sx + 16 * (size_t)key;
+        const float* b = &st->srtData[0].sx + 16 * (size_t)next;
+        float k16[16];
+        for (int k = 0; k < 16; ++k) k16[k] = __oxray_lerp(a[k], b[k], f);
+        __oxray_srt_matrix(k16, m);
+    }
+    return true;
+}
+
 static __forceinline__ __device__ const OptixMatrixMotionTransform*
-optixGetMatrixMotionTransformFromHandle(OptixTraversableHandle) {
-    return nullptr;
+optixGetMatrixMotionTransformFromHandle(OptixTraversableHandle handle) {
+    if (__oxray_kind_of(handle) != __OXRAY_MATRIX_MOTION) return nullptr;
+    return reinterpret_cast<const OptixMatrixMotionTransform*>(
+        reinterpret_cast<const __oxray_Traversable*>(handle)->nodes);
 }
 static __forceinline__ __device__ const OptixSRTMotionTransform*
-optixGetSRTMotionTransformFromHandle(OptixTraversableHandle) {
-    return nullptr;
+optixGetSRTMotionTransformFromHandle(OptixTraversableHandle handle) {
+    if (__oxray_kind_of(handle) != __OXRAY_SRT_MOTION) return nullptr;
+    return reinterpret_cast<const OptixSRTMotionTransform*>(
+        reinterpret_cast<const __oxray_Traversable*>(handle)->nodes);
 }
-static __forceinline__ __device__ float optixGetGASMotionTimeBegin(OptixTraversableHandle) {
-    return 0.f;
+// Guide §13.10: a GAS's motion options; without motion one step and times 0, as on the CPU.
+static __forceinline__ __device__ const __oxray_Motion* __oxray_gas_motion(
+    OptixTraversableHandle gas) {
+    if (gas == 0ull || !__OXRAY_IS_GAS(__oxray_kind_of(gas))) return nullptr;
+    return __oxray_motion_of(reinterpret_cast<const __oxray_Traversable*>(gas));
 }
-static __forceinline__ __device__ float optixGetGASMotionTimeEnd(OptixTraversableHandle) {
-    return 0.f;
+static __forceinline__ __device__ float optixGetGASMotionTimeBegin(OptixTraversableHandle gas) {
+    const __oxray_Motion* m = __oxray_gas_motion(gas);
+    return m ? m->begin : 0.f;
 }
-static __forceinline__ __device__ unsigned int optixGetGASMotionStepCount(OptixTraversableHandle) {
-    return 1u;
+static __forceinline__ __device__ float optixGetGASMotionTimeEnd(OptixTraversableHandle gas) {
+    const __oxray_Motion* m = __oxray_gas_motion(gas);
+    return m ? m->end : 0.f;
+}
+static __forceinline__ __device__ unsigned int optixGetGASMotionStepCount(OptixTraversableHandle gas) {
+    const __oxray_Motion* m = __oxray_gas_motion(gas);
+    return m ? m->keys : 1u;
 }
 
 // The object-to-world (`inverse` false) or world-to-object matrix of a transform-list entry,
-// 12 floats row-major.
+// 12 floats row-major: the instance's or static transform's own, or a motion transform's at the
+// ray's time, made in `scratch`.
 static __forceinline__ __device__ const float* __oxray_level_matrix(unsigned long long handle,
-                                                                   bool inverse) {
-    if (__oxray_kind_of(handle) == __OXRAY_INSTANCE) {
+                                                                   bool inverse, float* scratch) {
+    const u32 kind = __oxray_kind_of(handle);
+    if (kind == __OXRAY_INSTANCE) {
         const __oxray_Instance* i = reinterpret_cast<const __oxray_Instance*>(handle);
         return reinterpret_cast<const float*>(inverse ? i->world_to_object : i->object_to_world);
+    }
+    if (kind == __OXRAY_MATRIX_MOTION || kind == __OXRAY_SRT_MOTION) {
+        // The path holds a motion transform only at a time where it is present and invertible.
+        const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
+        float o2w[12];
+        __oxray_motion_matrix(t, __OXRAY_TIME(__oxray_state().ray.time), o2w);
+        if (inverse) {
+            __oxray_inverse(o2w, scratch);
+        } else {
+            for (int k = 0; k < 12; ++k) scratch[k] = o2w[k];
+        }
+        return scratch;
     }
     const OptixStaticTransform* t = optixGetStaticTransformFromHandle(handle);
     return inverse ? t->invTransform : t->transform;
@@ -552,7 +779,8 @@ static __forceinline__ __device__ void __oxray_composed(bool inverse, float m[12
     const __oxray_Path* p = __oxray_state().ray.path;
     for (int k = 0; k < 12; ++k) m[k] = (k % 5 == 0) ? 1.0f : 0.0f;
     for (u32 l = 0; l < p->len; ++l) {
-        const float* t = __oxray_level_matrix(p->levels[l], inverse);
+        float scratch[12];
+        const float* t = __oxray_level_matrix(p->levels[l], inverse, scratch);
         if (l == 0) {
             for (int k = 0; k < 12; ++k) m[k] = t[k];
         } else if (inverse) {
@@ -615,8 +843,44 @@ static __forceinline__ __device__ float3 optixTransformNormalFromObjectToWorldSp
     return __oxray_normal(m, normal);
 }
 
-// The object-space vertices of the hit triangle, as uploaded (pre-transform applied); zeros for
-// a custom primitive.
+// The primitives of leaf slot `slot` of a GAS at `time` (GasData::triangle_at, sphere_at,
+// curve_at): a GAS with motion interpolates its two keys around the time (a vanished one reads
+// its first key), as traversal does.
+static __forceinline__ __device__ void __oxray_triangle_at(const __oxray_Traversable* g, u32 slot,
+                                                           float time, float4 q[3]) {
+    const float4 *ka, *kb;
+    float f;
+    __oxray_gas_keys_at(g, time, ka, kb, f);
+    for (int k = 0; k < 3; ++k) {
+        q[k] = ka[3 * (size_t)slot + k];
+        // A triangle at a key is that key's, zeros' signs included (lerp_triangle4).
+        if (f != 0.0f) q[k] = __oxray_lerp4(q[k], kb[3 * (size_t)slot + k], f);
+    }
+}
+static __forceinline__ __device__ float4 __oxray_sphere_at(const __oxray_Traversable* g, u32 slot,
+                                                           float time) {
+    const float4 *ka, *kb;
+    float f;
+    __oxray_gas_keys_at(g, time, ka, kb, f);
+    return g->motion == 0ull ? ka[slot] : __oxray_lerp4(ka[slot], kb[slot], f);
+}
+static __forceinline__ __device__ void __oxray_curve_record_at(const __oxray_Traversable* g,
+                                                               u32 slot, float time,
+                                                               float4 rec[6]) {
+    const float4 *ka, *kb;
+    float f;
+    __oxray_gas_keys_at(g, time, ka, kb, f);
+    for (int k = 0; k < 6; ++k) rec[k] = ka[6 * (size_t)slot + k];
+    if (f == 0.0f) return;
+    // Control points and ribbon normals (22 floats) are interpolated; type and flags are key 0's.
+    const float* a = reinterpret_cast<const float*>(ka + 6 * (size_t)slot);
+    const float* b = reinterpret_cast<const float*>(kb + 6 * (size_t)slot);
+    float* out = reinterpret_cast<float*>(rec);
+    for (int k = 0; k < 22; ++k) out[k] = __oxray_lerp(a[k], b[k], f);
+}
+
+// The object-space vertices of the hit triangle, as uploaded (pre-transform applied) and, with
+// motion, at the ray's time; zeros for a custom primitive.
 static __forceinline__ __device__ void optixGetTriangleVertexData(float3 data[3]) {
     __oxray_ThreadState& s = __oxray_state();
     const __oxray_Traversable* g = __oxray_hit_gas();
@@ -624,11 +888,9 @@ static __forceinline__ __device__ void optixGetTriangleVertexData(float3 data[3]
         for (int k = 0; k < 3; ++k) data[k] = make_float3(0.0f, 0.0f, 0.0f);
         return;
     }
-    const float4* tris = reinterpret_cast<const float4*>(g->prims) + 3 * (size_t)s.ray.slot;
-    for (int k = 0; k < 3; ++k) {
-        float4 q = tris[k];
-        data[k] = make_float3(q.x, q.y, q.z);
-    }
+    float4 q[3];
+    __oxray_triangle_at(g, s.ray.slot, __OXRAY_TIME(s.ray.time), q);
+    for (int k = 0; k < 3; ++k) data[k] = make_float3(q[k].x, q[k].y, q[k].z);
 }
 
 // Guide §9.4: the centre and radius of the hit sphere, in object space, as the build input gave
@@ -640,7 +902,7 @@ static __forceinline__ __device__ void optixGetSphereData(float4 data[1]) {
         data[0] = make_float4(0.0f, 0.0f, 0.0f, 0.0f);
         return;
     }
-    data[0] = reinterpret_cast<const float4*>(g->prims)[s.ray.slot];
+    data[0] = __oxray_sphere_at(g, s.ray.slot, __OXRAY_TIME(s.ray.time));
 }
 
 // Guide §9.3: a curve hit's u in its segment (exactly 0 or 1 on a flat end cap), and a ribbon
@@ -658,8 +920,8 @@ static __forceinline__ __device__ void __oxray_curve_vertex_data(float4* data, i
     __oxray_ThreadState& s = __oxray_state();
     const __oxray_Traversable* g = __oxray_hit_gas();
     const bool curve = g != nullptr && g->kind == __OXRAY_CURVE_GAS && s.ray.slot != 0xffffffffu;
-    const float4* rec = curve ? reinterpret_cast<const float4*>(g->prims) + 6 * (size_t)s.ray.slot
-                              : nullptr;
+    float4 rec[6];
+    if (curve) __oxray_curve_record_at(g, s.ray.slot, __OXRAY_TIME(s.ray.time), rec);
     for (int k = 0; k < n; ++k) data[k] = curve ? rec[k] : make_float4(0.0f, 0.0f, 0.0f, 0.0f);
 }
 // Guide §9.3: the geometric normal of the hit ribbon at `ribbonParameters` (u, v): unit length,
@@ -670,7 +932,9 @@ static __forceinline__ __device__ float3 optixGetRibbonNormal(float2 ribbonParam
     const __oxray_Traversable* g = __oxray_hit_gas();
     const float3 zero = make_float3(0.0f, 0.0f, 0.0f);
     if (g == nullptr || g->kind != __OXRAY_CURVE_GAS || st.ray.slot == 0xffffffffu) return zero;
-    const CurveRecord c = load_curve(reinterpret_cast<const float4*>(g->prims), st.ray.slot);
+    CurveRecord c;
+    __oxray_curve_record_at(g, st.ray.slot, __OXRAY_TIME(st.ray.time),
+                            reinterpret_cast<float4*>(&c));
     if (c.type != 0x2505u) return zero;
     const double u = (double)ribbonParameters.x, v = (double)ribbonParameters.y;
     double a[3][4];
@@ -774,48 +1038,47 @@ static __forceinline__ __device__ u32 __oxray_random_slot(OptixTraversableHandle
 static __forceinline__ __device__ void optixGetTriangleVertexDataFromHandle(
     OptixTraversableHandle gas, unsigned int primIdx, unsigned int sbtGASIdx, float time,
     float3 data[3]) {
-    (void)time;  // no GAS has motion keys on this device
     const u32 slot = __oxray_random_slot(gas, __OXRAY_GAS, primIdx, sbtGASIdx);
     const float nan = __int_as_float(0x7fc00000);
-    const float4* p =
-        slot == 0xffffffffu
-            ? nullptr
-            : reinterpret_cast<const float4*>(
-                  reinterpret_cast<const __oxray_Traversable*>(gas)->prims) + 3 * (size_t)slot;
-    for (int k = 0; k < 3; ++k)
-        data[k] = p ? make_float3(p[k].x, p[k].y, p[k].z) : make_float3(nan, nan, nan);
+    if (slot == 0xffffffffu) {
+        for (int k = 0; k < 3; ++k) data[k] = make_float3(nan, nan, nan);
+        return;
+    }
+    float4 q[3];
+    __oxray_triangle_at(reinterpret_cast<const __oxray_Traversable*>(gas), slot, time, q);
+    for (int k = 0; k < 3; ++k) data[k] = make_float3(q[k].x, q[k].y, q[k].z);
 }
 static __forceinline__ __device__ void optixGetSphereDataFromHandle(OptixTraversableHandle gas,
                                                                     unsigned int primIdx,
                                                                     unsigned int sbtGASIdx,
                                                                     float time, float4 data[1]) {
-    (void)time;
     const u32 slot = __oxray_random_slot(gas, __OXRAY_SPHERE_GAS, primIdx, sbtGASIdx);
     const float nan = __int_as_float(0x7fc00000);
     data[0] = slot == 0xffffffffu
                   ? make_float4(nan, nan, nan, nan)
-                  : reinterpret_cast<const float4*>(
-                        reinterpret_cast<const __oxray_Traversable*>(gas)->prims)[slot];
+                  : __oxray_sphere_at(reinterpret_cast<const __oxray_Traversable*>(gas), slot,
+                                      time);
 }
 static __forceinline__ __device__ void __oxray_curve_data_from_handle(OptixTraversableHandle gas,
                                                                       unsigned int primIdx,
                                                                       unsigned int sbtGASIdx,
-                                                                      float4* data, int n) {
+                                                                      float time, float4* data,
+                                                                      int n) {
     const u32 slot = __oxray_random_slot(gas, __OXRAY_CURVE_GAS, primIdx, sbtGASIdx);
     const float nan = __int_as_float(0x7fc00000);
-    const float4* rec =
-        slot == 0xffffffffu
-            ? nullptr
-            : reinterpret_cast<const float4*>(
-                  reinterpret_cast<const __oxray_Traversable*>(gas)->prims) + 6 * (size_t)slot;
-    for (int k = 0; k < n; ++k) data[k] = rec ? rec[k] : make_float4(nan, nan, nan, nan);
+    if (slot == 0xffffffffu) {
+        for (int k = 0; k < n; ++k) data[k] = make_float4(nan, nan, nan, nan);
+        return;
+    }
+    float4 rec[6];
+    __oxray_curve_record_at(reinterpret_cast<const __oxray_Traversable*>(gas), slot, time, rec);
+    for (int k = 0; k < n; ++k) data[k] = rec[k];
 }
 #define __OXRAY_CURVE_FROM_HANDLE(name, n)                                                      \
     static __forceinline__ __device__ void name(OptixTraversableHandle gas, unsigned int primIdx, \
                                                 unsigned int sbtGASIdx, float time,             \
                                                 float4 data[n]) {                               \
-        (void)time;                                                                             \
-        __oxray_curve_data_from_handle(gas, primIdx, sbtGASIdx, data, n);                       \
+        __oxray_curve_data_from_handle(gas, primIdx, sbtGASIdx, time, data, n);                 \
     }
 __OXRAY_CURVE_FROM_HANDLE(optixGetLinearCurveVertexDataFromHandle, 2)
 __OXRAY_CURVE_FROM_HANDLE(optixGetQuadraticBSplineVertexDataFromHandle, 3)
@@ -917,6 +1180,7 @@ struct __oxray_Best {
 
 struct __oxray_TraceArgs {
     u32 flags, sbt_offset, sbt_stride;
+    float time;  // the traversal's time (__OXRAY_TIME of the ray's)
 };
 
 // What optixReportIntersection works with while an intersection program runs: the primitive,
@@ -1049,7 +1313,11 @@ static __noinline__ __device__ bool __oxray_walk_triangles(const TraceRay& r,
                                                            const __oxray_Path& path, float tmin,
                                                            float& tmax, __oxray_Best& best) {
     const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
-    const float4* tris = reinterpret_cast<const float4*>(g->prims);
+    // With motion (§5.10.2), the two keys around the ray's time, interpolated per triangle (a
+    // triangle at a key is that key's exactly, as on the CPU); the tree bounds every key.
+    const float4 *tris, *tris_b;
+    float f;
+    if (!__oxray_gas_keys(g, a.time, tris, tris_b, f)) return false;
     const uint2* slots = reinterpret_cast<const uint2*>(g->info);
     const u32* gflags_of = reinterpret_cast<const u32*>(g->geom_flags);
     bool ended = false;
@@ -1058,6 +1326,11 @@ static __noinline__ __device__ bool __oxray_walk_triangles(const TraceRay& r,
             float4 q0 = tris[3 * s];
             float4 q1 = tris[3 * s + 1];
             float4 q2 = tris[3 * s + 2];
+            if (f != 0.0f) {
+                q0 = __oxray_lerp4(q0, tris_b[3 * s], f);
+                q1 = __oxray_lerp4(q1, tris_b[3 * s + 1], f);
+                q2 = __oxray_lerp4(q2, tris_b[3 * s + 2], f);
+            }
             TriHit h;
             if (!intersect_triangle(r, make_float3(q0.x, q0.y, q0.z),
                                     make_float3(q1.x, q1.y, q1.z),
@@ -1134,14 +1407,19 @@ static __noinline__ __device__ bool __oxray_walk_spheres(const TraceRay& r,
                                                          const __oxray_Path& path, float tmin,
                                                          float& tmax, __oxray_Best& best) {
     const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
-    const float4* spheres = reinterpret_cast<const float4*>(g->prims);
+    const float4 *spheres, *spheres_b;
+    float f;
+    if (!__oxray_gas_keys(g, a.time, spheres, spheres_b, f)) return false;
+    const bool motion = g->motion != 0ull;
     const uint2* slots = reinterpret_cast<const uint2*>(g->info);
     const u32* gflags_of = reinterpret_cast<const u32*>(g->geom_flags);
     bool ended = false;
     walk_bvh2<OXRAY_BVH2_STACK>(r, nodes, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
         for (u32 s = start; s < start + count; ++s) {
             float t;
-            if (!intersect_sphere(r, spheres[s], tmin, tmax_, t)) continue;
+            // With motion every sphere is interpolated, at a key too (lerp_sphere).
+            const float4 sp = motion ? __oxray_lerp4(spheres[s], spheres_b[s], f) : spheres[s];
+            if (!intersect_sphere(r, sp, tmin, tmax_, t)) continue;
             if (__oxray_offer_builtin(slots, gflags_of, a, path, s, t, 0.0f, 0.0f,
                                       __OXRAY_HIT_KIND_SPHERE_FRONT_FACE, tmax_, tmax, best)) {
                 ended = true;
@@ -1163,13 +1441,22 @@ static __noinline__ __device__ bool __oxray_walk_curves(const TraceRay& r,
                                                         const __oxray_Path& path, float tmin,
                                                         float& tmax, __oxray_Best& best) {
     const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
-    const float4* curves = reinterpret_cast<const float4*>(g->prims);
+    const float4 *curves, *curves_b;
+    float f;
+    if (!__oxray_gas_keys(g, a.time, curves, curves_b, f)) return false;
     const uint2* slots = reinterpret_cast<const uint2*>(g->info);
     const u32* gflags_of = reinterpret_cast<const u32*>(g->geom_flags);
     bool ended = false;
     walk_bvh2<OXRAY_BVH2_STACK>(r, nodes, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
         for (u32 s = start; s < start + count; ++s) {
-            const CurveRecord c = load_curve(curves, s);
+            CurveRecord c = load_curve(curves, s);
+            if (f != 0.0f) {
+                // Control points and ribbon normals between the keys (lerp_curve).
+                const CurveRecord b = load_curve(curves_b, s);
+                float* cw = &c.p[0][0];
+                const float* bw = &b.p[0][0];
+                for (int k = 0; k < 22; ++k) cw[k] = __oxray_lerp(cw[k], bw[k], f);
+            }
             CurveHit h;
             if (!curve_intersect(c, r.org, r.dir, tmin, tmax_, h)) continue;
             if (__oxray_offer_builtin(slots, gflags_of, a, path, s, h.t, h.u, h.v,
@@ -1191,13 +1478,22 @@ static __noinline__ __device__ bool __oxray_walk_custom(const TraceRay& r,
                                                         const __oxray_Path& path, float tmin,
                                                         float& tmax, __oxray_Best& best) {
     const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
-    const float4* boxes = reinterpret_cast<const float4*>(g->prims);
+    const float4 *boxes, *boxes_b;
+    float f;
+    if (!__oxray_gas_keys(g, a.time, boxes, boxes_b, f)) return false;
+    const bool motion = g->motion != 0ull;
     const uint2* slots = reinterpret_cast<const uint2*>(g->info);
     const u32* gflags_of = reinterpret_cast<const u32*>(g->geom_flags);
     bool ended = false;
     walk_bvh2<OXRAY_BVH2_STACK>(r, nodes, tmin, tmax, [&](u32 start, u32 count, float& tmax_) {
         for (u32 s = start; s < start + count; ++s) {
-            if (!hits_box(r, boxes[2 * s], boxes[2 * s + 1], tmin, tmax_)) continue;
+            // With motion the box between the keys, corner by corner (lerp_aabb, §5.10.1).
+            float4 lo = boxes[2 * s], hi = boxes[2 * s + 1];
+            if (motion) {
+                lo = __oxray_lerp4(lo, boxes_b[2 * s], f);
+                hi = __oxray_lerp4(hi, boxes_b[2 * s + 1], f);
+            }
+            if (!hits_box(r, lo, hi, tmin, tmax_)) continue;
             uint2 info = slots[s];
             u32 gflags = gflags_of[info.y];
             const char* record = __oxray_hit_record(a, path, info.y);
@@ -1386,8 +1682,29 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
         }
         if (t->kind == __OXRAY_CURVE_GAS) return __oxray_walk_curves(r, t, a, path, tmin, tmax, best);
         return __oxray_walk_custom(r, t, a, path, tmin, tmax, best);
-    case __OXRAY_IAS:
+    case __OXRAY_IAS: {
+        // Guide §5.10.3: an IAS's vanish flags hide every instance outside its range.
+        const __oxray_Motion* m = __oxray_motion_of(t);
+        if (m != nullptr && __oxray_vanishes(m->keys, m->flags, m->begin, m->end, a.time)) {
+            return false;
+        }
         return __oxray_walk_ias(r, t, a, path, tmin, tmax, best);
+    }
+    case __OXRAY_MATRIX_MOTION:
+    case __OXRAY_SRT_MOTION: {
+        // §5.10.4, §5.10.5: the transform at the ray's time; none where it vanishes, and an
+        // interpolated matrix that is singular (a scale through zero) hides its child then.
+        float o2w[12], w2o[12];
+        if (!__oxray_motion_matrix(t, a.time, o2w) || !__oxray_inverse(o2w, w2o)) return false;
+        const unsigned long long child =
+            reinterpret_cast<const OptixMatrixMotionTransform*>(t->nodes)->child;
+        if (child == 0ull) return false;
+        TraceRay o;
+        if (!__oxray_child_ray(w2o, r, tmin, tmax, o)) return false;
+        return __oxray_descend(reinterpret_cast<const __oxray_Traversable*>(child),
+                               reinterpret_cast<unsigned long long>(t), nullptr, o, a, path,
+                               tmin, tmax, best);
+    }
     case __OXRAY_STATIC: {
         const OptixStaticTransform* st = reinterpret_cast<const OptixStaticTransform*>(t->nodes);
         if (st->child == 0ull) return false;
@@ -1407,7 +1724,8 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
 // as the CPU backend checks them.
 static __forceinline__ __device__ void __oxray_check_root(const __oxray_Traversable* t) {
     u32 k = t->kind;
-    if (!__OXRAY_IS_GAS(k) && k != __OXRAY_IAS && k != __OXRAY_STATIC) {
+    if (!__OXRAY_IS_GAS(k) && k != __OXRAY_IAS && k != __OXRAY_STATIC &&
+        k != __OXRAY_MATRIX_MOTION && k != __OXRAY_SRT_MOTION) {
         __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE, 0, nullptr);
     }
     if (OXRAY_GRAPH_FLAGS != 0u) {
@@ -1458,7 +1776,8 @@ static __forceinline__ __device__ bool __oxray_fast_root(OptixTraversableHandle 
     if (OXRAY_PRIMITIVE_TYPE_FLAGS != 0u && (OXRAY_PRIMITIVE_TYPE_FLAGS & (1u << 31)) == 0u) {
         return false;
     }
-    return reinterpret_cast<const __oxray_Traversable*>(handle)->kind == __OXRAY_GAS;
+    const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
+    return t->kind == __OXRAY_GAS && t->motion == 0ull;
 }
 
 // The query kernels' closest-hit loop over a triangle GAS (first hit with FIRST).
@@ -1623,6 +1942,7 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
     a.flags = flags;
     a.sbt_offset = sbt_offset;
     a.sbt_stride = sbt_stride;
+    a.time = __OXRAY_TIME(time);
     TraceRay r;
     r.org = org;
     r.dir = dir;
@@ -1683,6 +2003,7 @@ static __noinline__ __device__ void __oxray_trace_fast(const __oxray_Traversable
             a.flags = flags;
             a.sbt_offset = sbt_offset;
             a.sbt_stride = sbt_stride;
+            a.time = 0.0f;  // a GAS without motion
             const char* record = __oxray_hit_record(a, __oxray_root_path, info.y);
             st.ray.tmax = fast.t;
             if (__OXRAY_STORES(true, __OXRAY_READS_PRIMITIVE)) st.ray.prim = info.x;
