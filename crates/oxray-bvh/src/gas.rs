@@ -525,16 +525,11 @@ impl GasData {
 
         let mut tree = None;
         if options.motion.has_motion() {
-            // A refit would re-read every key; the CUDA layouts have no keys.
+            // A refit would re-read every key.
             if options.flags.contains(BuildFlags::ALLOW_UPDATE) {
                 return Err(BuildError::Unsupported("ALLOW_UPDATE with motion keys"));
             }
-            if keep_tree {
-                return Err(BuildError::Unsupported(
-                    "a GAS with motion keys for a layout other than the CPU's",
-                ));
-            }
-            crate::motion::build_motion(
+            let bvh2 = crate::motion::build_motion(
                 &mut gas,
                 options.motion,
                 inputs,
@@ -546,7 +541,7 @@ impl GasData {
             if !options.flags.contains(BuildFlags::ALLOW_COMPACTION) {
                 gas.shrink_to_fit();
             }
-            return Ok((gas, None));
+            return Ok((gas, keep_tree.then_some(bvh2)));
         }
         match gas.kind {
             GasKind::Triangles => {
@@ -1147,7 +1142,7 @@ fn packed_start(map: &[(u32, u32)], start: u32) -> Option<u32> {
 }
 
 /// Points the leaves of the binary tree at the slots the packing gave them.
-fn remap_leaves(mut tree: Bvh2, map: &[(u32, u32)]) -> Bvh2 {
+pub(crate) fn remap_leaves(mut tree: Bvh2, map: &[(u32, u32)]) -> Bvh2 {
     for node in tree.nodes.iter_mut().filter(|n| n.is_leaf()) {
         if let Some(s) = packed_start(map, node.left_first) {
             node.left_first = s;

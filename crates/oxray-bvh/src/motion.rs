@@ -77,7 +77,9 @@ fn union_boxes(keys: impl Iterator<Item = Option<Aabb>>) -> Option<Aabb> {
 }
 
 /// Builds a GAS with motion into `gas` (made by `GasData::prepare`): the primitives of every
-/// key, the tree over their union boxes, the later keys in [`GasMotion`].
+/// key, the tree over their union boxes, the later keys in [`GasMotion`]. Returns the binary
+/// tree the 4-wide one was made from, its leaves naming the structure's leaf slots (what the
+/// CUDA backend uploads).
 pub(crate) fn build_motion(
     gas: &mut GasData,
     motion: MotionOptions,
@@ -85,7 +87,7 @@ pub(crate) fn build_motion(
     config: &BuildConfig,
     width: NodeWidth,
     curve_splits: Option<CurveSplits>,
-) {
+) -> crate::Bvh2 {
     let keys = motion.key_count();
     let mut out = GasMotion {
         options: motion,
@@ -94,7 +96,7 @@ pub(crate) fn build_motion(
         spheres: Vec::new(),
         curves: Vec::new(),
     };
-    match gas.kind {
+    let tree = match gas.kind {
         GasKind::Triangles => {
             let per_key: Vec<Vec<[Vec3; 3]>> = (0..keys)
                 .map(|key| {
@@ -148,15 +150,17 @@ pub(crate) fn build_motion(
                     out.triangles.extend_from_slice(&blocks);
                 }
             }
+            // Packing moved the leaves' first slots: the other layouts follow.
+            let map = crate::gas::leaf_map(
+                &crate::wide::leaf_starts(&unpacked.nodes),
+                &crate::wide::leaf_starts(&gas.bvh.nodes),
+            );
             if width == NodeWidth::Eight {
-                let map = crate::gas::leaf_map(
-                    &crate::wide::leaf_starts(&unpacked.nodes),
-                    &crate::wide::leaf_starts(&gas.bvh.nodes),
-                );
                 let mut b8 = crate::bvh8::Bvh8::from(&bvh2);
                 crate::gas::remap_wide_leaves(&mut b8.nodes, &map);
                 gas.bvh8 = Some(b8);
             }
+            crate::gas::remap_leaves(bvh2, &map)
         }
         GasKind::CustomPrimitives => {
             let per_key: Vec<Vec<Aabb>> = (0..keys)
@@ -184,7 +188,7 @@ pub(crate) fn build_motion(
                     )
                 })
                 .collect();
-            gas.build_slots(&boxes, config, width);
+            let tree = gas.build_slots(&boxes, config, width);
             for (key, b) in per_key.iter().enumerate() {
                 let slotted = gas.slot_prim.iter().map(|&g| b[g as usize]);
                 if key == 0 {
@@ -193,6 +197,7 @@ pub(crate) fn build_motion(
                     out.aabbs.extend(slotted);
                 }
             }
+            tree
         }
         GasKind::Spheres => {
             let per_key: Vec<Vec<Sphere>> = (0..keys)
@@ -218,7 +223,7 @@ pub(crate) fn build_motion(
                     )
                 })
                 .collect();
-            gas.build_slots(&boxes, config, width);
+            let tree = gas.build_slots(&boxes, config, width);
             for (key, s) in per_key.iter().enumerate() {
                 let slotted = gas.slot_prim.iter().map(|&g| s[g as usize]);
                 if key == 0 {
@@ -227,6 +232,7 @@ pub(crate) fn build_motion(
                     out.spheres.extend(slotted);
                 }
             }
+            tree
         }
         GasKind::Curves => {
             let per_key: Vec<Vec<CurveSegment>> = (0..keys)
@@ -283,7 +289,7 @@ pub(crate) fn build_motion(
                 })
                 .unzip();
             let repeats = ref_ids.len() > ids.len();
-            gas.build_slot_refs(&ref_ids, &ref_bounds, repeats, config, width);
+            let tree = gas.build_slot_refs(&ref_ids, &ref_bounds, repeats, config, width);
             for (key, segments) in per_key.iter().enumerate() {
                 let slotted = gas.slot_prim.iter().map(|&g| segments[g as usize]);
                 if key == 0 {
@@ -292,9 +298,11 @@ pub(crate) fn build_motion(
                     out.curves.extend(slotted);
                 }
             }
+            tree
         }
-    }
+    };
     gas.motion = Some(out);
+    tree
 }
 
 /// Four triangles interpolated lane by lane between two keys' blocks (key `a` exactly where

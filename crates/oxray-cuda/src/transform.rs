@@ -490,6 +490,66 @@ mod tests {
     }
 
     #[test]
+    fn motion_tables_hold_every_later_key_in_the_key_0_layout() {
+        // Guide §5.10.2: a triangle GAS of three keys, each moving the triangles along x.
+        let v0: Vec<[f32; 3]> = (0..30)
+            .map(|i| {
+                [
+                    (i % 3) as f32 + (i / 3) as f32,
+                    (i % 2) as f32,
+                    (i / 3) as f32 * 0.1,
+                ]
+            })
+            .collect();
+        let keys: Vec<Vec<[f32; 3]>> = (1..3)
+            .map(|k| v0.iter().map(|p| [p[0] + k as f32, p[1], p[2]]).collect())
+            .collect();
+        let later: Vec<oxray_core::VertexBuffer<'_>> = keys
+            .iter()
+            .map(|k| oxray_core::VertexBuffer::f32x3(k))
+            .collect();
+        let input = oxray_core::TriangleInput::new(oxray_core::VertexBuffer::f32x3(&v0))
+            .motion_vertices(&later);
+        let m = oxray_core::MotionOptions::new(3, 0.0, 2.0);
+        let options = oxray_core::BuildOptions::default().with_motion(m);
+        let (gas, tree) = oxray_bvh::GasData::build_with_tree(&options, &[input.into()]).unwrap();
+        // The binary tree names the structure's slots, as for a static GAS.
+        let export = gas.export_triangles().unwrap();
+        let dl = crate::layout::DeviceLayout::new(&export, &tree, NodeLayout::Bvh2).unwrap();
+        let slots = dl.slots.len();
+        let words = crate::gas::motion_words(&gas).unwrap();
+        assert_eq!(&words[..5], &[3, 0, 0, 2.0f32.to_bits(), 3 * slots as u32]);
+        assert_eq!(words.len(), 8 + 2 * 12 * slots);
+        for (s, info) in dl.slots.iter().enumerate() {
+            if info.primitive_index == u32::MAX {
+                continue;
+            }
+            assert_eq!(
+                &dl.triangles[12 * s..12 * s + 12],
+                &gas.triangle_at(s, 0.0)
+                    .unwrap()
+                    .map(|p| [p[0], p[1], p[2], 0.0])
+                    .concat()[..]
+            );
+            for k in 1..3 {
+                let at = 8 + (k - 1) * 12 * slots + 12 * s;
+                let got: Vec<f32> = words[at..at + 12]
+                    .iter()
+                    .map(|&w| f32::from_bits(w))
+                    .collect();
+                let want = gas.triangle_at(s, k as f32).unwrap();
+                let t = 3 * info.primitive_index as usize;
+                assert_eq!(want[0][0], keys[k - 1][t][0], "key {k} of the input");
+                assert_eq!(
+                    got,
+                    want.map(|p| [p[0], p[1], p[2], 0.0]).concat(),
+                    "key {k}"
+                );
+            }
+        }
+    }
+
+    #[test]
     fn uploaded_triangles_keep_the_inputs_vertex_order() {
         // optixGetTriangleVertexData returns the uploaded vertices: they must be the input's
         // v0, v1, v2 (the barycentrics weigh them in that order).

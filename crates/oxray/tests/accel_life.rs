@@ -8,10 +8,9 @@ mod common;
 use common::{check_closest, devices, grid_cube, icosphere, name, Mesh, Rng};
 use glam::{Affine3A, Quat, Vec3};
 use oxray::{
-    AabbBuffer, AccelProperty, BackendKind, BuildError, BuildFlags, BuildInput, BuildOperation,
-    BuildOptions, CustomPrimitiveInput, Device, EmittedProperty, Gas, Hit, IndexBuffer, Instance,
-    LoadError, Ray, SphereInput, Transform, TraversableHandle, TriangleInput, UpdateRule,
-    VertexBuffer,
+    AabbBuffer, AccelProperty, BuildError, BuildFlags, BuildInput, BuildOperation, BuildOptions,
+    CustomPrimitiveInput, Device, EmittedProperty, Gas, Hit, IndexBuffer, Instance, LoadError, Ray,
+    SphereInput, Transform, TraversableHandle, TriangleInput, UpdateRule, VertexBuffer,
 };
 use oxray_testkit::mesh::deform;
 use oxray_testkit::rays::rays_around as rays;
@@ -600,23 +599,5 @@ fn damaged_saved_bytes_are_refused_on_every_device() {
         );
         assert!(device.load_gas(&bytes[..bytes.len() - 7]).is_err());
         assert!(device.load_gas(&[]).is_err());
-        if device.kind() == BackendKind::Cuda {
-            // A structure with motion keys has no device layout yet: a typed refusal.
-            let keys = [m.positions.clone(), m.positions.clone()];
-            let motion: Vec<VertexBuffer<'_>> =
-                keys[1..].iter().map(|k| VertexBuffer::f32x3(k)).collect();
-            let input = TriangleInput::new(VertexBuffer::f32x3(&keys[0]))
-                .indices(IndexBuffer::u32x3(&m.triangles))
-                .motion_vertices(&motion);
-            let opts = BuildOptions {
-                motion: oxray::MotionOptions::new(2, 0.0, 1.0),
-                ..Default::default()
-            };
-            let moving = Device::cpu().build_gas(&opts, &[input.into()]).unwrap();
-            assert!(matches!(
-                device.load_gas(&moving.to_bytes().unwrap()),
-                Err(LoadError::Unsupported(_))
-            ));
-        }
     }
 }
