@@ -68,6 +68,7 @@
 pub mod albedo;
 pub mod bsdf;
 pub mod crop;
+pub mod denoise;
 pub mod device;
 pub mod filter;
 pub mod lights;
