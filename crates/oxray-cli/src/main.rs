@@ -239,6 +239,14 @@ struct RenderArgs {
     /// albedo.RGB, normal.XYZ, depth.Z and samples.Y of the output (an .exr file).
     #[arg(long)]
     aov: bool,
+    /// Denoise the image (Open Image Denoise, guided by the first hit's albedo and normal).
+    ///
+    /// The render also computes the albedo and normal AOVs, and the output (PNG or EXR) is the
+    /// denoised image; with --aov the .exr also keeps the noisy image as the layer noisy.RGB.
+    /// Checkpoint images (--checkpoint) are not denoised. Needs OIDN's library: install it
+    /// with scripts/setup-oidn.sh, or name it (or its folder) with OXRAY_OIDN_LIB.
+    #[arg(long)]
+    denoise: bool,
     /// No progress bar.
     #[arg(short, long)]
     quiet: bool,
@@ -409,6 +417,7 @@ fn run(cli: Cli) -> Result<()> {
                 shutter,
                 animation,
                 aov,
+                denoise,
                 quiet,
                 backend,
             } = *args;
@@ -500,6 +509,11 @@ fn run(cli: Cli) -> Result<()> {
                     output.display()
                 );
             }
+            // Loaded before any work, so that a missing library costs no render.
+            let denoiser = denoise
+                .then(oxray_render::denoise::Denoiser::new)
+                .transpose()
+                .map_err(|e| anyhow::anyhow!("--denoise: {e}"))?;
             let renderer = render_device::open(&backend)?;
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
@@ -548,7 +562,8 @@ fn run(cli: Cli) -> Result<()> {
                 filter,
                 seed,
                 sampler,
-                aovs: aov,
+                // The denoiser's guides are the AOVs' albedo and normal.
+                aovs: aov || denoise,
                 crop,
                 shutter,
                 animation,
@@ -637,10 +652,20 @@ fn run(cli: Cli) -> Result<()> {
             }
             let render_secs = render_start.elapsed().as_secs_f64();
             bar.finish_and_clear();
-            if aov {
-                rendered.save_exr(&output)
-            } else {
-                rendered.image.save_with(&output, &look)
+            let denoise_start = std::time::Instant::now();
+            let denoised = match &denoiser {
+                Some(d) => Some(
+                    d.denoise_rendered(&rendered)
+                        .map_err(|e| anyhow::anyhow!("--denoise: {e}"))?,
+                ),
+                None => None,
+            };
+            let denoise_secs = denoise_start.elapsed().as_secs_f64();
+            match (&denoised, aov) {
+                (Some(clean), true) => rendered.save_denoised_exr(&output, clean),
+                (Some(clean), false) => clean.save_with(&output, &look),
+                (None, true) => rendered.save_exr(&output),
+                (None, false) => rendered.image.save_with(&output, &look),
             }
             .map_err(anyhow::Error::msg)?;
             let on = renderer
@@ -660,6 +685,16 @@ fn run(cli: Cli) -> Result<()> {
                     (true, true) => format!(", interrupted after {done} of {spp} spp"),
                     (true, false) => format!(", out of time after {done} of {spp} spp"),
                 };
+            let denoised = match &denoiser {
+                Some(d) => format!(
+                    ", denoised on the {} in {denoise_secs:.2} s",
+                    match d.device_type() {
+                        oxray_render::denoise::DeviceType::Cuda => "GPU",
+                        _ => "CPU",
+                    }
+                ),
+                None => String::new(),
+            };
             let (out_w, out_h) = (rendered.image.width, rendered.image.height);
             let samples_per_s = out_w as f64 * out_h as f64 * done as f64 / render_secs.max(1e-9);
             let rays_per_s = rendered.rays as f64 / render_secs.max(1e-9);
@@ -668,7 +703,7 @@ fn run(cli: Cli) -> Result<()> {
                 None => format!("{w}x{h}"),
             };
             say(format_args!(
-                "wrote {} ({size}, {done} spp, {} triangles, {} instances{on}{stopped}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s, {:.2} Mrays/s), total {:.1} s",
+                "wrote {} ({size}, {done} spp, {} triangles, {} instances{on}{stopped}{denoised}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s, {:.2} Mrays/s), total {:.1} s",
                 output.display(),
                 desc.triangle_count(),
                 desc.instances.len(),

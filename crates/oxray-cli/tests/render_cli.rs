@@ -846,3 +846,83 @@ fn shutter_renders_the_gltf_animation_as_motion_blur() {
     assert!(obj.status.success());
     assert!(String::from_utf8_lossy(&obj.stderr).contains("--shutter blurs nothing"));
 }
+
+/// `--denoise` writes the denoised image (PNG, or EXR with the noisy image as a layer beside
+/// the AOVs with `--aov`); without Open Image Denoise it is one error line before any render,
+/// and nothing is written. Skips (saying so) where OIDN is not installed
+/// (`scripts/setup-oidn.sh`), unless `OXRAY_REQUIRE_OIDN=1`.
+#[test]
+fn denoise_writes_the_denoised_image() {
+    let missing = tmp("denoise-missing.png");
+    let out = Command::new(env!("CARGO_BIN_EXE_oxray"))
+        .args(["render", "-o", s(&missing), "--size", "8x8", "--spp", "1"])
+        .args(["--quiet", "--denoise"])
+        .env(
+            "OXRAY_OIDN_LIB",
+            "/nonexistent/oxray/libOpenImageDenoise.so.2",
+        )
+        .output()
+        .unwrap();
+    assert_one_error(&out, "--denoise: cannot load Open Image Denoise");
+    assert_one_error(&out, "scripts/setup-oidn.sh");
+    assert!(!missing.exists());
+
+    let png = tmp("denoised.png");
+    let noisy_png = tmp("noisy.png");
+    let args = ["--size", "32x32", "--spp", "2", "--quiet"];
+    let out = oxray(&[&["render", "-o", s(&png), "--denoise"], &args[..]].concat());
+    let err = String::from_utf8_lossy(&out.stderr);
+    if !out.status.success()
+        && err.contains("cannot load Open Image Denoise")
+        && std::env::var("OXRAY_REQUIRE_OIDN").as_deref() != Ok("1")
+    {
+        eprintln!("skipped: {err}");
+        return;
+    }
+    assert!(out.status.success(), "{err}");
+    assert!(String::from_utf8_lossy(&out.stdout).contains("denoised on the"));
+    assert!(
+        oxray(&[&["render", "-o", s(&noisy_png)], &args[..]].concat())
+            .status
+            .success()
+    );
+    let (w, h, clean) = read_png(&png);
+    let (_, _, noisy) = read_png(&noisy_png);
+    assert_eq!((w, h), (32, 32));
+    // Denoising smooths: neighbouring pixels differ less than in the noisy render.
+    let roughness = |px: &[u8]| -> u64 {
+        px.chunks(4)
+            .zip(px.chunks(4).skip(1))
+            .map(|(a, b)| (0..3).map(|c| a[c].abs_diff(b[c]) as u64).sum::<u64>())
+            .sum()
+    };
+    assert!(
+        roughness(&clean) < roughness(&noisy) * 3 / 4,
+        "{} vs {}",
+        roughness(&clean),
+        roughness(&noisy)
+    );
+
+    let exr = tmp("denoised.exr");
+    let out = oxray(&[&["render", "-o", s(&exr), "--denoise", "--aov"], &args[..]].concat());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let read = exr::prelude::read_all_flat_layers_from_file(&exr).unwrap();
+    let names: Vec<String> = read.layer_data[0]
+        .channel_data
+        .list
+        .iter()
+        .map(|c| c.name.to_string())
+        .collect();
+    for layer in [
+        "R", "A", "albedo.R", "normal.Z", "noisy.R", "noisy.G", "noisy.B",
+    ] {
+        assert!(
+            names.iter().any(|n| n == layer),
+            "{layer} missing from {names:?}"
+        );
+    }
+}

@@ -563,3 +563,13 @@ fn load_library(candidates: Vec<PathBuf>) -> Result<(Library, String), DenoiseEr
         reason: tried.join("; "),
     })
 }
+
+impl Rendered {
+    /// Writes `denoised` (this render's image denoised, [`Denoiser::denoise_rendered`]) as one
+    /// OpenEXR file, atomically, as [`Rendered::save_exr`] writes the image: channels `R`, `G`,
+    /// `B`, `A` of the denoised image, the AOV layers where they were rendered, and the noisy
+    /// image as the layer `noisy.{R,G,B}`, for comparison or for another denoiser.
+    pub fn save_denoised_exr(&self, path: &Path, denoised: &Image) -> Result<(), String> {
+        crate::output::write_layers_exr(path, denoised, self.aovs.as_ref(), Some(&self.image))
+    }
+}

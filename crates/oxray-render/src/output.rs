@@ -102,11 +102,13 @@ impl Image {
 
 /// Writes `image` (channels `R`, `G`, `B`, `A`) and `aovs` (layers `albedo.{R,G,B}`,
 /// `normal.{X,Y,Z}`, `depth.Z`, `samples.Y`) as one linear 32-bit float OpenEXR file,
-/// atomically ([`crate::Rendered::save_exr`]).
+/// atomically ([`crate::Rendered::save_exr`]); with `noisy` (the render before denoising,
+/// `image` being the denoised one), also the layer `noisy.{R,G,B}`.
 pub(crate) fn write_layers_exr(
     path: &Path,
     image: &Image,
     aovs: Option<&crate::Aovs>,
+    noisy: Option<&Image>,
 ) -> Result<(), String> {
     let name = path.display();
     if oxray_scene::file_extension(path).as_deref() != Some("exr") {
@@ -128,6 +130,13 @@ pub(crate) fn write_layers_exr(
             ));
         }
     }
+    if noisy
+        .is_some_and(|i| (i.width, i.height) != (image.width, image.height) || i.pixels.len() != n)
+    {
+        return Err(format!(
+            "cannot write {name}: the noisy image is not the image's size"
+        ));
+    }
     write_atomic(path, |tmp| {
         use exr::prelude::*;
         let channel =
@@ -145,6 +154,11 @@ pub(crate) fn write_layers_exr(
             }
             list.push(channel("depth.Z", a.depth.clone()));
             list.push(channel("samples.Y", a.samples.clone()));
+        }
+        if let Some(noisy) = noisy {
+            for (c, label) in ["noisy.R", "noisy.G", "noisy.B"].iter().enumerate() {
+                list.push(channel(label, noisy.pixels.iter().map(|p| p[c]).collect()));
+            }
         }
         let layer = Layer::new(
             (image.width as usize, image.height as usize),

@@ -400,6 +400,6 @@ impl Rendered {
     /// `normal.{X,Y,Z}`, `depth.Z` and `samples.Y` (the `layer.channel` naming that
     /// compositors and denoisers read as layers).
     pub fn save_exr(&self, path: &Path) -> Result<(), String> {
-        crate::output::write_layers_exr(path, &self.image, self.aovs.as_ref())
+        crate::output::write_layers_exr(path, &self.image, self.aovs.as_ref(), None)
     }
 }
