@@ -16,6 +16,9 @@ use oxray_render::{render_passes, Image, RenderOptions, Rendered};
 use std::ops::ControlFlow;
 use std::time::Instant;
 
+/// An error measure of an image against the reference.
+type Metric = fn(&Image, &Image) -> f64;
+
 fn render(size: u32, spp: u32, seed: u32, aovs: bool) -> Rendered {
     let opts = RenderOptions {
         width: size,
@@ -100,7 +103,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let t = Instant::now();
         let both = denoiser.denoise_rendered(&noisy)?;
         times.push((spp, t.elapsed().as_secs_f64() * 1e3));
-        let metrics: [(&str, fn(&Image, &Image) -> f64); 3] = [
+        let metrics: [(&str, Metric); 3] = [
             ("RMSE, linear", rmse),
             ("RMSE, PNG (0-255)", rmse_png),
             ("relMSE", rel_mse),
