@@ -227,7 +227,7 @@ struct RenderArgs {
     ///
     /// Each camera ray takes a time in the interval, and the glTF animation (translation,
     /// rotation and scale of nodes) moves the instances during it. OPEN = CLOSE renders the
-    /// pose at that time without blur. Rendered by the cpu backend's programs.
+    /// pose at that time without blur. Every backend renders it.
     #[arg(long, value_name = "OPEN,CLOSE")]
     shutter: Option<String>,
     /// Which of the scene's animations --shutter plays (0: the first).

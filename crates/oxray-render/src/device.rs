@@ -16,6 +16,7 @@
 
 use crate::crop::CropWindow;
 use crate::lights::Environment;
+use crate::motion::Shutter;
 use crate::programs::CameraFrame;
 use crate::{prepare_lighting, traced, Image, RenderError, RenderOptions};
 use bytemuck::{Pod, Zeroable};
@@ -23,7 +24,7 @@ use oxray::programs::{Buffer, HitGroupDesc, Pipeline, ProgramGroup};
 use oxray::{
     BackendKind, BuildFlags, BuildInput, BuildOptions, Device, Gas, GeometryFlags, Ias,
     IndexBuffer, Instance, ModuleSource, PipelineCompileOptions, PipelineLinkOptions, SbtRegion,
-    ShaderBindingTable, Transform, TriangleInput, VertexBuffer,
+    ShaderBindingTable, SrtMotionTransform, Transform, TriangleInput, VertexBuffer,
 };
 use oxray_scene::{AlphaMode, LightKind, MaterialDesc, MeshDesc, SceneDesc, TextureRef, Wrap};
 use std::borrow::Cow;
@@ -51,9 +52,15 @@ pub fn compile_options() -> PipelineCompileOptions {
     PipelineCompileOptions {
         num_payload_values: WORDS,
         num_attribute_values: 2,
+        // Rays take the shutter's times when something moves (time 0 otherwise).
+        uses_motion_blur: true,
         ..Default::default()
     }
 }
+
+/// How deep the programs' traversable graphs go: an IAS, an instance's SRT motion transform
+/// (an instance that moves while the shutter is open) and a GAS.
+pub const MAX_GRAPH_DEPTH: u32 = 3;
 
 /// The pipeline link options the programs need (closest-hit programs trace shadow rays).
 pub fn link_options() -> PipelineLinkOptions {
@@ -229,11 +236,16 @@ struct ParamsGpu {
     image_height: u32,
     /// Where the random numbers come from ([`crate::Sampler::code`]).
     sampler: u32,
+    /// Motion blur: whether camera rays take times in the shutter, and its interval.
+    shutter_on: u32,
+    shutter_open: f32,
+    shutter_close: f32,
+    pad: u32,
 }
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
 const _: () = assert!(std::mem::size_of::<HitDataGpu>() == 56);
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 264);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 280);
 const _: () = assert!(std::mem::offset_of!(ParamsGpu, crop_x0) == 244);
 
 fn tex_ref(r: Option<TextureRef>) -> TexRefGpu {
@@ -498,7 +510,7 @@ impl SceneGeometry {
             shadow_opaque: hit(CLOSEST_HIT_SHADOW, false)?,
             shadow_alpha: hit(CLOSEST_HIT_SHADOW, true)?,
         };
-        let pipeline = device.create_pipeline(
+        let mut pipeline = device.create_pipeline(
             &compile_options(),
             &link_options(),
             Some("params"),
@@ -512,6 +524,7 @@ impl SceneGeometry {
                 groups.shadow_alpha.clone(),
             ],
         )?;
+        pipeline.set_max_traversable_graph_depth(MAX_GRAPH_DEPTH)?;
 
         let mut up = Uploads::new(device);
         let mut meshes = Vec::with_capacity(scene.meshes.len());
@@ -594,14 +607,16 @@ pub(crate) struct GpuScene {
 }
 
 impl GpuScene {
-    /// The tables of `scene` lit by `env`, over the structures of `geometry`.
+    /// The tables of `scene` lit by `env`, over the structures of `geometry`, with its
+    /// instances posed over `shutter` by the scene's animation of that index (`None`: at rest).
     pub(crate) fn build(
         device: &Device,
         scene: &SceneDesc,
         env: &Environment,
         geometry: &SceneGeometry,
+        shutter: Option<(Shutter, usize)>,
     ) -> Result<Self, RenderError> {
-        let lit = prepare_lighting(scene, env, None)?;
+        let lit = prepare_lighting(scene, env, shutter)?;
         let mut up = Uploads::new(device);
         let g = &geometry.groups;
 
@@ -640,6 +655,22 @@ impl GpuScene {
                 let Some(built) = &geometry.meshes[p.mesh] else {
                     continue;
                 };
+                if let Some((options, keys)) = &p.motion {
+                    // A moving instance: its SRT keys over the shutter place the mesh, and its
+                    // table entry is marked NaN so that the programs take the transform list's
+                    // matrices at each ray's time.
+                    let srt = SrtMotionTransform::new(built.gas.handle(), *options, keys)?;
+                    xforms.push(InstanceXformGpu {
+                        o2w: [f32::NAN; 12],
+                        w2o: [f32::NAN; 12],
+                    });
+                    instances.push(
+                        Instance::new(srt.into())
+                            .instance_id(p.id)
+                            .sbt_offset(sbt_offset[p.mesh]),
+                    );
+                    continue;
+                }
                 let inverse = p.transform.inverse().ok_or_else(|| {
                     RenderError::Scene(format!(
                         "instance {} has a transform that cannot be inverted",
@@ -714,7 +745,7 @@ impl GpuScene {
         let env_tables = env.tables();
         let env_texels: Vec<[f32; 3]> = env_tables.texels.iter().map(|t| t.to_array()).collect();
 
-        let params = ParamsGpu {
+        let mut params = ParamsGpu {
             accum: 0,
             handle,
             materials: up.put(&materials)?,
@@ -756,7 +787,14 @@ impl GpuScene {
             image_width: 0,
             image_height: 0,
             sampler: 0,
+            shutter_on: 0,
+            shutter_open: 0.0,
+            shutter_close: 0.0,
+            pad: 0,
         };
+        if let (Some((s, _)), true) = (shutter, lit.has_motion()) {
+            (params.shutter_on, params.shutter_open, params.shutter_close) = (1, s.open, s.close);
+        }
         let sbt = ShaderBindingTable {
             raygen: SbtRegion::from_headers(&[g.raygen.pack_header()]),
             miss: SbtRegion::from_headers(&[g.miss_env.pack_header(), g.miss_shadow.pack_header()]),

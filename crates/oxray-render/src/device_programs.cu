@@ -123,6 +123,12 @@ struct Params {
     u32 crop_x0, crop_y0;
     u32 image_width, image_height;
     u32 sampler;  // 0: independent hash numbers, 1: Owen-scrambled Sobol (sampler.rs)
+    // Motion blur (motion.rs Shutter): camera rays take times in [shutter_open, shutter_close]
+    // when shutter_on, and instances marked moving in `instances` move through SRT motion
+    // transforms; without it every ray's time is 0.
+    u32 shutter_on;
+    float shutter_open, shutter_close;
+    u32 pad;
 };
 
 }  // namespace pt
@@ -280,6 +286,7 @@ static __constant__ const u32 PT_SOBOL[4][32] = {
 
 // Dimensions (sampler.rs dim): the camera's, then PT_DIM_PER_VERTEX per path vertex.
 #define PT_DIM_PIXEL 0u
+#define PT_DIM_TIME 2u
 #define PT_DIM_CAMERA 4u
 #define PT_DIM_PER_VERTEX 12u
 #define PT_DIM_LIGHT_0 2u
@@ -632,6 +639,20 @@ PTI const InstanceXform& instance_xform() {
     return ptr<InstanceXform>(params.instances)[i];
 }
 
+// Whether the hit instance moves while the shutter is open: its table entry is NaN, its place
+// is the transform list's at the ray's time.
+PTI bool moving(const InstanceXform& x) { return x.o2w[0] != x.o2w[0]; }
+
+// The hit instance's matrices at the ray's time.
+PTI InstanceXform xform_at_hit() {
+    InstanceXform x = instance_xform();
+    if (moving(x)) {
+        optixGetObjectToWorldTransformMatrix(x.o2w);
+        optixGetWorldToObjectTransformMatrix(x.w2o);
+    }
+    return x;
+}
+
 // ---------------------------------------------------------------------------------------------
 // The radiance payload (programs.rs PathState): 16 words, the random state first so that the
 // any-hit program can draw from it in both ray types
@@ -821,7 +842,7 @@ struct Shading {
 };
 
 PTF Shading shading(const Material& m, const HitData& g) {
-    const InstanceXform& x = instance_xform();
+    const InstanceXform x = xform_at_hit();
     V3 dir = from_f3(optixGetWorldRayDirection());
     Shading sh;
     sh.point = from_f3(optixGetWorldRayOrigin()) + dir * optixGetRayTmax();
@@ -886,9 +907,11 @@ PTI V3 offset(const Shading& s, V3 dir) {
 }
 
 // Traces a shadow ray; true when nothing blocks it.
+// It takes the time of the ray being shaded.
 PTI bool visible(u32 seed, V3 from, V3 dir, float tmax) {
     u32 w0 = seed, w1 = 0u;
-    optixTrace(params.handle, f3(from), f3(dir), 0.0f, tmax, 0.0f, (OptixVisibilityMask)0xFF,
+    optixTrace(params.handle, f3(from), f3(dir), 0.0f, tmax, optixGetRayTime(),
+               (OptixVisibilityMask)0xFF,
                OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT | OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT,
                PT_SHADOW, PT_RAY_TYPES, PT_SHADOW, w0, w1);
     return w1 != 0u;
@@ -1056,6 +1079,14 @@ extern "C" __global__ void __raygen__camera() {
     float sy = 1.0f - 2.0f * ((float)y + oy) / (float)h;
     V3 dir = normalize(v3a(params.cam_forward) + v3a(params.cam_right) * sx +
                        v3a(params.cam_up) * sy);
+    // The path's time (motion.rs Shutter::time), drawn after the pixel's offsets so that a
+    // render without motion keeps its random sequence; every ray of the path takes it.
+    float time = 0.0f;
+    if (params.shutter_on != 0u) {
+        const float u = rng.get(PT_DIM_TIME);
+        time = fminf(params.shutter_open + (params.shutter_close - params.shutter_open) * u,
+                     params.shutter_close);
+    }
     PathState s;
     s.seed = rng.rng.s;
     s.done = 0u;
@@ -1069,7 +1100,7 @@ extern "C" __global__ void __raygen__camera() {
     for (u32 k = 0; k <= params.max_depth; ++k) {
         u32 w[PT_WORDS];
         to_words(s, w);
-        optixTrace(params.handle, f3(s.origin), f3(s.direction), 0.0f, inf(), 0.0f,
+        optixTrace(params.handle, f3(s.origin), f3(s.direction), 0.0f, inf(), time,
                    (OptixVisibilityMask)0xFF, OPTIX_RAY_FLAG_NONE, PT_RADIANCE, PT_RAY_TYPES,
                    PT_RADIANCE, w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7], w[8], w[9], w[10],
                    w[11], w[12], w[13], w[14], w[15]);
@@ -1112,7 +1143,8 @@ extern "C" __global__ void __closesthit__radiance() {
     V3 le = (sh.front || m.double_sided) ? emission(m, sh.uvs) : v3s(0.0f);
     if (!is_zero(le)) {
         float w = 1.0f;
-        if (s.pdf > 0.0f) {
+        // A moving emitter is not sampled by next-event estimation: found only here, in full.
+        if (s.pdf > 0.0f && !moving(instance_xform())) {
             float t = optixGetRayTmax();
             float cos_l = maxf(fabsf(dot(sh.ng, wo)), 1e-6f);
             float light_pdf = (1.0f - params.p_env) *

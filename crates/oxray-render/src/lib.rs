@@ -656,3 +656,8 @@ pub fn render_passes(
             .map(|a| Aovs::from_sums(w, h, &sums, &a.to_vec())),
     })
 }
+
+/// The README's examples (the library's, the renderer's), compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+struct ReadmeDoctests;

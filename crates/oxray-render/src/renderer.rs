@@ -71,6 +71,8 @@ pub struct Renderer<'s> {
     geometry: SceneGeometry,
     /// The instance level, lights and materials: `None` after an edit that changes them.
     tables: Option<GpuScene>,
+    /// The shutter and animation the tables pose the instances for.
+    posed_for: Option<(crate::motion::Shutter, usize)>,
 }
 
 impl<'s> Renderer<'s> {
@@ -116,6 +118,7 @@ impl<'s> Renderer<'s> {
             camera: None,
             geometry,
             tables: None,
+            posed_for: None,
         })
     }
 
@@ -198,25 +201,25 @@ impl<'s> Renderer<'s> {
     ) -> Result<Rendered, RenderError> {
         let window = crop::window_of(opts.width, opts.height, opts.crop)?;
         let (width, height) = (window.width(), window.height());
-        // The CUDA C++ programs trace the scene at rest: a shutter over an animation that
-        // moves something would be ignored, so it is refused rather than rendered still.
-        if opts.shutter.is_some()
-            && (0..self.scene.instances.len()).any(|i| self.scene.is_animated(i, opts.animation))
-        {
-            return Err(RenderError::Unsupported {
-                renderer: format!("the CUDA C++ path tracer on {}", self.device.describe()),
-                feature: "motion blur (a shutter over an animated scene; the Rust programs on the CPU render it)".into(),
-            });
+        // The instances are posed for one shutter: another one poses them anew.
+        let posed_for = opts.shutter.map(|s| (s, opts.animation));
+        if posed_for != self.posed_for {
+            self.tables = None;
         }
         let camera = camera_frame_with(&self.scene, opts, self.camera)?;
         let tables = match &mut self.tables {
             Some(t) => t,
-            slot @ None => slot.insert(GpuScene::build(
-                &self.device,
-                &self.scene,
-                &self.env,
-                &self.geometry,
-            )?),
+            slot @ None => {
+                let built = GpuScene::build(
+                    &self.device,
+                    &self.scene,
+                    &self.env,
+                    &self.geometry,
+                    posed_for,
+                )?;
+                self.posed_for = posed_for;
+                slot.insert(built)
+            }
         };
         let pixels = width as usize * height as usize;
         let accum = self.device.create_buffer::<[f32; 4]>(pixels)?;

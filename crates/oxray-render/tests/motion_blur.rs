@@ -12,7 +12,7 @@ use glam::{Mat4, Vec3};
 use oxray_render::filter::Filter;
 use oxray_render::lights::Environment;
 use oxray_render::motion::Shutter;
-use oxray_render::{render, Image, RenderError, RenderOptions, Renderer};
+use oxray_render::{render, Image, RenderOptions, Renderer};
 use oxray_scene::animation::{Animation, Channel, Interpolation, Property};
 use oxray_scene::{Camera, InstanceDesc, MaterialDesc, MeshDesc, NodeDesc, Primitive, SceneDesc};
 use std::ops::ControlFlow;
@@ -168,23 +168,72 @@ fn a_missing_animation_is_an_error() {
     assert!(e.to_string().contains("animation 3 does not exist"), "{e}");
 }
 
+/// The devices of this machine: the CPU (the programs' CUDA C++ compiled for it) and CUDA
+/// device 0 where there is one (`OXRAY_REQUIRE_GPU=1` makes its absence a failure).
+fn devices() -> Vec<oxray::Device> {
+    let mut d = vec![oxray::Device::cpu()];
+    match oxray::Device::cuda(0) {
+        Ok(c) => d.push(c),
+        Err(e) => {
+            assert!(
+                std::env::var_os("OXRAY_REQUIRE_GPU").is_none(),
+                "OXRAY_REQUIRE_GPU is set but there is no CUDA device: {e}"
+            );
+            println!("the CUDA half skips: {e}");
+        }
+    }
+    d
+}
+
+/// Renders with the path tracer's CUDA C++ programs on `device`.
+fn render_on(device: &oxray::Device, s: &SceneDesc, env: &Environment, o: &RenderOptions) -> Image {
+    let mut r = Renderer::new(device, s, env).unwrap();
+    r.render(o, |_| ControlFlow::Continue(())).unwrap().image
+}
+
 #[test]
-fn the_cuda_cpp_programs_refuse_motion_blur_rather_than_render_a_still() {
+fn s5_10_the_cuda_cpp_programs_blur_the_sliding_strip_on_every_device() {
     let s = scene(true, Vec3::ZERO);
     let env = white();
-    let mut r = Renderer::new(&oxray::Device::cpu(), &s, &env).unwrap();
-    let o = options(1, Some(Shutter::new(0.0, 1.0).unwrap()));
-    match r.render(&o, |_| ControlFlow::Continue(())) {
-        Err(RenderError::Unsupported { feature, .. }) => {
-            assert!(feature.contains("motion blur"), "{feature}")
+    for device in devices() {
+        let mut r = Renderer::new(&device, &s, &env).unwrap();
+        let o = options(1024, Some(Shutter::new(0.0, 1.0).unwrap()));
+        let img = r.render(&o, |_| ControlFlow::Continue(())).unwrap().image;
+        for x in 0..WIDTH {
+            let xp = looks_at(x);
+            let lo = ((xp + 0.5) / 2.0).clamp(0.0, 1.0);
+            let hi = ((xp + 1.5) / 2.0).clamp(0.0, 1.0);
+            let want = 1.0 - (hi - lo);
+            let got = column_mean(&img, x);
+            assert!(
+                (got - want).abs() < 0.05,
+                "{}: column {x} (x = {xp}): {got}, uncovered {want} of the time",
+                device.describe()
+            );
         }
-        Err(e) => panic!("{e}"),
-        Ok(_) => panic!("rendered a still where motion blur was asked for"),
+        // The same renderer without the shutter renders the still pose again (the tables are
+        // posed anew), and a closed shutter the pose at its time.
+        let still = r
+            .render(&options(16, None), |_| ControlFlow::Continue(()))
+            .unwrap()
+            .image;
+        assert_eq!(column_mean(&still, 20), 0.0, "x = 0.1 is covered at rest");
+        assert_eq!(column_mean(&still, 0), 1.0);
+        let posed = r
+            .render(
+                &options(16, Some(Shutter::new(0.75, 0.75).unwrap())),
+                |_| ControlFlow::Continue(()),
+            )
+            .unwrap()
+            .image;
+        let moved = render_on(
+            &device,
+            &scene(false, Vec3::new(0.5, 0.0, 0.0)),
+            &white(),
+            &options(16, None),
+        );
+        assert_eq!(posed.pixels, moved.pixels, "{}", device.describe());
     }
-    // Without the shutter it renders.
-    assert!(r
-        .render(&options(1, None), |_| ControlFlow::Continue(()))
-        .is_ok());
 }
 
 /// A white floor lit by an emissive panel above it, the panel drifting by 1/1000 of its size
@@ -281,4 +330,35 @@ fn s5_10_a_moving_emitter_lights_the_scene_as_much_as_a_still_one() {
     let (a, b) = (mean(&still), mean(&moving));
     assert!(a > 0.05, "{a}");
     assert!((a - b).abs() < 0.03 * a, "still {a}, moving {b}");
+}
+
+#[test]
+fn s5_10_a_moving_emitter_lights_alike_with_the_cuda_cpp_programs_on_every_device() {
+    let mean =
+        |img: &Image| img.pixels.iter().map(|p| p[0] as f64).sum::<f64>() / img.pixels.len() as f64;
+    let o = |shutter| RenderOptions {
+        width: 16,
+        height: 16,
+        spp: 256,
+        max_depth: 3,
+        shutter,
+        ..Default::default()
+    };
+    let dark = Environment::uniform(Vec3::ZERO);
+    for device in devices() {
+        let still = render_on(&device, &lit_floor(false), &dark, &o(None));
+        let moving = render_on(
+            &device,
+            &lit_floor(true),
+            &dark,
+            &o(Some(Shutter::new(0.0, 1.0).unwrap())),
+        );
+        let (a, b) = (mean(&still), mean(&moving));
+        assert!(a > 0.05, "{a}");
+        assert!(
+            (a - b).abs() < 0.03 * a,
+            "{}: still {a}, moving {b}",
+            device.describe()
+        );
+    }
 }

@@ -5,8 +5,8 @@
 //! equal samples against a converged reference, the same sampling in both backends, and images
 //! that do not depend on the thread count.
 //!
-//! `cargo test -p oxray-render --release --test sampler -- --ignored --nocapture` prints the
-//! error against samples per pixel for both samplers (the table of `docs/BENCHMARKS.md`).
+//! `cargo run --release -p oxray-render --example sampler_error` prints the error against
+//! samples per pixel for both samplers (the table of `docs/BENCHMARKS.md`).
 
 use glam::Vec3;
 use oxray::Device;
@@ -17,7 +17,7 @@ use oxray_render::sampler::{
     owen_scramble, pixel_seed, sobol, sobol_sample, Draws, SOBOL_DIMENSIONS, SOBOL_DIRECTIONS,
 };
 use oxray_render::{render, Image, RenderOptions, Sampler};
-use oxray_scene::{cornell_box, SceneDesc};
+use oxray_scene::cornell_box;
 use std::sync::OnceLock;
 
 /// Whether the first `n` points of the pair of dimensions `(dx, dy)` have one point in every
@@ -379,55 +379,5 @@ fn images_do_not_depend_on_the_thread_count() {
             bits(&run(3, cxx)),
             "C++ programs: {cxx}"
         );
-    }
-}
-
-/// The error against samples per pixel for both samplers on the Cornell box and, where
-/// `../shared/data/gltf` has it, the pine glTF scene under the sky (64 x 64; references of 1024
-/// samples, independent sampling with another seed). Prints the table of `docs/BENCHMARKS.md`.
-#[test]
-#[ignore]
-fn measure_error_against_samples() {
-    let pine = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/data/gltf/smallpine/scene.gltf");
-    let mut scenes: Vec<(&str, SceneDesc, Environment)> =
-        vec![("Cornell box", cornell_box(), dark())];
-    match SceneDesc::load(&pine) {
-        Ok(s) => scenes.push(("smallpine glTF", s, Environment::sky(1.0))),
-        Err(e) => println!("skipping the glTF scene: {e}"),
-    }
-    // One render's error is heavy-tailed at few samples (a firefly weighs a lot): the RMS over
-    // eight seeds.
-    let seeds = 8;
-    for (name, scene, env) in &scenes {
-        let reference = render(
-            scene,
-            env,
-            &opts(64, 1024, Sampler::Independent, 99),
-            |_| {},
-        );
-        let reference = reference.unwrap();
-        println!(
-            "| {name} | spp | RMSE independent | RMSE Sobol | ratio | time independent / Sobol |"
-        );
-        for spp in [1, 2, 4, 8, 16, 32, 64] {
-            let e = |sampler| {
-                let t = std::time::Instant::now();
-                let mse = (0..seeds)
-                    .map(|seed| {
-                        let img = render(scene, env, &opts(64, spp, sampler, seed), |_| {});
-                        rmse(&img.unwrap(), &reference).powi(2)
-                    })
-                    .sum::<f64>()
-                    / seeds as f64;
-                (mse.sqrt(), t.elapsed() / seeds)
-            };
-            let (independent, ti) = e(Sampler::Independent);
-            let (sobol, ts) = e(Sampler::Sobol);
-            println!(
-                "| | {spp} | {independent:.4} | {sobol:.4} | {:.2} | {ti:.1?} / {ts:.1?} |",
-                sobol / independent
-            );
-        }
     }
 }

@@ -124,7 +124,5 @@ pub use oxray_cpu::{
 pub use bytemuck;
 pub use glam;
 
-/// The README's example, compiled and run as a doctest.
-#[cfg(doctest)]
-#[doc = include_str!("../../../README.md")]
-struct ReadmeDoctests;
+// The README's examples are compiled and run as doctests of `oxray-render`, which depends on
+// this crate and on the renderer that one of them uses.
