@@ -346,7 +346,7 @@ fn renderer(device: &Device) -> String {
 
 /// Refuses what the device programs cannot render yet, naming it (today: texture data beyond
 /// 32-bit texel offsets).
-fn check_supported(device: &Device, scene: &SceneDesc) -> Result<(), RenderError> {
+pub(crate) fn check_supported(device: &Device, scene: &SceneDesc) -> Result<(), RenderError> {
     let texels: u64 = scene.textures.iter().map(|t| t.texels.len() as u64).sum();
     if texels > u32::MAX as u64 {
         return Err(RenderError::Unsupported {
@@ -439,9 +439,36 @@ pub(crate) struct SceneGeometry {
     textures: u64,
     num_textures: u32,
     texels: u64,
+    /// The texture table and texels, uploaded again when a texture changes.
+    texture_up: Uploads,
     srgb: u64,
     ggx_albedo: u64,
     _up: Uploads,
+}
+
+/// The texture table and the texels of `scene` on `device`: the uploads that hold them, the
+/// table's address, the number of textures and the texels' address.
+fn upload_textures(
+    device: &Device,
+    scene: &SceneDesc,
+) -> Result<(Uploads, u64, u32, u64), RenderError> {
+    let mut up = Uploads::new(device);
+    let mut texels: Vec<[u8; 4]> = Vec::new();
+    let mut textures = Vec::with_capacity(scene.textures.len());
+    for t in &scene.textures {
+        textures.push(TextureGpu {
+            offset: texels.len() as u32,
+            width: t.width,
+            height: t.height,
+            wrap_u: wrap(t.wrap_u),
+            wrap_v: wrap(t.wrap_v),
+            pad: [0; 3],
+        });
+        texels.extend_from_slice(&t.texels);
+    }
+    let table = up.put(&textures)?;
+    let texels = up.put(&texels)?;
+    Ok((up, table, textures.len() as u32, texels))
 }
 
 /// Whether material `m` of `scene` is opaque (no any-hit program).
@@ -550,30 +577,32 @@ impl SceneGeometry {
             meshes.push(Some(MeshGas { gas, opaque, hit }));
         }
 
-        let mut texels: Vec<[u8; 4]> = Vec::new();
-        let mut textures = Vec::with_capacity(scene.textures.len());
-        for t in &scene.textures {
-            textures.push(TextureGpu {
-                offset: texels.len() as u32,
-                width: t.width,
-                height: t.height,
-                wrap_u: wrap(t.wrap_u),
-                wrap_v: wrap(t.wrap_v),
-                pad: [0; 3],
-            });
-            texels.extend_from_slice(&t.texels);
-        }
+        let (texture_up, textures, num_textures, texels) = upload_textures(device, scene)?;
         Ok(SceneGeometry {
             pipeline,
             groups,
             meshes,
-            textures: up.put(&textures)?,
-            num_textures: textures.len() as u32,
-            texels: up.put(&texels)?,
+            textures,
+            num_textures,
+            texels,
+            texture_up,
             srgb: up.put(&crate::texture::srgb_table()[..])?,
             ggx_albedo: up.put(&crate::albedo::GgxAlbedo::get().cells)?,
             _up: up,
         })
+    }
+
+    /// Uploads the scene's textures again (one of them changed); the tables that point at them
+    /// must be made again.
+    pub(crate) fn reupload_textures(
+        &mut self,
+        device: &Device,
+        scene: &SceneDesc,
+    ) -> Result<(), RenderError> {
+        let (up, textures, num_textures, texels) = upload_textures(device, scene)?;
+        (self.texture_up, self.textures) = (up, textures);
+        (self.num_textures, self.texels) = (num_textures, texels);
+        Ok(())
     }
 
     /// Rebuilds the GAS of every mesh with a primitive of `material` (its alpha mode changed

@@ -12,7 +12,9 @@
 //!   level and the light tables (no GAS);
 //! - [`Renderer::set_material`] re-uploads the material table, and rebuilds the GASes of the
 //!   meshes that use the material only where its alpha mode changes between opaque and not
-//!   (opaque geometry is built without any-hit programs).
+//!   (opaque geometry is built without any-hit programs);
+//! - [`Renderer::set_texture`] uploads the textures again (no GAS);
+//! - a render with another [`RenderOptions::shutter`] poses the moving instances anew.
 //!
 //! An edit then a render gives exactly the image of a new renderer over the edited scene (tested
 //! bit for bit on the CPU). With [`RenderOptions::aovs`] the render also returns the first hit's
@@ -163,6 +165,35 @@ impl<'s> Renderer<'s> {
             self.geometry
                 .rebuild_meshes_of_material(&self.device, &self.scene, index as u32)?;
         }
+        self.tables = None;
+        Ok(())
+    }
+
+    /// Replaces texture `index` (its texels, size or wrap modes): the textures are uploaded
+    /// again and the materials that use it show the new one from the next render on; no GAS
+    /// is rebuilt (alpha-tested materials read the texture as they trace). A texture whose
+    /// texels do not match its size, or past the scene's textures, is an error that changes
+    /// nothing.
+    pub fn set_texture(
+        &mut self,
+        index: usize,
+        texture: oxray_scene::Texture,
+    ) -> Result<(), RenderError> {
+        let count = self.scene.textures.len();
+        if index >= count {
+            return Err(missing("texture", index, count));
+        }
+        let old = std::mem::replace(&mut self.scene.to_mut().textures[index], texture);
+        let checked = self
+            .scene
+            .validate()
+            .map_err(RenderError::Scene)
+            .and_then(|()| device::check_supported(&self.device, &self.scene));
+        if let Err(e) = checked {
+            self.scene.to_mut().textures[index] = old;
+            return Err(e);
+        }
+        self.geometry.reupload_textures(&self.device, &self.scene)?;
         self.tables = None;
         Ok(())
     }

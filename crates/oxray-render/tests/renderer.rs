@@ -182,6 +182,78 @@ fn edits_then_a_render_equal_a_new_renderer_over_the_edited_scene() {
     assert_eq!(all(&mut r, &o).image, fresh(&recoloured, &grey, &o));
 }
 
+/// A quad facing the camera, its material's base colour from a 2 x 2 texture, under a white sky.
+fn textured_quad(texels: [[u8; 4]; 4]) -> SceneDesc {
+    use oxray_scene::{InstanceDesc, MaterialDesc, MeshDesc, Primitive, Texture, TextureRef, Wrap};
+    let mut s = SceneDesc::default();
+    s.textures.push(Texture {
+        name: "checker".into(),
+        width: 2,
+        height: 2,
+        texels: texels.to_vec(),
+        wrap_u: Wrap::Repeat,
+        wrap_v: Wrap::Repeat,
+    });
+    s.materials.push(MaterialDesc {
+        name: "textured".into(),
+        base_color_texture: Some(TextureRef::new(0)),
+        specular: 0.0,
+        roughness: 1.0,
+        ..Default::default()
+    });
+    s.meshes.push(MeshDesc {
+        name: "quad".into(),
+        primitives: vec![Primitive {
+            positions: vec![
+                [-1.0, -1.0, 0.0],
+                [1.0, -1.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [-1.0, 1.0, 0.0],
+            ],
+            uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            material: 0,
+            ..Default::default()
+        }],
+    });
+    s.instances.push(InstanceDesc::new(0, Mat4::IDENTITY));
+    s.cameras
+        .push(Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 0.9));
+    s
+}
+
+#[test]
+fn a_texture_edit_then_a_render_equals_a_new_renderer_over_the_edited_scene() {
+    let red = [[255, 0, 0, 255]; 4];
+    let mut blue = [[0, 0, 255, 255]; 4];
+    blue[1] = [255, 255, 255, 255];
+    let env = Environment::uniform(Vec3::ONE);
+    let o = opts(16, 2);
+    let scene = textured_quad(red);
+    let mut r = Renderer::new(&Device::cpu(), &scene, &env).unwrap();
+    let before = all(&mut r, &o).image;
+    let centre = before.pixels[(8 * 16 + 8) as usize];
+    assert!(centre[0] > 4.0 * centre[2], "a red quad: {centre:?}");
+
+    let edited = textured_quad(blue);
+    r.set_texture(0, edited.textures[0].clone()).unwrap();
+    let after = all(&mut r, &o).image;
+    assert_ne!(after, before, "the new texture must show");
+    assert_eq!(after, fresh(&edited, &env, &o));
+    assert_eq!(r.scene().textures[0], edited.textures[0]);
+
+    // Bad edits are errors that change nothing.
+    let mut bad = edited.textures[0].clone();
+    bad.texels.pop();
+    assert!(
+        r.set_texture(0, bad.clone()).is_err(),
+        "texels that do not fill the size"
+    );
+    assert!(r.set_texture(1, edited.textures[0].clone()).is_err());
+    assert_eq!(r.scene().textures[0], edited.textures[0]);
+    assert_eq!(all(&mut r, &o).image, after);
+}
+
 #[test]
 fn seeds_choose_the_random_sequence() {
     let scene = cornell_box();
