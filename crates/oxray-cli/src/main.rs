@@ -346,7 +346,7 @@ impl CameraOverride {
             None => 2.0 * chosen.up.length().atan(),
         };
         Ok(oxray_scene::Camera {
-            to_world: glam::Mat4::look_at_rh(eye, target, up).inverse(),
+            to_world: oxray_scene::Camera::to_world_looking_at(eye, target, up),
             yfov,
             aspect: None,
         })

@@ -353,10 +353,33 @@ impl Camera {
             Vec3::Y
         };
         Camera {
-            to_world: Mat4::look_at_rh(eye, target, up).inverse(),
+            to_world: Self::to_world_looking_at(eye, target, up),
             yfov,
             aspect: None,
         }
+    }
+
+    /// The camera-to-world transform of a camera at `eye` looking at `target` with `up` up,
+    /// in glTF's convention (it looks down its -Z axis, +Y up, +X right): the columns are its
+    /// right, up and back directions and its position. `up` must not be parallel to the view.
+    ///
+    /// ```
+    /// use glam::Vec3;
+    /// use oxray_scene::Camera;
+    /// let m = Camera::to_world_looking_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y);
+    /// assert_eq!(m.transform_vector3(-Vec3::Z), -Vec3::Z);
+    /// assert_eq!(m.transform_point3(Vec3::ZERO), Vec3::new(0.0, 0.0, 5.0));
+    /// ```
+    pub fn to_world_looking_at(eye: Vec3, target: Vec3, up: Vec3) -> Mat4 {
+        let forward = (target - eye).normalize();
+        let right = forward.cross(up).normalize();
+        let up = right.cross(forward);
+        Mat4::from_cols(
+            right.extend(0.0),
+            up.extend(0.0),
+            (-forward).extend(0.0),
+            eye.extend(1.0),
+        )
     }
 }
 
