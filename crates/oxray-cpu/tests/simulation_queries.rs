@@ -728,6 +728,165 @@ fn closest_points_are_the_brute_force_ones() {
 }
 
 #[test]
+fn closest_points_through_instances_are_the_brute_force_ones() {
+    let mut rng = Rng::new(81);
+    let a = random_soup(&mut rng, 200, 3.0, 0.8);
+    let b = random_soup(&mut rng, 120, 2.0, 0.6);
+    let (ga, gb) = (
+        Arc::new(gas_of(&soup_mesh(&a), &BuildOptions::default())),
+        Arc::new(gas_of(&soup_mesh(&b), &BuildOptions::default())),
+    );
+    // Placements: rotations, uniform scales (one mirrored), translations; and a nested IAS
+    // under a static transform.
+    let place = |rng: &mut Rng, s: f32| {
+        Affine3A::from_scale_rotation_translation(
+            Vec3::splat(s),
+            rng.rotation(),
+            rng.vec3(-6.0, 6.0),
+        )
+    };
+    let mut placed: Vec<(Affine3A, &[Tri], u32)> = Vec::new();
+    let mut instances = Vec::new();
+    for i in 0..6u32 {
+        let (gas, tris) = if i % 2 == 0 { (&ga, &a) } else { (&gb, &b) };
+        let mut t = place(&mut rng, 0.5 + 0.3 * i as f32);
+        if i == 3 {
+            t = Affine3A::from_scale(Vec3::new(-1.0, 1.0, 1.0)) * t;
+        }
+        placed.push((t, tris, 10 + i));
+        instances.push(
+            Instance::new(gas.clone().into())
+                .transform(Transform::from_affine(&t))
+                .instance_id(10 + i),
+        );
+    }
+    let inner_t = place(&mut rng, 1.5);
+    let inner = Arc::new(
+        Ias::build(
+            &BuildOptions::default(),
+            &[(&[Instance::new(ga.clone().into())
+                .transform(Transform::from_affine(&inner_t))
+                .instance_id(20)][..])
+                .into()],
+        )
+        .unwrap(),
+    );
+    let outer_t = place(&mut rng, 0.8);
+    let st =
+        oxray_core::StaticTransform::new(inner.into(), Transform::from_affine(&outer_t)).unwrap();
+    placed.push((outer_t * inner_t, &a, 20));
+    instances.push(Instance::new(st.into()).instance_id(30));
+    let ias = Ias::build(&BuildOptions::default(), &[(&instances[..]).into()]).unwrap();
+
+    // The world triangles of every placement, for the brute force.
+    let world: Vec<(Tri, u32, u32)> = placed
+        .iter()
+        .flat_map(|(t, tris, id)| {
+            tris.iter().enumerate().map(move |(k, tri)| {
+                (
+                    tri.map(|v| t.transform_point3(Vec3::from(v)).to_array()),
+                    *id,
+                    k as u32,
+                )
+            })
+        })
+        .collect();
+    let world_tris: Vec<Tri> = world.iter().map(|w| w.0).collect();
+    let mut points: Vec<Vec3> = (0..400).map(|_| rng.vec3(-12.0, 12.0)).collect();
+    points.push(Vec3::splat(100.0));
+    let mut batch = vec![None; points.len()];
+    ias.closest_point_batch(&points, &mut batch).unwrap();
+    for (p, got) in points.iter().zip(&batch) {
+        let c = ias.closest_point(*p).unwrap().unwrap();
+        assert_eq!(
+            got.as_ref(),
+            Some(&c),
+            "the batch gives the single query's answer"
+        );
+        let (d, second, k) = ref_nearest(*p, &world_tris);
+        let tol = 1e-5 * (20.0 + d);
+        assert!(
+            (c.closest.distance as f64 - d).abs() <= tol,
+            "{p}: {} vs {d}",
+            c.closest.distance
+        );
+        assert!(((c.closest.point - *p).length() as f64 - d).abs() <= tol);
+        if second - d > 10.0 * tol {
+            // The nearest instance's (nearest to the GAS: 20 under the static transform)
+            // triangle, with its barycentrics in the object-space triangle.
+            assert_eq!(
+                (c.instance_id, c.closest.primitive_index),
+                (world[k].1, world[k].2)
+            );
+            let t = world[k].0.map(Vec3::from);
+            let from_bary =
+                t[0] * (1.0 - c.closest.u - c.closest.v) + t[1] * c.closest.u + t[2] * c.closest.v;
+            assert!(close(from_bary, c.closest.point, 1e-4 * (20.0 + d as f32)));
+        }
+    }
+}
+
+#[test]
+fn closest_points_through_instances_refuse_what_they_cannot_answer() {
+    let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let gas = Arc::new(Gas::from_mesh(&v, &[[0, 1, 2]]).unwrap());
+    let ias_of = |t: Transform| {
+        Ias::build(
+            &BuildOptions::default(),
+            &[(&[Instance::new(gas.clone().into()).transform(t)][..]).into()],
+        )
+        .unwrap()
+    };
+    // A non-uniform scale changes distances by direction: refused, never a wrong answer.
+    let stretched = ias_of(Transform::from_affine(&Affine3A::from_scale(Vec3::new(
+        1.0, 3.0, 1.0,
+    ))));
+    assert!(matches!(
+        stretched.closest_point(Vec3::ZERO),
+        Err(SurfaceQueryError::Unsupported(_))
+    ));
+    let plain = ias_of(Transform::IDENTITY);
+    assert!(matches!(
+        plain.closest_point(Vec3::new(f32::NAN, 0.0, 0.0)),
+        Err(SurfaceQueryError::NonFinitePoint { .. })
+    ));
+    assert_eq!(
+        plain
+            .closest_point(Vec3::new(0.25, 0.25, 3.0))
+            .unwrap()
+            .unwrap()
+            .closest
+            .distance,
+        3.0
+    );
+    // Spheres are no triangles.
+    let c = [[0.0f32, 0.0, 0.0]];
+    let r = [1.0f32];
+    let cb = [bytemuck::cast_slice::<_, u8>(&c)];
+    let rb = [bytemuck::cast_slice::<_, u8>(&r)];
+    let spheres = Arc::new(
+        Gas::build(
+            &BuildOptions::default(),
+            &[SphereInput::new(&cb, 1, &rb).into()],
+        )
+        .unwrap(),
+    );
+    let with_spheres = Ias::build(
+        &BuildOptions::default(),
+        &[(&[Instance::new(spheres.into())][..]).into()],
+    )
+    .unwrap();
+    assert!(matches!(
+        with_spheres.closest_point(Vec3::splat(3.0)),
+        Err(SurfaceQueryError::NotTriangles(_))
+    ));
+    // An empty IAS has no closest point.
+    let none: [Instance; 0] = [];
+    let empty = Ias::build(&BuildOptions::default(), &[(&none[..]).into()]).unwrap();
+    assert_eq!(empty.closest_point(Vec3::ZERO).unwrap(), None);
+}
+
+#[test]
 fn closest_points_on_vertices_and_edges_are_at_distance_zero() {
     let m = icosphere(2);
     let tris = m.soup();

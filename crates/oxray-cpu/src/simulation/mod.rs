@@ -9,6 +9,8 @@
 //!   how many ([`Gas::count_hits`]).
 //! - [`closest_point`]: the closest point of a triangle GAS to a point, the signed distance and
 //!   the inside test of closed meshes ([`Gas::closest_point`], [`Gas::signed_distance`]).
+//! - [`instanced`]: the closest point of the triangles under an IAS ([`Ias::closest_point`]),
+//!   through instances placed by similarities.
 //!
 //! Bad input (a NaN point, an invalid ray, slices of different lengths) is a
 //! [`SurfaceQueryError`]; an empty structure gives the documented empty result of each query.
@@ -39,6 +41,7 @@
 
 pub mod all_hits;
 pub mod closest_point;
+pub mod instanced;
 pub mod mesh;
 pub mod surface;
 
@@ -51,6 +54,7 @@ use thiserror::Error;
 
 pub use all_hits::AllHits;
 pub use closest_point::ClosestPoint;
+pub use instanced::InstanceClosestPoint;
 pub use mesh::MeshError;
 pub use surface::{NoShadingNormals, ShadingNormals, SurfaceHit, VertexNormals};
 

@@ -1,0 +1,254 @@
+//! The closest point of the triangles under an IAS to a query point ([`Ias::closest_point`]):
+//! the scenes simulation users build by placing meshes (rigid bodies, robots, rooms) rather
+//! than by baking them into one mesh.
+//!
+//! The search visits the instances nearest world box first and skips every instance whose box
+//! is farther than the best point so far; in an instance it runs the GAS's own search
+//! ([`Gas::closest_point_within`]) on the query point carried into object space, with the best
+//! distance so far as its radius. That is exact when the transforms on the way are
+//! similarities (rotations, reflections, uniform scales and translations: they scale every
+//! distance by one factor), which is what placements are; an instance with a non-uniform scale
+//! or a shear, a motion transform (a point query has no time) or a GAS of other primitives is a
+//! typed error, never a wrong answer.
+
+use super::{check_point, par_try_batch, ClosestPoint, SurfaceQueryError};
+use crate::traversal::NodeRef;
+#[allow(unused_imports)] // Named by the docs.
+use crate::Gas;
+use crate::Ias;
+use glam::Vec3;
+use oxray_core::{Aabb, Transform, MAX_TRAVERSABLE_GRAPH_DEPTH};
+
+/// The closest point of the triangles under an IAS, and the instance it lies under.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InstanceClosestPoint {
+    /// The closest point in world space, its distance from the query point, its triangle
+    /// (primitive index and build input of its GAS) and barycentrics in that triangle.
+    pub closest: ClosestPoint,
+    /// The id of the instance nearest the GAS on the way (as a hit's `instance_id`).
+    pub instance_id: u32,
+    /// The index of that instance in its IAS's build input (as a hit's `instance_index`).
+    pub instance_index: u32,
+}
+
+/// The factor by which `t` scales every distance, if it is a similarity (its linear part's
+/// columns orthogonal and of one length, within `f32` rounding); `None` otherwise.
+fn similarity_scale(t: &Transform) -> Option<f32> {
+    let m = &t.0;
+    let c = [
+        Vec3::new(m[0], m[4], m[8]),
+        Vec3::new(m[1], m[5], m[9]),
+        Vec3::new(m[2], m[6], m[10]),
+    ];
+    let s2 = c[0].length_squared();
+    let tol = 1e-5 * s2;
+    let same = |x: f32| (x - s2).abs() <= tol;
+    let orthogonal = |a: Vec3, b: Vec3| a.dot(b).abs() <= tol;
+    (s2 > 0.0
+        && s2.is_finite()
+        && same(c[1].length_squared())
+        && same(c[2].length_squared())
+        && orthogonal(c[0], c[1])
+        && orthogonal(c[0], c[2])
+        && orthogonal(c[1], c[2]))
+    .then(|| s2.sqrt())
+}
+
+/// Where the search is: the world-to-here and here-to-world transforms, the factor from here to
+/// world distances, and the instance nearest below.
+#[derive(Clone, Copy)]
+struct Frame {
+    world_to_here: Transform,
+    here_to_world: Transform,
+    scale: f32,
+    instance: Option<(u32, u32)>,
+    depth: u32,
+}
+
+impl Frame {
+    /// One level down through a transform `to_parent` (object to this frame) whose inverse is
+    /// `from_parent`.
+    fn enter(
+        &self,
+        to_parent: &Transform,
+        from_parent: &Transform,
+        instance: Option<(u32, u32)>,
+    ) -> Result<Frame, SurfaceQueryError> {
+        let s = similarity_scale(to_parent).ok_or(SurfaceQueryError::Unsupported(
+            "the closest point through a transform that is not a similarity (a non-uniform scale or a shear)",
+        ))?;
+        Ok(Frame {
+            world_to_here: from_parent.then_after(&self.world_to_here),
+            here_to_world: self.here_to_world.then_after(to_parent),
+            scale: self.scale * s,
+            instance: instance.or(self.instance),
+            depth: self.depth + 1,
+        })
+    }
+}
+
+/// The squared distance from `p` to box `b` (0 inside).
+fn box_distance2(b: &Aabb, p: Vec3) -> f32 {
+    (b.min - p).max(p - b.max).max(Vec3::ZERO).length_squared()
+}
+
+/// Searches the graph under `node` for a point closer to `world` than `best` (a world
+/// distance; `found` holds the point that gave it).
+fn search(
+    node: NodeRef<'_>,
+    frame: &Frame,
+    world: Vec3,
+    best: &mut f32,
+    found: &mut Option<InstanceClosestPoint>,
+) -> Result<(), SurfaceQueryError> {
+    if frame.depth > MAX_TRAVERSABLE_GRAPH_DEPTH {
+        return Err(SurfaceQueryError::Unsupported(
+            "a graph deeper than the traversable graph depth limit",
+        ));
+    }
+    let here = frame.world_to_here.transform_point(world);
+    match node {
+        NodeRef::Gas(gas) => {
+            let radius = *best / frame.scale;
+            if let Some(c) = gas.closest_point_within(here, radius)? {
+                let distance = c.distance * frame.scale;
+                if distance < *best {
+                    *best = distance;
+                    let (instance_id, instance_index) = frame.instance.unwrap_or((u32::MAX, 0));
+                    *found = Some(InstanceClosestPoint {
+                        closest: ClosestPoint {
+                            point: frame.here_to_world.transform_point(c.point),
+                            distance,
+                            ..c
+                        },
+                        instance_id,
+                        instance_index,
+                    });
+                }
+            }
+            Ok(())
+        }
+        NodeRef::Ias(ias) => {
+            // Nearest world box first (the slot breaks ties, so the order is fixed), stopping
+            // at the first box farther than the best point.
+            let data = ias.data();
+            let mut order: Vec<(f32, usize)> = data
+                .boxes
+                .iter()
+                .enumerate()
+                .filter(|&(slot, _)| ias.nodes.get(slot).is_some_and(Option::is_some))
+                .map(|(slot, b)| (box_distance2(b, here), slot))
+                .collect();
+            order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            for (d2, slot) in order {
+                if d2.sqrt() * frame.scale > *best {
+                    break;
+                }
+                let Some(child) = ias.nodes[slot].as_ref() else {
+                    continue;
+                };
+                let inst = &data.instances[slot];
+                let next = frame.enter(
+                    &inst.object_to_world,
+                    &inst.world_to_object,
+                    Some((inst.instance_id, inst.index)),
+                )?;
+                search(NodeRef::from(child), &next, world, best, found)?;
+            }
+            Ok(())
+        }
+        NodeRef::Static(st) => {
+            let Some(child) = NodeRef::of(st.child()) else {
+                return Ok(());
+            };
+            let next = frame.enter(st.transform(), st.inverse(), None)?;
+            search(child, &next, world, best, found)
+        }
+        NodeRef::MatrixMotion(_) | NodeRef::SrtMotion(_) => Err(SurfaceQueryError::Unsupported(
+            "the closest point through a motion transform (a point query has no time)",
+        )),
+    }
+}
+
+impl Ias {
+    /// The closest point of the triangles under this IAS (instances of triangle GASes, of
+    /// IASes and of static transforms, placed by similarities) to `point`, with its distance,
+    /// triangle, barycentrics and instance; `None` when nothing is under it. As exact as
+    /// [`Gas::closest_point`]; where two instances are equally close, the instance whose box is
+    /// searched first (nearer, then the lower slot) wins.
+    ///
+    /// Errors: a non-finite point; an instance under a transform that is not a similarity, a
+    /// motion transform, or a GAS of other primitives or with motion
+    /// ([`SurfaceQueryError::Unsupported`], [`SurfaceQueryError::NotTriangles`]).
+    ///
+    /// ```
+    /// use oxray_cpu::{Gas, Ias};
+    /// use oxray_core::{BuildOptions, Instance, Transform};
+    /// use glam::Vec3;
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let gas = Gas::from_mesh(&v, &[[0, 1, 2]])?;
+    /// let far = Transform::from_translation(Vec3::new(0.0, 0.0, 10.0));
+    /// let instances = [
+    ///     Instance::new(gas.handle()).instance_id(1),
+    ///     Instance::new(gas.handle()).instance_id(2).transform(far),
+    /// ];
+    /// let ias = Ias::build(&BuildOptions::default(), &[(&instances[..]).into()])?;
+    /// let c = ias.closest_point(Vec3::new(0.25, 0.25, 8.0))?.unwrap();
+    /// assert_eq!((c.instance_id, c.closest.distance), (2, 2.0));
+    /// assert_eq!(c.closest.point, Vec3::new(0.25, 0.25, 10.0));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn closest_point(
+        &self,
+        point: Vec3,
+    ) -> Result<Option<InstanceClosestPoint>, SurfaceQueryError> {
+        check_point(point)?;
+        let frame = Frame {
+            world_to_here: Transform::IDENTITY,
+            here_to_world: Transform::IDENTITY,
+            scale: 1.0,
+            instance: None,
+            depth: 1,
+        };
+        let mut best = f32::INFINITY;
+        let mut found = None;
+        search(NodeRef::Ias(self), &frame, point, &mut best, &mut found)?;
+        Ok(found)
+    }
+
+    /// The closest points of a batch of points, in parallel (`out[i]` for `points[i]`): the
+    /// same as point by point, whatever the number of threads. The first failing query (the
+    /// lowest index) is the error; every other output is written.
+    pub fn closest_point_batch(
+        &self,
+        points: &[Vec3],
+        out: &mut [Option<InstanceClosestPoint>],
+    ) -> Result<(), SurfaceQueryError> {
+        par_try_batch(points.len(), out, |i| self.closest_point(points[i]))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Affine3A, Quat};
+
+    #[test]
+    fn similarities_are_told_from_other_transforms() {
+        let r = Affine3A::from_scale_rotation_translation(
+            Vec3::splat(2.5),
+            Quat::from_rotation_y(0.7) * Quat::from_rotation_x(0.3),
+            Vec3::new(1.0, -2.0, 3.0),
+        );
+        let s = similarity_scale(&Transform::from_affine(&r)).unwrap();
+        assert!((s - 2.5).abs() < 1e-5, "{s}");
+        let mirror = Transform::from_affine(&Affine3A::from_scale(Vec3::new(-1.0, 1.0, 1.0)));
+        assert_eq!(similarity_scale(&mirror), Some(1.0));
+        let stretched = Transform::from_affine(&Affine3A::from_scale(Vec3::new(1.0, 2.0, 1.0)));
+        assert_eq!(similarity_scale(&stretched), None);
+        let mut sheared = Transform::IDENTITY;
+        sheared.0[1] = 0.5;
+        assert_eq!(similarity_scale(&sheared), None);
+        assert_eq!(similarity_scale(&Transform([0.0; 12])), None);
+    }
+}
