@@ -21,7 +21,9 @@ Steps per scene:
      The reference is their mean; the variance it keeps (a quarter of their mean squared
      difference) is subtracted from every MSE below.
   2. For each spp of --ladder (Mitsuba also at 4x its largest, to span oxray's errors),
-     --repeats times, alternating oxray (each sampler of --samplers) and Mitsuba so that
+     --repeats times, alternating oxray (each sampler of --samplers: sobol, its default, and
+     independent) and Mitsuba (each sampler of --mitsuba-samplers: independent, its default,
+     and ldsampler, scrambled (0,2)-sequences, the counterpart of oxray's Sobol) so that
      machine load falls on both alike: the render's wall time and its RMSE against the
      reference, over all pixels and over the pixels below 1 in every channel of the reference
      (the light and its edges excluded). oxray's time is the render time the CLI
@@ -263,7 +265,8 @@ def write_obj(path: Path, meshes: dict, albedo: dict) -> None:
 
 
 def mitsuba_scene(meshes: dict, albedo: dict, camera: dict, size: tuple[int, int], max_depth: int,
-                  folder: Path, emitter: dict | None = None, env: float | None = None):
+                  folder: Path, emitter: dict | None = None, env: float | None = None,
+                  sampler: str = "independent"):
     """The Mitsuba scene: one PLY per material (flat-shaded, two-sided diffuse), a pinhole
     camera with a box filter, the path integrator."""
     d = {"type": "scene",
@@ -273,7 +276,7 @@ def mitsuba_scene(meshes: dict, albedo: dict, camera: dict, size: tuple[int, int
                     "to_world": mi.ScalarTransform4f().look_at(
                         origin=[float(v) for v in camera["origin"]],
                         target=[float(v) for v in camera["target"]], up=camera["up"]),
-                    "sampler": {"type": "independent", "sample_count": 1},
+                    "sampler": {"type": sampler, "sample_count": 4},
                     "film": {"type": "hdrfilm", "width": size[0], "height": size[1],
                              "rfilter": {"type": "box"}, "pixel_format": "rgb"}}}
     for name, (pos, tris) in meshes.items():
@@ -377,14 +380,16 @@ def loglog_time_at(points: list[tuple[float, float]], target: float) -> float | 
     return math.exp(math.log(t0) + s * (math.log(target) - math.log(e0)))
 
 
-def fit_time_per_spp(rows: list[tuple[int, float]]) -> float:
-    """Least-squares slope of time over spp (the per-sample cost without fixed overheads)."""
+def fit_time_per_spp(rows: list[tuple[int, float]]) -> tuple[float, float]:
+    """Least-squares line of time over spp: the cost per spp (without fixed costs) and the
+    fixed cost per render (the intercept)."""
     x = np.array([r[0] for r in rows], dtype=np.float64)
     y = np.array([r[1] for r in rows])
-    return float(np.polyfit(x, y, 1)[0])
+    slope, intercept = np.polyfit(x, y, 1)
+    return float(slope), float(intercept)
 
 
-def bench_scene(name: str, ox: Oxray, mt: Mitsuba, args, out: Path) -> str:
+def bench_scene(name: str, ox: Oxray, mts: dict[str, Mitsuba], args, out: Path) -> str:
     lines = [f"### {name}\n"]
     # The reference: the mean of an oxray render and a Mitsuba render, each of --ref-spp, both
     # unbiased and independent of the ladder's renders. Their difference is the check that the
@@ -393,7 +398,8 @@ def bench_scene(name: str, ox: Oxray, mt: Mitsuba, args, out: Path) -> str:
     print(f"[{name}] reference: oxray sobol and Mitsuba, {args.ref_spp} spp each", file=sys.stderr)
     ref_o, ref_t = ox.render(args.ref_spp, 1_000_000, "sobol")
     t0 = time.perf_counter()
-    ref_m = mt.converged(args.ref_spp, 2_000_000)
+    mt0 = next(iter(mts))
+    ref_m = mts[mt0].converged(args.ref_spp, 2_000_000)
     ref_mt = time.perf_counter() - t0
     ref = (ref_o.astype(np.float64) + ref_m) / 2
     np.save(out / f"{slug(name)}-reference-oxray.npy", ref_o)
@@ -409,7 +415,7 @@ def bench_scene(name: str, ox: Oxray, mt: Mitsuba, args, out: Path) -> str:
     bo = ref_o[: h // b * b, : w // b * b].reshape(h // b, b, w // b, b, 3).mean((1, 3))
     bm = ref_m[: h // b * b, : w // b * b].reshape(h // b, b, w // b, b, 3).mean((1, 3))
     block_rel = np.abs(bm - bo) / np.maximum(bo, 0.02)
-    lines.append(f"Agreement: oxray (sobol, {args.ref_spp} spp, {ref_t:.1f} s) against Mitsuba "
+    lines.append(f"Agreement: oxray (sobol, {args.ref_spp} spp, {ref_t:.1f} s) against {mt0} "
                  f"({args.ref_spp} spp, {ref_mt:.1f} s); their mean is the reference.\n")
     lines.append("| | R | G | B |\n|---|---|---|---|")
     lines.append("| image mean, oxray | " + " | ".join(f"{v:.5f}" for v in mean_o) + " |")
@@ -422,16 +428,17 @@ def bench_scene(name: str, ox: Oxray, mt: Mitsuba, args, out: Path) -> str:
                  f"from the MSEs: {ref_var[0]:.3g} (all pixels), {ref_var[1]:.3g} (below 1).\n")
 
     renderers = {f"oxray {s}": args.ladder for s in args.samplers}
-    renderers["Mitsuba"] = args.ladder + [4 * args.ladder[-1]]
+    for r in mts:
+        renderers[r] = args.ladder + [4 * args.ladder[-1]]
     results: dict[str, dict[int, list]] = {r: {} for r in renderers}
     for rep in range(args.repeats):
-        for spp in renderers["Mitsuba"]:
+        for spp in renderers[mt0]:
             for r, ladder in renderers.items():
                 if spp not in ladder:
                     continue
                 seed = 1000 * rep + spp
-                if r == "Mitsuba":
-                    img, t = mt.render(spp, seed)
+                if r in mts:
+                    img, t = mts[r].render(spp, seed)
                 else:
                     img, t = ox.render(spp, seed, r.split()[1])
                 results[r].setdefault(spp, []).append(
@@ -451,27 +458,31 @@ def bench_scene(name: str, ox: Oxray, mt: Mitsuba, args, out: Path) -> str:
         for spp, (t, e, eu) in sorted(curves[r].items()):
             lines.append(f"| {r} | {spp} | {t:.3f} | {e:.5f} | {eu:.5f} |")
     w, h = (int(v) for v in args.size.split("x"))
-    slope = {r: fit_time_per_spp([(s, c[0]) for s, c in curves[r].items()]) for r in renderers}
-    lines.append("\nCost per sample (the slope of time over spp):\n")
-    lines.append("| renderer | ms per spp | M samples/s | time per sample / Mitsuba's |\n|---|---|---|---|")
+    fits = {r: fit_time_per_spp([(s, c[0]) for s, c in curves[r].items()]) for r in renderers}
+    slope = {r: f[0] for r, f in fits.items()}
+    lines.append("\nCost per sample (the slope of a line fitted to time over spp; its intercept is "
+                 "a fixed cost per render):\n")
+    lines.append(f"| renderer | ms per spp | M samples/s | time per sample / {mt0}'s | intercept s |"
+                 "\n|---|---|---|---|---|")
     for r in renderers:
         lines.append(f"| {r} | {1e3 * slope[r]:.2f} | {w * h / slope[r] / 1e6:.2f} | "
-                     f"{slope[r] / slope['Mitsuba']:.2f} |")
-    oxrays = [r for r in renderers if r != "Mitsuba"]
+                     f"{slope[r] / slope[mt0]:.2f} | {fits[r][1]:.3f} |")
+    oxrays = [r for r in renderers if r not in mts]
+    pairs = [(o, m) for o in oxrays for m in mts]
     for col, label in [(1, "all pixels"), (2, "pixels below 1 in the reference")]:
-        lines.append(f"\nTime to equal RMSE ({label}); ratio: oxray's time / Mitsuba's "
-                     "(below 1: oxray is faster). Targets: the RMSEs oxray's first sampler "
-                     "reaches at the ladder's spp.\n")
-        lines.append("| target RMSE | Mitsuba s | " + " | ".join(f"{r} s | ratio" for r in oxrays)
-                     + " |\n|" + "---|" * (2 + 2 * len(oxrays)))
+        lines.append(f"\nTime to equal RMSE ({label}), in seconds; ratios: oxray's time / "
+                     "Mitsuba's (below 1: oxray is faster). Targets: the RMSEs that "
+                     f"{oxrays[0]} reaches at the ladder's spp.\n")
+        lines.append("| target RMSE | " + " | ".join(renderers) + " | "
+                     + " | ".join(f"{o} / {m}" for o, m in pairs)
+                     + " |\n|" + "---|" * (1 + len(renderers) + len(pairs)))
         for spp in args.ladder:
             target = curves[oxrays[0]][spp][col]
-            tm = loglog_time_at([(c[0], c[col]) for c in curves["Mitsuba"].values()], target)
-            cells = [f"{target:.5f}", "n/a" if tm is None else f"{tm:.3f}"]
-            for r in oxrays:
-                to = loglog_time_at([(c[0], c[col]) for c in curves[r].values()], target)
-                cells.append("n/a" if to is None else f"{to:.3f}")
-                cells.append("n/a" if to is None or tm is None else f"**{to / tm:.2f}**")
+            at = {r: loglog_time_at([(c[0], c[col]) for c in curves[r].values()], target)
+                  for r in renderers}
+            cells = [f"{target:.5f}"] + ["n/a" if at[r] is None else f"{at[r]:.2f}" for r in renderers]
+            cells += ["n/a" if at[o] is None or at[m] is None else f"**{at[o] / at[m]:.2f}**"
+                      for o, m in pairs]
             lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
     return "\n".join(lines)
@@ -489,13 +500,16 @@ def main() -> None:
     ap.add_argument("--ref-spp", type=int, default=2048)
     ap.add_argument("--ladder", default="4,16,64,256")
     ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--samplers", default="sobol,independent")
+    ap.add_argument("--samplers", default="sobol,independent", help="oxray's (--sampler)")
+    ap.add_argument("--mitsuba-samplers", default="independent,ldsampler",
+                    help="Mitsuba's sampler plugins; the first also renders the reference")
     ap.add_argument("--scenes", default="cornell,gltf")
     ap.add_argument("--gltf", type=Path, default=ROOT.parent / "shared/data/gltf/balloon/scene.gltf")
     ap.add_argument("--out", type=Path, default=ROOT / "target/bench-mitsuba")
     args = ap.parse_args()
     args.ladder = [int(v) for v in args.ladder.split(",")]
     args.samplers = args.samplers.split(",")
+    args.mitsuba_samplers = args.mitsuba_samplers.split(",")
     args.out.mkdir(parents=True, exist_ok=True)
     subprocess.run(["cargo", "build", "--release", "-q", "-p", "oxray-cli"], cwd=ROOT, check=True)
     exe = ROOT / "target/release/oxray"
@@ -517,10 +531,12 @@ def main() -> None:
         for scene in args.scenes.split(","):
             if scene == "cornell":
                 meshes, camera = cornell_geometry()
-                mt = Mitsuba(mitsuba_scene(meshes, CORNELL_ALBEDO, camera, (w, h), args.max_depth, tmp,
-                                           emitter={"light": CORNELL_RADIANCE}), args.threads)
+                mts = {f"Mitsuba {s}": Mitsuba(mitsuba_scene(
+                    meshes, CORNELL_ALBEDO, camera, (w, h), args.max_depth, tmp,
+                    emitter={"light": CORNELL_RADIANCE}, sampler=s), args.threads)
+                    for s in args.mitsuba_samplers}
                 ox = Oxray(exe, [], args.size, args.max_depth, args.threads, tmp)
-                report.append(bench_scene("Cornell box", ox, mt, args, args.out))
+                report.append(bench_scene("Cornell box", ox, mts, args, args.out))
             elif scene == "gltf":
                 if not args.gltf.is_file():
                     report.append(f"### glTF\n\nSkipped: {args.gltf} is absent.\n")
@@ -528,8 +544,9 @@ def main() -> None:
                 meshes, albedo, camera = gltf_geometry(args.gltf)
                 obj = tmp / "scene.obj"
                 write_obj(obj, meshes, albedo)
-                mt = Mitsuba(mitsuba_scene(meshes, albedo, camera, (w, h), args.max_depth, tmp, env=1.0),
-                             args.threads)
+                mts = {f"Mitsuba {s}": Mitsuba(mitsuba_scene(
+                    meshes, albedo, camera, (w, h), args.max_depth, tmp, env=1.0, sampler=s),
+                    args.threads) for s in args.mitsuba_samplers}
                 ox = Oxray(exe, [str(obj), "--env", "1",
                                  "--look-from", ",".join(f"{v:.9g}" for v in camera["origin"]),
                                  "--look-at", ",".join(f"{v:.9g}" for v in camera["target"]),
@@ -537,7 +554,7 @@ def main() -> None:
                            args.size, args.max_depth, args.threads, tmp)
                 ntri = sum(len(t) for _, t in meshes.values())
                 label = f"glTF: {args.gltf.parent.name} ({ntri} triangles, {len(meshes)} materials)"
-                report.append(bench_scene(label, ox, mt, args, args.out))
+                report.append(bench_scene(label, ox, mts, args, args.out))
             else:
                 raise SystemExit(f"unknown scene {scene!r}")
     text = "\n".join(report)
