@@ -319,9 +319,11 @@ class Oxray:
             raise RuntimeError(f"unexpected oxray output: {text}")
         w, h = (int(v) for v in self.size.split("x"))
         secs, rate = float(m.group(1)), float(m.group(2))
-        # The rate has more significant digits than the seconds for short renders.
-        t = w * h * spp / (rate * 1e6) if rate > 0 else secs
-        return read_exr(out), t
+        # The CLI prints the seconds with one decimal and the rate with two: take whichever
+        # is the more precise (the rate for short renders, the seconds for long ones).
+        if rate > 0 and 0.005 / rate < 0.05 / max(secs, 1e-9):
+            return read_exr(out), w * h * spp / (rate * 1e6)
+        return read_exr(out), secs
 
 
 class Mitsuba:
@@ -514,15 +516,16 @@ def main() -> None:
     subprocess.run(["cargo", "build", "--release", "-q", "-p", "oxray-cli"], cwd=ROOT, check=True)
     exe = ROOT / "target/release/oxray"
     version = subprocess.run([str(exe), "--version"], capture_output=True, text=True).stdout.strip()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                            text=True).stdout.strip()
+    commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT,
+                            capture_output=True, text=True).stdout.strip()
     cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
     llvm = os.environ.get("DRJIT_LIBLLVM_PATH", "")
+    load = os.getloadavg()[0]
     report = [f"## oxray against Mitsuba 3 at equal error\n",
               f"{version} (commit {commit}); Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}, "
               f"variant {VARIANT}" + (f" ({Path(llvm).name})" if llvm else " (no LLVM: scalar fallback)")
               + f"; {cpu}, {os.cpu_count()} CPUs; {args.threads} threads each; {args.size}, "
-              f"max depth {args.max_depth}, box filter.\n"]
+              f"max depth {args.max_depth}, box filter; load average {load:.1f} at the start.\n"]
     if VARIANT != "llvm_ad_rgb":
         report.append("**Mitsuba runs its scalar variant: the LLVM backend is unavailable.**\n")
     with tempfile.TemporaryDirectory() as tmpdir:
