@@ -143,7 +143,10 @@ fn main() {
             times.sort_by(f64::total_cmp);
             total as f64 / times[runs / 2] / 1e6
         };
-        let (c, d) = (mrays_split(&split(&camera), 7), mrays_split(&split(&diffuse), 7));
+        let (c, d) = (
+            mrays_split(&split(&camera), 7),
+            mrays_split(&split(&diffuse), 7),
+        );
         let label = format!("large, {n} time segments");
         println!(
             "{label:<22} {c:>10.2} ({:>4.2}) {d:>10.2} ({:>4.2})",

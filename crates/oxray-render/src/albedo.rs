@@ -17,9 +17,12 @@
 //! `1 - E_F (1 + f0 (1 - E) / E)`.
 //!
 //! The table is [`GgxAlbedo::SIZE`]² cells over cos θo (columns, 0 to 1) and √α (rows, 0 to
-//! 1), computed by [`GgxAlbedo::compute`] with stratified visible-normal samples on first use
-//! (deterministic: a fixed quadrature), and read with bilinear interpolation by both versions
-//! of the path tracer (the C++ programs receive it as a buffer).
+//! 1), computed by [`GgxAlbedo::compute`] with stratified visible-normal samples (a fixed
+//! quadrature, 4 M samples: a sixth of a second, which every render in a fresh process paid
+//! when it was computed on first use). The crate embeds the computed table
+//! (`ggx_albedo.bin`, written by `cargo run -p oxray-render --example ggx_albedo_table`; a
+//! test checks that it is the computation's), and both versions of the path tracer read it
+//! with bilinear interpolation (the C++ programs receive it as a buffer).
 
 use super::bsdf::{sample_vndf, smith_g1};
 use glam::Vec3;
@@ -33,6 +36,9 @@ pub struct GgxAlbedo {
     pub cells: Vec<[f32; 2]>,
 }
 
+/// The computed table, embedded (see the module documentation).
+const EMBEDDED: &[u8] = include_bytes!("ggx_albedo.bin");
+
 /// The smallest α the surface model uses (GGX must stay representable in f32).
 pub const MIN_ALPHA: f32 = 2e-3;
 
@@ -40,10 +46,35 @@ impl GgxAlbedo {
     /// Cells along each axis.
     pub const SIZE: usize = 32;
 
-    /// The table, computed on first use.
+    /// The table ([`compute`](Self::compute) with 64² samples per cell, embedded in the
+    /// crate).
     pub fn get() -> &'static GgxAlbedo {
         static TABLE: OnceLock<GgxAlbedo> = OnceLock::new();
-        TABLE.get_or_init(|| GgxAlbedo::compute(64))
+        TABLE.get_or_init(|| GgxAlbedo::from_bytes(EMBEDDED).unwrap_or_else(|| Self::compute(64)))
+    }
+
+    /// The table as little-endian `f32` pairs, row by row (what `ggx_albedo.bin` holds).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        self.cells
+            .iter()
+            .flatten()
+            .flat_map(|x| x.to_le_bytes())
+            .collect()
+    }
+
+    /// The table from [`to_bytes`](Self::to_bytes)'s layout; `None` if the size is not
+    /// [`SIZE`](Self::SIZE)² cells.
+    pub fn from_bytes(bytes: &[u8]) -> Option<GgxAlbedo> {
+        if bytes.len() != Self::SIZE * Self::SIZE * 8 {
+            return None;
+        }
+        let floats: Vec<f32> = bytes
+            .chunks_exact(4)
+            .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        Some(GgxAlbedo {
+            cells: floats.chunks_exact(2).map(|c| [c[0], c[1]]).collect(),
+        })
     }
 
     /// Computes the table with `strata`² visible-normal samples per cell (stratified, at the
@@ -137,6 +168,22 @@ mod tests {
         // At normal incidence the Fresnel weight (1 - cos θh)^5 is small for smooth lobes.
         let (sa, sb) = t.lookup(1.0, MIN_ALPHA);
         assert!(sb < 1e-3 && sa > 0.99, "{sa} {sb}");
+    }
+
+    #[test]
+    fn the_embedded_table_is_the_computed_one() {
+        let embedded = GgxAlbedo::from_bytes(EMBEDDED).expect("the embedded table's size");
+        let computed = GgxAlbedo::compute(64);
+        // The same quadrature; the trigonometric functions of another platform's libm may
+        // round a last bit differently.
+        for (p, q) in embedded.cells.iter().zip(&computed.cells) {
+            for k in 0..2 {
+                assert!((p[k] - q[k]).abs() <= 1e-6, "{p:?} vs {q:?}");
+            }
+        }
+        assert_eq!(GgxAlbedo::get(), &embedded);
+        assert_eq!(GgxAlbedo::from_bytes(&computed.to_bytes()), Some(computed));
+        assert_eq!(GgxAlbedo::from_bytes(&[0; 12]), None);
     }
 
     #[test]

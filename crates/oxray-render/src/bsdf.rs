@@ -161,6 +161,13 @@ impl Surface {
         self.base * (1.0 - self.metallic)
     }
 
+    /// Whether the surface is Lambertian (no coat, no metal). Its GGX lobe is then exactly
+    /// zero (every term is a product with a zero Fresnel factor) and is never sampled, so
+    /// [`eval`](Self::eval) and [`sample`](Self::sample) skip it, with the same bits.
+    fn lambertian(&self) -> bool {
+        !self.dielectric && self.specular == 0.0 && self.metallic == 0.0
+    }
+
     /// What depends on the outgoing direction only: Turquin's factor that scales the GGX lobe,
     /// the compensated lobe's albedo `E_spec`, and the probability of sampling the specular
     /// lobe rather than the diffuse one (in proportion to their albedos, so that a pure metal
@@ -196,6 +203,15 @@ impl Surface {
         if self.dielectric || cos_o <= 0.0 || cos_i <= 0.0 {
             return (Vec3::ZERO, 0.0);
         }
+        if self.lambertian() {
+            return (self.base * (FRAC_1_PI * cos_i), cos_i * FRAC_1_PI);
+        }
+        self.eval_lobes(n, wo, wi, cos_o, cos_i)
+    }
+
+    /// [`eval`](Self::eval) with both lobes, for a non-dielectric and directions above the
+    /// surface.
+    fn eval_lobes(&self, n: Vec3, wo: Vec3, wi: Vec3, cos_o: f32, cos_i: f32) -> (Vec3, f32) {
         let h = (wo + wi).normalize();
         let (nh, oh) = (n.dot(h).max(0.0), wo.dot(h).max(1e-6));
         let a2 = self.alpha * self.alpha;
@@ -222,7 +238,7 @@ impl Surface {
             return None;
         }
         let (t, b) = basis(n);
-        let wi = if u[0] < self.lobes(cos_o).p_spec {
+        let wi = if !self.lambertian() && u[0] < self.lobes(cos_o).p_spec {
             let wo_l = to_local(wo, n, t, b);
             let h = sample_vndf(wo_l, self.alpha, u[1], u[2]);
             let h = t * h.x + b * h.y + n * h.z;
@@ -300,6 +316,46 @@ pub(crate) fn sample_vndf(wo: Vec3, alpha: f32, u1: f32, u2: f32) -> Vec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_lambertian_shortcut_gives_the_bits_of_both_lobes() {
+        // Every roughness (the lobe's terms stay finite down to the smallest alpha), coloured
+        // bases, directions all over the hemisphere, grazing ones included.
+        let mut seed = 0x9e37_79b9_u32;
+        let mut next = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 8) as f32 / (1u32 << 24) as f32
+        };
+        let n = Vec3::new(0.2, 0.9, -0.3).normalize();
+        let (t, b) = basis(n);
+        let mut dir = |next: &mut dyn FnMut() -> f32| {
+            let (u1, u2) = (next(), next());
+            let r = (1.0 - u1 * u1).sqrt();
+            let phi = TAU * u2;
+            t * (r * phi.cos()) + b * (r * phi.sin()) + n * u1
+        };
+        for k in 0..2000 {
+            let base = Vec3::new(next(), next(), next());
+            let roughness = (k % 11) as f32 / 10.0;
+            let s = Surface::new(base, 0.0, roughness, 0.0, 1.5, 0.0);
+            assert!(s.lambertian());
+            let (wo, wi) = (dir(&mut next), dir(&mut next));
+            let (cos_o, cos_i) = (n.dot(wo), n.dot(wi));
+            if cos_o <= 0.0 || cos_i <= 0.0 {
+                continue;
+            }
+            let (f, pdf) = s.eval(n, wo, wi);
+            let (g, gpdf) = s.eval_lobes(n, wo, wi, cos_o, cos_i);
+            assert_eq!(
+                (f.to_array().map(f32::to_bits), pdf.to_bits()),
+                (g.to_array().map(f32::to_bits), gpdf.to_bits()),
+                "roughness {roughness}, cos {cos_o} {cos_i}"
+            );
+        }
+        // A coat or a metal is not Lambertian.
+        assert!(!Surface::new(Vec3::ONE, 0.0, 1.0, 0.0, 1.5, 1.0).lambertian());
+        assert!(!Surface::new(Vec3::ONE, 0.5, 1.0, 0.0, 1.5, 0.0).lambertian());
+    }
 
     fn estimate_albedo(s: &Surface, wo: Vec3, n: usize) -> (Vec3, f32) {
         // Mean of weight (the directional albedo) and the importance-sampling check: the mean of

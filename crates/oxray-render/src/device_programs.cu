@@ -463,11 +463,21 @@ PTI Lobes lobes_of(const Surface& s, float cos_o) {
     return l;
 }
 
+// Whether the surface is Lambertian (no coat, no metal): its GGX lobe is exactly zero and never
+// sampled (bsdf.rs Surface::lambertian).
+PTI bool lambertian(const Surface& s) {
+    return !s.dielectric && s.specular == 0.0f && s.metallic == 0.0f;
+}
+
 // BSDF times |cos| at wi, and the pdf of sampling wi.
 PTI V3 bsdf_eval(const Surface& s, V3 n, V3 wo, V3 wi, float& pdf) {
     float cos_o = dot(n, wo), cos_i = dot(n, wi);
     pdf = 0.0f;
     if (s.dielectric || cos_o <= 0.0f || cos_i <= 0.0f) return v3s(0.0f);
+    if (lambertian(s)) {
+        pdf = cos_i * PT_FRAC_1_PI;
+        return s.base * (PT_FRAC_1_PI * cos_i);
+    }
     V3 h = normalize(wo + wi);
     float nh = maxf(dot(n, h), 0.0f), oh = maxf(dot(wo, h), 1e-6f);
     float a2 = s.alpha * s.alpha;
@@ -522,7 +532,7 @@ PTI bool bsdf_sample(const Surface& s, V3 n, V3 wo, bool entering, float u0, flo
     V3 t, b;
     basis(n, t, b);
     V3 wi;
-    if (u0 < lobes_of(s, cos_o).p_spec) {
+    if (!lambertian(s) && u0 < lobes_of(s, cos_o).p_spec) {
         V3 wo_l = to_local(wo, n, t, b);
         V3 h = sample_vndf(wo_l, s.alpha, u1, u2);
         h = t * h.x + b * h.y + n * h.z;
