@@ -11,6 +11,7 @@ use oxray_scene::SceneDesc;
 use std::path::{Path, PathBuf};
 
 mod render_device;
+mod view;
 
 #[derive(Parser)]
 #[command(
@@ -31,6 +32,15 @@ enum Command {
     /// Scenes: glTF 2.0 (.gltf, .glb), OBJ (+MTL) or PLY. Without SCENE, the built-in Cornell
     /// box. Ctrl-C stops after the pass in flight and writes the samples done.
     Render(Box<RenderArgs>),
+    /// Preview a scene in a window, rendered progressively; the mouse moves the camera.
+    ///
+    /// Scenes as for render (the built-in Cornell box without SCENE). Each pass adds a sample
+    /// per pixel until --spp; any camera move starts again. Left-drag orbits the camera around
+    /// its target, right-drag or the wheel dollies, middle-drag pans; R resets the camera, S
+    /// saves the window's image to a new PNG in the current directory, Esc or Q quits. With
+    /// --screenshot, renders --frames passes, writes the window's image and exits. Needs an
+    /// X11 or Wayland display.
+    View(Box<ViewArgs>),
     /// Cast a file of rays at a mesh and write the hits.
     ///
     /// Rays are little-endian `f32[8]`: ox, oy, oz, tmin, dx, dy, dz, tmax. Hits are f32 t,
@@ -260,6 +270,80 @@ struct RenderArgs {
     backend: String,
 }
 
+/// The options of `oxray view`.
+#[derive(clap::Args)]
+struct ViewArgs {
+    /// The scene file; omit for the built-in Cornell box.
+    scene: Option<PathBuf>,
+    /// Window (and image) size, WxH.
+    #[arg(long, default_value = "512x512")]
+    size: String,
+    /// Samples per pixel at most: the preview stops refining there.
+    #[arg(long, default_value_t = 4096)]
+    spp: u32,
+    /// Path vertices at most.
+    #[arg(long, default_value_t = 8)]
+    max_depth: u32,
+    /// Worker threads (default: all cores).
+    #[arg(short = 't', long)]
+    threads: Option<usize>,
+    /// Which of the scene's cameras to start from (default: the first, else one framing the
+    /// scene).
+    #[arg(long)]
+    camera: Option<usize>,
+    /// Put the camera at X,Y,Z (world space; default: where the chosen camera is).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    look_from: Option<Vec3>,
+    /// Aim the camera at X,Y,Z.
+    ///
+    /// Default: the scene's centre with --look-from, else where the chosen camera looks.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    look_at: Option<Vec3>,
+    /// The camera's up direction (default: +Y).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
+    up: Option<Vec3>,
+    /// Vertical field of view in degrees (default: the chosen camera's).
+    #[arg(long, value_name = "DEGREES")]
+    fov: Option<f32>,
+    /// Environment light: sky, none, a grey level, or an .hdr/.exr map (as for render).
+    #[arg(long)]
+    env: Option<String>,
+    /// Multiplies the environment's radiance.
+    #[arg(long, default_value_t = 1.0)]
+    env_intensity: f32,
+    /// Exposure in stops applied before tone mapping.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    exposure: f32,
+    /// Tone curve: aces, neutral or linear (as for render).
+    #[arg(long, default_value = "aces")]
+    tonemap: String,
+    /// Pixel filter: gaussian, blackman-harris or box.
+    #[arg(long, default_value = "gaussian")]
+    filter: String,
+    /// Put the scene on a large grey ground plane.
+    #[arg(long)]
+    ground: bool,
+    /// Seed of the random sequence (the same seed gives render's image).
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Random numbers: sobol or independent.
+    #[arg(long, default_value = "sobol")]
+    sampler: String,
+    /// Which path tracer on which device: cpu, cpu-cxx, cuda, cuda:N or auto (as for render).
+    #[arg(long, default_value = "cpu", value_parser = render_device::parse)]
+    backend: String,
+    /// Render --frames passes, write the window's image to this PNG and exit.
+    ///
+    /// The file holds the pixels the window shows (replaced atomically; never a file the
+    /// scene reads). Mouse and keys are ignored meanwhile. For scripts and tests.
+    #[arg(long, value_name = "OUT.png")]
+    screenshot: Option<PathBuf>,
+    /// With --screenshot: the passes (samples per pixel) before the image is written
+    /// (default: --spp).
+    #[arg(long, value_name = "N", requires = "screenshot")]
+    frames: Option<u32>,
+}
+
 const LIMITS_HELP: &str = "Limits (checked before allocating; raise them with these environment variables): input files up to OXRAY_MAX_FILE_MB (default 2048), one decoded image up to OXRAY_MAX_IMAGE_MB (256), a scene's textures up to OXRAY_MAX_TEXTURES_MB (1024), geometry flattened for raycast up to OXRAY_MAX_GEOMETRY_MB (2048), ray files up to OXRAY_MAX_RAYS rays (33554432).";
 
 fn main() {
@@ -373,6 +457,58 @@ fn default_output(scene: Option<&Path>) -> PathBuf {
     PathBuf::from(format!("{stem}.oxray.png"))
 }
 
+/// `--size WxH` of `render` and `view`.
+fn parse_size(size: &str) -> Result<(u32, u32)> {
+    let (w, h) = size
+        .split_once('x')
+        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+        .filter(|&(w, h)| w > 0 && h > 0 && w <= 16384 && h <= 16384)
+        .with_context(|| format!("--size must be WxH within 1..=16384, got {size:?}"))?;
+    // The accumulation buffer takes 16 bytes a pixel: keep it within 1 GiB.
+    if w as u64 * h as u64 > 1 << 26 {
+        bail!("--size {w}x{h} has more than 2^26 pixels (about 8192x8192); render tiles of it instead");
+    }
+    Ok((w, h))
+}
+
+/// `--tonemap` and `--exposure` of `render` and `view`.
+fn parse_look(tonemap: &str, exposure: f32) -> Result<oxray_render::tonemap::Look> {
+    if !(exposure.is_finite() && exposure.abs() <= 32.0) {
+        bail!("--exposure must be within -32..=32 stops, got {exposure}");
+    }
+    let tone_map: oxray_render::tonemap::ToneMap = tonemap
+        .parse()
+        .map_err(|e| anyhow::anyhow!("--tonemap: {e}"))?;
+    Ok(oxray_render::tonemap::Look { tone_map, exposure })
+}
+
+fn check_env_intensity(env_intensity: f32) -> Result<()> {
+    if !(env_intensity.is_finite() && env_intensity >= 0.0) {
+        bail!("--env-intensity must be a finite number >= 0, got {env_intensity}");
+    }
+    Ok(())
+}
+
+/// The file `--env` reads, if it names one (rather than sky, none or a grey level).
+fn environment_file(env: Option<&str>) -> Option<PathBuf> {
+    env.filter(|e| !matches!(*e, "sky" | "none") && e.parse::<f32>().is_err())
+        .map(PathBuf::from)
+}
+
+/// The environment light `--env` names, scaled by `--env-intensity`.
+fn environment(env: &str, env_intensity: f32) -> Result<Environment> {
+    Ok(match env {
+        "sky" => Environment::sky(env_intensity),
+        "none" => Environment::uniform(Vec3::ZERO),
+        other => match other.parse::<f32>() {
+            Ok(v) if v.is_finite() && v >= 0.0 => {
+                Environment::uniform(Vec3::splat(v * env_intensity))
+            }
+            _ => Environment::load(Path::new(other), env_intensity).map_err(anyhow::Error::msg)?,
+        },
+    })
+}
+
 fn default_meshes() -> Vec<PathBuf> {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes");
     ["stanford-bunny.obj", "igea.ply"]
@@ -421,15 +557,7 @@ fn run(cli: Cli) -> Result<()> {
                 quiet,
                 backend,
             } = *args;
-            let (w, h) = size
-                .split_once('x')
-                .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
-                .filter(|&(w, h)| w > 0 && h > 0 && w <= 16384 && h <= 16384)
-                .with_context(|| format!("--size must be WxH within 1..=16384, got {size:?}"))?;
-            // The accumulation buffer takes 16 bytes a pixel: keep it within 1 GiB.
-            if w as u64 * h as u64 > 1 << 26 {
-                bail!("--size {w}x{h} has more than 2^26 pixels (about 8192x8192); render tiles of it instead");
-            }
+            let (w, h) = parse_size(&size)?;
             let crop = match crop {
                 Some(text) => {
                     let window: oxray_render::crop::CropWindow =
@@ -451,12 +579,7 @@ fn run(cli: Cli) -> Result<()> {
             if spp == 0 || spp > 1 << 16 {
                 bail!("--spp must be in 1..=65536, got {spp}");
             }
-            if !(exposure.is_finite() && exposure.abs() <= 32.0) {
-                bail!("--exposure must be within -32..=32 stops, got {exposure}");
-            }
-            let tone_map: oxray_render::tonemap::ToneMap = tonemap
-                .parse()
-                .map_err(|e| anyhow::anyhow!("--tonemap: {e}"))?;
+            let look = parse_look(&tonemap, exposure)?;
             let filter: oxray_render::filter::Filter = filter
                 .parse()
                 .map_err(|e| anyhow::anyhow!("--filter: {e}"))?;
@@ -477,9 +600,7 @@ fn run(cli: Cli) -> Result<()> {
                 Some(t) => bail!("--time must be a number of seconds in (0, 1e7], got {t}"),
                 None => None,
             };
-            if !(env_intensity.is_finite() && env_intensity >= 0.0) {
-                bail!("--env-intensity must be a finite number >= 0, got {env_intensity}");
-            }
+            check_env_intensity(env_intensity)?;
             let named = output.is_some();
             let output = output.unwrap_or_else(|| default_output(scene.as_deref()));
             let ext = oxray_scene::file_extension(&output);
@@ -497,10 +618,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             // Checked before any work: the output is none of the inputs and its folder takes
             // a new file; a default name never replaces a file oxray did not write.
-            let env_file = env
-                .as_deref()
-                .filter(|e| !matches!(*e, "sky" | "none") && e.parse::<f32>().is_err())
-                .map(PathBuf::from);
+            let env_file = environment_file(env.as_deref());
             let inputs: Vec<&Path> = scene.iter().chain(&env_file).map(|p| p.as_path()).collect();
             oxray_scene::files::check_output(&output, &inputs).map_err(anyhow::Error::msg)?;
             if !named && output.exists() && !oxray_render::output::written_by_oxray(&output) {
@@ -541,17 +659,7 @@ fn run(cli: Cli) -> Result<()> {
             for w in &desc.warnings {
                 eprintln!("warning: {w}");
             }
-            let environment = match env.as_deref().unwrap_or(default_env) {
-                "sky" => Environment::sky(env_intensity),
-                "none" => Environment::uniform(Vec3::ZERO),
-                other => match other.parse::<f32>() {
-                    Ok(v) if v.is_finite() && v >= 0.0 => {
-                        Environment::uniform(Vec3::splat(v * env_intensity))
-                    }
-                    _ => Environment::load(Path::new(other), env_intensity)
-                        .map_err(anyhow::Error::msg)?,
-                },
-            };
+            let environment = environment(env.as_deref().unwrap_or(default_env), env_intensity)?;
             let loaded = start.elapsed().as_secs_f64();
             let mut opts = RenderOptions {
                 width: w,
@@ -616,7 +724,6 @@ fn run(cli: Cli) -> Result<()> {
                 })
                 .context("cannot install the interrupt handler")?;
             }
-            let look = oxray_render::tonemap::Look { tone_map, exposure };
             let render_start = std::time::Instant::now();
             let mut last_checkpoint = render_start;
             let mut checkpoints = 0u32;
@@ -715,6 +822,129 @@ fn run(cli: Cli) -> Result<()> {
                 std::process::exit(130);
             }
             Ok(())
+        }
+        Command::View(args) => {
+            let ViewArgs {
+                scene,
+                size,
+                spp,
+                max_depth,
+                threads,
+                camera,
+                look_from,
+                look_at,
+                up,
+                fov,
+                env,
+                env_intensity,
+                exposure,
+                tonemap,
+                filter,
+                ground,
+                seed,
+                sampler,
+                backend,
+                screenshot,
+                frames,
+            } = *args;
+            let (w, h) = parse_size(&size)?;
+            if spp == 0 || spp > 1 << 16 {
+                bail!("--spp must be in 1..=65536, got {spp}");
+            }
+            let passes = match frames {
+                Some(0) => bail!("--frames must be at least 1"),
+                Some(n) => n.min(spp),
+                None => spp,
+            };
+            let look = parse_look(&tonemap, exposure)?;
+            let filter: oxray_render::filter::Filter = filter
+                .parse()
+                .map_err(|e| anyhow::anyhow!("--filter: {e}"))?;
+            let sampler: oxray_render::Sampler = sampler
+                .parse()
+                .map_err(|e| anyhow::anyhow!("--sampler: {e}"))?;
+            check_env_intensity(env_intensity)?;
+            let env_file = environment_file(env.as_deref());
+            if let Some(out) = &screenshot {
+                if oxray_scene::file_extension(out).as_deref() != Some("png") {
+                    bail!(
+                        "cannot write {}: --screenshot writes a PNG (.png)",
+                        out.display()
+                    );
+                }
+                let inputs: Vec<&Path> =
+                    scene.iter().chain(&env_file).map(|p| p.as_path()).collect();
+                oxray_scene::files::check_output(out, &inputs).map_err(anyhow::Error::msg)?;
+            }
+            // Before any loading: without a display there is nothing to show it in.
+            view::check_display()?;
+            let renderer = render_device::open(&backend)?;
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.unwrap_or(0))
+                .build()
+                .context("cannot start the worker threads")?;
+            let (mut desc, default_env) = match &scene {
+                Some(path) => (pool.install(|| SceneDesc::load(path))?, "sky"),
+                None => (oxray_scene::cornell_box(), "none"),
+            };
+            if let Some(out) = &screenshot {
+                if let Some(read) = desc
+                    .sources
+                    .iter()
+                    .find(|r| oxray_scene::files::same_file(out, r))
+                {
+                    bail!(
+                        "{} is read by the scene ({}); choose another screenshot file",
+                        out.display(),
+                        read.display()
+                    );
+                }
+            }
+            if ground {
+                desc.add_ground();
+            }
+            for w in &desc.warnings {
+                eprintln!("warning: {w}");
+            }
+            let environment = environment(env.as_deref().unwrap_or(default_env), env_intensity)?;
+            let mut opts = RenderOptions {
+                width: w,
+                height: h,
+                spp: if screenshot.is_some() { passes } else { spp },
+                max_depth: max_depth.clamp(1, 64),
+                camera,
+                filter,
+                seed,
+                sampler,
+                ..Default::default()
+            };
+            if look_from.is_some() || look_at.is_some() || up.is_some() || fov.is_some() {
+                let chosen = oxray_render::camera_frame(&desc, &opts)?;
+                let view = CameraOverride {
+                    look_from,
+                    look_at,
+                    up,
+                    fov,
+                };
+                desc.cameras
+                    .insert(0, view.camera(&chosen, desc.content_bounds())?);
+                opts.camera = Some(0);
+            }
+            let name = scene
+                .as_deref()
+                .and_then(|p| p.file_stem())
+                .map_or("cornell".into(), |s| s.to_string_lossy().into_owned());
+            view::run(view::ViewSetup {
+                name,
+                scene: desc,
+                environment,
+                opts,
+                look,
+                look_at,
+                renderer,
+                pool,
+                screenshot,
+            })
         }
         Command::Raycast {
             mesh,
