@@ -14,7 +14,7 @@
 //!    `t₀(u) = Z - √D`. The roots of `D` split `[0, 1]` into the intervals where it does.
 //! 2. Inside an interval, `t₀` is smallest at a root of `t₀'`, i.e. of
 //!    `P = 4 Z'² D - D'²` (degree ≤ 10) where `Z'` and `D'` share a sign, or at `u = 0` or `1`.
-//!    Every real root comes from [`crate::poly`] (isolation by the derivative's roots, then
+//!    Every real root comes from `poly.rs` (isolation by the derivative's roots, then
 //!    safeguarded Newton), in `f64`.
 //! 3. Ends: linear curves have round caps and elbows (the spheres `S(0)`, `S(1)` are part of
 //!    the segment, so a minimum at `u = 0` or `1` is a hit). Other types are open by default:

@@ -267,6 +267,7 @@ impl GasData {
     /// A triangle build with `PREFER_FAST_TRACE` and without `ALLOW_UPDATE` uses spatial
     /// splits ([`spatial_splits`]): a leaf may then hold a triangle that another leaf holds
     /// too (never one whose SBT record has `REQUIRE_SINGLE_ANYHIT_CALL`).
+    #[doc(alias = "optixAccelBuild")]
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<GasData, BuildError> {
         Ok(Self::build_impl(
             options,
@@ -996,6 +997,7 @@ impl GasData {
     /// assert!(size <= gas.memory().output_bytes);
     /// # Ok::<(), oxray_core::BuildError>(())
     /// ```
+    #[doc(alias = "optixAccelCompact")]
     pub fn compact(&self) -> Result<GasData, BuildError> {
         if !self.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
             return Err(BuildError::CompactionNotAllowed);

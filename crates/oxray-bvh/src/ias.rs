@@ -461,6 +461,8 @@ impl IasData {
     /// `optixGetInstanceTraversableFromIAS`); needs `ALLOW_RANDOM_INSTANCE_ACCESS`. `None` for
     /// an index out of range, a null child, or without the flag; the whole instance is
     /// [`instance_by_index`](Self::instance_by_index).
+    #[doc(alias = "optixGetInstanceChildFromHandle")]
+    #[doc(alias = "optixGetInstanceTraversableFromIAS")]
     pub fn instance_child(&self, index: u32) -> Option<&TraversableHandle> {
         self.instance_by_index(index)
             .ok()

@@ -8,6 +8,7 @@ use oxray_core::{Aabb, BuildError, BuildInput, BuildOptions};
 
 /// Buffer sizes for a build (`OptixAccelBufferSizes`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[doc(alias = "OptixAccelBufferSizes")]
 pub struct AccelBufferSizes {
     /// Upper bound of the bytes the built structure occupies ([`GasData::memory`](crate::GasData::memory)).
     pub output_size_in_bytes: usize,

@@ -38,6 +38,7 @@ impl GasData {
     /// assert_eq!(gas.global_primitive(0, 1), None);
     /// # Ok::<(), oxray_core::BuildError>(())
     /// ```
+    #[doc(alias = "optixGetPrimitiveIndex")]
     pub fn global_primitive(&self, primitive_index: u32, sbt_gas_index: u32) -> Option<u32> {
         let n = self.inputs.len();
         let i = self
@@ -126,6 +127,7 @@ impl IasData {
     /// The instance of index `index` in the build input (`optixGetInstanceTraversableFromIAS`,
     /// guide §13.12): its transforms, id, SBT offset, mask, flags and child. Needs
     /// `ALLOW_RANDOM_INSTANCE_ACCESS`.
+    #[doc(alias = "optixGetInstanceTraversableFromIAS")]
     pub fn instance_by_index(&self, index: u32) -> Result<&InstanceData, RandomAccessError> {
         if !self
             .build_flags

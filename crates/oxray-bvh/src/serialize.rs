@@ -735,6 +735,7 @@ impl IasData {
     /// be the structures it was built over, or copies of them (loaded, compacted) — the world
     /// boxes are the saved ones, not recomputed, as in OptiX's relocation. Every field is
     /// checked as a build checks it, and the tree as [`GasData::from_bytes`] does.
+    #[doc(alias = "OptixRelocateInputInstanceArray")]
     pub fn from_bytes(bytes: &[u8], children: &[TraversableHandle]) -> Result<IasData, LoadError> {
         let (version, payload) = unframe(bytes, KIND_IAS)?;
         let mut r = Reader { bytes: payload };

@@ -28,6 +28,7 @@ use oxray_core::Aabb;
 /// ```
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[doc(alias = "optixGetSphereData")]
 pub struct Sphere {
     /// The centre, object space.
     pub center: [f32; 3],
@@ -52,6 +53,7 @@ impl Sphere {
     }
 
     /// `(x, y, z, radius)`, the `float4` of `optixGetSphereData`.
+    #[doc(alias = "optixGetSphereData")]
     pub fn to_array(&self) -> [f32; 4] {
         let c = self.center;
         [c[0], c[1], c[2], self.radius]

@@ -17,6 +17,7 @@ use glam::Vec3;
 /// ```
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[doc(alias = "OptixAabb")]
 pub struct Aabb {
     /// Smallest corner.
     pub min: Vec3,

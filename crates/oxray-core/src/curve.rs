@@ -18,6 +18,7 @@ use glam::Vec3;
 /// assert_eq!(CurveType::from_code(0x250B), Some(CurveType::RoundCubicBezierRocaps));
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[doc(alias = "OptixPrimitiveType")]
 pub enum CurveType {
     /// Piecewise linear segments with spherical end caps and elbows
     /// (`OPTIX_PRIMITIVE_TYPE_ROUND_LINEAR`).
@@ -44,6 +45,7 @@ pub enum CurveType {
 
 impl CurveType {
     /// Every curve type, in `OptixPrimitiveType` order.
+    #[doc(alias = "OptixPrimitiveType")]
     pub const ALL: [CurveType; 10] = [
         CurveType::RoundQuadraticBSpline,
         CurveType::RoundCubicBSpline,
@@ -58,6 +60,7 @@ impl CurveType {
     ];
 
     /// The `OptixPrimitiveType` value.
+    #[doc(alias = "OptixPrimitiveType")]
     pub const fn code(self) -> u32 {
         match self {
             CurveType::RoundQuadraticBSpline => 0x2501,
@@ -74,6 +77,7 @@ impl CurveType {
     }
 
     /// The curve type of an `OptixPrimitiveType` value.
+    #[doc(alias = "OptixPrimitiveType")]
     pub const fn from_code(code: u32) -> Option<CurveType> {
         Some(match code {
             0x2501 => CurveType::RoundQuadraticBSpline,
@@ -118,6 +122,7 @@ impl CurveType {
     }
 
     /// The pipeline flag that enables this type (`OptixPrimitiveTypeFlags`, guide §9.1).
+    #[doc(alias = "OptixPrimitiveTypeFlags")]
     pub const fn type_flag(self) -> crate::PrimitiveTypeFlags {
         use crate::PrimitiveTypeFlags as F;
         match self {

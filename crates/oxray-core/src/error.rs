@@ -6,6 +6,7 @@ use thiserror::Error;
 /// The `OptixResult` codes that oxray's errors map to (guide §3.1; values from the OptiX headers).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[repr(u32)]
+#[doc(alias = "OptixResult")]
 pub enum ErrorCode {
     /// `OPTIX_ERROR_INVALID_VALUE`.
     InvalidValue = 7001,
@@ -340,6 +341,7 @@ impl BuildError {
     }
 
     /// The `OptixResult` code the guide gives for this error.
+    #[doc(alias = "OptixResult")]
     pub fn code(&self) -> ErrorCode {
         match self {
             BuildError::Unsupported(_) => ErrorCode::NotSupported,
@@ -581,6 +583,9 @@ pub enum LoadError {
 impl LoadError {
     /// The `OptixResult` code closest to this error (`OPTIX_ERROR_INVALID_VALUE` for damaged
     /// bytes, `OPTIX_ERROR_NOT_SUPPORTED` for a version or a device that cannot take them).
+    #[doc(alias = "OptixResult")]
+    #[doc(alias = "OPTIX_ERROR_INVALID_VALUE")]
+    #[doc(alias = "OPTIX_ERROR_NOT_SUPPORTED")]
     pub fn code(&self) -> ErrorCode {
         match self {
             LoadError::UnsupportedVersion { .. } | LoadError::Unsupported(_) => {
@@ -733,6 +738,7 @@ pub enum PipelineError {
 
 impl PipelineError {
     /// The `OptixResult` code the guide gives for this error.
+    #[doc(alias = "OptixResult")]
     pub fn code(&self) -> ErrorCode {
         ErrorCode::InvalidValue
     }
@@ -779,6 +785,7 @@ pub enum LaunchError {
 
 impl LaunchError {
     /// The `OptixResult` code the guide gives for this error.
+    #[doc(alias = "OptixResult")]
     pub fn code(&self) -> ErrorCode {
         match self {
             LaunchError::ValidationFailure { .. } => ErrorCode::ValidationFailure,

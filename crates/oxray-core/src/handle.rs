@@ -12,6 +12,7 @@ use std::sync::Arc;
 /// The kind of a traversable (`OptixTraversableType`, extended with the acceleration
 /// structures).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[doc(alias = "OptixTraversableType")]
 pub enum TraversableKind {
     /// A geometry acceleration structure.
     Gas,

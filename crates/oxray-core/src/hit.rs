@@ -19,10 +19,12 @@ use crate::aabb::Aabb;
 /// assert!(!HitKind::custom(3).is_front_face() && !HitKind::custom(3).is_back_face());
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[doc(alias = "optixGetHitKind")]
 pub struct HitKind(pub u8);
 
 /// The primitive type of a hit (`OptixPrimitiveType`, guide §13.7), for the kinds oxray builds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[doc(alias = "OptixPrimitiveType")]
 pub enum PrimitiveType {
     /// `OPTIX_PRIMITIVE_TYPE_CUSTOM`.
     Custom,
@@ -36,6 +38,7 @@ pub enum PrimitiveType {
 
 impl PrimitiveType {
     /// The `OptixPrimitiveType` value.
+    #[doc(alias = "OptixPrimitiveType")]
     pub const fn code(self) -> u32 {
         match self {
             PrimitiveType::Custom => 0x2500,
@@ -52,6 +55,8 @@ impl HitKind {
     pub const SPHERE_FRONT_FACE: HitKind = HitKind(0x8C);
     /// The back face of a sphere: never reported (spheres are hollow and their back faces
     /// culled, guide §9.6), but `optixIsBackFaceHit` and `optixGetPrimitiveType` read it.
+    #[doc(alias = "optixIsBackFaceHit")]
+    #[doc(alias = "optixGetPrimitiveType")]
     pub const SPHERE_BACK_FACE: HitKind = HitKind(0x8D);
 
     /// The front (`back == false`) or back face of a curve of type `ty` (guide §9.3): round
@@ -61,6 +66,7 @@ impl HitKind {
     }
 
     /// `optixGetPrimitiveType(hitKind)`: which primitive type the kind belongs to.
+    #[doc(alias = "optixGetPrimitiveType")]
     pub const fn primitive_type(self) -> PrimitiveType {
         match self.0 {
             0xFE | 0xFF => PrimitiveType::Triangle,
@@ -76,18 +82,22 @@ impl HitKind {
     }
 
     /// `optixIsFrontFaceHit(hitKind)`: a built-in primitive's front face (never a custom kind).
+    #[doc(alias = "optixIsFrontFaceHit")]
     pub const fn is_front_face(self) -> bool {
         self.0 >= 0x80 && self.0 & 1 == 0
     }
 
     /// `optixIsBackFaceHit(hitKind)`: a built-in primitive's back face (never a custom kind).
+    #[doc(alias = "optixIsBackFaceHit")]
     pub const fn is_back_face(self) -> bool {
         self.0 >= 0x80 && self.0 & 1 == 1
     }
 
     /// `OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE`.
+    #[doc(alias = "OPTIX_HIT_KIND_TRIANGLE_FRONT_FACE")]
     pub const TRIANGLE_FRONT_FACE: HitKind = HitKind(0xFE);
     /// `OPTIX_HIT_KIND_TRIANGLE_BACK_FACE`.
+    #[doc(alias = "OPTIX_HIT_KIND_TRIANGLE_BACK_FACE")]
     pub const TRIANGLE_BACK_FACE: HitKind = HitKind(0xFF);
 
     /// A custom hit kind: only the low 7 bits are kept (guide §12).

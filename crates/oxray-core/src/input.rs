@@ -213,6 +213,7 @@ impl<'a> SbtIndexOffsets<'a> {
 /// assert_eq!(input.num_primitives(), 1);
 /// ```
 #[derive(Clone, Copy, Debug)]
+#[doc(alias = "OptixBuildInputTriangleArray")]
 pub struct TriangleInput<'a> {
     /// Vertex positions.
     pub vertices: VertexBuffer<'a>,
@@ -350,6 +351,7 @@ impl<'a> AabbBuffer<'a> {
 /// A custom-primitive build input (`OptixBuildInputCustomPrimitiveArray`, guide §5.1): the shape
 /// inside each box is decided by an intersection program (or closure) at trace time.
 #[derive(Clone, Copy, Debug)]
+#[doc(alias = "OptixBuildInputCustomPrimitiveArray")]
 pub struct CustomPrimitiveInput<'a> {
     /// One box per primitive; each must enclose its primitive.
     pub aabbs: AabbBuffer<'a>,
@@ -447,6 +449,7 @@ impl<'a> CustomPrimitiveInput<'a> {
 /// assert_eq!(input.radius(&one[0], 1), 1.0);
 /// ```
 #[derive(Clone, Copy, Debug)]
+#[doc(alias = "OptixBuildInputSphereArray")]
 pub struct SphereInput<'a> {
     /// Centres (`float3`, little-endian), one buffer per motion key (`vertexBuffers`).
     pub vertex_buffers: &'a [&'a [u8]],
@@ -575,6 +578,7 @@ impl<'a> SphereInput<'a> {
 /// One build input of an acceleration structure (`OptixBuildInput`). All inputs of one GAS
 /// build must be of the same kind.
 #[derive(Clone, Copy, Debug)]
+#[doc(alias = "OptixBuildInput")]
 pub enum BuildInput<'a> {
     /// Triangles.
     Triangles(TriangleInput<'a>),

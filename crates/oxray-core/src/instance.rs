@@ -10,6 +10,7 @@ bitflags! {
     /// Flags of an instance (`OptixInstanceFlags`, guide §5.4). The flags of the instance
     /// nearest to the geometry override those of its ancestors.
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    #[doc(alias = "OptixInstanceFlags")]
     pub struct InstanceFlags: u32 {
         /// Triangles are never culled by facing, whatever the ray flags.
         const DISABLE_TRIANGLE_FACE_CULLING = 1 << 0;
@@ -47,6 +48,7 @@ pub const MAX_TRAVERSABLE_GRAPH_DEPTH: u32 = 31;
 /// assert_eq!(instance.visibility_mask, 0xFF);
 /// ```
 #[derive(Clone, Debug)]
+#[doc(alias = "OptixInstance")]
 pub struct Instance {
     /// Object-to-world transform.
     pub transform: Transform,
@@ -109,6 +111,7 @@ impl Instance {
 /// A static transform (`OptixStaticTransform`): places its child with a fixed transform. The
 /// inverse is computed, not trusted from the caller.
 #[derive(Clone, Debug)]
+#[doc(alias = "OptixStaticTransform")]
 pub struct StaticTransform {
     child: TraversableHandle,
     transform: Transform,

@@ -10,6 +10,7 @@ bitflags! {
     /// guide §5.10.1). Without a flag, time is clamped to the range: the traversable appears
     /// static and visible. Values match OptiX's.
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    #[doc(alias = "OptixMotionFlags")]
     pub struct MotionFlags: u16 {
         /// Nothing under the traversable is hit at times before `time_begin`.
         const START_VANISH = 1 << 0;
@@ -38,6 +39,7 @@ bitflags! {
 /// assert_eq!(v.sample(9.0), None);
 /// ```
 #[derive(Clone, Copy, Debug, Default)]
+#[doc(alias = "OptixMotionOptions")]
 pub struct MotionOptions {
     /// Motion keys (`numKeys`); 0 or 1 disables motion of an acceleration structure.
     pub num_keys: u16,

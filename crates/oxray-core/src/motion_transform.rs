@@ -32,6 +32,7 @@ use glam::Vec3;
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
 #[allow(missing_docs)]
+#[doc(alias = "OptixSRTData")]
 pub struct SrtData {
     pub sx: f32,
     pub a: f32,
@@ -301,6 +302,7 @@ impl MatrixMotionTransform {
     /// The transform as `OptixMatrixMotionTransform` lays it out (guide §5.10.4, §5.10.5: a 32-byte header of
     /// child handle, motion options and padding, then every key), with a child handle of 0:
     /// what `optixGet…MotionTransformFromHandle` gives programs compiled for the CPU.
+    #[doc(alias = "OptixMatrixMotionTransform")]
     pub fn optix_layout(&self) -> &[u8] {
         bytemuck::cast_slice(&self.layout)
     }
@@ -439,6 +441,7 @@ impl SrtMotionTransform {
     /// The transform as `OptixSRTMotionTransform` lays it out (guide §5.10.4, §5.10.5: a 32-byte header of
     /// child handle, motion options and padding, then every key), with a child handle of 0:
     /// what `optixGet…MotionTransformFromHandle` gives programs compiled for the CPU.
+    #[doc(alias = "OptixSRTMotionTransform")]
     pub fn optix_layout(&self) -> &[u8] {
         bytemuck::cast_slice(&self.layout)
     }

@@ -6,6 +6,7 @@ bitflags! {
     /// How an acceleration structure is built and what may be done with it later
     /// (`OptixBuildFlags`, guide §5.5). Values match OptiX's.
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    #[doc(alias = "OptixBuildFlags")]
     pub struct BuildFlags: u32 {
         /// Allows a later update (refit) of the structure (§5.6).
         const ALLOW_UPDATE = 1 << 0;
@@ -29,6 +30,7 @@ bitflags! {
 bitflags! {
     /// Flags of one SBT record of a build input (`OptixGeometryFlags`, guide §5.1).
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    #[doc(alias = "OptixGeometryFlags")]
     pub struct GeometryFlags: u32 {
         /// The any-hit program is not called for these primitives: they are opaque, unless an
         /// instance or ray flag enforces any-hit.
@@ -42,6 +44,7 @@ bitflags! {
 
 /// A build or an in-place update of an existing structure (`OptixBuildOperation`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[doc(alias = "OptixBuildOperation")]
 pub enum BuildOperation {
     /// Build from scratch.
     #[default]
@@ -58,6 +61,7 @@ pub enum BuildOperation {
 /// assert_eq!(opts.flags, BuildFlags::PREFER_FAST_TRACE);
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[doc(alias = "OptixAccelBuildOptions")]
 pub struct BuildOptions {
     /// Build flags.
     pub flags: BuildFlags,
@@ -95,6 +99,8 @@ impl BuildOptions {
 /// A property a build emits (`OptixAccelPropertyType`; guide §5.8, and the OptiX headers'
 /// `optixAccelEmitProperty`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[doc(alias = "OptixAccelPropertyType")]
+#[doc(alias = "optixAccelEmitProperty")]
 pub enum AccelProperty {
     /// The size in bytes of the compacted structure (`OPTIX_PROPERTY_TYPE_COMPACTED_SIZE`);
     /// needs `ALLOW_COMPACTION`.

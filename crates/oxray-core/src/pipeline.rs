@@ -32,6 +32,7 @@ type LogFn = Arc<dyn Fn(LogLevel, &str, &str) + Send + Sync>;
 /// assert!(ctx.is_validation_mode());
 /// ```
 #[derive(Clone, Default)]
+#[doc(alias = "OptixDeviceContext")]
 pub struct DeviceContext {
     validation_mode: bool,
     log_level: Option<LogLevel>,
@@ -88,6 +89,7 @@ bitflags! {
     /// Which traversable graphs a pipeline may trace (`OptixTraversableGraphFlags`); empty means
     /// any.
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    #[doc(alias = "OptixTraversableGraphFlags")]
     pub struct TraversableGraphFlags: u32 {
         /// A GAS traced directly.
         const ALLOW_SINGLE_GAS = 1 << 0;
@@ -101,6 +103,7 @@ bitflags! {
     /// triangles and custom primitives. Spheres (and curves) must be enabled explicitly (guide
     /// §9.1): an empty set does not include them.
     #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+    #[doc(alias = "OptixPrimitiveTypeFlags")]
     pub struct PrimitiveTypeFlags: u32 {
         /// Custom primitives.
         const CUSTOM = 1 << 0;
@@ -159,6 +162,7 @@ impl PrimitiveTypeFlags {
 
 /// Compile options shared by every program of a pipeline (`OptixPipelineCompileOptions`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[doc(alias = "OptixPipelineCompileOptions")]
 pub struct PipelineCompileOptions {
     /// Whether rays carry a time (otherwise `ray_time()` is 0).
     pub uses_motion_blur: bool,

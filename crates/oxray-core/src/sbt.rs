@@ -5,8 +5,10 @@ use crate::error::PipelineError;
 use bytemuck::Pod;
 
 /// Bytes of a record header (`OPTIX_SBT_RECORD_HEADER_SIZE`).
+#[doc(alias = "OPTIX_SBT_RECORD_HEADER_SIZE")]
 pub const SBT_RECORD_HEADER_SIZE: usize = 32;
 /// Alignment of records and strides (`OPTIX_SBT_RECORD_ALIGNMENT`).
+#[doc(alias = "OPTIX_SBT_RECORD_ALIGNMENT")]
 pub const SBT_RECORD_ALIGNMENT: usize = 16;
 
 const HEADER_MAGIC: [u8; 8] = *b"oxraySBT";
@@ -15,6 +17,7 @@ const HEADER_MAGIC: [u8; 8] = *b"oxraySBT";
 /// a program group's `pack_header` (`optixSbtRecordPackHeader`).
 /// Headers may be copied byte-wise and reused by every pipeline that holds the group.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[doc(alias = "optixSbtRecordPackHeader")]
 pub struct SbtHeader(pub [u8; SBT_RECORD_HEADER_SIZE]);
 
 impl SbtHeader {
@@ -125,6 +128,7 @@ impl SbtRegion {
 
 /// The shader binding table of a launch (`OptixShaderBindingTable`).
 #[derive(Clone, Debug, Default)]
+#[doc(alias = "OptixShaderBindingTable")]
 pub struct ShaderBindingTable {
     /// The ray-generation record (the first record of the region is used).
     pub raygen: SbtRegion,

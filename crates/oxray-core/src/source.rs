@@ -4,6 +4,8 @@
 /// The guide's types and constants that programs name (`OptixTraversableHandle`, ray flags, hit
 /// kinds, exception codes, payload, transform and primitive types, `OptixStaticTransform`), the
 /// part both device headers share: each backend's compiler puts it before its device header.
+#[doc(alias = "OptixTraversableHandle")]
+#[doc(alias = "OptixStaticTransform")]
 pub const OPTIX_TYPES_HEADER: &str = include_str!("optix_types.h");
 
 /// The entry-name prefixes of the eight program kinds (guide §6.2).

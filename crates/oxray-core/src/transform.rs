@@ -17,6 +17,8 @@ use glam::{Affine3A, Mat3A, Vec3, Vec3A};
 /// ```
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Pod, Zeroable)]
+#[doc(alias = "OptixInstance")]
+#[doc(alias = "OptixStaticTransform")]
 pub struct Transform(pub [f32; 12]);
 
 impl Default for Transform {

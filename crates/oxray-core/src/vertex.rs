@@ -7,6 +7,7 @@ use glam::Vec3;
 /// Two-component formats have `z = 0`. `Snorm16` components map `i16` to `[-1, 1]` as
 /// `max(x / 32767, -1)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[doc(alias = "OptixVertexFormat")]
 pub enum VertexFormat {
     /// Three `f32` (`OPTIX_VERTEX_FORMAT_FLOAT3`).
     #[default]
@@ -93,6 +94,7 @@ impl VertexFormat {
 
 /// The format of one index triplet in an index buffer (`OptixIndicesFormat`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+#[doc(alias = "OptixIndicesFormat")]
 pub enum IndexFormat {
     /// Three `u16` (`OPTIX_INDICES_FORMAT_UNSIGNED_SHORT3`).
     U16x3,

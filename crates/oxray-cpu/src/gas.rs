@@ -49,6 +49,7 @@ impl Gas {
     /// zero-area triangle, an inverted box) are left out: they are inactive.
     ///
     /// It is traversed by the process's kernel ([`Isa::selected`]).
+    #[doc(alias = "optixAccelBuild")]
     pub fn build(options: &BuildOptions, inputs: &[BuildInput<'_>]) -> Result<Gas, BuildError> {
         Self::build_with_isa(Isa::selected(), options, inputs)
     }
@@ -91,6 +92,7 @@ impl Gas {
 
     /// The pipeline flags (`OptixPrimitiveTypeFlags`) of the curve types it holds; empty for a
     /// structure that is not made of curves.
+    #[doc(alias = "OptixPrimitiveTypeFlags")]
     pub fn curve_types(&self) -> PrimitiveTypeFlags {
         self.curve_types
     }

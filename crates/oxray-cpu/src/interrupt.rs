@@ -14,6 +14,10 @@ use oxray_core::{Exception, ExceptionCode};
 /// code after the call runs. It can only be made by those functions, so a program cannot invent
 /// one it is not allowed to raise.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[doc(alias = "optixTrace")]
+#[doc(alias = "optixThrowException")]
+#[doc(alias = "optixIgnoreIntersection")]
+#[doc(alias = "optixTerminateRay")]
 pub struct Interrupt(pub(crate) InterruptKind);
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -24,6 +24,7 @@ pub(crate) struct PipelineShared<P> {
 
 /// A pipeline (`OptixPipeline`): program groups linked with their options, ready to launch.
 /// `P` is the type of the launch parameters.
+#[doc(alias = "OptixPipeline")]
 pub struct Pipeline<P> {
     shared: Arc<PipelineShared<P>>,
 }
@@ -31,6 +32,7 @@ pub struct Pipeline<P> {
 impl<P> Pipeline<P> {
     /// Links a pipeline (`optixPipelineCreate`), checking the options against the guide's
     /// limits (§12).
+    #[doc(alias = "optixPipelineCreate")]
     pub fn new(
         context: &DeviceContext,
         compile: &PipelineCompileOptions,
@@ -108,6 +110,7 @@ impl<P> Pipeline<P> {
     /// context's log callback at [`LogLevel::Error`](oxray_core::LogLevel::Error) if one is set, and otherwise printed to
     /// stderr, one line each: `[oxray][EXCEPTION] launch index [x, y, z]: <exception>`. In
     /// validation mode they are also logged with an exception record.
+    #[doc(alias = "optixLaunch")]
     pub fn launch(
         &self,
         params: &P,
@@ -214,6 +217,7 @@ impl<P> Pipeline<P> {
     /// Sets the deepest traversable graph a trace may enter (the last argument of
     /// `optixPipelineSetStackSize`, guide §6.8; at most 31, the default). A trace of a deeper
     /// graph raises `TRAVERSAL_DEPTH_EXCEEDED`. Clones of this pipeline keep their setting.
+    #[doc(alias = "optixPipelineSetStackSize")]
     pub fn set_max_traversable_graph_depth(&mut self, depth: u32) -> Result<(), PipelineError> {
         if depth == 0 || depth > MAX_TRAVERSABLE_GRAPH_DEPTH {
             return Err(PipelineError::InvalidGraphDepth(depth));

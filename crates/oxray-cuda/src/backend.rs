@@ -105,6 +105,7 @@ impl Cuda {
     /// The memory query (`optixAccelComputeMemoryUsage`) for a GAS build on this backend: the
     /// device builder's sizes where it would build the inputs, else the host builder's
     /// ([`oxray_bvh::compute_memory_usage`]).
+    #[doc(alias = "optixAccelComputeMemoryUsage")]
     pub fn compute_memory_usage(
         &self,
         options: &BuildOptions,

@@ -2,11 +2,11 @@
 //! typed errors as every backend, [`GasData::prepare`]), their vertices and indices copied to the
 //! device, and the kernels of [`BUILD_SOURCE`] make a linear BVH (Karras 2012) collapsed into
 //! leaves by the SAH, written straight into the binary node layout the trace kernels and
-//! pipelines walk ([`NodeLayout::Bvh2`]). Only the slot table (the sorted triangle ids, 4 bytes a
+//! pipelines walk ([`crate::NodeLayout::Bvh2`]). Only the slot table (the sorted triangle ids, 4 bytes a
 //! triangle) comes back to the host, where hits are resolved.
 //!
 //! Which builds run here is [`Cuda`](crate::Cuda)'s choice ([`GasBuilder`]); this module is the
-//! builder itself, with its timings for benchmarks ([`build_triangles`]).
+//! builder itself, with its timings for benchmarks ([`build_gas`]).
 
 use crate::context::{nvrtc_compile, CudaContext};
 use crate::error::{driver, CudaError};
@@ -400,8 +400,9 @@ fn scratch_bytes(n: usize, key_bytes: usize) -> usize {
 /// The memory query of a device build (`optixAccelComputeMemoryUsage` on this device), from the
 /// inputs' counts and formats: the output is the node and triangle arrays at their largest (one
 /// node per triangle, 64 bytes, and 48 bytes of triangle per triangle); the temporary memory is
-/// the staged inputs and the scratch arrays, exactly what [`build_triangles`] allocates.
+/// the staged inputs and the scratch arrays, exactly what [`build_gas`] allocates.
 /// Validates as the build does, short of reading the buffers.
+#[doc(alias = "optixAccelComputeMemoryUsage")]
 pub fn memory_usage(
     options: &BuildOptions,
     inputs: &[BuildInput<'_>],

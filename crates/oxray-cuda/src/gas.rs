@@ -952,6 +952,7 @@ impl CudaGas {
     /// the device address of a descriptor of its tables, made on first use and kept with the
     /// GAS (which must outlive the launches that trace it). GASes in the BVH4 layout are not
     /// traced by pipelines yet.
+    #[doc(alias = "OptixTraversableHandle")]
     pub fn optix_handle(&self) -> Result<u64, CudaError> {
         if self.layout != NodeLayout::Bvh2 {
             return Err(CudaError::Unsupported(

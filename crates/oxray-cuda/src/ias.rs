@@ -20,7 +20,7 @@ use std::sync::Mutex;
 /// world-to-object transform, world box and device addresses of each child GAS. Queries give
 /// the CPU backend's hits: distances, barycentrics and facing bit for bit, with the instance's
 /// id and index; which of two hits at exactly the same distance is reported may differ (the
-/// top-level layouts differ, as for [`NodeLayout::Bvh2`]).
+/// top-level layouts differ, as for [`crate::NodeLayout::Bvh2`]).
 #[derive(Debug)]
 pub struct CudaIas {
     ctx: CudaContext,
@@ -195,6 +195,7 @@ impl CudaIas {
     /// the device address of a descriptor of its top-level tree, its instance table and, for
     /// each instance, its id, SBT offset, flags, mask, index and child's handle. Made on first
     /// use and kept with the IAS.
+    #[doc(alias = "OptixTraversableHandle")]
     pub fn optix_handle(&self) -> Result<u64, CudaError> {
         let mut view = self.program_view.lock().unwrap_or_else(|e| e.into_inner());
         if let Some(v) = view.as_ref() {

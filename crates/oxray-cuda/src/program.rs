@@ -52,6 +52,7 @@ const EXCEPTION_RECORDS: usize = 64;
 /// The modules of one pipeline are compiled together in one translation unit, so they must
 /// not define the same names twice (helpers of several modules can be `static`).
 #[derive(Clone, Debug)]
+#[doc(alias = "OptixModule")]
 pub struct CudaModule {
     inner: Arc<ModuleInner>,
 }
@@ -164,6 +165,7 @@ impl GroupInner {
 
 /// A program group of CUDA C++ programs (`OptixProgramGroup`).
 #[derive(Clone, Debug)]
+#[doc(alias = "OptixProgramGroup")]
 pub struct CudaProgramGroup {
     inner: Arc<GroupInner>,
 }
@@ -246,6 +248,8 @@ impl CudaProgramGroup {
     /// one SBT record of the callables region. Each is a device function of any signature;
     /// `optixDirectCall<ReturnT>(index, args...)` and `optixContinuationCall` call it with the
     /// caller's `ReturnT(ArgTypes...)`, which must be its own.
+    #[doc(alias = "optixDirectCall")]
+    #[doc(alias = "optixContinuationCall")]
     pub fn callables(
         direct: Option<(&CudaModule, &str)>,
         continuation: Option<(&CudaModule, &str)>,
@@ -276,6 +280,7 @@ impl CudaProgramGroup {
 
     /// The record header naming this group (`optixSbtRecordPackHeader`). A pipeline that holds
     /// the group replaces it, as it uploads the SBT, with the group's program index.
+    #[doc(alias = "optixSbtRecordPackHeader")]
     pub fn pack_header(&self) -> SbtHeader {
         let id = self.inner.id;
         let mut h = [0u8; SBT_RECORD_HEADER_SIZE];
@@ -847,6 +852,7 @@ fn device_address<T>(buffer: &CudaSlice<T>, stream: &Arc<cudarc::driver::CudaStr
 }
 
 /// A pipeline of CUDA C++ programs (`OptixPipeline`), compiled into one kernel.
+#[doc(alias = "OptixPipeline")]
 pub struct CudaPipeline {
     ctx: CudaContext,
     module: Arc<cudarc::driver::CudaModule>,
@@ -886,6 +892,7 @@ impl CudaPipeline {
     /// Compiles and loads a pipeline (`optixPipelineCreate`). `params_variable` is the guide's
     /// `pipelineLaunchParamsVariableName`: a `__constant__` (or `__device__`) variable of a
     /// module that each launch fills with the launch parameters.
+    #[doc(alias = "optixPipelineCreate")]
     pub fn new(
         ctx: &CudaContext,
         compile: &PipelineCompileOptions,
@@ -972,6 +979,7 @@ impl CudaPipeline {
     /// `optixPipelineSetStackSize`, guide §6.8): 1 to 31, by default
     /// [`DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH`]. A trace of a deeper graph raises
     /// `TRAVERSAL_DEPTH_EXCEEDED`. The context's stack grows to match.
+    #[doc(alias = "optixPipelineSetStackSize")]
     pub fn set_max_traversable_graph_depth(&mut self, depth: u32) -> Result<(), CudaError> {
         if depth == 0 || depth > oxray_core::MAX_TRAVERSABLE_GRAPH_DEPTH {
             return Err(PipelineError::InvalidGraphDepth(depth).into());
@@ -994,6 +1002,7 @@ impl CudaPipeline {
     /// parameters `params` (the bytes of the parameter variable, copied before the launch, guide
     /// §10), and waits for them. Exceptions are counted in the report, with the first five by
     /// launch index (among the first 64 the device recorded).
+    #[doc(alias = "optixLaunch")]
     pub fn launch(
         &self,
         params: &[u8],

@@ -90,6 +90,7 @@ impl CudaGas {
     /// `optixGetTriangleVertexDataFromHandle` from the host: a triangle's vertices (guide
     /// §13.9), read from device memory. The GAS must be built with
     /// `ALLOW_RANDOM_VERTEX_ACCESS`; `time` is unused (no GAS has motion keys on this device).
+    #[doc(alias = "optixGetTriangleVertexDataFromHandle")]
     pub fn triangle_vertex_data(
         &self,
         primitive_index: u32,
@@ -104,6 +105,7 @@ impl CudaGas {
     }
 
     /// `optixGetSphereDataFromHandle` from the host: a sphere's centre and radius.
+    #[doc(alias = "optixGetSphereDataFromHandle")]
     pub fn sphere_data(
         &self,
         primitive_index: u32,

@@ -142,6 +142,8 @@ impl CudaGas {
     ///
     /// GASes in the BVH4 node layout are not updated on the device
     /// ([`BuildError::Unsupported`]).
+    #[doc(alias = "optixAccelBuild")]
+    #[doc(alias = "OPTIX_BUILD_OPERATION_UPDATE")]
     pub fn update(
         &mut self,
         options: &BuildOptions,

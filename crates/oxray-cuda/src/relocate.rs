@@ -90,6 +90,7 @@ impl CudaGas {
     /// [`compacted_size`](Self::compacted_size) bytes with the same hits, independent of the
     /// source, updatable if the source was. Refused without `ALLOW_COMPACTION`
     /// ([`BuildError::CompactionNotAllowed`]).
+    #[doc(alias = "optixAccelCompact")]
     pub fn compact(&self) -> Result<CudaGas, BuildError> {
         if !self.meta.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
             return Err(BuildError::CompactionNotAllowed);

@@ -120,6 +120,8 @@ pub(crate) fn resolve_child(
 /// [`StaticTransform`] over CUDA structures get one made by [`CudaIas::upload`]; make one to
 /// trace from a static transform at the root.
 #[derive(Debug)]
+#[doc(alias = "OptixStaticTransform")]
+#[doc(alias = "optixGetStaticTransformFromHandle")]
 pub struct CudaStaticTransform {
     ctx: CudaContext,
     transform: StaticTransform,
@@ -179,6 +181,7 @@ impl CudaStaticTransform {
 
     /// The `OptixTraversableHandle` of this transform for programs of a
     /// [`CudaPipeline`](crate::CudaPipeline), made on first use and kept with it.
+    #[doc(alias = "OptixTraversableHandle")]
     pub fn optix_handle(&self) -> Result<u64, CudaError> {
         let mut view = self.view.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, a)) = view.as_ref() {
@@ -261,6 +264,10 @@ impl MotionTransform {
 /// Instances whose child is a core motion transform over CUDA structures get one made by
 /// [`CudaIas::upload`]; make one to trace from a motion transform at the root.
 #[derive(Debug)]
+#[doc(alias = "OptixMatrixMotionTransform")]
+#[doc(alias = "OptixSRTMotionTransform")]
+#[doc(alias = "optixGetMatrixMotionTransformFromHandle")]
+#[doc(alias = "optixGetSRTMotionTransformFromHandle")]
 pub struct CudaMotionTransform {
     ctx: CudaContext,
     transform: MotionTransform,
@@ -318,6 +325,7 @@ impl CudaMotionTransform {
 
     /// The `OptixTraversableHandle` of this transform for programs of a
     /// [`CudaPipeline`](crate::CudaPipeline), made on first use and kept with it.
+    #[doc(alias = "OptixTraversableHandle")]
     pub fn optix_handle(&self) -> Result<u64, CudaError> {
         let mut view = self.view.lock().unwrap_or_else(|e| e.into_inner());
         if let Some((_, a)) = view.as_ref() {

@@ -328,7 +328,7 @@ mod tests {
         };
         let n = Vec3::new(0.2, 0.9, -0.3).normalize();
         let (t, b) = basis(n);
-        let mut dir = |next: &mut dyn FnMut() -> f32| {
+        let dir = |next: &mut dyn FnMut() -> f32| {
             let (u1, u2) = (next(), next());
             let r = (1.0 - u1 * u1).sqrt();
             let phi = TAU * u2;

@@ -1,5 +1,5 @@
 //! Where the path tracer's random numbers come from: independent hash-based numbers
-//! ([`Rng`](crate::bsdf::Rng)), or an Owen-scrambled Sobol sequence (Burley 2020, "Practical
+//! ([`Rng`]), or an Owen-scrambled Sobol sequence (Burley 2020, "Practical
 //! Hash-based Owen Scrambling").
 //!
 //! The Sobol sampler gives each use of a random number in a path its own dimension

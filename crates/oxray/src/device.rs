@@ -182,6 +182,7 @@ impl Device {
     /// CUDA device those of the builder that will run (the device's kernels for the inputs and
     /// presets it builds, see `oxray::cuda::Cuda`). Validates as the build does, short of
     /// reading the buffers.
+    #[doc(alias = "optixAccelComputeMemoryUsage")]
     pub fn compute_memory_usage(
         &self,
         options: &BuildOptions,
@@ -196,6 +197,7 @@ impl Device {
 
     /// Builds a GAS on this device (`optixAccelBuild`); inputs are validated as the guide says,
     /// with the same typed errors on every device.
+    #[doc(alias = "optixAccelBuild")]
     pub fn build_gas(
         &self,
         options: &BuildOptions,
@@ -310,6 +312,7 @@ impl Device {
     /// }
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
+    #[doc(alias = "optixAccelCompact")]
     pub fn compact_gas(&self, gas: &Gas) -> Result<Gas, BuildError> {
         match (&self.repr, gas.repr()) {
             (DeviceRepr::Cpu(_), GasRepr::Cpu(g)) => Ok(Gas::from_repr(GasRepr::Cpu(Arc::new(

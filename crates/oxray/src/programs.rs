@@ -88,6 +88,7 @@ pub enum ProgramError {
 
 /// A module of programs (`OptixModule`), for the device that created it.
 #[derive(Clone, Debug)]
+#[doc(alias = "OptixModule")]
 pub struct Module(ModuleRepr);
 
 #[derive(Clone, Debug)]
@@ -128,6 +129,7 @@ impl Module {
 
 /// A program group (`OptixProgramGroup`).
 #[derive(Clone, Debug)]
+#[doc(alias = "OptixProgramGroup")]
 pub struct ProgramGroup(GroupRepr);
 
 #[derive(Clone, Debug)]
@@ -274,6 +276,7 @@ impl ProgramGroup {
     }
 
     /// The record header naming this group (`optixSbtRecordPackHeader`).
+    #[doc(alias = "optixSbtRecordPackHeader")]
     pub fn pack_header(&self) -> SbtHeader {
         match &self.0 {
             GroupRepr::Cpu(g) => g.pack_header(),
@@ -285,6 +288,7 @@ impl ProgramGroup {
 
 /// A pipeline of program groups (`OptixPipeline`).
 #[derive(Debug)]
+#[doc(alias = "OptixPipeline")]
 pub struct Pipeline(PipelineRepr);
 
 #[derive(Debug)]
@@ -297,6 +301,7 @@ enum PipelineRepr {
 impl Pipeline {
     /// Launches `width * height * depth` ray-generation programs (`optixLaunch`); `params` are
     /// copied into the pipeline's launch-parameter variable first (guide §10).
+    #[doc(alias = "optixLaunch")]
     pub fn launch(
         &self,
         params: &[u8],
@@ -332,6 +337,7 @@ impl Pipeline {
     /// `TRAVERSAL_DEPTH_EXCEEDED`. The defaults differ: 31 on the CPU, where depth costs
     /// nothing, and 2 on CUDA (one level of instances over geometry, OptiX's default), where the
     /// stack reserved for every resident thread grows with it.
+    #[doc(alias = "optixPipelineSetStackSize")]
     pub fn set_max_traversable_graph_depth(&mut self, depth: u32) -> Result<(), ProgramError> {
         match &mut self.0 {
             PipelineRepr::Cpu(p) => p.set_max_traversable_graph_depth(depth)?,
@@ -448,6 +454,7 @@ impl<T: Pod> Buffer<T> {
 impl Device {
     /// A module of programs for this device (`optixModuleCreate`). It is compiled with the
     /// pipelines that use it.
+    #[doc(alias = "optixModuleCreate")]
     pub fn create_module(&self, source: ModuleSource<'_>) -> Result<Module, ProgramError> {
         let ModuleSource::CudaCpp(src) = source;
         Ok(Module(match &self.repr {
@@ -460,6 +467,7 @@ impl Device {
     /// A pipeline of program groups made from this device's modules (`optixPipelineCreate`);
     /// `params_variable` is the guide's `pipelineLaunchParamsVariableName`. The CUDA device
     /// compiles it with NVRTC, the CPU device with the host's C++ compiler (cached on disk).
+    #[doc(alias = "optixPipelineCreate")]
     pub fn create_pipeline(
         &self,
         compile: &PipelineCompileOptions,
@@ -522,6 +530,7 @@ impl Device {
 impl Gas {
     /// The `OptixTraversableHandle` value that CUDA C++ programs of this structure's device
     /// trace. It stays valid while the structure lives.
+    #[doc(alias = "OptixTraversableHandle")]
     pub fn optix_handle(&self) -> Result<u64, ProgramError> {
         match self.repr() {
             GasRepr::Cpu(_) => Ok(oxray_cpu::cxx::optix_handle(&self.handle())),
@@ -534,6 +543,7 @@ impl Gas {
 impl Ias {
     /// The `OptixTraversableHandle` value that CUDA C++ programs of this structure's device
     /// trace. It stays valid while the structure lives.
+    #[doc(alias = "OptixTraversableHandle")]
     pub fn optix_handle(&self) -> Result<u64, ProgramError> {
         match self.repr() {
             IasRepr::Cpu(_) => Ok(oxray_cpu::cxx::optix_handle(&self.handle())),

@@ -22,6 +22,7 @@ fn registry() -> &'static Mutex<HashMap<u64, WeakTraversableHandle>> {
 /// use oxray_core::TraversableHandle;
 /// assert_eq!(oxray_cpu::cxx::optix_handle(&TraversableHandle::NULL), 0);
 /// ```
+#[doc(alias = "OptixTraversableHandle")]
 pub fn optix_handle(handle: &TraversableHandle) -> u64 {
     let value = handle.address();
     if value != 0 {

@@ -172,6 +172,7 @@ struct ModuleInner {
 /// (callables: `extern "C" __device__ R __direct_callable__name(args…)`). It is compiled with
 /// the pipelines that use it.
 #[derive(Clone)]
+#[doc(alias = "OptixModule")]
 pub struct CxxModule {
     inner: Arc<ModuleInner>,
 }
@@ -229,6 +230,7 @@ impl CxxModule {
 
 /// A program group of CUDA C++ programs for the CPU (`OptixProgramGroup`).
 #[derive(Clone)]
+#[doc(alias = "OptixProgramGroup")]
 pub struct CxxProgramGroup {
     group: ProgramGroup<CxxLaunch>,
     modules: Vec<CxxModule>,
@@ -351,6 +353,7 @@ impl CxxProgramGroup {
     }
 
     /// The record header naming this group (`optixSbtRecordPackHeader`).
+    #[doc(alias = "optixSbtRecordPackHeader")]
     pub fn pack_header(&self) -> SbtHeader {
         self.group.pack_header()
     }
@@ -362,6 +365,7 @@ fn cpu_entry<'a>(e: Option<(&'a CxxModule, &'a str)>) -> Option<(&'a Module<CxxL
 
 /// A pipeline of CUDA C++ programs on the CPU (`OptixPipeline`): its modules compiled into one
 /// shared library, its groups linked by the CPU pipeline.
+#[doc(alias = "OptixPipeline")]
 pub struct CxxPipeline {
     pipeline: Pipeline<CxxLaunch>,
     loaded: Arc<unit::Loaded>,
@@ -380,6 +384,7 @@ impl CxxPipeline {
     /// Compiles (or finds in the cache), loads and links a pipeline (`optixPipelineCreate`).
     /// `params_variable` is the guide's `pipelineLaunchParamsVariableName`: a variable of a
     /// module that each launch fills with the launch parameters.
+    #[doc(alias = "optixPipelineCreate")]
     pub fn new(
         context: &DeviceContext,
         compile: &PipelineCompileOptions,
@@ -406,6 +411,7 @@ impl CxxPipeline {
     }
 
     /// Sets the deepest traversable graph a trace may enter (`optixPipelineSetStackSize`).
+    #[doc(alias = "optixPipelineSetStackSize")]
     pub fn set_max_traversable_graph_depth(&mut self, depth: u32) -> Result<(), CxxError> {
         Ok(self.pipeline.set_max_traversable_graph_depth(depth)?)
     }
@@ -413,6 +419,7 @@ impl CxxPipeline {
     /// Launches `width * height * depth` ray-generation programs on all cores (`optixLaunch`):
     /// `params` are copied into the parameter variable first (guide §10); launches of pipelines
     /// of one compiled unit run one at a time.
+    #[doc(alias = "optixLaunch")]
     pub fn launch(
         &self,
         params: &[u8],

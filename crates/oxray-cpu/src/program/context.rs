@@ -13,6 +13,7 @@ use std::cell::Cell;
 
 /// What a transform-list entry is (`OptixTransformType`, with the instance's ids).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[doc(alias = "OptixTransformType")]
 pub enum TransformListKind {
     /// An instance of an IAS.
     Instance {
@@ -149,11 +150,13 @@ impl<'a, P> Frame<'a, P> {
 macro_rules! common_queries {
     () => {
         /// `optixGetLaunchIndex`.
+        #[doc(alias = "optixGetLaunchIndex")]
         pub fn launch_index(&self) -> [u32; 3] {
             self.frame.index
         }
 
         /// `optixGetLaunchDimensions`.
+        #[doc(alias = "optixGetLaunchDimensions")]
         pub fn launch_dimensions(&self) -> [u32; 3] {
             self.frame.launch.dims
         }
@@ -165,6 +168,7 @@ macro_rules! common_queries {
 
         /// The data of this program's SBT record (`optixGetSbtDataPointer`), read as `T`;
         /// `None` if the record is shorter than the header plus `T`.
+        #[doc(alias = "optixGetSbtDataPointer")]
         pub fn sbt_data<T: Pod>(&self) -> Option<T> {
             self.frame.sbt_data()
         }
@@ -184,6 +188,7 @@ macro_rules! throw_fn {
         /// exception program runs; later device calls of this program do nothing. Leave the
         /// program at once with `?` or `return` (the idiomatic way: in OptiX the call never
         /// returns).
+        #[doc(alias = "optixThrowException")]
         pub fn throw_exception(&self, code: i32, details: &[u32]) -> ProgramResult {
             self.no_return.call(|| self.frame.throw(code, details))
         }
@@ -198,6 +203,7 @@ macro_rules! direct_call_fn {
         /// If the call raises (here or in the callable, even if the callable dropped the
         /// interrupt), an [`Interrupt`] comes back and takes effect as
         /// [`throw_exception`](Self::throw_exception) does: pass it on with `?`.
+        #[doc(alias = "optixDirectCall")]
         pub fn direct_call<A: 'static, R: 'static>(
             &self,
             sbt_index: u32,
@@ -215,6 +221,7 @@ macro_rules! continuation_call_fn {
         /// `sbt_index` with `args`; it may trace. If the call raises, an [`Interrupt`] comes
         /// back and takes effect as [`throw_exception`](Self::throw_exception) does: pass it on
         /// with `?`.
+        #[doc(alias = "optixContinuationCall")]
         pub fn continuation_call<A: 'static, R: 'static>(
             &self,
             sbt_index: u32,
@@ -229,26 +236,32 @@ macro_rules! continuation_call_fn {
 macro_rules! ray_queries {
     ($ray:ident) => {
         /// `optixGetWorldRayOrigin`.
+        #[doc(alias = "optixGetWorldRayOrigin")]
         pub fn world_ray_origin(&self) -> Vec3 {
             self.$ray.origin
         }
         /// `optixGetWorldRayDirection`.
+        #[doc(alias = "optixGetWorldRayDirection")]
         pub fn world_ray_direction(&self) -> Vec3 {
             self.$ray.direction
         }
         /// `optixGetRayTmin`: the trace's tmin.
+        #[doc(alias = "optixGetRayTmin")]
         pub fn ray_tmin(&self) -> f32 {
             self.$ray.tmin
         }
         /// `optixGetRayTime` (0 in a pipeline without motion blur).
+        #[doc(alias = "optixGetRayTime")]
         pub fn ray_time(&self) -> f32 {
             self.$ray.time
         }
         /// `optixGetRayFlags`.
+        #[doc(alias = "optixGetRayFlags")]
         pub fn ray_flags(&self) -> crate::RayFlags {
             self.$ray.flags
         }
         /// `optixGetRayVisibilityMask`.
+        #[doc(alias = "optixGetRayVisibilityMask")]
         pub fn ray_visibility_mask(&self) -> u8 {
             self.$ray.mask
         }
@@ -258,11 +271,13 @@ macro_rules! ray_queries {
 macro_rules! payload_fns {
     () => {
         /// `optixGetPayload_i`. Words past the trace's payload read as 0.
+        #[doc(alias = "optixGetPayload_i")]
         pub fn payload(&self, i: usize) -> u32 {
             self.payload.get(i).copied().unwrap_or(0)
         }
         /// `optixSetPayload_i`. Words past the trace's payload are ignored, and so are writes
         /// after a device call that does not return (in OptiX they are never reached).
+        #[doc(alias = "optixSetPayload_i")]
         pub fn set_payload(&mut self, i: usize, v: u32) {
             if self.no_return.is_set() {
                 return;
@@ -304,6 +319,7 @@ macro_rules! transform_queries {
     ($hit:ident) => {
         /// Entry `i` of the transform list (`optixGetTransformListHandle` and the queries on
         /// its handle): index 0 is the level nearest the root. `None` past the list.
+        #[doc(alias = "optixGetTransformListHandle")]
         pub fn transform_list_entry(&self, i: u32) -> Option<TransformListEntry> {
             let level = self.path?.levels().nth(i as usize)?;
             Some(match level {
@@ -336,6 +352,7 @@ macro_rules! transform_queries {
         /// `optixGetMatrixMotionTransformFromHandle` on entry `i` of the transform list: the
         /// traversable, with its keys and motion options (guide §13.11). `None` if the entry
         /// is not a matrix motion transform.
+        #[doc(alias = "optixGetMatrixMotionTransformFromHandle")]
         pub fn matrix_motion_transform(
             &self,
             i: u32,
@@ -349,6 +366,7 @@ macro_rules! transform_queries {
         /// `optixGetSRTMotionTransformFromHandle` on entry `i` of the transform list: the
         /// traversable, with its keys and motion options (guide §13.11). `None` if the entry
         /// is not an SRT motion transform.
+        #[doc(alias = "optixGetSRTMotionTransformFromHandle")]
         pub fn srt_motion_transform(&self, i: u32) -> Option<&oxray_core::SrtMotionTransform> {
             match self.path?.levels().nth(i as usize)? {
                 Level::SrtMotion(m, _) => Some(m),
@@ -358,38 +376,47 @@ macro_rules! transform_queries {
 
         /// `optixGetTransformListSize`: transforms (instances and static transforms) between
         /// world and object space.
+        #[doc(alias = "optixGetTransformListSize")]
         pub fn transform_list_size(&self) -> u32 {
             self.place.levels
         }
         /// `optixGetObjectToWorldTransformMatrix`: the composed object-to-world transform.
+        #[doc(alias = "optixGetObjectToWorldTransformMatrix")]
         pub fn object_to_world_transform(&self) -> crate::Transform {
             self.place.object_to_world()
         }
         /// `optixGetWorldToObjectTransformMatrix`: the composed world-to-object transform.
+        #[doc(alias = "optixGetWorldToObjectTransformMatrix")]
         pub fn world_to_object_transform(&self) -> crate::Transform {
             self.place.world_to_object()
         }
         /// `optixTransformPointFromObjectToWorldSpace`.
+        #[doc(alias = "optixTransformPointFromObjectToWorldSpace")]
         pub fn transform_point_to_world(&self, p: Vec3) -> Vec3 {
             self.place.object_to_world().transform_point(p)
         }
         /// `optixTransformVectorFromObjectToWorldSpace`.
+        #[doc(alias = "optixTransformVectorFromObjectToWorldSpace")]
         pub fn transform_vector_to_world(&self, v: Vec3) -> Vec3 {
             self.place.object_to_world().transform_vector(v)
         }
         /// `optixTransformNormalFromObjectToWorldSpace` (inverse transpose).
+        #[doc(alias = "optixTransformNormalFromObjectToWorldSpace")]
         pub fn transform_normal_to_world(&self, n: Vec3) -> Vec3 {
             crate::Transform::transform_normal_with_inverse(&self.place.world_to_object(), n)
         }
         /// `optixTransformPointFromWorldToObjectSpace`.
+        #[doc(alias = "optixTransformPointFromWorldToObjectSpace")]
         pub fn transform_point_to_object(&self, p: Vec3) -> Vec3 {
             self.place.world_to_object().transform_point(p)
         }
         /// `optixTransformVectorFromWorldToObjectSpace`.
+        #[doc(alias = "optixTransformVectorFromWorldToObjectSpace")]
         pub fn transform_vector_to_object(&self, v: Vec3) -> Vec3 {
             self.place.world_to_object().transform_vector(v)
         }
         /// `optixTransformNormalFromWorldToObjectSpace` (inverse transpose).
+        #[doc(alias = "optixTransformNormalFromWorldToObjectSpace")]
         pub fn transform_normal_to_object(&self, n: Vec3) -> Vec3 {
             crate::Transform::transform_normal_with_inverse(&self.place.object_to_world(), n)
         }
@@ -399,45 +426,54 @@ macro_rules! transform_queries {
 macro_rules! hit_queries {
     ($hit:ident) => {
         /// `optixGetPrimitiveIndex`: index within the build input plus its offset.
+        #[doc(alias = "optixGetPrimitiveIndex")]
         pub fn primitive_index(&self) -> u32 {
             self.$hit.primitive_index
         }
         /// `optixGetSbtGASIndex`.
+        #[doc(alias = "optixGetSbtGASIndex")]
         pub fn sbt_gas_index(&self) -> u32 {
             self.$hit.sbt_gas_index
         }
         /// `optixGetInstanceId`: the user id of the instance nearest to the geometry; `!0` when
         /// there is no instance (a GAS traced directly: guide §13.7; the OptiX 9.0 header says
         /// 0, oxray follows the guide).
+        #[doc(alias = "optixGetInstanceId")]
         pub fn instance_id(&self) -> u32 {
             self.place.instance_id
         }
         /// `optixGetInstanceIndex`: that instance's position in its IAS's build input; 0 when
         /// there is no instance.
+        #[doc(alias = "optixGetInstanceIndex")]
         pub fn instance_index(&self) -> u32 {
             self.place.instance_index
         }
         transform_queries!($hit);
         /// `optixGetHitKind`.
+        #[doc(alias = "optixGetHitKind")]
         pub fn hit_kind(&self) -> HitKind {
             self.$hit.hit_kind
         }
         /// `optixIsFrontFaceHit`: the front face of a built-in primitive (a triangle, or a
         /// sphere, whose hits are always front-face hits: guide §9.4); false for a custom one.
+        #[doc(alias = "optixIsFrontFaceHit")]
         pub fn is_front_face_hit(&self) -> bool {
             self.$hit.hit_kind.is_front_face()
         }
         /// `optixIsBackFaceHit`: the back face of a built-in primitive (only triangles have
         /// back-face hits); false for a custom one.
+        #[doc(alias = "optixIsBackFaceHit")]
         pub fn is_back_face_hit(&self) -> bool {
             self.$hit.hit_kind.is_back_face()
         }
         /// `optixGetPrimitiveType`: triangle, sphere, a curve type or custom (guide §13.7).
+        #[doc(alias = "optixGetPrimitiveType")]
         pub fn primitive_type(&self) -> PrimitiveType {
             self.$hit.hit_kind.primitive_type()
         }
         /// `optixGetSphereData`: the object-space centre and radius `(x, y, z, r)` of the hit
         /// sphere (guide §9.4; no build flag needed). Zeros for another primitive type.
+        #[doc(alias = "optixGetSphereData")]
         pub fn sphere_data(&self) -> [f32; 4] {
             // A sphere with motion is the one at the ray's time (guide §5.10.2).
             match self
@@ -450,6 +486,7 @@ macro_rules! hit_queries {
         }
         /// `optixGetCurveParameter`: the hit's `u` in its curve segment, exactly 0 or 1 on a
         /// flat end cap (guide §9.3). 0 when the hit is not a curve.
+        #[doc(alias = "optixGetCurveParameter")]
         pub fn curve_parameter(&self) -> f32 {
             match self.$hit.hit_kind.primitive_type() {
                 PrimitiveType::Curve(_) => f32::from_bits(self.$hit.attributes[0]),
@@ -458,6 +495,7 @@ macro_rules! hit_queries {
         }
         /// `optixGetRibbonParameters`: a ribbon hit's `(u, v)`, `v ∈ [-1, 1]` across the
         /// ribbon (guide §9.3). Zeros when the hit is not a ribbon.
+        #[doc(alias = "optixGetRibbonParameters")]
         pub fn ribbon_parameters(&self) -> [f32; 2] {
             match self.$hit.hit_kind.primitive_type() {
                 PrimitiveType::Curve(c) if c.is_ribbon() => [
@@ -473,6 +511,12 @@ macro_rules! hit_queries {
         /// `optixGetCubicBezierVertexData`, their Rocaps variants and
         /// `optixGetRibbonVertexData` give them (guide §9.3; no build flag needed): as many as
         /// the type has (2, 3 or 4), then zeros. Zeros when the hit is not a curve.
+        #[doc(alias = "optixGetLinearCurveVertexData")]
+        #[doc(alias = "optixGetQuadraticBSplineVertexData")]
+        #[doc(alias = "optixGetCubicBSplineVertexData")]
+        #[doc(alias = "optixGetCatmullRomVertexData")]
+        #[doc(alias = "optixGetCubicBezierVertexData")]
+        #[doc(alias = "optixGetRibbonVertexData")]
         pub fn curve_vertex_data(&self) -> [[f32; 4]; 4] {
             // A segment with motion is the one at the ray's time (guide §5.10.2).
             match self.hit_curve() {
@@ -485,6 +529,7 @@ macro_rules! hit_queries {
         /// pointing out of its front face (guide §9.3; see
         /// [`CurveSegment::ribbon_normal`](oxray_bvh::CurveSegment::ribbon_normal)). Zero when
         /// the hit is not a ribbon.
+        #[doc(alias = "optixGetRibbonNormal")]
         pub fn ribbon_normal(&self, ribbon_parameters: [f32; 2]) -> Vec3 {
             match self.hit_curve() {
                 Some(s) => s.ribbon_normal(
@@ -503,20 +548,24 @@ macro_rules! hit_queries {
         }
         /// `optixGetGASMotionTimeBegin`, `…TimeEnd` and `…StepCount` of the hit's GAS
         /// (guide §13.10): its motion options (the default, no motion, for a static GAS).
+        #[doc(alias = "optixGetGASMotionTimeBegin")]
         pub fn gas_motion_options(&self) -> oxray_core::MotionOptions {
             self.gas
                 .map_or(oxray_core::MotionOptions::NONE, |g| g.motion_options())
         }
         /// `optixIsTriangleHit`.
+        #[doc(alias = "optixIsTriangleHit")]
         pub fn is_triangle_hit(&self) -> bool {
             self.$hit.hit_kind.0 >= 0xFE
         }
         /// `optixGetAttribute_i` (0 past the reported attributes).
+        #[doc(alias = "optixGetAttribute_i")]
         pub fn attribute(&self, i: usize) -> u32 {
             self.$hit.attributes.get(i).copied().unwrap_or(0)
         }
         /// `optixGetTriangleVertexData`: the object-space vertices of the hit triangle (zeros
         /// for a custom primitive).
+        #[doc(alias = "optixGetTriangleVertexData")]
         pub fn triangle_vertex_data(&self) -> [Vec3; 3] {
             // A triangle with motion is the one at the ray's time, interpolated as traversal
             // interpolated it (guide §13.9).
@@ -527,6 +576,7 @@ macro_rules! hit_queries {
             }
         }
         /// `optixGetTriangleBarycentrics`: attributes 0 and 1 as floats.
+        #[doc(alias = "optixGetTriangleBarycentrics")]
         pub fn triangle_barycentrics(&self) -> [f32; 2] {
             [
                 f32::from_bits(self.attribute(0)),
@@ -552,6 +602,7 @@ impl<P> RayGenCtx<'_, P> {
     /// the trace returns). An exception raised by the trace comes back as an [`Interrupt`]; it
     /// takes effect as [`throw_exception`](Self::throw_exception) does (the launch index ends
     /// even if the program drops it): pass it on with `?`.
+    #[doc(alias = "optixTrace")]
     pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
         self.no_return
             .call(|| trace::trace(self.frame, ray, payload))
@@ -580,12 +631,14 @@ impl<P> ClosestHitCtx<'_, P> {
     hit_queries!(hit);
 
     /// `optixGetRayTmax`: the distance of the closest hit.
+    #[doc(alias = "optixGetRayTmax")]
     pub fn ray_tmax(&self) -> f32 {
         self.hit.t
     }
 
     /// `optixTrace` from a closest-hit program (recursion, up to the pipeline's depth).
     /// An exception it raises takes effect when it returns: pass it on with `?`.
+    #[doc(alias = "optixTrace")]
     pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
         self.no_return
             .call(|| trace::trace(self.frame, ray, payload))
@@ -613,14 +666,17 @@ impl<P> AnyHitCtx<'_, P> {
     hit_queries!(hit);
 
     /// `optixGetRayTmax`: the candidate's distance.
+    #[doc(alias = "optixGetRayTmax")]
     pub fn ray_tmax(&self) -> f32 {
         self.hit.t
     }
     /// `optixGetObjectRayOrigin`: the ray in the object space of the hit geometry.
+    #[doc(alias = "optixGetObjectRayOrigin")]
     pub fn object_ray_origin(&self) -> Vec3 {
         self.place.object_origin
     }
     /// `optixGetObjectRayDirection` (not normalised: t is the same in both spaces).
+    #[doc(alias = "optixGetObjectRayDirection")]
     pub fn object_ray_direction(&self) -> Vec3 {
         self.place.object_direction
     }
@@ -630,6 +686,7 @@ impl<P> AnyHitCtx<'_, P> {
     /// ignored; later device calls of the program (a terminate, a throw, payload writes) do
     /// nothing, as in OptiX they are never reached. Write the payload before, and leave the
     /// program at once: `return ctx.ignore_intersection();` (or `?`).
+    #[doc(alias = "optixIgnoreIntersection")]
     pub fn ignore_intersection(&self) -> ProgramResult {
         self.no_return
             .call(|| Err(Interrupt(InterruptKind::IgnoreIntersection)))
@@ -639,6 +696,7 @@ impl<P> AnyHitCtx<'_, P> {
     /// program then runs. It takes effect when called, as
     /// [`ignore_intersection`](Self::ignore_intersection) does: leave the program at once with
     /// `return ctx.terminate_ray();` (or `?`).
+    #[doc(alias = "optixTerminateRay")]
     pub fn terminate_ray(&self) -> ProgramResult {
         self.no_return
             .call(|| Err(Interrupt(InterruptKind::TerminateRay)))
@@ -662,12 +720,14 @@ impl<P> MissCtx<'_, P> {
     payload_fns!();
 
     /// `optixGetRayTmax`: the trace's tmax.
+    #[doc(alias = "optixGetRayTmax")]
     pub fn ray_tmax(&self) -> f32 {
         self.ray.tmax
     }
 
     /// `optixTrace` from a miss program.
     /// An exception it raises takes effect when it returns: pass it on with `?`.
+    #[doc(alias = "optixTrace")]
     pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
         self.no_return
             .call(|| trace::trace(self.frame, ray, payload))
@@ -695,32 +755,39 @@ impl<P> IntersectionCtx<'_, '_, P> {
     ray_queries!(ray);
 
     /// `optixGetRayTmax`: the closest accepted hit so far, or the trace's tmax.
+    #[doc(alias = "optixGetRayTmax")]
     pub fn ray_tmax(&self) -> f32 {
         self.tmax
     }
     /// `optixGetObjectRayOrigin`: the ray in the object space of the primitive.
+    #[doc(alias = "optixGetObjectRayOrigin")]
     pub fn object_ray_origin(&self) -> Vec3 {
         self.place.object_origin
     }
     /// `optixGetObjectRayDirection` (not normalised: t is the same in both spaces).
+    #[doc(alias = "optixGetObjectRayDirection")]
     pub fn object_ray_direction(&self) -> Vec3 {
         self.place.object_direction
     }
     transform_queries!(prim);
 
     /// `optixGetInstanceId` (`!0` without instances).
+    #[doc(alias = "optixGetInstanceId")]
     pub fn instance_id(&self) -> u32 {
         self.place.instance_id
     }
     /// `optixGetInstanceIndex` (0 without instances).
+    #[doc(alias = "optixGetInstanceIndex")]
     pub fn instance_index(&self) -> u32 {
         self.place.instance_index
     }
     /// `optixGetPrimitiveIndex`.
+    #[doc(alias = "optixGetPrimitiveIndex")]
     pub fn primitive_index(&self) -> u32 {
         self.prim.primitive_index
     }
     /// `optixGetSbtGASIndex`.
+    #[doc(alias = "optixGetSbtGASIndex")]
     pub fn sbt_gas_index(&self) -> u32 {
         self.prim.sbt_gas_index
     }
@@ -729,10 +796,12 @@ impl<P> IntersectionCtx<'_, '_, P> {
         self.aabb
     }
     /// `optixGetPayload_i`.
+    #[doc(alias = "optixGetPayload_i")]
     pub fn payload(&self, i: usize) -> u32 {
         self.reporter.payload_ref().get(i).copied().unwrap_or(0)
     }
     /// `optixSetPayload_i` (ignored after a device call that does not return).
+    #[doc(alias = "optixSetPayload_i")]
     pub fn set_payload(&mut self, i: usize, v: u32) {
         if self.no_return.is_set() {
             return;
@@ -749,6 +818,7 @@ impl<P> IntersectionCtx<'_, '_, P> {
     /// terminated the ray or raised, an [`Interrupt`] comes back; it takes effect when this
     /// returns (traversal ends, whatever the program then returns, and later reports do
     /// nothing): pass it on with `?`.
+    #[doc(alias = "optixReportIntersection")]
     pub fn report_intersection(
         &mut self,
         t: f32,
@@ -796,11 +866,13 @@ impl<P> ExceptionCtx<'_, P> {
     common_queries!();
 
     /// `optixGetExceptionCode`.
+    #[doc(alias = "optixGetExceptionCode")]
     pub fn exception_code(&self) -> ExceptionCode {
         self.exception.code
     }
 
     /// `optixGetExceptionDetail_i`: 0 past the details given.
+    #[doc(alias = "optixGetExceptionDetail_i")]
     pub fn exception_detail(&self, i: usize) -> u32 {
         self.exception.details().get(i).copied().unwrap_or(0)
     }
@@ -837,6 +909,7 @@ impl<P> ContinuationCallableCtx<'_, P> {
 
     /// `optixTrace` from a continuation callable.
     /// An exception it raises takes effect when it returns: pass it on with `?`.
+    #[doc(alias = "optixTrace")]
     pub fn trace(&self, ray: &TraceRay<'_>, payload: &mut [u32]) -> ProgramResult {
         self.no_return
             .call(|| trace::trace(self.frame, ray, payload))

@@ -13,6 +13,7 @@ static NEXT_GROUP_ID: AtomicU64 = AtomicU64::new(1);
 
 /// The kind of a program group (`OptixProgramGroupKind`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[doc(alias = "OptixProgramGroupKind")]
 pub enum ProgramGroupKind {
     /// One ray-generation program.
     RayGen,
@@ -196,6 +197,7 @@ impl<P> ProgramGroup<P> {
     }
 
     /// The record header naming this group (`optixSbtRecordPackHeader`).
+    #[doc(alias = "optixSbtRecordPackHeader")]
     pub fn pack_header(&self) -> SbtHeader {
         SbtHeader::for_group(self.inner.id)
     }

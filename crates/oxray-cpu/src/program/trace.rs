@@ -25,6 +25,7 @@ use oxray_core::{HitKind, InstanceFlags};
 /// `tmax = +inf`, time 0, visibility mask `0xFF`, no flags, SBT offset 0, stride 1, miss
 /// index 0.
 #[derive(Clone, Debug)]
+#[doc(alias = "optixTrace")]
 pub struct TraceRay<'h> {
     /// Where traversal starts.
     pub handle: &'h TraversableHandle,

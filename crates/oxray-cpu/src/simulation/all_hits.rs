@@ -10,10 +10,10 @@
 //!   candidates sorted and finds repeats by binary search. Once a full list is known to miss a
 //!   hit, the interval shrinks to its farthest hit (not before, so that whether the list is
 //!   complete is exact).
-//! - [`Gas::count_hits`] has a visitor of its own ([`CountVisitor`]) that keeps no hit
+//! - [`Gas::count_hits`] has a visitor of its own (`CountVisitor`) that keeps no hit
 //!   record: only the key of each primitive counted (`t`, instance, build input, primitive)
 //!   in a fixed array on the stack, scanned for repeats. A ray crossing more than
-//!   [`COUNT_KEYS`] primitives is counted again with the sorted list (a thread's scratch list,
+//!   `COUNT_KEYS` primitives is counted again with the sorted list (a thread's scratch list,
 //!   allocated once).
 
 use super::{check_ray, par_try_batch, SurfaceQueryError, CHUNK};
