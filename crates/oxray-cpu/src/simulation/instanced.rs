@@ -186,11 +186,11 @@ impl Ias {
     /// use oxray_core::{BuildOptions, Instance, Transform};
     /// use glam::Vec3;
     /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
-    /// let gas = Gas::from_mesh(&v, &[[0, 1, 2]])?;
+    /// let gas = std::sync::Arc::new(Gas::from_mesh(&v, &[[0, 1, 2]])?);
     /// let far = Transform::from_translation(Vec3::new(0.0, 0.0, 10.0));
     /// let instances = [
-    ///     Instance::new(gas.handle()).instance_id(1),
-    ///     Instance::new(gas.handle()).instance_id(2).transform(far),
+    ///     Instance::new(gas.clone().into()).instance_id(1),
+    ///     Instance::new(gas.clone().into()).instance_id(2).transform(far),
     /// ];
     /// let ias = Ias::build(&BuildOptions::default(), &[(&instances[..]).into()])?;
     /// let c = ias.closest_point(Vec3::new(0.25, 0.25, 8.0))?.unwrap();
