@@ -166,20 +166,8 @@ struct RenderArgs {
     /// Which of the scene's cameras to use (default: the first, else one framing the scene).
     #[arg(long)]
     camera: Option<usize>,
-    /// Put the camera at X,Y,Z (world space; default: where the chosen camera is).
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-    look_from: Option<Vec3>,
-    /// Aim the camera at X,Y,Z.
-    ///
-    /// Default: the scene's centre with --look-from, else where the chosen camera looks.
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-    look_at: Option<Vec3>,
-    /// The camera's up direction (default: +Y).
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-    up: Option<Vec3>,
-    /// Vertical field of view in degrees (default: the chosen camera's).
-    #[arg(long, value_name = "DEGREES")]
-    fov: Option<f32>,
+    #[command(flatten)]
+    aim: CameraOverride,
     /// Environment light: sky, none, a grey level, or an .hdr/.exr map.
     ///
     /// "sky" is a procedural daylight (the default for scene files), "none" is black (the
@@ -291,20 +279,8 @@ struct ViewArgs {
     /// scene).
     #[arg(long)]
     camera: Option<usize>,
-    /// Put the camera at X,Y,Z (world space; default: where the chosen camera is).
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-    look_from: Option<Vec3>,
-    /// Aim the camera at X,Y,Z.
-    ///
-    /// Default: the scene's centre with --look-from, else where the chosen camera looks.
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-    look_at: Option<Vec3>,
-    /// The camera's up direction (default: +Y).
-    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
-    up: Option<Vec3>,
-    /// Vertical field of view in degrees (default: the chosen camera's).
-    #[arg(long, value_name = "DEGREES")]
-    fov: Option<f32>,
+    #[command(flatten)]
+    aim: CameraOverride,
     /// Environment light: sky, none, a grey level, or an .hdr/.exr map (as for render).
     #[arg(long)]
     env: Option<String>,
@@ -392,15 +368,44 @@ fn parse_vec3(text: &str) -> Result<Vec3, String> {
     }
 }
 
-/// `--look-from`, `--look-at`, `--up` and `--fov`: a camera made from the chosen one.
+/// `--look-from`, `--look-at`, `--up` and `--fov`: a camera made from the chosen one (the
+/// options of `render` and `view`).
+#[derive(clap::Args, Clone, Copy)]
 struct CameraOverride {
+    /// Put the camera at X,Y,Z (world space; default: where the chosen camera is).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     look_from: Option<Vec3>,
+    /// Aim the camera at X,Y,Z.
+    ///
+    /// Default: the scene's centre with --look-from, else where the chosen camera looks.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     look_at: Option<Vec3>,
+    /// The camera's up direction (default: +Y).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_vec3, allow_hyphen_values = true)]
     up: Option<Vec3>,
+    /// Vertical field of view in degrees (default: the chosen camera's).
+    #[arg(long, value_name = "DEGREES")]
     fov: Option<f32>,
 }
 
 impl CameraOverride {
+    /// Puts the camera these options make from the one `opts` chooses first among the scene's
+    /// cameras and makes `opts` use it; nothing without them.
+    fn apply(&self, desc: &mut SceneDesc, opts: &mut RenderOptions) -> Result<()> {
+        if self.look_from.is_none()
+            && self.look_at.is_none()
+            && self.up.is_none()
+            && self.fov.is_none()
+        {
+            return Ok(());
+        }
+        let chosen = oxray_render::camera_frame(desc, opts)?;
+        desc.cameras
+            .insert(0, self.camera(&chosen, desc.content_bounds())?);
+        opts.camera = Some(0);
+        Ok(())
+    }
+
     fn camera(
         &self,
         chosen: &oxray_render::programs::CameraFrame,
@@ -535,10 +540,7 @@ fn run(cli: Cli) -> Result<()> {
                 max_depth,
                 threads,
                 camera,
-                look_from,
-                look_at,
-                up,
-                fov,
+                aim,
                 env,
                 env_intensity,
                 exposure,
@@ -688,18 +690,7 @@ fn run(cli: Cli) -> Result<()> {
                     );
                 }
             }
-            if look_from.is_some() || look_at.is_some() || up.is_some() || fov.is_some() {
-                let chosen = oxray_render::camera_frame(&desc, &opts)?;
-                let view = CameraOverride {
-                    look_from,
-                    look_at,
-                    up,
-                    fov,
-                };
-                desc.cameras
-                    .insert(0, view.camera(&chosen, desc.content_bounds())?);
-                opts.camera = Some(0);
-            }
+            aim.apply(&mut desc, &mut opts)?;
             let bar = if quiet {
                 indicatif::ProgressBar::hidden()
             } else {
@@ -831,10 +822,7 @@ fn run(cli: Cli) -> Result<()> {
                 max_depth,
                 threads,
                 camera,
-                look_from,
-                look_at,
-                up,
-                fov,
+                aim,
                 env,
                 env_intensity,
                 exposure,
@@ -918,18 +906,7 @@ fn run(cli: Cli) -> Result<()> {
                 sampler,
                 ..Default::default()
             };
-            if look_from.is_some() || look_at.is_some() || up.is_some() || fov.is_some() {
-                let chosen = oxray_render::camera_frame(&desc, &opts)?;
-                let view = CameraOverride {
-                    look_from,
-                    look_at,
-                    up,
-                    fov,
-                };
-                desc.cameras
-                    .insert(0, view.camera(&chosen, desc.content_bounds())?);
-                opts.camera = Some(0);
-            }
+            aim.apply(&mut desc, &mut opts)?;
             let name = scene
                 .as_deref()
                 .and_then(|p| p.file_stem())
@@ -940,7 +917,7 @@ fn run(cli: Cli) -> Result<()> {
                 environment,
                 opts,
                 look,
-                look_at,
+                look_at: aim.look_at,
                 renderer,
                 pool,
                 screenshot,
