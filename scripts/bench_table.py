@@ -46,6 +46,10 @@ def read_oxray(path):
             m = re.search(r"rays traced on the (\S+) build", line)
             if m:
                 traced = m.group(1)
+            if line.startswith("structure life"):
+                # The tables after the ray table (refit, compaction, save and load) are not
+                # read here.
+                break
             if not line.startswith("| ") or line.startswith("| mesh"):
                 continue
             c = cells(line)

@@ -34,6 +34,38 @@ impl CustomIntersector for NoCustomPrimitives {
     }
 }
 
+/// What a query does with each candidate: an any-hit program in closure form, or accept
+/// every candidate. A filter that never looks at the candidates lets the query skip finding
+/// each one's primitive index and SBT record (a lookup per candidate, a cache miss on large
+/// meshes) and do it once, for the hit it returns.
+trait CandidateFilter {
+    /// Whether [`decide`](Self::decide) reads the candidate.
+    const SEES_CANDIDATES: bool;
+    fn decide(&mut self, hit: &Hit) -> CandidateAction;
+}
+
+/// Accepts every candidate.
+struct AcceptAll;
+
+impl CandidateFilter for AcceptAll {
+    const SEES_CANDIDATES: bool = false;
+    #[inline(always)]
+    fn decide(&mut self, _: &Hit) -> CandidateAction {
+        CandidateAction::Accept
+    }
+}
+
+/// A user's filter closure.
+struct Closure<F>(F);
+
+impl<F: FnMut(&Hit) -> CandidateAction> CandidateFilter for Closure<F> {
+    const SEES_CANDIDATES: bool = true;
+    #[inline(always)]
+    fn decide(&mut self, hit: &Hit) -> CandidateAction {
+        (self.0)(hit)
+    }
+}
+
 struct QueryVisitor<'s, 'a, C, F> {
     /// The GAS being traversed, and where it sits.
     gas: Option<&'s Gas>,
@@ -45,15 +77,32 @@ struct QueryVisitor<'s, 'a, C, F> {
     filter: F,
     first_hit_ends: bool,
     best: Option<Hit>,
+    /// The GAS and leaf slot of `best` while its primitive index, SBT-GAS index and build
+    /// input are still to be found (filters that do not see candidates).
+    unresolved: Option<(&'s Gas, u32)>,
 }
 
-impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'s, '_, C, F> {
+impl<'s, C: CustomIntersector, F: CandidateFilter> QueryVisitor<'s, '_, C, F> {
+    /// Offers the candidate at leaf `slot` of the current GAS, whose primitive fields are
+    /// still to be filled in.
     #[inline(always)]
-    fn offer(&mut self, hit: Hit) -> Decision {
-        match (self.filter)(&hit) {
+    fn offer(&mut self, gas: &'s Gas, slot: u32, mut hit: Hit) -> Decision {
+        let unresolved = if F::SEES_CANDIDATES {
+            (hit.primitive_index, hit.sbt_gas_index, hit.build_input) = gas.resolve(slot);
+            None
+        } else {
+            Some((gas, slot))
+        };
+        self.offer_resolved(hit, unresolved)
+    }
+
+    #[inline(always)]
+    fn offer_resolved(&mut self, hit: Hit, unresolved: Option<(&'s Gas, u32)>) -> Decision {
+        match self.filter.decide(&hit) {
             CandidateAction::Ignore => Decision::Ignore,
             action => {
                 self.best = Some(hit);
+                self.unresolved = unresolved;
                 if self.first_hit_ends || action == CandidateAction::Terminate {
                     Decision::AcceptAndTerminate
                 } else {
@@ -63,15 +112,22 @@ impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> QueryVisitor<'
         }
     }
 
+    /// The hit the query returns, its primitive fields filled in.
+    fn finish(self) -> Option<Hit> {
+        let mut hit = self.best?;
+        if let Some((gas, slot)) = self.unresolved {
+            (hit.primitive_index, hit.sbt_gas_index, hit.build_input) = gas.resolve(slot);
+        }
+        Some(hit)
+    }
+
     #[inline(always)]
     fn instance(&self) -> (u32, u32) {
         self.instance.map_or((!0, 0), |i| (i.instance_id, i.index))
     }
 }
 
-impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> SceneVisitor<'s>
-    for QueryVisitor<'s, '_, C, F>
-{
+impl<'s, C: CustomIntersector, F: CandidateFilter> SceneVisitor<'s> for QueryVisitor<'s, '_, C, F> {
     fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
         self.gas = Some(gas);
         self.instance = path.instance;
@@ -83,35 +139,42 @@ impl<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> SceneVisitor<'
     }
 }
 
-impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
-    for QueryVisitor<'_, '_, C, F>
-{
+impl<'s, C: CustomIntersector, F: CandidateFilter> GasVisitor for QueryVisitor<'s, '_, C, F> {
+    #[inline(always)]
+    fn nearest_first(&self) -> bool {
+        // An occlusion query stops at its first hit, wherever it is.
+        !self.first_hit_ends
+    }
+
     #[inline(always)]
     fn triangle(&mut self, slot: u32, h: &TriangleHit) -> Decision {
         let Some(gas) = self.gas else {
             return Decision::Ignore;
         };
-        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
         let (instance_id, instance_index) = self.instance();
         // FLIP_TRIANGLE_FACING of the nearest instance swaps the faces (guide §5.4).
         let flip = self
             .instance
             .is_some_and(|i| i.flags.contains(crate::InstanceFlags::FLIP_TRIANGLE_FACING));
-        self.offer(Hit {
-            t: h.t,
-            u: h.u,
-            v: h.v,
-            primitive_index,
-            sbt_gas_index,
-            build_input,
-            hit_kind: if h.front_face != flip {
-                HitKind::TRIANGLE_FRONT_FACE
-            } else {
-                HitKind::TRIANGLE_BACK_FACE
+        self.offer(
+            gas,
+            slot,
+            Hit {
+                t: h.t,
+                u: h.u,
+                v: h.v,
+                primitive_index: 0,
+                sbt_gas_index: 0,
+                build_input: 0,
+                hit_kind: if h.front_face != flip {
+                    HitKind::TRIANGLE_FRONT_FACE
+                } else {
+                    HitKind::TRIANGLE_BACK_FACE
+                },
+                instance_id,
+                instance_index,
             },
-            instance_id,
-            instance_index,
-        })
+        )
     }
 
     #[inline(always)]
@@ -119,20 +182,23 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
         let Some(gas) = self.gas else {
             return Decision::Ignore;
         };
-        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
         let (instance_id, instance_index) = self.instance();
         // Spheres have no attributes (guide §9.4, §13.4) and only a front face.
-        self.offer(Hit {
-            t,
-            u: 0.0,
-            v: 0.0,
-            primitive_index,
-            sbt_gas_index,
-            build_input,
-            hit_kind: HitKind::SPHERE_FRONT_FACE,
-            instance_id,
-            instance_index,
-        })
+        self.offer(
+            gas,
+            slot,
+            Hit {
+                t,
+                u: 0.0,
+                v: 0.0,
+                primitive_index: 0,
+                sbt_gas_index: 0,
+                build_input: 0,
+                hit_kind: HitKind::SPHERE_FRONT_FACE,
+                instance_id,
+                instance_index,
+            },
+        )
     }
 
     #[inline(always)]
@@ -140,20 +206,23 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
         let Some(gas) = self.gas else {
             return Decision::Ignore;
         };
-        let (primitive_index, sbt_gas_index, build_input) = gas.resolve(slot);
         let (instance_id, instance_index) = self.instance();
         // A curve's attributes are its u (and a ribbon's v), guide §9.3.
-        self.offer(Hit {
-            t: h.t,
-            u: h.u,
-            v: h.v,
-            primitive_index,
-            sbt_gas_index,
-            build_input,
-            hit_kind: HitKind::curve(gas.curves[slot as usize].curve_type(), h.back_face),
-            instance_id,
-            instance_index,
-        })
+        self.offer(
+            gas,
+            slot,
+            Hit {
+                t: h.t,
+                u: h.u,
+                v: h.v,
+                primitive_index: 0,
+                sbt_gas_index: 0,
+                build_input: 0,
+                hit_kind: HitKind::curve(gas.curves[slot as usize].curve_type(), h.back_face),
+                instance_id,
+                instance_index,
+            },
+        )
     }
 
     fn custom(&mut self, slot: u32, tmin: f32, tmax: f32, _: &mut [Entry]) -> (Option<f32>, bool) {
@@ -193,7 +262,7 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
             instance_id,
             instance_index,
         };
-        match self.offer(hit) {
+        match self.offer_resolved(hit, None) {
             Decision::Ignore | Decision::Abort => (None, false),
             Decision::Accept => (Some(c.t), false),
             Decision::AcceptAndTerminate => (Some(c.t), true),
@@ -201,12 +270,8 @@ impl<C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction> GasVisitor
     }
 }
 
-fn accept_all(_: &Hit) -> CandidateAction {
-    CandidateAction::Accept
-}
-
 /// Runs one query from `root` with this thread's stack.
-fn query<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction>(
+fn query<'s, C: CustomIntersector, F: CandidateFilter>(
     root: NodeRef<'s>,
     ray: &Ray,
     custom: &mut C,
@@ -222,9 +287,10 @@ fn query<'s, C: CustomIntersector, F: FnMut(&Hit) -> CandidateAction>(
         filter,
         first_hit_ends,
         best: None,
+        unresolved: None,
     };
     with_stack(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
-    v.best
+    v.finish()
 }
 
 /// Closest hits of a batch under `root` (`None`: the null handle, every ray misses), in
@@ -235,7 +301,7 @@ pub(crate) fn closest_batch(
     hits: &mut [Option<Hit>],
 ) -> Result<(), QueryError> {
     par_batch(rays, hits, |ray| {
-        root.and_then(|r| query(r, ray, &mut NoCustomPrimitives, accept_all, false))
+        root.and_then(|r| query(r, ray, &mut NoCustomPrimitives, AcceptAll, false))
     })
 }
 
@@ -246,7 +312,7 @@ pub(crate) fn any_batch(
     occluded: &mut [bool],
 ) -> Result<(), QueryError> {
     par_batch(rays, occluded, |ray| {
-        root.is_some_and(|r| query(r, ray, &mut NoCustomPrimitives, accept_all, true).is_some())
+        root.is_some_and(|r| query(r, ray, &mut NoCustomPrimitives, AcceptAll, true).is_some())
     })
 }
 
@@ -282,7 +348,7 @@ macro_rules! query_api {
             /// nothing. Where two hits are at the same distance, which one is returned is fixed by the
             /// structure, identical from run to run.
             pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-                query($root(self), ray, &mut NoCustomPrimitives, accept_all, false)
+                query($root(self), ray, &mut NoCustomPrimitives, AcceptAll, false)
             }
 
             /// The closest hit, with custom primitives intersected by `custom`.
@@ -291,7 +357,7 @@ macro_rules! query_api {
                 ray: &Ray,
                 custom: &mut C,
             ) -> Option<Hit> {
-                query($root(self), ray, custom, accept_all, false)
+                query($root(self), ray, custom, AcceptAll, false)
             }
 
             /// The closest hit that `filter` accepts: an any-hit program in closure form. The filter sees
@@ -319,19 +385,19 @@ macro_rules! query_api {
                 custom: &mut C,
                 filter: impl FnMut(&Hit) -> CandidateAction,
             ) -> Option<Hit> {
-                query($root(self), ray, custom, filter, false)
+                query($root(self), ray, custom, Closure(filter), false)
             }
 
             /// Whether anything lies in `[ray.tmin, ray.tmax]` (a shadow or visibility ray): traversal
             /// stops at the first hit found, which need not be the closest.
             pub fn occluded(&self, ray: &Ray) -> bool {
-                query($root(self), ray, &mut NoCustomPrimitives, accept_all, true).is_some()
+                query($root(self), ray, &mut NoCustomPrimitives, AcceptAll, true).is_some()
             }
 
             /// Whether anything lies in the ray's interval, with custom primitives intersected by
             /// `custom`.
             pub fn occluded_with<C: CustomIntersector>(&self, ray: &Ray, custom: &mut C) -> bool {
-                query($root(self), ray, custom, accept_all, true).is_some()
+                query($root(self), ray, custom, AcceptAll, true).is_some()
             }
 
             /// Closest hits of a batch of rays, in parallel on the current rayon pool. The results are
@@ -342,7 +408,7 @@ macro_rules! query_api {
                 hits: &mut [Option<Hit>],
             ) -> Result<(), QueryError> {
                 self.batch(rays, hits, |root, ray| {
-                    query(root, ray, &mut NoCustomPrimitives, accept_all, false)
+                    query(root, ray, &mut NoCustomPrimitives, AcceptAll, false)
                 })
             }
 
@@ -353,7 +419,7 @@ macro_rules! query_api {
                 occluded: &mut [bool],
             ) -> Result<(), QueryError> {
                 self.batch(rays, occluded, |root, ray| {
-                    query(root, ray, &mut NoCustomPrimitives, accept_all, true).is_some()
+                    query(root, ray, &mut NoCustomPrimitives, AcceptAll, true).is_some()
                 })
             }
 
@@ -373,7 +439,7 @@ macro_rules! query_api {
                         root,
                         ray,
                         &mut |p: &CustomPrimitive, r: &Ray| custom(p, r),
-                        accept_all,
+                        AcceptAll,
                         false,
                     )
                 })

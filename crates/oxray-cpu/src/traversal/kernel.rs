@@ -50,6 +50,13 @@ pub(crate) trait GasVisitor {
         tmax: f32,
         spare: &mut [Entry],
     ) -> (Option<f32>, bool);
+    /// Whether children are visited nearest first. A visitor whose first accepted hit ends
+    /// traversal (an occlusion query) may say no: any order finds whether there is a hit, and
+    /// not sorting saves work on every node.
+    #[inline(always)]
+    fn nearest_first(&self) -> bool {
+        true
+    }
 }
 
 /// One entry of the traversal stack.
@@ -90,7 +97,7 @@ pub(crate) fn with_stack<R>(f: impl FnOnce(&mut [Entry]) -> R) -> R {
 /// the ray enters to `leaves`, which offers candidates to `visitor`. The interval shrinks as
 /// candidates are accepted. Returns the final tmax and whether traversal was ended early.
 #[inline(always)]
-pub(crate) fn traverse<N: NodeLayout, L: LeafIntersector<V>, V>(
+pub(crate) fn traverse<N: NodeLayout, L: LeafIntersector<V>, V: GasVisitor>(
     nodes: &[N::Node],
     leaves: &L,
     ray: &PreparedRay,
@@ -111,7 +118,15 @@ pub(crate) fn traverse<N: NodeLayout, L: LeafIntersector<V>, V>(
             let node = &nodes[cur.child as usize];
             let (dist, mut mask) = N::intersect(node, ray, tmin, box_tmax);
             if mask != 0 {
-                let entry = |l: usize| N::entry(node, l, dist[l]);
+                let entry = |l: usize| {
+                    let e = N::entry(node, l, dist[l]);
+                    if e.count == 0 {
+                        N::prefetch(nodes, e.child);
+                    } else {
+                        leaves.prefetch(e.child);
+                    }
+                    e
+                };
                 let a = entry(mask.trailing_zeros() as usize);
                 mask &= mask - 1;
                 if mask == 0 {
@@ -122,11 +137,27 @@ pub(crate) fn traverse<N: NodeLayout, L: LeafIntersector<V>, V>(
                 let b = entry(mask.trailing_zeros() as usize);
                 mask &= mask - 1;
                 if mask == 0 {
-                    // Two: push the farther one.
-                    let (near, far) = if b.dist < a.dist { (b, a) } else { (a, b) };
+                    // Two: push the farther one (or the second, in any order).
+                    let (near, far) = if b.dist < a.dist && visitor.nearest_first() {
+                        (b, a)
+                    } else {
+                        (a, b)
+                    };
                     stack[sp] = far;
                     sp += 1;
                     cur = near;
+                    continue;
+                }
+                if !visitor.nearest_first() {
+                    // Any order will do: push all but the first, continue with it.
+                    stack[sp] = b;
+                    sp += 1;
+                    while mask != 0 {
+                        stack[sp] = entry(mask.trailing_zeros() as usize);
+                        mask &= mask - 1;
+                        sp += 1;
+                    }
+                    cur = a;
                     continue;
                 }
                 // Three or more: push all, sort them farthest first, continue with the nearest.
@@ -193,7 +224,7 @@ pub(crate) fn traverse<N: NodeLayout, L: LeafIntersector<V>, V>(
 /// [`crate::Isa::is_available`] for [`crate::Isa::Avx2`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
-pub(crate) unsafe fn traverse_avx2<L: LeafIntersector<V>, V>(
+pub(crate) unsafe fn traverse_avx2<L: LeafIntersector<V>, V: GasVisitor>(
     nodes: &[oxray_bvh::Bvh8Node],
     leaves: &L,
     ray: &PreparedRay,
@@ -214,7 +245,7 @@ pub(crate) unsafe fn traverse_avx2<L: LeafIntersector<V>, V>(
 /// [`crate::Isa::is_available`] for [`crate::Isa::Avx512`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl")]
-pub(crate) unsafe fn traverse_avx512<L: LeafIntersector<V>, V>(
+pub(crate) unsafe fn traverse_avx512<L: LeafIntersector<V>, V: GasVisitor>(
     nodes: &[oxray_bvh::Bvh8Node],
     leaves: &L,
     ray: &PreparedRay,

@@ -37,6 +37,11 @@ pub(crate) trait LeafIntersector<V> {
         visitor: &mut V,
         spare: &mut [Entry],
     ) -> LeafEnd;
+
+    /// Asks for the first primitives of the leaf at slot `start` to be loaded (a hint, given
+    /// as soon as the leaf is known to be entered; any slot is allowed).
+    #[inline(always)]
+    fn prefetch(&self, _start: u32) {}
 }
 
 /// Triangles in blocks of four (leaf slot `s` is lane `s % 4` of block `s / 4`), tested with
@@ -44,6 +49,12 @@ pub(crate) trait LeafIntersector<V> {
 pub(crate) struct TriangleLeaves<'a>(pub &'a [Triangle4]);
 
 impl<V: GasVisitor> LeafIntersector<V> for TriangleLeaves<'_> {
+    #[inline(always)]
+    fn prefetch(&self, start: u32) {
+        let block = self.0.as_ptr().wrapping_add(start as usize / 4);
+        super::prefetch::prefetch(block, super::prefetch::lines_of::<Triangle4>());
+    }
+
     #[inline(always)]
     fn leaf(
         &self,

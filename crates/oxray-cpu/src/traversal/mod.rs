@@ -7,6 +7,7 @@ mod kernel;
 mod leaf;
 mod motion;
 mod node;
+mod prefetch;
 mod ray;
 mod scene;
 

@@ -31,6 +31,12 @@ pub(crate) trait NodeLayout {
     fn intersect(node: &Self::Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> (Self::Dists, u32);
     /// The stack entry of child `lane`: an inner node (count 0) or a leaf's slot range.
     fn entry(node: &Self::Node, lane: usize, dist: f32) -> Entry;
+    /// Asks for node `index` of `nodes` to be loaded (a hint; any index is allowed).
+    #[inline(always)]
+    fn prefetch(nodes: &[Self::Node], index: u32) {
+        let lines = super::prefetch::lines_of::<Self::Node>();
+        super::prefetch::prefetch(nodes.as_ptr().wrapping_add(index as usize), lines);
+    }
 }
 
 /// The 4-wide layout ([`Bvh4Node`]): boxes structure-of-arrays, tested with 4-wide SSE

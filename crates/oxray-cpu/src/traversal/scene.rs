@@ -307,7 +307,7 @@ fn traverse_motion_gas<V: GasVisitor>(
 /// Traverses a GAS with the kernel it was given (once, when it was built or loaded: see
 /// [`Gas::isa`]).
 #[inline(always)]
-fn traverse_gas<L: LeafIntersector<V>, V>(
+fn traverse_gas<L: LeafIntersector<V>, V: GasVisitor>(
     gas: &Gas,
     leaves: &L,
     prepared: &PreparedRay,
