@@ -3,7 +3,8 @@
 //! program pipeline is built on.
 
 use crate::traversal::{
-    traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef, Path, SceneVisitor,
+    coherent, traverse_gas_packet, traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef,
+    Path, SceneVisitor, PACKET,
 };
 use crate::Gas;
 use oxray_bvh::triangle::TriangleHit;
@@ -113,7 +114,7 @@ impl<'s, C: CustomIntersector, F: CandidateFilter> QueryVisitor<'s, '_, C, F> {
     }
 
     /// The hit the query returns, its primitive fields filled in.
-    fn finish(self) -> Option<Hit> {
+    fn finish(&self) -> Option<Hit> {
         let mut hit = self.best?;
         if let Some((gas, slot)) = self.unresolved {
             (hit.primitive_index, hit.sbt_gas_index, hit.build_input) = gas.resolve(slot);
@@ -270,6 +271,21 @@ impl<'s, C: CustomIntersector, F: CandidateFilter> GasVisitor for QueryVisitor<'
     }
 }
 
+impl<'s, 'a, C: CustomIntersector, F: CandidateFilter> QueryVisitor<'s, 'a, C, F> {
+    fn new(ray: &Ray, custom: &'a mut C, filter: F, first_hit_ends: bool) -> Self {
+        QueryVisitor {
+            gas: None,
+            instance: None,
+            object_ray: *ray,
+            custom,
+            filter,
+            first_hit_ends,
+            best: None,
+            unresolved: None,
+        }
+    }
+}
+
 /// Runs one query from `root` with this thread's stack.
 fn query<'s, C: CustomIntersector, F: CandidateFilter>(
     root: NodeRef<'s>,
@@ -279,18 +295,50 @@ fn query<'s, C: CustomIntersector, F: CandidateFilter>(
     first_hit_ends: bool,
 ) -> Option<Hit> {
     ray.validate().ok()?;
-    let mut v = QueryVisitor {
-        gas: None,
-        instance: None,
-        object_ray: *ray,
-        custom,
-        filter,
-        first_hit_ends,
-        best: None,
-        unresolved: None,
-    };
+    let mut v = QueryVisitor::new(ray, custom, filter, first_hit_ends);
     with_stack(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
     v.finish()
+}
+
+/// Closest hits (`first_hit_ends` false) or occlusion (true) of a batch under `root`
+/// (`None`: the null handle, every ray misses), in parallel, each answer mapped by `answer`
+/// into `out`. Coherent groups of eight rays under a triangle GAS go through the packet kernel
+/// (see [`traverse_gas_packet`]); the answers are those of one ray at a time (up to which of
+/// two primitives at exactly the same distance is reported), whatever the number of threads.
+fn batch_queries<T: Send>(
+    root: Option<NodeRef<'_>>,
+    rays: &[Ray],
+    out: &mut [T],
+    first_hit_ends: bool,
+    answer: impl Fn(Option<Hit>) -> T + Sync,
+) -> Result<(), QueryError> {
+    let single = |ray: &Ray| {
+        root.and_then(|r| query(r, ray, &mut NoCustomPrimitives, AcceptAll, first_hit_ends))
+    };
+    let Some(NodeRef::Gas(gas)) = root else {
+        return par_batch(rays, out, |ray| answer(single(ray)));
+    };
+    par_chunks(rays, out, |rays, out| {
+        for (group, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
+            if coherent(group) {
+                let mut customs = [NoCustomPrimitives; PACKET];
+                let mut customs = customs.iter_mut();
+                let mut visitors: [_; PACKET] = std::array::from_fn(|l| {
+                    let custom = customs.next().expect("one per ray");
+                    QueryVisitor::new(&group[l], custom, AcceptAll, first_hit_ends)
+                });
+                if traverse_gas_packet(gas, group, &mut visitors) {
+                    for (o, v) in out.iter_mut().zip(&visitors) {
+                        *o = answer(v.finish());
+                    }
+                    continue;
+                }
+            }
+            for (o, ray) in out.iter_mut().zip(group) {
+                *o = answer(single(ray));
+            }
+        }
+    })
 }
 
 /// Closest hits of a batch under `root` (`None`: the null handle, every ray misses), in
@@ -300,9 +348,7 @@ pub(crate) fn closest_batch(
     rays: &[Ray],
     hits: &mut [Option<Hit>],
 ) -> Result<(), QueryError> {
-    par_batch(rays, hits, |ray| {
-        root.and_then(|r| query(r, ray, &mut NoCustomPrimitives, AcceptAll, false))
-    })
+    batch_queries(root, rays, hits, false, |h| h)
 }
 
 /// Occlusion of a batch under `root`, in parallel.
@@ -311,9 +357,7 @@ pub(crate) fn any_batch(
     rays: &[Ray],
     occluded: &mut [bool],
 ) -> Result<(), QueryError> {
-    par_batch(rays, occluded, |ray| {
-        root.is_some_and(|r| query(r, ray, &mut NoCustomPrimitives, AcceptAll, true).is_some())
-    })
+    batch_queries(root, rays, occluded, true, |h| h.is_some())
 }
 
 /// Runs `f` on every ray in parallel chunks, writing `out` in ray order.
@@ -321,6 +365,20 @@ fn par_batch<T: Send>(
     rays: &[Ray],
     out: &mut [T],
     f: impl Fn(&Ray) -> T + Sync,
+) -> Result<(), QueryError> {
+    par_chunks(rays, out, |rays, out| {
+        for (r, o) in rays.iter().zip(out) {
+            *o = f(r);
+        }
+    })
+}
+
+/// Runs `f` on fixed chunks of the rays and their outputs in parallel. The chunks are the same
+/// whatever the number of threads (what a packet is made of depends only on the batch).
+fn par_chunks<T: Send>(
+    rays: &[Ray],
+    out: &mut [T],
+    f: impl Fn(&[Ray], &mut [T]) + Sync,
 ) -> Result<(), QueryError> {
     if rays.len() != out.len() {
         return Err(QueryError::LengthMismatch {
@@ -331,11 +389,7 @@ fn par_batch<T: Send>(
     const CHUNK: usize = 256;
     rays.par_chunks(CHUNK)
         .zip(out.par_chunks_mut(CHUNK))
-        .for_each(|(rays, out)| {
-            for (r, o) in rays.iter().zip(out) {
-                *o = f(r);
-            }
-        });
+        .for_each(|(rays, out)| f(rays, out));
     Ok(())
 }
 
@@ -400,27 +454,28 @@ macro_rules! query_api {
                 query($root(self), ray, custom, AcceptAll, true).is_some()
             }
 
-            /// Closest hits of a batch of rays, in parallel on the current rayon pool. The results are
-            /// the same as [`intersect`](Self::intersect) ray by ray, whatever the number of threads.
+            /// Closest hits of a batch of rays, in parallel on the current rayon pool. Groups of eight
+            /// consecutive rays from one origin (camera rays) are traced together as a packet where
+            /// the processor has AVX2. The results are those of [`intersect`](Self::intersect) ray by
+            /// ray (t, u, v and facing bit for bit; where two primitives are hit at exactly the same
+            /// distance either may be reported), the same whatever the number of threads.
             pub fn intersect_batch(
                 &self,
                 rays: &[Ray],
                 hits: &mut [Option<Hit>],
             ) -> Result<(), QueryError> {
-                self.batch(rays, hits, |root, ray| {
-                    query(root, ray, &mut NoCustomPrimitives, AcceptAll, false)
-                })
+                batch_queries(Some($root(self)), rays, hits, false, |h| h)
             }
 
-            /// Occlusion of a batch of rays, in parallel.
+            /// Occlusion of a batch of rays, in parallel (packets as for
+            /// [`intersect_batch`](Self::intersect_batch)); the same answers as
+            /// [`occluded`](Self::occluded) ray by ray.
             pub fn occluded_batch(
                 &self,
                 rays: &[Ray],
                 occluded: &mut [bool],
             ) -> Result<(), QueryError> {
-                self.batch(rays, occluded, |root, ray| {
-                    query(root, ray, &mut NoCustomPrimitives, AcceptAll, true).is_some()
-                })
+                batch_queries(Some($root(self)), rays, occluded, true, |h| h.is_some())
             }
 
             /// Closest hits of a batch, with custom primitives intersected by `custom` (called from

@@ -7,9 +7,11 @@ mod kernel;
 mod leaf;
 mod motion;
 mod node;
+mod packet;
 mod prefetch;
 mod ray;
 mod scene;
 
 pub(crate) use kernel::{with_stack, Decision, Entry, GasVisitor};
+pub(crate) use packet::{coherent, traverse_gas_packet, PACKET};
 pub(crate) use scene::{traverse_node, Level, NodeRef, Path, SceneVisitor};

@@ -75,16 +75,15 @@ fn intersect4(node: &Bvh4Node, r: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 
     let b = &node.bounds;
     // SAFETY: SSE is part of the x86_64 baseline, so the intrinsics are available. `Bvh4Node` is
     // `repr(C, align(64))` with `bounds` (rows of `[f32; 4]`) first, so each row is a 16-byte
-    // aligned load of 4 floats, as are the `Lanes` of the ray (`align(16)`); `dist` is 4 writable
-    // floats (unaligned store).
+    // aligned load of 4 floats; `dist` is 4 writable floats (unaligned store).
     unsafe {
         let load = |row: &[f32; 4]| _mm_load_ps(row.as_ptr());
         let mut tn = _mm_set1_ps(tmin);
         let mut tf = _mm_set1_ps(tmax);
         let robust = _mm_set1_ps(ROBUST_FAR);
         for a in 0..3 {
-            let o = _mm_load_ps(r.org4[a].0.as_ptr());
-            let inv = _mm_load_ps(r.inv4[a].0.as_ptr());
+            let o = _mm_set1_ps(r.org[a]);
+            let inv = _mm_set1_ps(r.inv[a]);
             let n = _mm_mul_ps(_mm_sub_ps(load(&b[r.near[a]]), o), inv);
             let f = _mm_mul_ps(_mm_mul_ps(_mm_sub_ps(load(&b[r.far[a]]), o), inv), robust);
             // maxps/minps return their second operand when either is NaN.

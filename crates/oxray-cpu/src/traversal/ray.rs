@@ -15,15 +15,7 @@ pub(crate) struct PreparedRay {
     pub near: [usize; 3],
     pub far: [usize; 3],
     pub tri: WatertightRay,
-    /// `org` and `inv` broadcast to four lanes, for the 4-wide box test.
-    pub org4: [Lanes; 3],
-    pub inv4: [Lanes; 3],
 }
-
-/// Four `f32` lanes, 16-byte aligned.
-#[repr(C, align(16))]
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Lanes(pub [f32; 4]);
 
 impl PreparedRay {
     /// `None` for an invalid ray, which can hit nothing. Inlined into every caller: the
@@ -31,6 +23,12 @@ impl PreparedRay {
     #[inline(always)]
     pub fn new(ray: &Ray) -> Option<Self> {
         ray.validate().ok()?;
+        Some(Self::of_valid(ray))
+    }
+
+    /// The constants of a ray that [`Ray::validate`] accepted.
+    #[inline(always)]
+    pub fn of_valid(ray: &Ray) -> Self {
         let d = ray.direction.to_array();
         let mut inv = [0.0; 3];
         let mut near = [0; 3];
@@ -52,16 +50,14 @@ impl PreparedRay {
                 far[a] = a;
             }
         }
-        Some(PreparedRay {
+        PreparedRay {
             org: ray.origin.to_array(),
             dir: ray.direction,
             inv,
             near,
             far,
             tri: WatertightRay::new(ray.origin, ray.direction),
-            org4: ray.origin.to_array().map(|x| Lanes([x; 4])),
-            inv4: inv.map(|x| Lanes([x; 4])),
-        })
+        }
     }
 
     /// The scalar slab test against one box, conservative like the 4-wide one.
