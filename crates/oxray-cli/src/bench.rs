@@ -7,6 +7,7 @@ use oxray::{BuildFlags, BuildOptions, IndexBuffer, Ray, RayRecord, TriangleInput
 use oxray_scene::mesh::Mesh;
 use oxray_testkit::rays;
 use oxray_testkit::rng::Rng;
+use rayon::prelude::*;
 use std::time::Instant;
 
 /// The build input of a mesh.
@@ -85,8 +86,9 @@ pub struct BenchResult {
     /// Fraction of primary, diffuse and shadow rays that hit (are blocked, for shadow rays).
     pub hit_rate: [f64; 3],
     /// Mrays/s of the coherent rays traced through the programmable pipeline (trivial
-    /// closest-hit and miss programs).
-    pub pipeline_mrays: (f64, f64),
+    /// closest-hit and miss programs), as single-ray queries (`Gas::intersect` ray by ray in
+    /// parallel: the kernel a launch's traces run), and as a batched query (packets).
+    pub pipeline_mrays: (f64, f64, f64),
 }
 
 /// The build presets the benchmark compares, in its columns' order, by the names `--build`
@@ -403,12 +405,13 @@ struct PipelineParams<'a> {
 
 /// Mrays/s of a launch that traces `rays` (one per launch index) through the programmable
 /// pipeline, with a closest-hit program that returns t and a miss program that returns +inf,
-/// and of [`Gas::intersect_batch`] on the same rays, timed alternately: the pipeline's overhead.
+/// of the same rays as single-ray queries (the pipeline's overhead over its own kernel) and of
+/// [`Gas::intersect_batch`] (which traces camera rays as packets), timed alternately.
 pub fn pipeline_mrays(
     gas: &std::sync::Arc<Gas>,
     rays: &[Ray],
     runs: usize,
-) -> Result<(f64, f64), Box<dyn std::error::Error>> {
+) -> Result<(f64, f64, f64), Box<dyn std::error::Error>> {
     use oxray::{
         DeviceContext, HitGroupDesc, Module, OutputBuffer, Pipeline, PipelineCompileOptions,
         PipelineLinkOptions, ProgramGroup, SbtRegion, ShaderBindingTable, TraceRay,
@@ -471,17 +474,24 @@ pub fn pipeline_mrays(
     // Launches and raw batched queries of the same rays alternate, so that both see the same
     // machine conditions.
     let mut hits = vec![None; rays.len()];
-    let (mut piped, mut raw) = (Vec::new(), Vec::new());
+    let (mut piped, mut single, mut batched) = (Vec::new(), Vec::new(), Vec::new());
     for _ in 0..runs {
         let t = Instant::now();
         launch()?;
         piped.push(t.elapsed().as_secs_f64());
         let t = Instant::now();
+        rays.par_iter()
+            .zip(hits.par_iter_mut())
+            .with_min_len(256)
+            .for_each(|(r, h)| *h = gas.intersect(r));
+        single.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
         gas.intersect_batch(rays, &mut hits)?;
-        raw.push(t.elapsed().as_secs_f64());
+        batched.push(t.elapsed().as_secs_f64());
     }
     let n = rays.len() as f64;
-    Ok((n / median(piped) / 1e6, n / median(raw) / 1e6))
+    let rate = |times| n / median(times) / 1e6;
+    Ok((rate(piped), rate(single), rate(batched)))
 }
 
 /// Results of the instancing benchmark.

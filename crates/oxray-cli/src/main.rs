@@ -1042,7 +1042,7 @@ fn run(cli: Cli) -> Result<()> {
                 ))?;
             } else {
                 say(format_args!(
-                    "| mesh | tris | build ms (default / fast-build / fast-trace / fast-trace-binned) | SAH (default / fast-build / fast-trace / fast-trace-binned) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace / fast-trace-binned) | pipeline primary closest vs the same rays as queries, alternated |"
+                    "| mesh | tris | build ms (default / fast-build / fast-trace / fast-trace-binned) | SAH (default / fast-build / fast-trace / fast-trace-binned) | primary closest | primary any | diffuse closest | diffuse any | shadow | diffuse closest by build (default / fast-build / fast-trace / fast-trace-binned) | pipeline primary closest vs the same rays as single-ray queries, alternated (batched, packets) |"
                 ))?;
                 say(format_args!(
                     "|---|---:|---|---|---:|---:|---:|---:|---:|---|---:|"
@@ -1080,7 +1080,7 @@ fn run(cli: Cli) -> Result<()> {
                     })
                     .map_err(anyhow::Error::msg)?;
                 say(format_args!(
-                    "| {} | {} | {:.1} / {:.1} / {:.1} / {:.1} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) |",
+                    "| {} | {} | {:.1} / {:.1} / {:.1} / {:.1} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} / {:.2} / {:.2} / {:.2} | {:.2} vs {:.2} ({:.0}%) ({:.2}) |",
                     r.name, r.triangles, r.build_ms[0], r.build_ms[1], r.build_ms[2], r.build_ms[3],
                     r.sah[0], r.sah[1], r.sah[2], r.sah[3],
                     r.mrays[0], r.mrays[1], r.mrays[2], r.mrays[3], r.mrays[4],
@@ -1088,6 +1088,7 @@ fn run(cli: Cli) -> Result<()> {
                     r.pipeline_mrays.0,
                     r.pipeline_mrays.1,
                     100.0 * r.pipeline_mrays.0 / r.pipeline_mrays.1,
+                    r.pipeline_mrays.2,
                 ))?;
                 eprintln!(
                     "  {}: {:.1} Mtris/s build, fast-trace leaf references {:.3} per triangle, hit rate primary {:.1}%, diffuse {:.1}%, shadow rays blocked {:.1}%",

@@ -7,14 +7,21 @@
 //! cargo bench -p oxray-cpu --bench ray_sets -- bench-out/rays ogre shadow any 9 1
 //! ```
 //!
-//! Arguments: DIR NAME SET (coherent, incoherent, shadow) QUERY (closest, any) RUNS THREADS.
+//! Arguments: DIR NAME SET (coherent, incoherent, shadow) QUERY (closest, any, single: closest
+//! hits ray by ray with `Gas::intersect`, no packets, or pipeline: closest hits through the
+//! programmable pipeline, a ray-generation program tracing one ray per launch index with a
+//! closest-hit program that returns t) RUNS THREADS.
 //! Prints the median and the best Mrays/s (on a shared machine the best is the steadier
 //! figure), the hit count (which must not change between kernels) and the
 //! kernel used. `OXRAY_CPU_ISA` picks the kernel as everywhere else.
 
-use oxray_core::{BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
-use oxray_cpu::Gas;
+use oxray_core::{
+    BuildOptions, DeviceContext, IndexBuffer, PipelineCompileOptions, PipelineLinkOptions, Ray,
+    SbtRegion, ShaderBindingTable, TraversableHandle, TriangleInput, VertexBuffer,
+};
+use oxray_cpu::{Gas, HitGroupDesc, Module, OutputBuffer, Pipeline, ProgramGroup, TraceRay};
 use std::path::Path;
+use std::sync::Arc;
 use std::time::Instant;
 
 fn read(path: &Path) -> Vec<u8> {
@@ -74,12 +81,23 @@ fn main() {
         .build()
         .expect("thread pool");
     let any = query == "any";
+    let single = query == "single";
     let mut hits = vec![None; rays.len()];
     let mut blocked = vec![false; rays.len()];
+    let gas = Arc::new(gas);
+    let piped = (query == "pipeline").then(|| PipelineBench::new(&gas, &rays));
     let mut trace = || {
         let start = Instant::now();
         pool.install(|| {
-            if any {
+            if let Some(p) = &piped {
+                p.launch();
+            } else if single {
+                use rayon::prelude::*;
+                rays.par_iter()
+                    .zip(hits.par_iter_mut())
+                    .with_min_len(256)
+                    .for_each(|(r, h)| *h = gas.intersect(r));
+            } else if any {
                 gas.occluded_batch(&rays, &mut blocked).expect("batch");
             } else {
                 gas.intersect_batch(&rays, &mut hits).expect("batch");
@@ -90,7 +108,9 @@ fn main() {
     trace();
     let mut times: Vec<f64> = (0..runs).map(|_| trace()).collect();
     times.sort_by(f64::total_cmp);
-    let count = if any {
+    let count = if let Some(p) = &piped {
+        p.hit_count()
+    } else if any {
         blocked.iter().filter(|&&b| b).count()
     } else {
         hits.iter().flatten().count()
@@ -102,4 +122,102 @@ fn main() {
         gas.isa(),
         rays.len()
     );
+}
+
+/// Launch parameters of the pipeline mode.
+#[derive(Clone)]
+struct Params<'a> {
+    rays: &'a [Ray],
+    handle: TraversableHandle,
+    out: &'a OutputBuffer<f32>,
+}
+
+/// The pipeline of `oxray bench`'s pipeline column: one trace per launch index, a closest-hit
+/// program that returns t, a miss program that returns +inf.
+struct PipelineBench<'a> {
+    pipeline: Pipeline<Params<'a>>,
+    sbt: ShaderBindingTable,
+    params: Params<'a>,
+}
+
+impl<'a> PipelineBench<'a> {
+    fn new(gas: &Arc<Gas>, rays: &'a [Ray]) -> Self {
+        let out: &'a OutputBuffer<f32> = Box::leak(Box::new(OutputBuffer::new(rays.len())));
+        let module = Module::<Params>::new()
+            .raygen("__raygen__bench", |ctx| {
+                let [x, _, _] = ctx.launch_index();
+                let p = ctx.params();
+                let r = &p.rays[x as usize];
+                let mut payload = [0u32; 1];
+                ctx.trace(
+                    &TraceRay::new(&p.handle, r.origin, r.direction).interval(r.tmin, r.tmax),
+                    &mut payload,
+                )?;
+                p.out.write(x as usize, f32::from_bits(payload[0]));
+                Ok(())
+            })
+            .and_then(|m| {
+                m.closest_hit("__closesthit__t", |ctx| {
+                    let t = ctx.ray_tmax();
+                    ctx.set_payload_f32(0, t);
+                    Ok(())
+                })
+            })
+            .and_then(|m| {
+                m.miss("__miss__inf", |ctx| {
+                    ctx.set_payload_f32(0, f32::INFINITY);
+                    Ok(())
+                })
+            })
+            .expect("module");
+        let rg = ProgramGroup::raygen(&module, "__raygen__bench").expect("raygen");
+        let ms = ProgramGroup::miss(Some((&module, "__miss__inf"))).expect("miss");
+        let hg = ProgramGroup::hit_group(HitGroupDesc {
+            closest_hit: Some((&module, "__closesthit__t")),
+            ..Default::default()
+        })
+        .expect("hit group");
+        let pipeline = Pipeline::new(
+            &DeviceContext::new(),
+            &PipelineCompileOptions {
+                num_payload_values: 1,
+                ..Default::default()
+            },
+            &PipelineLinkOptions { max_trace_depth: 1 },
+            &[rg.clone(), ms.clone(), hg.clone()],
+        )
+        .expect("pipeline");
+        let sbt = ShaderBindingTable {
+            raygen: SbtRegion::from_headers(&[rg.pack_header()]),
+            miss: SbtRegion::from_headers(&[ms.pack_header()]),
+            hitgroup: SbtRegion::from_headers(&[hg.pack_header()]),
+            ..Default::default()
+        };
+        let params = Params {
+            rays,
+            handle: gas.clone().into(),
+            out,
+        };
+        PipelineBench {
+            pipeline,
+            sbt,
+            params,
+        }
+    }
+
+    fn launch(&self) {
+        let n = self.params.rays.len() as u32;
+        let report = self
+            .pipeline
+            .launch(&self.params, &self.sbt, n, 1, 1)
+            .expect("launch");
+        assert_eq!(report.exceptions, 0, "the bench's programs raise nothing");
+    }
+
+    /// Rays whose closest-hit program ran (a finite t).
+    fn hit_count(&self) -> usize {
+        (0..self.params.rays.len())
+            .filter(|&i| self.params.out.read(i).is_some_and(f32::is_finite))
+            .count()
+    }
 }

@@ -157,10 +157,14 @@ impl<P> Pipeline<P> {
             callable_groups: &callable_groups,
             dims: [width, height, depth],
         };
-        let (w, h) = (width as u64, height as u64);
+        // `total` is at most 2^30, so indices fit 32 bits (whose division is the cheaper).
+        let (w, h) = (width.max(1), height.max(1));
         let index_of = |i: usize| {
-            let i = i as u64;
-            [(i % w) as u32, ((i / w) % h) as u32, (i / (w * h)) as u32]
+            let i = i as u32;
+            if w as u64 == total {
+                return [i, 0, 0];
+            }
+            [i % w, (i / w) % h, i / (w * h)]
         };
         // Each chunk keeps its first five exceptions and counts its traces; chunks are
         // combined in index order.

@@ -124,6 +124,9 @@ pub(crate) struct HitState {
     pub record: usize,
     /// Leaf slot of the primitive in its GAS (`u32::MAX` for none), for vertex fetches.
     pub slot: u32,
+    /// Whether `primitive_index` is set; otherwise it is found from `slot` when a program
+    /// may read it ([`PipelineVisitor::lookup`]).
+    pub resolved: bool,
 }
 
 /// The instance nearest to a hit and the transforms between its object space and world space.
@@ -207,6 +210,29 @@ struct PipelineVisitor<'a, 'p, 's, P> {
 }
 
 impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
+    /// The primitive index (if found), SBT-GAS index and whether the index was found, of leaf
+    /// `slot`. In a GAS with one SBT record the SBT-GAS index is 0 without a lookup, and the
+    /// primitive index is found only when a program may read it ([`Self::resolved`]): the
+    /// lookup is a cache miss on large meshes, and most candidates are replaced by nearer ones.
+    #[inline(always)]
+    fn lookup(gas: &Gas, slot: u32) -> (u32, u32, bool) {
+        if gas.record_flags.len() == 1 {
+            return (0, 0, false);
+        }
+        let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
+        (primitive_index, sbt_gas_index, true)
+    }
+
+    /// `hit` with its primitive index found in `gas`, the GAS it was found in.
+    #[inline(always)]
+    fn resolved(gas: Option<&Gas>, mut hit: HitState) -> HitState {
+        if let (false, Some(gas)) = (hit.resolved, gas) {
+            hit.primitive_index = gas.resolve(hit.slot).0;
+            hit.resolved = true;
+        }
+        hit
+    }
+
     fn record(&mut self, sbt_gas_index: u32) -> Option<usize> {
         let rec = hit_group_index(
             self.instance_sbt_offset,
@@ -281,7 +307,7 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
                         ..self.frame
                     },
                     ray: self.ray,
-                    hit,
+                    hit: Self::resolved(self.gas, hit),
                     payload: self.payload,
                     path: self.path.as_ref(),
                     gas: self.gas,
@@ -389,7 +415,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
                 Decision::Ignore
             };
         };
-        let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
+        let (primitive_index, sbt_gas_index, resolved) = Self::lookup(gas, slot);
         let gflags = gas.record_flags[sbt_gas_index as usize];
         let iflags = self.instance.map_or(InstanceFlags::empty(), |i| i.flags);
         // Facing: counter-clockwise is front unless the nearest instance flips it (§5.4).
@@ -422,6 +448,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             attributes,
             record,
             slot,
+            resolved,
         };
         self.candidate(hit, gflags)
     }
@@ -434,7 +461,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
                 Decision::Ignore
             };
         };
-        let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
+        let (primitive_index, sbt_gas_index, resolved) = Self::lookup(gas, slot);
         let gflags = gas.record_flags[sbt_gas_index as usize];
         let Some(record) = self.record(sbt_gas_index) else {
             return Decision::Abort;
@@ -451,6 +478,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             attributes: [0; 8],
             record,
             slot,
+            resolved,
         };
         self.candidate(hit, gflags)
     }
@@ -463,7 +491,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
                 Decision::Ignore
             };
         };
-        let (primitive_index, sbt_gas_index, _) = gas.resolve(slot);
+        let (primitive_index, sbt_gas_index, resolved) = Self::lookup(gas, slot);
         let gflags = gas.record_flags[sbt_gas_index as usize];
         let Some(record) = self.record(sbt_gas_index) else {
             return Decision::Abort;
@@ -481,6 +509,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             attributes,
             record,
             slot,
+            resolved,
         };
         self.candidate(hit, gflags)
     }
@@ -515,6 +544,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             attributes: [0; 8],
             record,
             slot: u32::MAX,
+            resolved: true,
         };
         let frame = Frame {
             record: self.record_bytes(record),
@@ -786,7 +816,7 @@ impl<P> PipelineVisitor<'_, '_, '_, P> {
                 ..self.frame
             },
             ray: *state,
-            hit: *hit,
+            hit: Self::resolved(self.best_gas, *hit),
             payload: self.payload,
             path: self.best_path.as_ref(),
             gas: self.best_gas,
