@@ -237,6 +237,7 @@ impl PrimRef {
 }
 
 /// Bytes of working memory [`build_bvh2`] allocates for `n` primitives, at most.
+#[must_use]
 pub fn temp_bytes(n: usize) -> usize {
     // Two reference arrays: binned splits partition from one into the other.
     2 * n * std::mem::size_of::<PrimRef>()
@@ -245,6 +246,7 @@ pub fn temp_bytes(n: usize) -> usize {
 }
 
 /// Builds a binary BVH over `bounds` (every box must be finite and valid).
+#[must_use]
 pub fn build_bvh2(bounds: &[Aabb], config: &BuildConfig) -> Bvh2 {
     build_bvh2_at(bounds, config, 0)
 }

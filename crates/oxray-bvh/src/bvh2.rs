@@ -22,11 +22,13 @@ pub struct Bvh2Node {
 
 impl Bvh2Node {
     /// The node's box.
+    #[must_use]
     pub fn bounds(&self) -> Aabb {
         Aabb::new(self.min.into(), self.max.into())
     }
 
     /// Whether the node is a leaf.
+    #[must_use]
     pub fn is_leaf(&self) -> bool {
         self.count > 0
     }

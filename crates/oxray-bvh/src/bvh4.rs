@@ -27,11 +27,13 @@ crate::wide::wide_node!(Bvh4Node, 4);
 
 impl Bvh4Node {
     /// The box of child `lane`.
+    #[must_use]
     pub fn child_bounds(&self, lane: usize) -> Aabb {
         WideNode::child_bounds(self, lane)
     }
 
     /// Whether lane `lane` holds a child.
+    #[must_use]
     pub fn is_used(&self, lane: usize) -> bool {
         WideNode::is_used(self, lane)
     }

@@ -28,11 +28,13 @@ crate::wide::wide_node!(Bvh8Node, 8);
 
 impl Bvh8Node {
     /// The box of child `lane`.
+    #[must_use]
     pub fn child_bounds(&self, lane: usize) -> Aabb {
         WideNode::child_bounds(self, lane)
     }
 
     /// Whether lane `lane` holds a child.
+    #[must_use]
     pub fn is_used(&self, lane: usize) -> bool {
         WideNode::is_used(self, lane)
     }

@@ -120,6 +120,7 @@ impl CurveSegment {
     /// The record of an updatable structure's slot whose segment is inactive: NaN control
     /// points, which no ray hits and no bound includes. It keeps its curve type, which a
     /// pipeline's primitive-type check reads.
+    #[must_use]
     pub fn deactivated(self) -> CurveSegment {
         CurveSegment {
             points: [[f32::NAN; 4]; 4],
@@ -129,6 +130,7 @@ impl CurveSegment {
 
     /// A segment of `ty` with control points `points` (`x, y, z, radius`; as many as the type
     /// has), cap `flags` ([`CAP_START`], [`CAP_END`]) and ribbon normals.
+    #[must_use]
     pub fn new(
         ty: CurveType,
         points: &[[f32; 4]],
@@ -150,17 +152,20 @@ impl CurveSegment {
     }
 
     /// The curve type (round linear for an inactive record).
+    #[must_use]
     pub fn curve_type(&self) -> CurveType {
         CurveType::from_code(self.curve_type).unwrap_or(CurveType::RoundLinear)
     }
 
     /// The control points as `float4`s, as many as the type has.
+    #[must_use]
     pub fn control_points(&self) -> &[[f32; 4]] {
         &self.points[..self.curve_type().control_points()]
     }
 
     /// Whether a ray can hit it: finite control points, a known type, and a radius that is
     /// positive somewhere (the guide skips negative radii, §9.8).
+    #[must_use]
     pub fn is_active(&self) -> bool {
         self.active_type().is_some()
     }
@@ -244,17 +249,20 @@ impl CurveSegment {
     }
 
     /// The centre and radius at `u`, in `f64` (the reference tests use it too).
+    #[must_use]
     pub fn eval(&self, u: f64) -> (DVec3, f64) {
         eval_basis(&self.power_basis(), u)
     }
 
     /// The tangent `c'(u)`, in `f64`.
+    #[must_use]
     pub fn tangent(&self, u: f64) -> DVec3 {
         tangent_basis(&self.power_basis(), u)
     }
 
     /// The box around the segment: the Bézier hull of the centre line grown by the largest
     /// radius coefficient, rounded outwards. Empty for an inactive segment.
+    #[must_use]
     pub fn bounds(&self) -> Aabb {
         if !self.is_active() {
             return Aabb::EMPTY;
@@ -278,6 +286,7 @@ impl CurveSegment {
     /// let (a, b) = (s.bounds_over(0.0, 0.5), s.bounds_over(0.5, 1.0));
     /// assert!(a.max.x < 2.2 && b.min.x > 1.8 && s.bounds().contains_box(&a.union(&b)));
     /// ```
+    #[must_use]
     pub fn bounds_over(&self, u0: f64, u1: f64) -> Aabb {
         let Some(ty) = self.active_type() else {
             return Aabb::EMPTY;
@@ -305,6 +314,7 @@ impl CurveSegment {
     /// (the length of its Bézier control polygon, which bounds the centre line's) over its width
     /// (twice its largest radius coefficient) over `splits.width_ratio`, at most
     /// `splits.max_pieces`. 1 for an inactive segment.
+    #[must_use]
     pub fn pieces(&self, splits: &CurveSplits) -> u32 {
         let Some(ty) = self.active_type() else {
             return 1;
@@ -326,6 +336,7 @@ impl CurveSegment {
 
     /// The nearest front-face hit (or ribbon hit) of the ray `org + t dir` in `[tmin, tmax]`;
     /// `dir` need not be normalised.
+    #[must_use]
     pub fn intersect(&self, org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<CurveHit> {
         let len = dir.as_dvec3().length();
         // NaN (a NaN direction) fails the compare: no hit.

@@ -45,6 +45,7 @@ pub struct GasExport {
 
 impl GasExport {
     /// Triangles that can be hit (slots that are not padding).
+    #[must_use]
     pub fn num_triangles(&self) -> usize {
         self.slots.iter().filter(|s| s.is_some()).count()
     }
@@ -67,6 +68,7 @@ impl GasData {
     /// assert_eq!(export.slots[slot].unwrap().vertices, v);
     /// # Ok::<(), oxray_core::BuildError>(())
     /// ```
+    #[must_use]
     pub fn export_triangles(&self) -> Option<GasExport> {
         if self.kind != GasKind::Triangles {
             return None;

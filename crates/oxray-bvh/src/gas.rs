@@ -188,6 +188,7 @@ pub struct InputShape {
 
 impl InputShape {
     /// The shape of a GAS build input; `None` for an instance input.
+    #[must_use]
     pub fn of(input: &BuildInput<'_>) -> Option<InputShape> {
         let sbt_offset_size = input.sbt_index_offsets().map_or(0, |o| o.size.size() as u8);
         let num_sbt_records = input.flags().len() as u32;
@@ -348,6 +349,7 @@ impl GasData {
     }
 
     /// The node layouts the structure holds.
+    #[must_use]
     pub fn width(&self) -> NodeWidth {
         if self.bvh8.is_some() {
             NodeWidth::Eight
@@ -790,6 +792,7 @@ impl GasData {
     }
 
     /// The kind of primitives.
+    #[must_use]
     pub fn kind(&self) -> BuildInputKind {
         match self.kind {
             GasKind::Triangles => BuildInputKind::Triangles,
@@ -800,16 +803,19 @@ impl GasData {
     }
 
     /// The flags it was built with.
+    #[must_use]
     pub fn build_flags(&self) -> BuildFlags {
         self.build_flags
     }
 
     /// Primitives declared over all build inputs, inactive ones included.
+    #[must_use]
     pub fn num_primitives(&self) -> u32 {
         self.num_primitives
     }
 
     /// Primitives that can be hit (each once, however many leaf slots hold it).
+    #[must_use]
     pub fn num_active_primitives(&self) -> u32 {
         let mut seen = vec![false; self.num_primitives as usize];
         let mut count = 0;
@@ -829,6 +835,7 @@ impl GasData {
     /// Leaf slots that hold a primitive that can be hit: more than
     /// [`num_active_primitives`](Self::num_active_primitives) where spatial splits referenced
     /// a primitive from several leaves.
+    #[must_use]
     pub fn num_references(&self) -> u32 {
         (0..self.slot_prim.len())
             .filter(|&s| self.slot_is_active(s))
@@ -864,6 +871,7 @@ impl GasData {
     /// Whether leaf slot `slot` holds a primitive that can be hit (an updatable structure keeps
     /// slots of inactive primitives: their triangle lanes hold NaN, their boxes are empty).
     #[inline]
+    #[must_use]
     pub fn slot_is_active(&self, slot: usize) -> bool {
         if self.slot_prim.get(slot).is_none_or(|&g| g == NO_PRIMITIVE) {
             return false;
@@ -877,36 +885,43 @@ impl GasData {
     }
 
     /// Number of build inputs.
+    #[must_use]
     pub fn num_build_inputs(&self) -> usize {
         self.inputs.len()
     }
 
     /// SBT records over all build inputs (the span of SBT-GAS indices).
+    #[must_use]
     pub fn num_sbt_records(&self) -> u32 {
         self.record_flags.len() as u32
     }
 
     /// The geometry flags of an SBT record, by SBT-GAS index.
+    #[must_use]
     pub fn geometry_flags(&self, sbt_gas_index: u32) -> Option<GeometryFlags> {
         self.record_flags.get(sbt_gas_index as usize).copied()
     }
 
     /// The box around every active primitive (empty when there is none).
+    #[must_use]
     pub fn bounds(&self) -> Aabb {
         self.bounds
     }
 
     /// The BVH.
+    #[must_use]
     pub fn bvh(&self) -> &Bvh4 {
         &self.bvh
     }
 
     /// BVH statistics: nodes, depth, SAH cost, bytes.
+    #[must_use]
     pub fn stats(&self) -> BvhStats {
         self.bvh.stats()
     }
 
     /// Bytes the structure occupies.
+    #[must_use]
     pub fn memory(&self) -> GasMemory {
         fn bytes<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
@@ -955,6 +970,7 @@ impl GasData {
     /// The bytes the structure takes once compacted: the emitted property `COMPACTED_SIZE`
     /// (guide §5.8), known before compacting. `None` unless it was built with
     /// `ALLOW_COMPACTION`.
+    #[must_use]
     pub fn compacted_size(&self) -> Option<usize> {
         if !self.build_flags.contains(BuildFlags::ALLOW_COMPACTION) {
             return None;
@@ -1009,6 +1025,7 @@ impl GasData {
     }
 
     /// What a backend that keeps the structure elsewhere (in GPU memory, say) reports of it.
+    #[must_use]
     pub fn info(&self) -> GasInfo {
         GasInfo {
             kind: self.kind(),
@@ -1024,6 +1041,7 @@ impl GasData {
 
     /// The build input and the index within it of a global primitive id.
     #[inline]
+    #[must_use]
     pub fn locate(&self, global: u32) -> (usize, u32) {
         let i = if self.inputs.len() == 1 {
             0
@@ -1035,6 +1053,7 @@ impl GasData {
 
     /// Primitive index (with the input's offset), SBT-GAS index and build input of a leaf slot.
     #[inline]
+    #[must_use]
     pub fn resolve(&self, slot: u32) -> (u32, u32, u32) {
         self.resolve_global(self.slot_prim[slot as usize])
     }
@@ -1042,6 +1061,7 @@ impl GasData {
     /// Primitive index (with the input's offset), SBT-GAS index and build input of a global
     /// primitive id (ids count over all inputs, in order; `global < num_primitives`).
     #[inline]
+    #[must_use]
     pub fn resolve_global(&self, global: u32) -> (u32, u32, u32) {
         let (input, local) = self.locate(global);
         let rec = &self.inputs[input];
@@ -1055,6 +1075,7 @@ impl GasData {
 /// refits one leaf slot per primitive, and rebuilding the clipped boxes would need the
 /// splits again), none otherwise. Only triangles are split, and never those whose SBT record
 /// has `REQUIRE_SINGLE_ANYHIT_CALL` (guide §5.1).
+#[must_use]
 pub fn spatial_splits(options: &BuildOptions) -> Option<SpatialSplits> {
     (options.flags.contains(BuildFlags::PREFER_FAST_TRACE)
         && !options.flags.contains(BuildFlags::ALLOW_UPDATE))
@@ -1066,6 +1087,7 @@ pub fn spatial_splits(options: &BuildOptions) -> Option<SpatialSplits> {
 /// [`CurveSplits::FAST_BUILD`] with `PREFER_FAST_BUILD` (a lower one), none with
 /// `ALLOW_UPDATE` (a refit fills one slot per segment). Segments of SBT records with
 /// `REQUIRE_SINGLE_ANYHIT_CALL` are never split, whatever this says.
+#[must_use]
 pub fn curve_splits(options: &BuildOptions) -> Option<CurveSplits> {
     let flags = options.flags;
     if flags.contains(BuildFlags::ALLOW_UPDATE) {
@@ -1300,6 +1322,7 @@ pub(crate) fn decode_sphere_key(s: &SphereInput<'_>, i: usize, key: usize) -> Sp
 
 /// Decodes (and pre-transforms) every triangle of a validated input (one whose indices are in
 /// range: [`GasData::prepare`] checks them), in parallel.
+#[must_use]
 pub fn decode_triangles(t: &TriangleInput<'_>) -> Vec<[Vec3; 3]> {
     let n = t.num_primitives() as usize;
     (0..n)

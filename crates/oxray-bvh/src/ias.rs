@@ -393,6 +393,7 @@ impl IasData {
     }
 
     /// Bytes the IAS occupies (its own tables; the children are not counted).
+    #[must_use]
     pub fn memory_bytes(&self) -> usize {
         fn bytes<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
@@ -402,6 +403,7 @@ impl IasData {
 
     /// The bytes of the compacted IAS (emitted property `COMPACTED_SIZE`, guide §5.8); `None`
     /// unless built with `ALLOW_COMPACTION`.
+    #[must_use]
     pub fn compacted_size(&self) -> Option<usize> {
         self.build_flags
             .contains(BuildFlags::ALLOW_COMPACTION)
@@ -428,31 +430,37 @@ impl IasData {
     }
 
     /// Instances in the build input.
+    #[must_use]
     pub fn num_instances(&self) -> u32 {
         self.num_instances
     }
 
     /// The world box of every instance that can be hit.
+    #[must_use]
     pub fn bounds(&self) -> Aabb {
         self.bounds
     }
 
     /// The flags it was built with.
+    #[must_use]
     pub fn build_flags(&self) -> BuildFlags {
         self.build_flags
     }
 
     /// The BVH over the instances.
+    #[must_use]
     pub fn bvh(&self) -> &Bvh4 {
         &self.bvh
     }
 
     /// BVH statistics.
+    #[must_use]
     pub fn stats(&self) -> BvhStats {
         self.bvh.stats()
     }
 
     /// Levels of the traversable graph from this IAS down (an IAS over GASes is 2).
+    #[must_use]
     pub fn graph_depth(&self) -> u32 {
         self.depth
     }
@@ -463,6 +471,7 @@ impl IasData {
     /// [`instance_by_index`](Self::instance_by_index).
     #[doc(alias = "optixGetInstanceChildFromHandle")]
     #[doc(alias = "optixGetInstanceTraversableFromIAS")]
+    #[must_use]
     pub fn instance_child(&self, index: u32) -> Option<&TraversableHandle> {
         self.instance_by_index(index)
             .ok()

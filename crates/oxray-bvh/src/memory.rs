@@ -95,6 +95,7 @@ pub fn compute_memory_usage(
 }
 
 /// The sizes for validated inputs of `num_inputs` build inputs.
+#[must_use]
 pub fn sizes_for(s: &InputSummary, num_inputs: usize) -> AccelBufferSizes {
     let n = s.num_primitives as usize;
     let output = output_bound(s, num_inputs, n);

@@ -59,6 +59,7 @@ impl GasMotion {
     }
 
     /// Bytes of the later keys' primitives.
+    #[must_use]
     pub fn bytes(&self) -> usize {
         std::mem::size_of_val(&self.triangles[..])
             + std::mem::size_of_val(&self.aabbs[..])
@@ -308,6 +309,7 @@ pub(crate) fn build_motion(
 /// Four triangles interpolated lane by lane between two keys' blocks (key `a` exactly where
 /// `f` is 0).
 #[inline(always)]
+#[must_use]
 pub fn lerp_triangle4(a: &Triangle4, b: &Triangle4, f: f32) -> Triangle4 {
     let mut out = *a;
     if f == 0.0 {
@@ -326,6 +328,7 @@ pub fn lerp_triangle4(a: &Triangle4, b: &Triangle4, f: f32) -> Triangle4 {
 
 /// A box interpolated corner by corner between two keys (guide §5.10.1).
 #[inline(always)]
+#[must_use]
 pub fn lerp_aabb(a: &Aabb, b: &Aabb, f: f32) -> Aabb {
     Aabb::new(
         Vec3::from_array(std::array::from_fn(|i| lerp(a.min[i], b.min[i], f))),
@@ -335,6 +338,7 @@ pub fn lerp_aabb(a: &Aabb, b: &Aabb, f: f32) -> Aabb {
 
 /// A sphere interpolated between two keys: centre and radius linearly (guide §5.10.2).
 #[inline(always)]
+#[must_use]
 pub fn lerp_sphere(a: &Sphere, b: &Sphere, f: f32) -> Sphere {
     Sphere {
         center: std::array::from_fn(|i| lerp(a.center[i], b.center[i], f)),
@@ -345,6 +349,7 @@ pub fn lerp_sphere(a: &Sphere, b: &Sphere, f: f32) -> Sphere {
 /// A curve segment interpolated between two keys: control points, radii and ribbon normals
 /// linearly (guide §5.10.2); its type, caps and flags are key `a`'s (every key has the same).
 #[inline(always)]
+#[must_use]
 pub fn lerp_curve(a: &CurveSegment, b: &CurveSegment, f: f32) -> CurveSegment {
     if f == 0.0 {
         return *a;
@@ -364,6 +369,7 @@ impl GasData {
     /// The motion keys a ray at `time` sees (guide §5.10.1): [`KeySample::STATIC`] without
     /// motion, `None` where the structure vanishes.
     #[inline]
+    #[must_use]
     pub fn key_sample(&self, time: f32) -> Option<KeySample> {
         match &self.motion {
             None => Some(KeySample::STATIC),
@@ -373,6 +379,7 @@ impl GasData {
 
     /// The box around the active primitives at each motion key (one box without motion): the
     /// emitted property `AABBS` (guide §5.8, one per key).
+    #[must_use]
     pub fn key_bounds(&self) -> Vec<Aabb> {
         let keys = self.motion_options().key_count();
         (0..keys)
@@ -401,6 +408,7 @@ impl GasData {
     }
 
     /// The motion options (the default, no motion, for a static structure).
+    #[must_use]
     pub fn motion_options(&self) -> MotionOptions {
         self.motion
             .as_ref()
@@ -409,6 +417,7 @@ impl GasData {
 
     /// The triangle blocks of two keys (both key 0 without motion).
     #[inline]
+    #[must_use]
     pub fn triangle_keys(&self, s: KeySample) -> (&[Triangle4], &[Triangle4]) {
         match &self.motion {
             None => (&self.triangles, &self.triangles),
@@ -421,6 +430,7 @@ impl GasData {
 
     /// The boxes of two keys (both key 0 without motion).
     #[inline]
+    #[must_use]
     pub fn aabb_keys(&self, s: KeySample) -> (&[Aabb], &[Aabb]) {
         match &self.motion {
             None => (&self.aabbs, &self.aabbs),
@@ -433,6 +443,7 @@ impl GasData {
 
     /// The spheres of two keys (both key 0 without motion).
     #[inline]
+    #[must_use]
     pub fn sphere_keys(&self, s: KeySample) -> (&[Sphere], &[Sphere]) {
         match &self.motion {
             None => (&self.spheres, &self.spheres),
@@ -445,6 +456,7 @@ impl GasData {
 
     /// The curve segments of two keys (both key 0 without motion).
     #[inline]
+    #[must_use]
     pub fn curve_keys(&self, s: KeySample) -> (&[CurveSegment], &[CurveSegment]) {
         match &self.motion {
             None => (&self.curves, &self.curves),
@@ -458,6 +470,7 @@ impl GasData {
     /// The triangle of leaf slot `slot` at `time` (interpolated between its keys; clamped
     /// outside the range, and key 0's where the structure vanishes); `None` for a slot out of
     /// range or a structure of another kind.
+    #[must_use]
     pub fn triangle_at(&self, slot: usize, time: f32) -> Option<[[f32; 3]; 3]> {
         let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
         let (a, b) = self.triangle_keys(s);
@@ -466,6 +479,7 @@ impl GasData {
     }
 
     /// The box of leaf slot `slot` at `time` (see [`triangle_at`](Self::triangle_at)).
+    #[must_use]
     pub fn aabb_at(&self, slot: usize, time: f32) -> Option<Aabb> {
         let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
         let (a, b) = self.aabb_keys(s);
@@ -473,6 +487,7 @@ impl GasData {
     }
 
     /// The sphere of leaf slot `slot` at `time` (see [`triangle_at`](Self::triangle_at)).
+    #[must_use]
     pub fn sphere_at(&self, slot: usize, time: f32) -> Option<Sphere> {
         let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
         let (a, b) = self.sphere_keys(s);
@@ -480,6 +495,7 @@ impl GasData {
     }
 
     /// The curve segment of leaf slot `slot` at `time` (see [`triangle_at`](Self::triangle_at)).
+    #[must_use]
     pub fn curve_at(&self, slot: usize, time: f32) -> Option<CurveSegment> {
         let s = self.key_sample(time).unwrap_or(KeySample::STATIC);
         let (a, b) = self.curve_keys(s);

@@ -13,6 +13,7 @@ use oxray_core::{BuildFlags, RandomAccessError};
 pub const NO_SLOT: u32 = u32::MAX;
 
 /// The name of a GAS kind in errors.
+#[must_use]
 pub fn kind_name(kind: GasKind) -> &'static str {
     match kind {
         GasKind::Triangles => "triangles",
@@ -39,6 +40,7 @@ impl GasData {
     /// # Ok::<(), oxray_core::BuildError>(())
     /// ```
     #[doc(alias = "optixGetPrimitiveIndex")]
+    #[must_use]
     pub fn global_primitive(&self, primitive_index: u32, sbt_gas_index: u32) -> Option<u32> {
         let n = self.inputs.len();
         let i = self
@@ -65,6 +67,7 @@ impl GasData {
 
     /// The first leaf slot of every primitive by global id ([`NO_SLOT`] for one the builder
     /// left out): the table random vertex access reads through.
+    #[must_use]
     pub fn primitive_slots(&self) -> Vec<u32> {
         let mut slots = vec![NO_SLOT; self.num_primitives as usize];
         for (slot, &g) in self.slot_prim.iter().enumerate() {

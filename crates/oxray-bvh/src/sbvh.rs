@@ -52,6 +52,7 @@ impl SpatialSplits {
     };
 
     /// The most references a build over `n` triangles makes.
+    #[must_use]
     pub fn max_references(&self, n: usize) -> usize {
         n + self.extra(n)
     }
@@ -68,6 +69,7 @@ const SPATIAL_BINS: usize = 32;
 /// box of triangle `tris[k]`; triangles with `splittable[k] == false` are never split (all are
 /// splittable when `splittable` is `None`). The tree's `prim_order` may name a triangle more
 /// than once (never more than `splits.max_references(n)` slots in all).
+#[must_use]
 pub fn build_sbvh2(
     tris: &[[Vec3; 3]],
     bounds: &[Aabb],

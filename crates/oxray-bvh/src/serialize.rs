@@ -59,6 +59,7 @@ const KIND_IAS: u32 = 2;
 const HEADER: usize = 8 + 4 + 4 + 8 + 8;
 
 /// A 64-bit checksum of the payload (multiply-rotate over 8-byte words, then the length).
+#[must_use]
 pub fn checksum(bytes: &[u8]) -> u64 {
     const P: u64 = 0x9E37_79B9_7F4A_7C15;
     let mut h: u64 = 0xCBF2_9CE4_8422_2325;
@@ -351,6 +352,7 @@ impl GasData {
     /// assert!(GasData::from_bytes(&bytes[..bytes.len() - 1]).is_err());
     /// # Ok::<(), oxray_core::BuildError>(())
     /// ```
+    #[must_use]
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut w = Writer(Vec::new());
         w.u32(kind_code(self.kind));
@@ -691,6 +693,7 @@ impl GasData {
 
 impl IasData {
     /// Saves the IAS without its children (see [`IasData::from_bytes`]).
+    #[must_use]
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut w = Writer(Vec::new());
         w.u32(self.build_flags.bits());

@@ -45,6 +45,7 @@ impl Sphere {
     };
 
     /// A sphere of `radius` around `center`.
+    #[must_use]
     pub fn new(center: Vec3, radius: f32) -> Sphere {
         Sphere {
             center: center.to_array(),
@@ -54,6 +55,7 @@ impl Sphere {
 
     /// `(x, y, z, radius)`, the `float4` of `optixGetSphereData`.
     #[doc(alias = "optixGetSphereData")]
+    #[must_use]
     pub fn to_array(&self) -> [f32; 4] {
         let c = self.center;
         [c[0], c[1], c[2], self.radius]
@@ -65,6 +67,7 @@ impl Sphere {
     /// nothing else of them). Such spheres are inactive: left out of the tree, as a build
     /// leaves out degenerate triangles (§5.1).
     #[inline]
+    #[must_use]
     pub fn is_active(&self) -> bool {
         self.center.iter().all(|c| c.is_finite()) && self.radius.is_finite() && self.radius > 0.0
     }
@@ -73,6 +76,7 @@ impl Sphere {
     /// point of the sphere despite the rounding of `center ± radius`, and every hit the test
     /// reports.
     #[inline]
+    #[must_use]
     pub fn bounds(&self) -> Aabb {
         let c = Vec3::from(self.center);
         let r = Vec3::splat(self.radius);
@@ -84,6 +88,7 @@ impl Sphere {
     /// The front-face hit of the ray `org + t dir` (`dir` need not be normalised: t is in its
     /// units, as across instance transforms): the entry point, if it lies in `[tmin, tmax]`.
     #[inline(always)]
+    #[must_use]
     pub fn intersect(&self, org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
         let t = self.entry(org, dir);
         // NaN (an inactive sphere, a miss) fails both compares.
@@ -92,6 +97,7 @@ impl Sphere {
 
     /// The smaller root of `|org + t dir - center|² = radius²`, or NaN when the line misses.
     #[inline(always)]
+    #[must_use]
     pub fn entry(&self, org: Vec3, dir: Vec3) -> f32 {
         let c = Vec3::from(self.center);
         let r = self.radius;

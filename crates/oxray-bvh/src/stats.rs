@@ -27,6 +27,7 @@ pub struct BvhStats {
 
 impl Bvh4 {
     /// Computes the statistics of this BVH.
+    #[must_use]
     pub fn stats(&self) -> BvhStats {
         stats_of(&self.nodes)
     }
@@ -34,6 +35,7 @@ impl Bvh4 {
 
 impl Bvh8 {
     /// Computes the statistics of this BVH.
+    #[must_use]
     pub fn stats(&self) -> BvhStats {
         stats_of(&self.nodes)
     }

@@ -77,6 +77,7 @@ impl GasData {
     /// assert_eq!((s.num_primitives, s.triangles.len(), s.bounds), (1, 0, gas.bounds));
     /// # Ok::<(), oxray_core::BuildError>(())
     /// ```
+    #[must_use]
     pub fn skeleton(&self) -> GasData {
         GasData {
             kind: self.kind,
@@ -125,6 +126,7 @@ impl GasData {
     /// primitive gets an inactive one. For a backend that keeps slots elsewhere (a GPU). The
     /// inputs must have passed [`check_update`](Self::check_update) and be of this structure's
     /// kind.
+    #[must_use]
     pub fn update_slot_primitives(
         &self,
         slot_prim: &[u32],

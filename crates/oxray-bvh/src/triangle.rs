@@ -37,6 +37,7 @@ pub struct TriangleHit {
 impl WatertightRay {
     /// Precomputes the shear for a ray. `dir` must be non-zero and finite.
     #[inline]
+    #[must_use]
     pub fn new(org: Vec3, dir: Vec3) -> Self {
         let a = dir.abs();
         let kz = if a.x >= a.y && a.x >= a.z {
@@ -62,6 +63,7 @@ impl WatertightRay {
 
     /// Intersects the triangle `(p0, p1, p2)`; reports a hit only for `tmin <= t <= tmax`.
     #[inline(always)]
+    #[must_use]
     pub fn intersect(
         &self,
         p0: &[f32; 3],
@@ -160,6 +162,7 @@ pub const F32_TINY: f32 = 1.0 / (1u128 << 96) as f32;
 /// function of zero (the ray meets an edge or vertex exactly), a determinant or scaled distance
 /// that overflowed or underflowed (distances grow with the cube of the coordinates), or NaN.
 #[inline(always)]
+#[must_use]
 pub fn needs_f64(u: f32, v: f32, w: f32, det: f32, t_scaled: f32) -> bool {
     let ok = |x: f32| x.abs() >= F32_TINY && x.abs() < f32::INFINITY;
     u == 0.0 || v == 0.0 || w == 0.0 || !ok(det) || !ok(t_scaled)
@@ -167,6 +170,7 @@ pub fn needs_f64(u: f32, v: f32, w: f32, det: f32, t_scaled: f32) -> bool {
 
 /// Whether a triangle can never be hit: a non-finite vertex or zero area. The builder leaves such
 /// triangles out of the acceleration structure (they are inactive).
+#[must_use]
 pub fn is_degenerate(p0: Vec3, p1: Vec3, p2: Vec3) -> bool {
     if !(p0.is_finite() && p1.is_finite() && p2.is_finite()) {
         return true;

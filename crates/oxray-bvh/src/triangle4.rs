@@ -26,6 +26,7 @@ impl Triangle4 {
     }
 
     /// The triangle in lane `lane`.
+    #[must_use]
     pub fn get(&self, lane: usize) -> [[f32; 3]; 3] {
         std::array::from_fn(|k| std::array::from_fn(|axis| self.v[k][axis][lane]))
     }
@@ -49,6 +50,7 @@ pub struct Hits4 {
 impl Hits4 {
     /// The hit of lane `l`.
     #[inline(always)]
+    #[must_use]
     pub fn get(&self, l: usize) -> TriangleHit {
         TriangleHit {
             t: self.t[l],
@@ -63,6 +65,7 @@ impl WatertightRay {
     /// Intersects the first `valid` (1 to 4) lanes of a block; hits lie in `[tmin, tmax]`.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
+    #[must_use]
     pub fn intersect4(&self, tri: &Triangle4, valid: usize, tmin: f32, tmax: f32) -> Hits4 {
         use crate::triangle::F32_TINY;
         use std::arch::x86_64::*;

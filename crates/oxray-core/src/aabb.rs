@@ -39,11 +39,13 @@ impl Aabb {
     };
 
     /// The box with the given corners.
+    #[must_use]
     pub const fn new(min: Vec3, max: Vec3) -> Self {
         Aabb { min, max }
     }
 
     /// The smallest box holding all the points.
+    #[must_use]
     pub fn from_points(points: &[Vec3]) -> Self {
         points.iter().fold(Self::EMPTY, |mut b, &p| {
             b.grow(p);
@@ -60,6 +62,7 @@ impl Aabb {
 
     /// The smallest box holding both boxes. NaN coordinates of `other` are ignored.
     #[inline]
+    #[must_use]
     pub fn union(&self, other: &Aabb) -> Aabb {
         Aabb {
             min: min3(self.min, other.min),
@@ -69,30 +72,35 @@ impl Aabb {
 
     /// `max - min`, negative on an empty box.
     #[inline]
+    #[must_use]
     pub fn extent(&self) -> Vec3 {
         self.max - self.min
     }
 
     /// The centre, computed so that huge coordinates do not overflow.
     #[inline]
+    #[must_use]
     pub fn center(&self) -> Vec3 {
         self.min * 0.5 + self.max * 0.5
     }
 
     /// Whether `min <= max` on every axis (NaN makes a box invalid).
     #[inline]
+    #[must_use]
     pub fn is_valid(&self) -> bool {
         self.min.x <= self.max.x && self.min.y <= self.max.y && self.min.z <= self.max.z
     }
 
     /// Whether every coordinate is finite and `min <= max`.
     #[inline]
+    #[must_use]
     pub fn is_finite_valid(&self) -> bool {
         self.is_valid() && self.min.is_finite() && self.max.is_finite()
     }
 
     /// Half the surface area; 0 for an empty or degenerate box. This is the SAH's measure.
     #[inline]
+    #[must_use]
     pub fn half_area(&self) -> f32 {
         let e = self.extent();
         if e.x < 0.0 || e.y < 0.0 || e.z < 0.0 {
@@ -103,17 +111,20 @@ impl Aabb {
 
     /// Whether `p` lies inside or on the box.
     #[inline]
+    #[must_use]
     pub fn contains(&self, p: Vec3) -> bool {
         p.cmpge(self.min).all() && p.cmple(self.max).all()
     }
 
     /// Whether `other` lies inside or on the box.
     #[inline]
+    #[must_use]
     pub fn contains_box(&self, other: &Aabb) -> bool {
         self.contains(other.min) && self.contains(other.max)
     }
 
     /// The axis of greatest extent (0, 1 or 2).
+    #[must_use]
     pub fn largest_axis(&self) -> usize {
         let e = self.extent();
         if e.x >= e.y && e.x >= e.z {

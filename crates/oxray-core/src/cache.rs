@@ -11,6 +11,7 @@ use std::path::{Path, PathBuf};
 /// let dir = oxray_core::cache::cache_dir();
 /// assert!(dir.is_absolute() || dir.is_relative()); // any path the environment gives
 /// ```
+#[must_use]
 pub fn cache_dir() -> PathBuf {
     let env = |k: &str| {
         std::env::var_os(k)
@@ -30,6 +31,7 @@ pub fn cache_dir() -> PathBuf {
 /// use oxray_core::cache::content_key;
 /// assert_ne!(content_key(&["a", "bc"]), content_key(&["ab", "c"]));
 /// ```
+#[must_use]
 pub fn content_key(parts: &[&str]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for p in parts {
@@ -42,6 +44,7 @@ pub fn content_key(parts: &[&str]) -> u64 {
 }
 
 /// The path of entry `key` with extension `ext` in `dir`.
+#[must_use]
 pub fn entry_path(dir: &Path, prefix: &str, key: u64, ext: &str) -> PathBuf {
     dir.join(format!("{prefix}-{key:016x}.{ext}"))
 }

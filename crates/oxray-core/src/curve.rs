@@ -61,6 +61,7 @@ impl CurveType {
 
     /// The `OptixPrimitiveType` value.
     #[doc(alias = "OptixPrimitiveType")]
+    #[must_use]
     pub const fn code(self) -> u32 {
         match self {
             CurveType::RoundQuadraticBSpline => 0x2501,
@@ -78,6 +79,7 @@ impl CurveType {
 
     /// The curve type of an `OptixPrimitiveType` value.
     #[doc(alias = "OptixPrimitiveType")]
+    #[must_use]
     pub const fn from_code(code: u32) -> Option<CurveType> {
         Some(match code {
             0x2501 => CurveType::RoundQuadraticBSpline,
@@ -95,6 +97,7 @@ impl CurveType {
     }
 
     /// Control points of one segment (guide §5.2): 2 linear, 3 quadratic, 4 cubic.
+    #[must_use]
     pub const fn control_points(self) -> usize {
         match self {
             CurveType::RoundLinear => 2,
@@ -106,11 +109,13 @@ impl CurveType {
     }
 
     /// Whether this is a ribbon (flat cross-section).
+    #[must_use]
     pub const fn is_ribbon(self) -> bool {
         matches!(self, CurveType::FlatQuadraticBSpline)
     }
 
     /// Whether this is a Rocaps (swept-sphere) variant (guide §9.7).
+    #[must_use]
     pub const fn is_rocaps(self) -> bool {
         matches!(
             self,
@@ -123,6 +128,7 @@ impl CurveType {
 
     /// The pipeline flag that enables this type (`OptixPrimitiveTypeFlags`, guide §9.1).
     #[doc(alias = "OptixPrimitiveTypeFlags")]
+    #[must_use]
     pub const fn type_flag(self) -> crate::PrimitiveTypeFlags {
         use crate::PrimitiveTypeFlags as F;
         match self {
@@ -229,6 +235,7 @@ pub struct CurveInput<'a> {
 impl<'a> CurveInput<'a> {
     /// `num_primitives` segments of `curve_type` over `num_vertices` control points, tightly
     /// packed, with no normals, default end caps and no flags.
+    #[must_use]
     pub fn new(
         curve_type: CurveType,
         vertex_buffers: &'a [&'a [u8]],
@@ -256,18 +263,21 @@ impl<'a> CurveInput<'a> {
     }
 
     /// Sets the control point stride in bytes.
+    #[must_use]
     pub fn vertex_stride(mut self, stride: u32) -> Self {
         self.vertex_stride = stride;
         self
     }
 
     /// Sets the radius stride in bytes.
+    #[must_use]
     pub fn width_stride(mut self, stride: u32) -> Self {
         self.width_stride = stride;
         self
     }
 
     /// Sets the ribbon normal buffers (one per motion key) and their stride.
+    #[must_use]
     pub fn normals(mut self, buffers: &'a [&'a [u8]], stride: u32) -> Self {
         self.normal_buffers = buffers;
         self.normal_stride = stride;
@@ -275,30 +285,35 @@ impl<'a> CurveInput<'a> {
     }
 
     /// Sets the index stride in bytes.
+    #[must_use]
     pub fn index_stride(mut self, stride: u32) -> Self {
         self.index_stride = stride;
         self
     }
 
     /// Sets the geometry flags of the input's SBT record.
+    #[must_use]
     pub fn flag(mut self, flag: GeometryFlags) -> Self {
         self.flag = flag;
         self
     }
 
     /// Sets the end caps.
+    #[must_use]
     pub fn endcaps(mut self, endcaps: CurveEndcaps) -> Self {
         self.endcaps = endcaps;
         self
     }
 
     /// Sets the primitive index offset.
+    #[must_use]
     pub fn primitive_index_offset(mut self, offset: u32) -> Self {
         self.primitive_index_offset = offset;
         self
     }
 
     /// Segments this input declares.
+    #[must_use]
     pub fn num_primitives(&self) -> u32 {
         self.num_primitives
     }
@@ -313,50 +328,59 @@ impl<'a> CurveInput<'a> {
     }
 
     /// The control point stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_vertex_stride(&self) -> usize {
         Self::effective(self.vertex_stride, 12)
     }
 
     /// The radius stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_width_stride(&self) -> usize {
         Self::effective(self.width_stride, 4)
     }
 
     /// The normal stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_normal_stride(&self) -> usize {
         Self::effective(self.normal_stride, 12)
     }
 
     /// The index stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_index_stride(&self) -> usize {
         Self::effective(self.index_stride, 4)
     }
 
     /// The first control point of segment `i` in a validated index buffer.
     #[inline]
+    #[must_use]
     pub fn segment_start(&self, index_buffer: &[u8], i: usize) -> u32 {
         read_u32(index_buffer, i * self.effective_index_stride())
     }
 
     /// Control point `i` of a validated key buffer.
     #[inline]
+    #[must_use]
     pub fn point(&self, buffer: &[u8], i: usize) -> Vec3 {
         read_vec3(buffer, i * self.effective_vertex_stride())
     }
 
     /// Normal `i` of a validated key buffer.
     #[inline]
+    #[must_use]
     pub fn normal(&self, buffer: &[u8], i: usize) -> Vec3 {
         read_vec3(buffer, i * self.effective_normal_stride())
     }
 
     /// Radius of control point `i` in a validated key buffer.
     #[inline]
+    #[must_use]
     pub fn radius(&self, buffer: &[u8], i: usize) -> f32 {
         f32::from_bits(read_u32(buffer, i * self.effective_width_stride()))
     }
 
     /// Whether segment `i` starts a strand (§5.2: the one before it does not continue into it).
+    #[must_use]
     pub fn starts_strand(&self, i: usize) -> bool {
         i == 0
             || self.segment_start(self.index_buffer, i - 1).wrapping_add(1)
@@ -364,6 +388,7 @@ impl<'a> CurveInput<'a> {
     }
 
     /// Whether segment `i` ends a strand (§5.2).
+    #[must_use]
     pub fn ends_strand(&self, i: usize) -> bool {
         i + 1 >= self.num_primitives as usize || self.starts_strand(i + 1)
     }

@@ -331,6 +331,7 @@ pub enum BuildError {
 
 impl BuildError {
     /// Shorthand for an instance field with bits above its limit.
+    #[must_use]
     pub fn field(instance: u32, field: &'static str, value: u32, bits: u32) -> Self {
         BuildError::InstanceFieldOutOfRange {
             instance,
@@ -342,6 +343,7 @@ impl BuildError {
 
     /// The `OptixResult` code the guide gives for this error.
     #[doc(alias = "OptixResult")]
+    #[must_use]
     pub fn code(&self) -> ErrorCode {
         match self {
             BuildError::Unsupported(_) => ErrorCode::NotSupported,
@@ -586,6 +588,7 @@ impl LoadError {
     #[doc(alias = "OptixResult")]
     #[doc(alias = "OPTIX_ERROR_INVALID_VALUE")]
     #[doc(alias = "OPTIX_ERROR_NOT_SUPPORTED")]
+    #[must_use]
     pub fn code(&self) -> ErrorCode {
         match self {
             LoadError::UnsupportedVersion { .. } | LoadError::Unsupported(_) => {
@@ -739,6 +742,7 @@ pub enum PipelineError {
 impl PipelineError {
     /// The `OptixResult` code the guide gives for this error.
     #[doc(alias = "OptixResult")]
+    #[must_use]
     pub fn code(&self) -> ErrorCode {
         ErrorCode::InvalidValue
     }
@@ -786,6 +790,7 @@ pub enum LaunchError {
 impl LaunchError {
     /// The `OptixResult` code the guide gives for this error.
     #[doc(alias = "OptixResult")]
+    #[must_use]
     pub fn code(&self) -> ErrorCode {
         match self {
             LaunchError::ValidationFailure { .. } => ErrorCode::ValidationFailure,

@@ -79,6 +79,7 @@ impl ExceptionCode {
     pub const MAX_USER: i32 = (1 << 30) - 1;
 
     /// Whether this is a user code.
+    #[must_use]
     pub fn is_user(self) -> bool {
         (0..=Self::MAX_USER).contains(&self.0)
     }
@@ -95,6 +96,7 @@ pub struct Exception {
 
 impl Exception {
     /// An exception with `code` and up to eight detail words (more are dropped).
+    #[must_use]
     pub fn new(code: ExceptionCode, details: &[u32]) -> Self {
         let n = details.len().min(8);
         let mut d = [0; 8];
@@ -108,6 +110,7 @@ impl Exception {
 
     /// The detail words (`optixGetExceptionDetail_0..7`).
     #[doc(alias = "optixGetExceptionDetail_0")]
+    #[must_use]
     pub fn details(&self) -> &[u32] {
         &self.details[..self.num_details as usize]
     }

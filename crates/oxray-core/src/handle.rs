@@ -105,31 +105,37 @@ impl TraversableHandle {
     }
 
     /// Whether this is the null handle.
+    #[must_use]
     pub fn is_null(&self) -> bool {
         self.0.is_none()
     }
 
     /// What the handle refers to, if anything.
+    #[must_use]
     pub fn kind(&self) -> Option<TraversableKind> {
         self.0.as_ref().map(|t| t.traversable_kind())
     }
 
     /// The backend the structure lives on; `None` for the null handle.
+    #[must_use]
     pub fn backend(&self) -> Option<BackendKind> {
         self.0.as_ref().map(|t| t.backend())
     }
 
     /// The box around everything reachable from the handle, in the handle's space.
+    #[must_use]
     pub fn bounds(&self) -> Aabb {
         self.0.as_ref().map_or(Aabb::EMPTY, |t| t.bounds())
     }
 
     /// Levels of the graph below and including this handle (0 for the null handle).
+    #[must_use]
     pub fn graph_depth(&self) -> u32 {
         self.0.as_ref().map_or(0, |t| t.graph_depth())
     }
 
     /// Whether two handles refer to the same structure.
+    #[must_use]
     pub fn same_as(&self, other: &TraversableHandle) -> bool {
         match (&self.0, &other.0) {
             (None, None) => true,
@@ -139,23 +145,27 @@ impl TraversableHandle {
     }
 
     /// The lineage of the structure behind the handle (see [`Traversable::lineage`]).
+    #[must_use]
     pub fn lineage(&self) -> Option<u64> {
         self.0.as_ref().and_then(|t| t.lineage())
     }
 
     /// Whether `other` refers to the same structure as `self`, or to an update (or compaction)
     /// of it: what an IAS update accepts as an unchanged instance child (guide §5.6).
+    #[must_use]
     pub fn same_structure(&self, other: &TraversableHandle) -> bool {
         self.same_as(other) || (self.lineage().is_some() && self.lineage() == other.lineage())
     }
 
     /// The backend object, if the handle refers to a `T`.
+    #[must_use]
     pub fn downcast_ref<T: Traversable>(&self) -> Option<&T> {
         let any: &dyn Any = self.0.as_deref()?;
         any.downcast_ref()
     }
 
     /// A new owner of the backend object, if the handle refers to a `T`.
+    #[must_use]
     pub fn downcast_arc<T: Traversable>(&self) -> Option<Arc<T>> {
         let any: Arc<dyn Any + Send + Sync> = self.0.clone()?;
         any.downcast().ok()
@@ -170,6 +180,7 @@ impl TraversableHandle {
 
     /// A number that identifies the structure while it is alive (its address; 0 for the null
     /// handle). A structure dropped and another made later may be given the same number.
+    #[must_use]
     pub fn address(&self) -> u64 {
         self.0
             .as_ref()
@@ -190,6 +201,7 @@ pub struct WeakTraversableHandle(Option<std::sync::Weak<dyn Traversable>>);
 impl WeakTraversableHandle {
     /// The handle, if the structure is still alive (`None` for a dropped structure and for the
     /// null handle).
+    #[must_use]
     pub fn upgrade(&self) -> Option<TraversableHandle> {
         self.0
             .as_ref()

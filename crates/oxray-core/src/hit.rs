@@ -39,6 +39,7 @@ pub enum PrimitiveType {
 impl PrimitiveType {
     /// The `OptixPrimitiveType` value.
     #[doc(alias = "OptixPrimitiveType")]
+    #[must_use]
     pub const fn code(self) -> u32 {
         match self {
             PrimitiveType::Custom => 0x2500,
@@ -61,12 +62,14 @@ impl HitKind {
 
     /// The front (`back == false`) or back face of a curve of type `ty` (guide §9.3): round
     /// curves report front faces only (their tubes are hollow, §9.6); ribbons report either.
+    #[must_use]
     pub const fn curve(ty: crate::CurveType, back: bool) -> HitKind {
         HitKind(0x80 | ((ty.code() & 0xFF) as u8) << 1 | back as u8)
     }
 
     /// `optixGetPrimitiveType(hitKind)`: which primitive type the kind belongs to.
     #[doc(alias = "optixGetPrimitiveType")]
+    #[must_use]
     pub const fn primitive_type(self) -> PrimitiveType {
         match self.0 {
             0xFE | 0xFF => PrimitiveType::Triangle,
@@ -83,12 +86,14 @@ impl HitKind {
 
     /// `optixIsFrontFaceHit(hitKind)`: a built-in primitive's front face (never a custom kind).
     #[doc(alias = "optixIsFrontFaceHit")]
+    #[must_use]
     pub const fn is_front_face(self) -> bool {
         self.0 >= 0x80 && self.0 & 1 == 0
     }
 
     /// `optixIsBackFaceHit(hitKind)`: a built-in primitive's back face (never a custom kind).
     #[doc(alias = "optixIsBackFaceHit")]
+    #[must_use]
     pub const fn is_back_face(self) -> bool {
         self.0 >= 0x80 && self.0 & 1 == 1
     }
@@ -101,16 +106,19 @@ impl HitKind {
     pub const TRIANGLE_BACK_FACE: HitKind = HitKind(0xFF);
 
     /// A custom hit kind: only the low 7 bits are kept (guide §12).
+    #[must_use]
     pub const fn custom(kind: u8) -> HitKind {
         HitKind(kind & 0x7F)
     }
 
     /// Whether this is a triangle's front face.
+    #[must_use]
     pub const fn is_triangle_front_face(self) -> bool {
         self.0 == 0xFE
     }
 
     /// Whether this is a triangle's back face.
+    #[must_use]
     pub const fn is_triangle_back_face(self) -> bool {
         self.0 == 0xFF
     }

@@ -24,6 +24,7 @@ pub struct VertexBuffer<'a> {
 
 impl<'a> VertexBuffer<'a> {
     /// A buffer of `count` vertices of `format` with the given stride.
+    #[must_use]
     pub fn new(data: &'a [u8], format: VertexFormat, stride: u32, count: u32) -> Self {
         VertexBuffer {
             data,
@@ -34,6 +35,7 @@ impl<'a> VertexBuffer<'a> {
     }
 
     /// Tightly packed `f32` positions.
+    #[must_use]
     pub fn f32x3(vertices: &'a [[f32; 3]]) -> Self {
         Self::new(
             bytemuck::cast_slice(vertices),
@@ -44,6 +46,7 @@ impl<'a> VertexBuffer<'a> {
     }
 
     /// Tightly packed `glam::Vec3` positions.
+    #[must_use]
     pub fn vec3(vertices: &'a [Vec3]) -> Self {
         Self::new(
             bytemuck::cast_slice(vertices),
@@ -54,6 +57,7 @@ impl<'a> VertexBuffer<'a> {
     }
 
     /// The stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_stride(&self) -> usize {
         if self.stride == 0 {
             self.format.size()
@@ -78,6 +82,7 @@ pub struct IndexBuffer<'a> {
 
 impl<'a> IndexBuffer<'a> {
     /// A buffer of `count` triplets of `format` with the given stride.
+    #[must_use]
     pub fn new(data: &'a [u8], format: IndexFormat, stride: u32, count: u32) -> Self {
         IndexBuffer {
             data,
@@ -88,6 +93,7 @@ impl<'a> IndexBuffer<'a> {
     }
 
     /// Tightly packed `u32` triplets.
+    #[must_use]
     pub fn u32x3(triangles: &'a [[u32; 3]]) -> Self {
         Self::new(
             bytemuck::cast_slice(triangles),
@@ -98,6 +104,7 @@ impl<'a> IndexBuffer<'a> {
     }
 
     /// Tightly packed `u16` triplets.
+    #[must_use]
     pub fn u16x3(triangles: &'a [[u16; 3]]) -> Self {
         Self::new(
             bytemuck::cast_slice(triangles),
@@ -108,6 +115,7 @@ impl<'a> IndexBuffer<'a> {
     }
 
     /// The stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_stride(&self) -> usize {
         if self.stride == 0 {
             self.format.size()
@@ -130,6 +138,7 @@ pub enum SbtIndexSize {
 
 impl SbtIndexSize {
     /// Bytes of one offset.
+    #[must_use]
     pub const fn size(self) -> usize {
         match self {
             SbtIndexSize::U8 => 1,
@@ -153,6 +162,7 @@ pub struct SbtIndexOffsets<'a> {
 
 impl<'a> SbtIndexOffsets<'a> {
     /// Tightly packed `u8` offsets.
+    #[must_use]
     pub fn u8(offsets: &'a [u8]) -> Self {
         SbtIndexOffsets {
             data: offsets,
@@ -162,6 +172,7 @@ impl<'a> SbtIndexOffsets<'a> {
     }
 
     /// Tightly packed `u16` offsets.
+    #[must_use]
     pub fn u16(offsets: &'a [u16]) -> Self {
         SbtIndexOffsets {
             data: bytemuck::cast_slice(offsets),
@@ -171,6 +182,7 @@ impl<'a> SbtIndexOffsets<'a> {
     }
 
     /// Tightly packed `u32` offsets.
+    #[must_use]
     pub fn u32(offsets: &'a [u32]) -> Self {
         SbtIndexOffsets {
             data: bytemuck::cast_slice(offsets),
@@ -180,6 +192,7 @@ impl<'a> SbtIndexOffsets<'a> {
     }
 
     /// The stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_stride(&self) -> usize {
         if self.stride == 0 {
             self.size.size()
@@ -190,6 +203,7 @@ impl<'a> SbtIndexOffsets<'a> {
 
     /// The offset of primitive `i`; the buffer must have been validated.
     #[inline]
+    #[must_use]
     pub fn get(&self, i: usize) -> u32 {
         let at = i * self.effective_stride();
         let b = &self.data[at..at + self.size.size()];
@@ -237,6 +251,7 @@ pub struct TriangleInput<'a> {
 
 impl<'a> TriangleInput<'a> {
     /// A triangle soup over `vertices` with one SBT record and no flags.
+    #[must_use]
     pub fn new(vertices: VertexBuffer<'a>) -> Self {
         TriangleInput {
             vertices,
@@ -259,17 +274,20 @@ impl<'a> TriangleInput<'a> {
     /// let input = TriangleInput::new(VertexBuffer::f32x3(&k0)).motion_vertices(&later);
     /// assert_eq!(input.num_motion_keys(), 2);
     /// ```
+    #[must_use]
     pub fn motion_vertices(mut self, keys: &'a [VertexBuffer<'a>]) -> Self {
         self.motion_vertices = keys;
         self
     }
 
     /// Motion keys the input gives vertices for (1 without motion).
+    #[must_use]
     pub fn num_motion_keys(&self) -> usize {
         1 + self.motion_vertices.len()
     }
 
     /// The vertex buffer of motion key `key` (0 is [`vertices`](Self::vertices)).
+    #[must_use]
     pub fn vertex_key(&self, key: usize) -> Option<&VertexBuffer<'a>> {
         match key {
             0 => Some(&self.vertices),
@@ -278,36 +296,42 @@ impl<'a> TriangleInput<'a> {
     }
 
     /// Sets the index buffer.
+    #[must_use]
     pub fn indices(mut self, indices: IndexBuffer<'a>) -> Self {
         self.indices = Some(indices);
         self
     }
 
     /// Sets the 3x4 row-major pre-transform.
+    #[must_use]
     pub fn pre_transform(mut self, m: [f32; 12]) -> Self {
         self.pre_transform = Some(m);
         self
     }
 
     /// Sets the per-record geometry flags (and so the number of SBT records).
+    #[must_use]
     pub fn flags(mut self, flags: &'a [GeometryFlags]) -> Self {
         self.flags = flags;
         self
     }
 
     /// Sets the per-primitive SBT index offsets.
+    #[must_use]
     pub fn sbt_index_offsets(mut self, offsets: SbtIndexOffsets<'a>) -> Self {
         self.sbt_index_offsets = Some(offsets);
         self
     }
 
     /// Sets the primitive index offset.
+    #[must_use]
     pub fn primitive_index_offset(mut self, offset: u32) -> Self {
         self.primitive_index_offset = offset;
         self
     }
 
     /// Number of triangles this input declares.
+    #[must_use]
     pub fn num_primitives(&self) -> u32 {
         match &self.indices {
             Some(ix) => ix.count,
@@ -330,6 +354,7 @@ pub struct AabbBuffer<'a> {
 
 impl<'a> AabbBuffer<'a> {
     /// Tightly packed boxes.
+    #[must_use]
     pub fn new(aabbs: &'a [crate::Aabb]) -> Self {
         AabbBuffer {
             data: bytemuck::cast_slice(aabbs),
@@ -339,6 +364,7 @@ impl<'a> AabbBuffer<'a> {
     }
 
     /// The stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_stride(&self) -> usize {
         if self.stride == 0 {
             24
@@ -370,6 +396,7 @@ pub struct CustomPrimitiveInput<'a> {
 
 impl<'a> CustomPrimitiveInput<'a> {
     /// Custom primitives bounded by `aabbs`, with one SBT record and no flags.
+    #[must_use]
     pub fn new(aabbs: AabbBuffer<'a>) -> Self {
         CustomPrimitiveInput {
             aabbs,
@@ -381,12 +408,14 @@ impl<'a> CustomPrimitiveInput<'a> {
     }
 
     /// Sets the boxes of motion keys 1, 2, … (key 0 is [`aabbs`](Self::aabbs)).
+    #[must_use]
     pub fn motion_aabbs(mut self, keys: &'a [AabbBuffer<'a>]) -> Self {
         self.motion_aabbs = keys;
         self
     }
 
     /// The box buffer of motion key `key` (0 is [`aabbs`](Self::aabbs)).
+    #[must_use]
     pub fn aabb_key(&self, key: usize) -> Option<&AabbBuffer<'a>> {
         match key {
             0 => Some(&self.aabbs),
@@ -396,6 +425,7 @@ impl<'a> CustomPrimitiveInput<'a> {
 
     /// Box `i` of a validated key buffer.
     #[inline]
+    #[must_use]
     pub fn aabb(buffer: &AabbBuffer<'_>, i: usize) -> crate::Aabb {
         let at = i * buffer.effective_stride();
         let f: [f32; 6] = std::array::from_fn(|k| {
@@ -406,18 +436,21 @@ impl<'a> CustomPrimitiveInput<'a> {
     }
 
     /// Sets the per-record geometry flags.
+    #[must_use]
     pub fn flags(mut self, flags: &'a [GeometryFlags]) -> Self {
         self.flags = flags;
         self
     }
 
     /// Sets the per-primitive SBT index offsets.
+    #[must_use]
     pub fn sbt_index_offsets(mut self, offsets: SbtIndexOffsets<'a>) -> Self {
         self.sbt_index_offsets = Some(offsets);
         self
     }
 
     /// Sets the primitive index offset.
+    #[must_use]
     pub fn primitive_index_offset(mut self, offset: u32) -> Self {
         self.primitive_index_offset = offset;
         self
@@ -473,6 +506,7 @@ pub struct SphereInput<'a> {
 
 impl<'a> SphereInput<'a> {
     /// `num_vertices` spheres, tightly packed, one radius each, one SBT record and no flags.
+    #[must_use]
     pub fn new(
         vertex_buffers: &'a [&'a [u8]],
         num_vertices: u32,
@@ -492,47 +526,55 @@ impl<'a> SphereInput<'a> {
     }
 
     /// Sets the centre stride in bytes.
+    #[must_use]
     pub fn vertex_stride(mut self, stride: u32) -> Self {
         self.vertex_stride = stride;
         self
     }
 
     /// Sets the radius stride in bytes.
+    #[must_use]
     pub fn radius_stride(mut self, stride: u32) -> Self {
         self.radius_stride = stride;
         self
     }
 
     /// Sets `singleRadius`: one radius per buffer for every sphere.
+    #[must_use]
     pub fn single_radius(mut self, single: bool) -> Self {
         self.single_radius = single;
         self
     }
 
     /// Sets the per-record geometry flags (and so the number of SBT records).
+    #[must_use]
     pub fn flags(mut self, flags: &'a [GeometryFlags]) -> Self {
         self.flags = flags;
         self
     }
 
     /// Sets the per-primitive SBT index offsets.
+    #[must_use]
     pub fn sbt_index_offsets(mut self, offsets: SbtIndexOffsets<'a>) -> Self {
         self.sbt_index_offsets = Some(offsets);
         self
     }
 
     /// Sets the primitive index offset.
+    #[must_use]
     pub fn primitive_index_offset(mut self, offset: u32) -> Self {
         self.primitive_index_offset = offset;
         self
     }
 
     /// Number of spheres this input declares.
+    #[must_use]
     pub fn num_primitives(&self) -> u32 {
         self.num_vertices
     }
 
     /// The centre stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_vertex_stride(&self) -> usize {
         if self.vertex_stride == 0 {
             12
@@ -542,6 +584,7 @@ impl<'a> SphereInput<'a> {
     }
 
     /// The radius stride in bytes, resolving 0.
+    #[must_use]
     pub fn effective_radius_stride(&self) -> usize {
         if self.radius_stride == 0 {
             4
@@ -552,6 +595,7 @@ impl<'a> SphereInput<'a> {
 
     /// Centre `i` of a validated key buffer.
     #[inline]
+    #[must_use]
     pub fn centre(&self, buffer: &[u8], i: usize) -> Vec3 {
         let at = i * self.effective_vertex_stride();
         let f = |k: usize| {
@@ -564,6 +608,7 @@ impl<'a> SphereInput<'a> {
     /// Radius of sphere `i` in a validated key buffer (the single radius with
     /// [`single_radius`](Self::single_radius)).
     #[inline]
+    #[must_use]
     pub fn radius(&self, buffer: &[u8], i: usize) -> f32 {
         let at = if self.single_radius {
             0
@@ -650,6 +695,7 @@ impl std::fmt::Display for BuildInputKind {
 
 impl BuildInput<'_> {
     /// The kind of this input.
+    #[must_use]
     pub fn kind(&self) -> BuildInputKind {
         match self {
             BuildInput::Triangles(_) => BuildInputKind::Triangles,
@@ -662,6 +708,7 @@ impl BuildInput<'_> {
     }
 
     /// Number of primitives this input declares.
+    #[must_use]
     pub fn num_primitives(&self) -> u32 {
         match self {
             BuildInput::Triangles(t) => t.num_primitives(),
@@ -674,6 +721,7 @@ impl BuildInput<'_> {
     }
 
     /// The per-record geometry flags (none for instances).
+    #[must_use]
     pub fn flags(&self) -> &[GeometryFlags] {
         match self {
             BuildInput::Triangles(t) => t.flags,
@@ -686,6 +734,7 @@ impl BuildInput<'_> {
     }
 
     /// The per-primitive SBT index offsets.
+    #[must_use]
     pub fn sbt_index_offsets(&self) -> Option<&SbtIndexOffsets<'_>> {
         match self {
             BuildInput::Triangles(t) => t.sbt_index_offsets.as_ref(),
@@ -697,6 +746,7 @@ impl BuildInput<'_> {
     }
 
     /// The primitive index offset.
+    #[must_use]
     pub fn primitive_index_offset(&self) -> u32 {
         match self {
             BuildInput::Triangles(t) => t.primitive_index_offset,
@@ -727,6 +777,7 @@ impl<'a> From<&'a [&'a crate::Instance]> for BuildInput<'a> {
 
 impl BuildInputKind {
     /// Whether inputs of this kind build an IAS.
+    #[must_use]
     pub fn is_instances(self) -> bool {
         matches!(
             self,

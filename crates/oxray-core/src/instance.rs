@@ -66,6 +66,7 @@ pub struct Instance {
 
 impl Instance {
     /// An identity instance of `child` with id 0, SBT offset 0 and mask `0xFF`.
+    #[must_use]
     pub fn new(child: TraversableHandle) -> Self {
         Instance {
             transform: Transform::IDENTITY,
@@ -78,30 +79,35 @@ impl Instance {
     }
 
     /// Sets the object-to-world transform.
+    #[must_use]
     pub fn transform(mut self, t: Transform) -> Self {
         self.transform = t;
         self
     }
 
     /// Sets the user id.
+    #[must_use]
     pub fn instance_id(mut self, id: u32) -> Self {
         self.instance_id = id;
         self
     }
 
     /// Sets the SBT offset.
+    #[must_use]
     pub fn sbt_offset(mut self, offset: u32) -> Self {
         self.sbt_offset = offset;
         self
     }
 
     /// Sets the visibility mask.
+    #[must_use]
     pub fn visibility_mask(mut self, mask: u32) -> Self {
         self.visibility_mask = mask;
         self
     }
 
     /// Sets the flags.
+    #[must_use]
     pub fn flags(mut self, flags: InstanceFlags) -> Self {
         self.flags = flags;
         self
@@ -140,16 +146,19 @@ impl StaticTransform {
     }
 
     /// The object-to-world transform.
+    #[must_use]
     pub fn transform(&self) -> &Transform {
         &self.transform
     }
 
     /// The world-to-object transform (the inverse, computed when it was made).
+    #[must_use]
     pub fn inverse(&self) -> &Transform {
         &self.inverse
     }
 
     /// The child.
+    #[must_use]
     pub fn child(&self) -> &TraversableHandle {
         &self.child
     }

@@ -97,6 +97,7 @@ impl KeySample {
 /// exactly wherever `a == b` (a motionless key pair gives the static data, up to the sign of a
 /// zero), and at `f = 0` for finite `b - a`.
 #[inline(always)]
+#[must_use]
 pub fn lerp(a: f32, b: f32, f: f32) -> f32 {
     a + (b - a) * f
 }
@@ -140,6 +141,7 @@ impl MotionOptions {
     };
 
     /// `num_keys` keys from `time_begin` to `time_end`, without flags.
+    #[must_use]
     pub fn new(num_keys: u16, time_begin: f32, time_end: f32) -> Self {
         MotionOptions {
             num_keys,
@@ -150,17 +152,20 @@ impl MotionOptions {
     }
 
     /// The same options with `flags`.
+    #[must_use]
     pub fn with_flags(mut self, flags: MotionFlags) -> Self {
         self.flags = flags;
         self
     }
 
     /// Whether these options give motion: more than one key.
+    #[must_use]
     pub fn has_motion(&self) -> bool {
         self.num_keys > 1
     }
 
     /// Keys the data is given for: `num_keys`, or 1 without motion.
+    #[must_use]
     pub fn key_count(&self) -> usize {
         (self.num_keys as usize).max(1)
     }
@@ -204,6 +209,7 @@ impl MotionOptions {
     /// Whether a traversable with these options vanishes at `time` (a vanish flag and a time
     /// outside the range); never without motion.
     #[inline]
+    #[must_use]
     pub fn vanishes_at(&self, time: f32) -> bool {
         self.has_motion()
             && ((self.flags.contains(MotionFlags::START_VANISH) && time < self.time_begin)
@@ -215,6 +221,7 @@ impl MotionOptions {
     /// traversable vanishes. A time that is not a number is taken as `time_begin`. Without
     /// motion, [`KeySample::STATIC`].
     #[inline]
+    #[must_use]
     pub fn sample(&self, time: f32) -> Option<KeySample> {
         if !self.has_motion() {
             return Some(KeySample::STATIC);

@@ -85,6 +85,7 @@ impl SrtData {
 
     /// Component-wise linear interpolation of two keys (the quaternion is not normalised
     /// here; [`to_transform`](Self::to_transform) does).
+    #[must_use]
     pub fn lerp(&self, other: &SrtData, f: f32) -> SrtData {
         let (a, b) = (self.as_array(), other.as_array());
         let out: [f32; 16] = std::array::from_fn(|i| lerp(a[i], b[i], f));
@@ -93,6 +94,7 @@ impl SrtData {
 
     /// The object-to-world transform `C = T · R · S`, with the quaternion normalised first
     /// (guide §5.10.5).
+    #[must_use]
     pub fn to_transform(&self) -> Transform {
         let n =
             (self.qx * self.qx + self.qy * self.qy + self.qz * self.qz + self.qw * self.qw).sqrt();
@@ -212,6 +214,7 @@ fn optix_layout(motion: &MotionOptions, keys: &[f32]) -> Vec<u64> {
 
 /// Grows a box by a few ulps of its coordinates: a key interpolated in `f32` may round past
 /// the boxes of its keys by an ulp.
+#[must_use]
 pub fn pad_motion_box(b: &Aabb) -> Aabb {
     if !b.is_valid() {
         return *b;
@@ -272,27 +275,32 @@ impl MatrixMotionTransform {
     }
 
     /// The child.
+    #[must_use]
     pub fn child(&self) -> &TraversableHandle {
         &self.child
     }
 
     /// The motion options.
+    #[must_use]
     pub fn motion_options(&self) -> &MotionOptions {
         &self.motion
     }
 
     /// The keys' object-to-world matrices.
+    #[must_use]
     pub fn keys(&self) -> &[Transform] {
         &self.keys
     }
 
     /// The matrix between two keys.
+    #[must_use]
     pub fn interpolate(&self, s: KeySample) -> Transform {
         let (a, b) = (&self.keys[s.key].0, &self.keys[s.next].0);
         Transform(std::array::from_fn(|i| lerp(a[i], b[i], s.fraction)))
     }
 
     /// The object-to-world transform at `time`; `None` where the transform vanishes.
+    #[must_use]
     pub fn object_to_world_at(&self, time: f32) -> Option<Transform> {
         self.motion.sample(time).map(|s| self.interpolate(s))
     }
@@ -303,6 +311,7 @@ impl MatrixMotionTransform {
     /// child handle, motion options and padding, then every key), with a child handle of 0:
     /// what `optixGet…MotionTransformFromHandle` gives programs compiled for the CPU.
     #[doc(alias = "OptixMatrixMotionTransform")]
+    #[must_use]
     pub fn optix_layout(&self) -> &[u8] {
         bytemuck::cast_slice(&self.layout)
     }
@@ -410,21 +419,25 @@ impl SrtMotionTransform {
     }
 
     /// The child.
+    #[must_use]
     pub fn child(&self) -> &TraversableHandle {
         &self.child
     }
 
     /// The motion options.
+    #[must_use]
     pub fn motion_options(&self) -> &MotionOptions {
         &self.motion
     }
 
     /// The keys.
+    #[must_use]
     pub fn keys(&self) -> &[SrtData] {
         &self.keys
     }
 
     /// The transform between two keys.
+    #[must_use]
     pub fn interpolate(&self, s: KeySample) -> Transform {
         self.keys[s.key]
             .lerp(&self.keys[s.next], s.fraction)
@@ -432,6 +445,7 @@ impl SrtMotionTransform {
     }
 
     /// The object-to-world transform at `time`; `None` where the transform vanishes.
+    #[must_use]
     pub fn object_to_world_at(&self, time: f32) -> Option<Transform> {
         self.motion.sample(time).map(|s| self.interpolate(s))
     }
@@ -442,6 +456,7 @@ impl SrtMotionTransform {
     /// child handle, motion options and padding, then every key), with a child handle of 0:
     /// what `optixGet…MotionTransformFromHandle` gives programs compiled for the CPU.
     #[doc(alias = "OptixSRTMotionTransform")]
+    #[must_use]
     pub fn optix_layout(&self) -> &[u8] {
         bytemuck::cast_slice(&self.layout)
     }

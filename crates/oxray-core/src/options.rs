@@ -75,6 +75,7 @@ pub struct BuildOptions {
 
 impl BuildOptions {
     /// A build with the given flags.
+    #[must_use]
     pub fn new(flags: BuildFlags) -> Self {
         BuildOptions {
             flags,
@@ -90,6 +91,7 @@ impl BuildOptions {
     /// let opts = BuildOptions::new(BuildFlags::empty()).with_motion(MotionOptions::new(2, 0.0, 1.0));
     /// assert_eq!(opts.motion.key_count(), 2);
     /// ```
+    #[must_use]
     pub fn with_motion(mut self, motion: crate::motion::MotionOptions) -> Self {
         self.motion = motion;
         self

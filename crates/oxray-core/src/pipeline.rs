@@ -41,6 +41,7 @@ pub struct DeviceContext {
 
 impl DeviceContext {
     /// A context without validation or logging.
+    #[must_use]
     pub fn new() -> Self {
         Self::default()
     }
@@ -49,12 +50,14 @@ impl DeviceContext {
     /// negative tmin, tmin > tmax raise `INVALID_RAY`), report every exception to the log, and
     /// fail with [`LaunchError::ValidationFailure`](crate::LaunchError::ValidationFailure) when a
     /// launch index raised a built-in (non-user) exception.
+    #[must_use]
     pub fn validation_mode(mut self, on: bool) -> Self {
         self.validation_mode = on;
         self
     }
 
     /// Whether validation mode is on.
+    #[must_use]
     pub fn is_validation_mode(&self) -> bool {
         self.validation_mode
     }
@@ -71,6 +74,7 @@ impl DeviceContext {
     }
 
     /// Whether a log callback is set (at any level).
+    #[must_use]
     pub fn has_log_callback(&self) -> bool {
         self.log.is_some()
     }
@@ -145,6 +149,7 @@ impl PrimitiveTypeFlags {
     /// assert!(PrimitiveTypeFlags::SPHERE.allows(PrimitiveType::Sphere));
     /// assert!(!PrimitiveTypeFlags::SPHERE.allows(PrimitiveType::Triangle));
     /// ```
+    #[must_use]
     pub fn allows(self, ty: crate::PrimitiveType) -> bool {
         let set = if self.is_empty() {
             PrimitiveTypeFlags::TRIANGLE | PrimitiveTypeFlags::CUSTOM
@@ -298,6 +303,7 @@ fn exception_message(index: [u32; 3], e: &Exception) -> String {
 ///     "[oxray][EXCEPTION] launch index [3, 0, 0]: user exception (code 7, details [1, 2])\n"
 /// );
 /// ```
+#[must_use]
 pub fn builtin_exception_lines(first: &[([u32; 3], Exception)]) -> String {
     first
         .iter()

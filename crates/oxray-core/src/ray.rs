@@ -101,6 +101,7 @@ pub enum RayError {
 
 impl Ray {
     /// A ray over `[0, +inf]`.
+    #[must_use]
     pub fn new(origin: Vec3, direction: Vec3) -> Self {
         Ray {
             origin,
@@ -112,6 +113,7 @@ impl Ray {
     }
 
     /// A ray over `[tmin, tmax]`.
+    #[must_use]
     pub fn with_interval(origin: Vec3, direction: Vec3, tmin: f32, tmax: f32) -> Self {
         Ray {
             origin,
@@ -123,12 +125,14 @@ impl Ray {
     }
 
     /// The same ray at time `time`.
+    #[must_use]
     pub fn with_time(mut self, time: f32) -> Self {
         self.time = time;
         self
     }
 
     /// The point at distance `t`.
+    #[must_use]
     pub fn at(&self, t: f32) -> Vec3 {
         self.origin + self.direction * t
     }
@@ -171,6 +175,7 @@ pub const TMAX_SLACK: f32 = 1.0 + 1.0 / 16384.0;
 
 /// `max(acc, x)` that keeps `acc` when `x` is NaN (compiles to `maxps`).
 #[inline(always)]
+#[must_use]
 pub fn max_ignore_nan(acc: f32, x: f32) -> f32 {
     if x > acc {
         x
@@ -181,6 +186,7 @@ pub fn max_ignore_nan(acc: f32, x: f32) -> f32 {
 
 /// `min(acc, x)` that keeps `acc` when `x` is NaN (compiles to `minps`).
 #[inline(always)]
+#[must_use]
 pub fn min_ignore_nan(acc: f32, x: f32) -> f32 {
     if x < acc {
         x

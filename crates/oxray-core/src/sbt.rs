@@ -22,6 +22,7 @@ pub struct SbtHeader(pub [u8; SBT_RECORD_HEADER_SIZE]);
 
 impl SbtHeader {
     /// The header of a CPU program group with id `id` (what `pack_header` writes).
+    #[must_use]
     pub fn for_group(id: u64) -> SbtHeader {
         let mut h = [0u8; SBT_RECORD_HEADER_SIZE];
         h[..8].copy_from_slice(&HEADER_MAGIC);
@@ -32,6 +33,7 @@ impl SbtHeader {
     }
 
     /// The program-group id, if the bytes are a header at all.
+    #[must_use]
     pub fn group_id(bytes: &[u8]) -> Option<u64> {
         let h: &[u8; SBT_RECORD_HEADER_SIZE] =
             bytes.get(..SBT_RECORD_HEADER_SIZE)?.try_into().ok()?;
@@ -82,6 +84,7 @@ impl SbtRegion {
     }
 
     /// Records whose only content is the header.
+    #[must_use]
     pub fn from_headers(headers: &[SbtHeader]) -> Self {
         let records: Vec<(SbtHeader, [u8; 0])> = headers.iter().map(|h| (*h, [])).collect();
         Self::from_records(&records)
@@ -111,16 +114,19 @@ impl SbtRegion {
     }
 
     /// Bytes from one record to the next.
+    #[must_use]
     pub fn stride(&self) -> usize {
         self.stride
     }
 
     /// Number of records.
+    #[must_use]
     pub fn count(&self) -> usize {
         self.count
     }
 
     /// Record `i` (header and data), if it exists.
+    #[must_use]
     pub fn record(&self, i: usize) -> Option<&[u8]> {
         (i < self.count).then(|| &self.bytes[i * self.stride..(i + 1) * self.stride])
     }
@@ -153,6 +159,7 @@ pub struct ShaderBindingTable {
 /// // Bits above the fourth are ignored.
 /// assert_eq!(hit_group_index(0, 1, 0x12, 0x31), 3);
 /// ```
+#[must_use]
 pub fn hit_group_index(
     instance_offset: u32,
     sbt_gas_index: u32,

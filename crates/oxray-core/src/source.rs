@@ -73,6 +73,7 @@ fn code_only(source: &str) -> String {
 
 /// Whether `source` declares or defines a function `name` (the name as a whole word, followed
 /// by `(`), outside comments and strings.
+#[must_use]
 pub fn has_entry(source: &str, name: &str) -> bool {
     let code = code_only(source);
     let found = find_word_calls(&code, name).next().is_some();
@@ -127,6 +128,7 @@ pub fn entries(source: &str) -> Vec<String> {
 /// let s = oxray_core::source::strip_optix_includes("#include <optix.h>\n#include <cmath>\n");
 /// assert_eq!(s, "// (oxray device header) #include <optix.h>\n#include <cmath>\n");
 /// ```
+#[must_use]
 pub fn strip_optix_includes(source: &str) -> String {
     let mut out = String::with_capacity(source.len());
     for line in source.lines() {
@@ -154,6 +156,7 @@ pub fn strip_optix_includes(source: &str) -> String {
 /// let src = "extern \"C\" __constant__ Params params;\nextern \"C\" { __constant__ int n; }\n";
 /// assert_eq!(oxray_core::source::extern_c_variables(src), ["params"]);
 /// ```
+#[must_use]
 pub fn extern_c_variables(source: &str) -> Vec<String> {
     let code = code_only(source);
     let mut names = Vec::new();

@@ -33,11 +33,13 @@ impl Transform {
         Transform([1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]);
 
     /// A translation.
+    #[must_use]
     pub fn from_translation(t: Vec3) -> Self {
         Self::from_affine(&Affine3A::from_translation(t))
     }
 
     /// From a `glam` affine transform.
+    #[must_use]
     pub fn from_affine(a: &Affine3A) -> Self {
         let m = a.matrix3;
         let t = a.translation;
@@ -49,6 +51,7 @@ impl Transform {
     }
 
     /// As a `glam` affine transform.
+    #[must_use]
     pub fn to_affine(&self) -> Affine3A {
         let r = &self.0;
         Affine3A {
@@ -63,6 +66,7 @@ impl Transform {
 
     /// Applies the transform to a point.
     #[inline]
+    #[must_use]
     pub fn transform_point(&self, p: Vec3) -> Vec3 {
         let r = &self.0;
         Vec3::new(
@@ -74,6 +78,7 @@ impl Transform {
 
     /// Applies the linear part to a vector.
     #[inline]
+    #[must_use]
     pub fn transform_vector(&self, v: Vec3) -> Vec3 {
         let r = &self.0;
         Vec3::new(
@@ -85,6 +90,7 @@ impl Transform {
 
     /// Applies the inverse transpose of the linear part (for normals), given the inverse.
     #[inline]
+    #[must_use]
     pub fn transform_normal_with_inverse(inverse: &Transform, n: Vec3) -> Vec3 {
         let r = &inverse.0;
         Vec3::new(
@@ -95,11 +101,13 @@ impl Transform {
     }
 
     /// `self * other`: applies `other`, then `self`.
+    #[must_use]
     pub fn then_after(&self, other: &Transform) -> Transform {
         Self::from_affine(&(self.to_affine() * other.to_affine()))
     }
 
     /// The inverse, or `None` if the transform is singular or not finite.
+    #[must_use]
     pub fn inverse(&self) -> Option<Transform> {
         let a = self.to_affine();
         let det = a.matrix3.determinant();
@@ -122,6 +130,7 @@ impl Transform {
     /// let inv = t.inverse_cofactors().unwrap();
     /// assert_eq!(inv.transform_point(Vec3::new(1.0, 2.0, 3.0)), Vec3::ZERO);
     /// ```
+    #[must_use]
     pub fn inverse_cofactors(&self) -> Option<Transform> {
         let m = &self.0;
         let (a, b, c, tx) = (m[0], m[1], m[2], m[3]);
@@ -164,6 +173,7 @@ impl Transform {
     }
 
     /// The box around the transformed corners of `b` (empty stays empty).
+    #[must_use]
     pub fn transform_aabb(&self, b: &Aabb) -> Aabb {
         if !b.is_valid() {
             return Aabb::EMPTY;

@@ -26,6 +26,7 @@ pub enum VertexFormat {
 
 impl VertexFormat {
     /// Bytes of one vertex, the stride of a tightly packed buffer.
+    #[must_use]
     pub const fn size(self) -> usize {
         match self {
             VertexFormat::F32x3 => 12,
@@ -36,6 +37,7 @@ impl VertexFormat {
     }
 
     /// The natural alignment of a component; strides must be a multiple of it.
+    #[must_use]
     pub const fn alignment(self) -> usize {
         match self {
             VertexFormat::F32x3 | VertexFormat::F32x2 => 4,
@@ -48,6 +50,7 @@ impl VertexFormat {
     /// # Panics
     /// If `bytes` is shorter than one vertex (build inputs are validated before decoding).
     #[inline]
+    #[must_use]
     pub fn decode(self, bytes: &[u8]) -> Vec3 {
         // One bounds check per vertex: the fixed-size array below needs no more.
         fn take<const N: usize>(b: &[u8]) -> [u8; N] {
@@ -105,6 +108,7 @@ pub enum IndexFormat {
 
 impl IndexFormat {
     /// Bytes of one triplet.
+    #[must_use]
     pub const fn size(self) -> usize {
         match self {
             IndexFormat::U16x3 => 6,
@@ -113,6 +117,7 @@ impl IndexFormat {
     }
 
     /// The natural alignment of one index; strides must be a multiple of it.
+    #[must_use]
     pub const fn alignment(self) -> usize {
         match self {
             IndexFormat::U16x3 => 2,
@@ -125,6 +130,7 @@ impl IndexFormat {
     /// # Panics
     /// If `bytes` is shorter than one triplet (build inputs are validated before decoding).
     #[inline]
+    #[must_use]
     pub fn decode(self, bytes: &[u8]) -> [u32; 3] {
         match self {
             IndexFormat::U16x3 => {

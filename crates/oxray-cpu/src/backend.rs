@@ -35,6 +35,7 @@ pub struct Cpu {
 impl Cpu {
     /// The CPU backend, with the process's traversal kernel: the best the processor has, or the
     /// one `OXRAY_CPU_ISA` forces ([`Isa::selected`]).
+    #[must_use]
     pub fn new() -> Self {
         Cpu {
             isa: Isa::selected(),
@@ -43,11 +44,13 @@ impl Cpu {
 
     /// The CPU backend with the traversal kernel `isa`, clamped to what the processor has
     /// ([`Isa::clamp`]).
+    #[must_use]
     pub fn with_isa(isa: Isa) -> Self {
         Cpu { isa: isa.clamp() }
     }
 
     /// The traversal kernel of the structures it builds.
+    #[must_use]
     pub fn isa(&self) -> Isa {
         self.isa
     }

@@ -70,6 +70,7 @@ impl Gas {
     /// Wraps built (or loaded, or compacted) data for the kernel `isa`, clamped to what the
     /// processor has; a kernel of 8-wide nodes falls back to the 4-wide one ([`Isa::Sse`]) if
     /// the data has no 8-wide layout.
+    #[must_use]
     pub fn from_data_with_isa(data: GasData, isa: Isa) -> Gas {
         let isa = Self::kernel_for(&data, isa);
         let curve_types = data
@@ -93,11 +94,13 @@ impl Gas {
     /// The pipeline flags (`OptixPrimitiveTypeFlags`) of the curve types it holds; empty for a
     /// structure that is not made of curves.
     #[doc(alias = "OptixPrimitiveTypeFlags")]
+    #[must_use]
     pub fn curve_types(&self) -> PrimitiveTypeFlags {
         self.curve_types
     }
 
     /// The kernel that traverses this structure.
+    #[must_use]
     pub fn isa(&self) -> Isa {
         self.isa
     }
@@ -113,6 +116,7 @@ impl Gas {
     }
 
     /// The built data.
+    #[must_use]
     pub fn data(&self) -> &GasData {
         &self.data
     }

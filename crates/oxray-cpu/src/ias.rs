@@ -65,6 +65,7 @@ impl Ias {
     }
 
     /// The built data.
+    #[must_use]
     pub fn data(&self) -> &IasData {
         &self.data
     }

@@ -37,6 +37,7 @@ impl Interrupt {
     }
 
     /// The exception, if this interrupt is one.
+    #[must_use]
     pub fn as_exception(&self) -> Option<&Exception> {
         match &self.0 {
             InterruptKind::Exception(e) => Some(e),

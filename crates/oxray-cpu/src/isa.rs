@@ -36,6 +36,7 @@ impl Isa {
     pub const ALL: [Isa; 4] = [Isa::Scalar, Isa::Sse, Isa::Avx2, Isa::Avx512];
 
     /// The kernel's name, as [`ISA_ENV`] takes it.
+    #[must_use]
     pub fn name(self) -> &'static str {
         match self {
             Isa::Scalar => "scalar",
@@ -47,6 +48,7 @@ impl Isa {
     }
 
     /// The kernel of a name (`scalar`, `sse`, `neon`, `avx2`, `avx512`, any case).
+    #[must_use]
     pub fn from_name(name: &str) -> Option<Isa> {
         match name.trim().to_ascii_lowercase().as_str() {
             "scalar" => Some(Isa::Scalar),
@@ -58,6 +60,7 @@ impl Isa {
     }
 
     /// Whether this processor runs the kernel.
+    #[must_use]
     pub fn is_available(self) -> bool {
         match self {
             Isa::Scalar | Isa::Sse => true,
@@ -71,6 +74,7 @@ impl Isa {
     }
 
     /// The kernels this processor runs, from the narrowest.
+    #[must_use]
     pub fn available() -> Vec<Isa> {
         Isa::ALL.into_iter().filter(|i| i.is_available()).collect()
     }
@@ -78,6 +82,7 @@ impl Isa {
     /// The fastest kernel this processor runs: AVX-512, else AVX2 (both 8-wide; AVX-512's mask
     /// compares and 32 registers measured 4-12 % faster on the bunny), else the 4-wide SSE/NEON
     /// kernel.
+    #[must_use]
     pub fn detect() -> Isa {
         [Isa::Avx512, Isa::Avx2]
             .into_iter()
@@ -87,6 +92,7 @@ impl Isa {
 
     /// The kernel itself if the processor runs it, else the best one below it that it runs
     /// (AVX-512 → AVX2 → SSE; the scalar kernel runs everywhere).
+    #[must_use]
     pub fn clamp(self) -> Isa {
         match self {
             i if i.is_available() => i,
@@ -108,6 +114,7 @@ impl Isa {
     }
 
     /// The node layouts a structure needs for this kernel.
+    #[must_use]
     pub fn width(self) -> NodeWidth {
         match self {
             Isa::Sse => NodeWidth::Four,

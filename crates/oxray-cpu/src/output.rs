@@ -33,6 +33,7 @@ impl<T: Pod> OutputBuffer<T> {
     };
 
     /// A zeroed buffer of `len` elements.
+    #[must_use]
     pub fn new(len: usize) -> Self {
         OutputBuffer {
             words: (0..len * Self::WORDS).map(|_| AtomicU32::new(0)).collect(),
@@ -42,11 +43,13 @@ impl<T: Pod> OutputBuffer<T> {
     }
 
     /// Number of elements.
+    #[must_use]
     pub fn len(&self) -> usize {
         self.len
     }
 
     /// Whether the buffer has no elements.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
@@ -65,6 +68,7 @@ impl<T: Pod> OutputBuffer<T> {
     }
 
     /// Reads element `i`.
+    #[must_use]
     pub fn read(&self, i: usize) -> Option<T> {
         if i >= self.len {
             return None;
@@ -80,6 +84,7 @@ impl<T: Pod> OutputBuffer<T> {
     }
 
     /// All elements.
+    #[must_use]
     pub fn to_vec(&self) -> Vec<T> {
         (0..self.len).filter_map(|i| self.read(i)).collect()
     }

@@ -47,6 +47,7 @@ impl Cuda {
 
     /// The backend of an open context (the GASes it builds use the default layout and are
     /// built on the device).
+    #[must_use]
     pub fn from_context(ctx: CudaContext) -> Cuda {
         Cuda {
             ctx,
@@ -56,28 +57,33 @@ impl Cuda {
     }
 
     /// The same device, building GASes in `layout` from now on.
+    #[must_use]
     pub fn with_layout(mut self, layout: NodeLayout) -> Self {
         self.layout = layout;
         self
     }
 
     /// The same device, building triangle GASes with `builder` from now on.
+    #[must_use]
     pub fn with_builder(mut self, builder: GasBuilder) -> Self {
         self.builder = builder;
         self
     }
 
     /// The node layout triangle GASes are uploaded in.
+    #[must_use]
     pub fn layout(&self) -> NodeLayout {
         self.layout
     }
 
     /// Where triangle GASes are built.
+    #[must_use]
     pub fn builder(&self) -> GasBuilder {
         self.builder
     }
 
     /// How the device would build a GAS of these inputs, or `None` where the host builds it.
+    #[must_use]
     pub fn device_build_config(
         &self,
         options: &BuildOptions,
@@ -118,6 +124,7 @@ impl Cuda {
     }
 
     /// The device context.
+    #[must_use]
     pub fn context(&self) -> &CudaContext {
         &self.ctx
     }

@@ -211,11 +211,13 @@ impl CudaContext {
     }
 
     /// Whether two handles share one context (device memory of one is valid in the other).
+    #[must_use]
     pub fn same_context(&self, other: &CudaContext) -> bool {
         Arc::ptr_eq(&self.kernels, &other.kernels)
     }
 
     /// The device.
+    #[must_use]
     pub fn device(&self) -> &DeviceInfo {
         &self.info
     }

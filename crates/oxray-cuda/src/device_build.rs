@@ -59,6 +59,7 @@ impl GasBuilder {
     }
 
     /// `device` or `host`.
+    #[must_use]
     pub fn name(self) -> &'static str {
         match self {
             GasBuilder::Device => "device",
@@ -118,6 +119,7 @@ impl DeviceBuildConfig {
     /// quality step yet, and the host's SAH builder traces faster) and `ALLOW_UPDATE` (the
     /// device does not refit; an updatable structure keeps slots for inactive primitives, which
     /// only the host builder places).
+    #[must_use]
     pub fn for_options(options: &BuildOptions, num_primitives: u32) -> Option<DeviceBuildConfig> {
         let f = options.flags;
         if f.intersects(BuildFlags::PREFER_FAST_TRACE | BuildFlags::ALLOW_UPDATE) {

@@ -75,6 +75,7 @@ pub enum CudaError {
 impl CudaError {
     /// Whether the error only says that this machine has no CUDA (no driver, no device, no
     /// NVRTC): the caller may fall back to the CPU backend or skip.
+    #[must_use]
     pub fn is_unavailable(&self) -> bool {
         matches!(
             self,

@@ -37,16 +37,19 @@ impl HitRecord {
     pub const MISS: u32 = u32::MAX;
 
     /// Whether the ray hit something.
+    #[must_use]
     pub fn is_hit(&self) -> bool {
         self.slot != Self::MISS
     }
 
     /// The leaf slot hit (meaningless for a miss).
+    #[must_use]
     pub fn slot_index(&self) -> u32 {
         self.slot & 0x7FFF_FFFF
     }
 
     /// Whether the hit is on a triangle's front face.
+    #[must_use]
     pub fn is_front_face(&self) -> bool {
         self.slot & 0x8000_0000 == 0
     }
@@ -97,11 +100,13 @@ impl DeviceRays {
     }
 
     /// Rays in the batch.
+    #[must_use]
     pub fn len(&self) -> usize {
         self.len
     }
 
     /// Whether the batch is empty.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
@@ -151,11 +156,13 @@ impl DeviceHits {
     }
 
     /// Results held.
+    #[must_use]
     pub fn len(&self) -> usize {
         self.len
     }
 
     /// Whether it holds no results.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
@@ -194,11 +201,13 @@ impl DeviceOcclusion {
     }
 
     /// Results held.
+    #[must_use]
     pub fn len(&self) -> usize {
         self.len
     }
 
     /// Whether it holds no results.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }

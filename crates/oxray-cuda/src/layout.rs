@@ -30,6 +30,7 @@ pub enum NodeLayout {
 
 impl NodeLayout {
     /// Bytes of one node.
+    #[must_use]
     pub fn node_bytes(self) -> usize {
         match self {
             NodeLayout::Bvh4 => 128,
@@ -38,6 +39,7 @@ impl NodeLayout {
     }
 
     /// A short name (`bvh4`, `bvh2`).
+    #[must_use]
     pub fn name(self) -> &'static str {
         match self {
             NodeLayout::Bvh4 => "bvh4",

@@ -32,6 +32,7 @@ pub const PIPELINE_BLOCK: u32 = 128;
 const PIPELINE_THREADS_PER_SM: u32 = 1280;
 
 /// The block size pipelines are compiled and launched with.
+#[must_use]
 pub fn pipeline_block() -> u32 {
     std::env::var("OXRAY_PIPELINE_BLOCK")
         .ok()
@@ -73,11 +74,13 @@ impl CudaModule {
     }
 
     /// The source as given.
+    #[must_use]
     pub fn source(&self) -> &str {
         &self.inner.source
     }
 
     /// Whether the source defines or declares the entry `name` (a word followed by `(`).
+    #[must_use]
     pub fn has_entry(&self, name: &str) -> bool {
         oxray_core::source::has_entry(&self.inner.source, name)
     }
@@ -274,6 +277,7 @@ impl CudaProgramGroup {
     }
 
     /// The group's kind.
+    #[must_use]
     pub fn kind(&self) -> CudaProgramGroupKind {
         self.inner.kind
     }
@@ -281,6 +285,7 @@ impl CudaProgramGroup {
     /// The record header naming this group (`optixSbtRecordPackHeader`). A pipeline that holds
     /// the group replaces it, as it uploads the SBT, with the group's program index.
     #[doc(alias = "optixSbtRecordPackHeader")]
+    #[must_use]
     pub fn pack_header(&self) -> SbtHeader {
         let id = self.inner.id;
         let mut h = [0u8; SBT_RECORD_HEADER_SIZE];
@@ -291,6 +296,7 @@ impl CudaProgramGroup {
     }
 
     /// The group id a header packed by [`pack_header`](Self::pack_header) names.
+    #[must_use]
     pub fn header_group_id(bytes: &[u8]) -> Option<u64> {
         let h = bytes.get(..SBT_RECORD_HEADER_SIZE)?;
         if h[..8] != CUDA_HEADER_MAGIC {
@@ -304,6 +310,7 @@ impl CudaProgramGroup {
 
 /// The CUDA C++ translation unit of a pipeline: traversal, device header, modules, dispatch and
 /// the kernel `__oxray_pipeline`. Compiled with [`pipeline_compile_options`].
+#[must_use]
 pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     let mut s = String::new();
     // Without any-hit programs, a trace into a triangle GAS that culls nothing takes the query
@@ -661,6 +668,7 @@ pub fn compile_pipeline_ptx(
 /// Where [`compile_pipeline_ptx`] keeps the PTX of a pipeline (`None` without NVRTC): the disk
 /// cache (the counterpart of OptiX's, guide §4.2), keyed by everything that determines the PTX
 /// (NVRTC's version, the options, which name the architecture, and the whole unit).
+#[must_use]
 pub fn pipeline_cache_entry(
     cc: (i32, i32),
     compile: &PipelineCompileOptions,
@@ -1228,17 +1236,20 @@ impl<T: Pod> CudaBuffer<T> {
     }
 
     /// The device address of the first value (a `T*` for programs).
+    #[must_use]
     pub fn device_ptr(&self) -> u64 {
         let (p, _g) = self.bytes.device_ptr(&self.ctx.stream);
         p
     }
 
     /// Values held.
+    #[must_use]
     pub fn len(&self) -> usize {
         self.len
     }
 
     /// Whether it holds no values.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }

@@ -115,6 +115,7 @@ pub struct Animation {
 
 impl Channel {
     /// Why the channel cannot be sampled (for loaders), or `None` when it can.
+    #[must_use]
     pub fn problem(&self) -> Option<String> {
         if self.times.is_empty() {
             return Some("no keyframes".into());
@@ -143,6 +144,7 @@ impl Channel {
     }
 
     /// The value at `time` (clamped to the keyframes), as four components.
+    #[must_use]
     pub fn sample(&self, time: f32) -> Vec4 {
         let n = self.times.len();
         let value = |k: usize| -> Vec4 {
@@ -205,6 +207,7 @@ fn quat(v: Vec4) -> Quat {
 
 impl InstanceDesc {
     /// A placement of mesh `mesh` by `transform`, at no node.
+    #[must_use]
     pub fn new(mesh: u32, transform: Mat4) -> InstanceDesc {
         InstanceDesc {
             mesh,
@@ -214,6 +217,7 @@ impl InstanceDesc {
     }
 
     /// The same placement, made by node `node` (which animations may move).
+    #[must_use]
     pub fn at_node(mut self, node: u32) -> InstanceDesc {
         self.node = Some(node);
         self
@@ -223,6 +227,7 @@ impl InstanceDesc {
 impl SceneDesc {
     /// The local transform of node `node` at `time` under animation `animation` (its rest
     /// transform where no channel of that animation targets it).
+    #[must_use]
     pub fn node_transform_at(&self, node: u32, animation: usize, time: f32) -> Mat4 {
         let Some(n) = self.nodes.get(node as usize) else {
             return Mat4::IDENTITY;
@@ -246,6 +251,7 @@ impl SceneDesc {
 
     /// Whether animation `animation` moves instance `instance` (a channel targets its node or
     /// one of the node's ancestors).
+    #[must_use]
     pub fn is_animated(&self, instance: usize, animation: usize) -> bool {
         let Some(a) = self.animations.get(animation) else {
             return false;
@@ -258,6 +264,7 @@ impl SceneDesc {
     /// How many keyframes of animation `animation` that move instance `instance` (on its node
     /// or an ancestor) fall strictly between `open` and `close`: how finely the motion must be
     /// keyed to follow them.
+    #[must_use]
     pub fn keyframes_between(
         &self,
         instance: usize,
@@ -281,6 +288,7 @@ impl SceneDesc {
     /// The object-to-world transform of instance `instance` at `time` under animation
     /// `animation`: the product of its node's and its ancestors' animated local transforms. An
     /// instance the animation does not move keeps [`InstanceDesc::transform`].
+    #[must_use]
     pub fn instance_transform_at(&self, instance: usize, animation: usize, time: f32) -> Mat4 {
         let Some(inst) = self.instances.get(instance) else {
             return Mat4::IDENTITY;

@@ -28,6 +28,7 @@ const LIGHT_Y: f32 = 548.3;
 /// down +Z, a 25 mm film at 35 mm focal length). Materials: 0 white, 1 red, 2 green, 3 light
 /// (emitting downwards only). Every quad is listed as in the data, whose windings face the
 /// room's inside and the blocks' outside.
+#[must_use]
 pub fn cornell_box() -> SceneDesc {
     let mut light = diffuse("light", [0.78; 3]);
     light.emissive = [17.0, 12.0, 4.0];

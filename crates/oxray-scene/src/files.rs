@@ -99,6 +99,7 @@ impl Limits {
 }
 
 /// `n` bytes in MiB for messages.
+#[must_use]
 pub fn mib(n: u64) -> String {
     if n >= MIB {
         format!("{} MiB", n / MIB)
@@ -158,6 +159,7 @@ pub fn read_input(path: &Path) -> io::Result<Vec<u8>> {
 
 /// Whether `a` and `b` name the same existing file (same device and inode on Unix, same
 /// canonical path elsewhere). Paths that do not exist are never the same file.
+#[must_use]
 pub fn same_file(a: &Path, b: &Path) -> bool {
     #[cfg(unix)]
     {
@@ -287,6 +289,7 @@ thread_local! {
 
 /// Whether the current thread is inside [`guard_panics`]: a panic hook can stay silent then,
 /// since the panic is reported as an ordinary error.
+#[must_use]
 pub fn in_guarded_code() -> bool {
     GUARDED.with(|g| g.get() > 0)
 }

@@ -139,6 +139,7 @@ impl TextureRef {
     pub const IDENTITY: [f32; 6] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
 
     /// A reference to `texture` with untransformed coordinates.
+    #[must_use]
     pub fn new(texture: u32) -> TextureRef {
         TextureRef {
             texture,
@@ -148,6 +149,7 @@ impl TextureRef {
     }
 
     /// The same reference, reading texture coordinate set `set` (0 or 1).
+    #[must_use]
     pub fn with_tex_coord(mut self, set: u32) -> Self {
         self.tex_coord = set;
         self
@@ -155,6 +157,7 @@ impl TextureRef {
 
     /// The transform of `KHR_texture_transform`: scale, then rotate by `rotation` radians
     /// (counter-clockwise in UV space, which is clockwise in the image), then offset.
+    #[must_use]
     pub fn with_khr_transform(mut self, offset: [f32; 2], rotation: f32, scale: [f32; 2]) -> Self {
         let (s, c) = rotation.sin_cos();
         self.uv_transform = [
@@ -169,6 +172,7 @@ impl TextureRef {
     }
 
     /// Applies the UV transform.
+    #[must_use]
     pub fn map(&self, u: f32, v: f32) -> (f32, f32) {
         let m = &self.uv_transform;
         (m[0] * u + m[1] * v + m[2], m[3] * u + m[4] * v + m[5])
@@ -267,6 +271,7 @@ pub struct Texture {
 
 impl Texture {
     /// A 1x1 texture of one colour (the stand-in for a texture that could not be loaded).
+    #[must_use]
     pub fn solid(name: &str, rgba: [u8; 4]) -> Texture {
         Texture {
             name: name.into(),
@@ -326,6 +331,7 @@ pub struct PunctualLight {
 impl InstanceDesc {
     /// The placement as an engine transform, or `None` when it cannot be traced (a non-finite
     /// or singular matrix: such an instance has no visible surface).
+    #[must_use]
     pub fn placement(&self) -> Option<oxray::Transform> {
         let m = self.transform;
         (m.is_finite() && m.determinant().abs() > 1e-30)
@@ -346,6 +352,7 @@ pub struct Camera {
 
 impl Camera {
     /// A camera at `eye` looking at `target`, with +Y up.
+    #[must_use]
     pub fn look_at(eye: Vec3, target: Vec3, yfov: f32) -> Camera {
         let up = if (target - eye).normalize().cross(Vec3::Y).length() < 1e-3 {
             Vec3::Z
@@ -370,6 +377,7 @@ impl Camera {
     /// assert_eq!(m.transform_vector3(-Vec3::Z), -Vec3::Z);
     /// assert_eq!(m.transform_point3(Vec3::ZERO), Vec3::new(0.0, 0.0, 5.0));
     /// ```
+    #[must_use]
     pub fn to_world_looking_at(eye: Vec3, target: Vec3, up: Vec3) -> Mat4 {
         let forward = (target - eye).normalize();
         let right = forward.cross(up).normalize();
@@ -442,6 +450,7 @@ impl SceneDesc {
     }
 
     /// A scene of one untextured mesh with the default material.
+    #[must_use]
     pub fn from_mesh(name: &str, mesh: crate::mesh::Mesh) -> SceneDesc {
         SceneDesc {
             meshes: vec![MeshDesc {
@@ -503,6 +512,7 @@ impl SceneDesc {
     }
 
     /// World-space bounds of the scene's own content: every instance but the added ground.
+    #[must_use]
     pub fn content_bounds(&self) -> Option<(Vec3, Vec3)> {
         match self.ground {
             None => self.bounds(),
@@ -516,6 +526,7 @@ impl SceneDesc {
     }
 
     /// Triangles over all instances.
+    #[must_use]
     pub fn triangle_count(&self) -> u64 {
         self.instances
             .iter()
@@ -526,6 +537,7 @@ impl SceneDesc {
     }
 
     /// World-space bounds over all instances, or `None` for an empty scene.
+    #[must_use]
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         let mut lo = Vec3::splat(f32::INFINITY);
         let mut hi = Vec3::splat(f32::NEG_INFINITY);
@@ -617,6 +629,7 @@ impl SceneDesc {
 
 /// A file's extension in lower case (`None` without one, or when it is not UTF-8): how every
 /// loader and writer picks a format.
+#[must_use]
 pub fn file_extension(path: &Path) -> Option<String> {
     path.extension()
         .and_then(|e| e.to_str())

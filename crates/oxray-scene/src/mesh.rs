@@ -206,6 +206,7 @@ impl Mesh {
     /// assert_eq!(m.triangles.len(), 20 * 16);
     /// assert_eq!(m.bounds(), oxray_scene::mesh::Mesh::icosphere(0).bounds());
     /// ```
+    #[must_use]
     pub fn subdivided(&self, levels: u32) -> Option<Mesh> {
         let tris = (self.triangles.len() as u64).checked_mul(4u64.checked_pow(levels)?)?;
         // Each split adds at most 3 vertices per triangle of the level before.
@@ -231,6 +232,7 @@ impl Mesh {
     }
 
     /// The box around the vertices as `(min, max)`.
+    #[must_use]
     pub fn bounds(&self) -> ([f32; 3], [f32; 3]) {
         let mut lo = [f32::INFINITY; 3];
         let mut hi = [f32::NEG_INFINITY; 3];

@@ -13,21 +13,25 @@ pub struct Context {
 
 impl Context {
     /// A context over `device`.
+    #[must_use]
     pub fn new(device: DeviceContext) -> Self {
         Context { device }
     }
 
     /// The device context.
+    #[must_use]
     pub fn device(&self) -> &DeviceContext {
         &self.device
     }
 
     /// A new, empty scene.
+    #[must_use]
     pub fn create_scene<P>(&self) -> Scene<P> {
         Scene::new()
     }
 
     /// A material with one hit group per ray type and a user value.
+    #[must_use]
     pub fn create_material<P>(
         &self,
         hit_groups: Vec<Option<ProgramGroup<P>>>,
@@ -37,6 +41,7 @@ impl Context {
     }
 
     /// A pipeline over scenes: ray generation and one miss program per ray type.
+    #[must_use]
     pub fn create_pipeline<P: Clone + Sync>(
         &self,
         compile: PipelineCompileOptions,

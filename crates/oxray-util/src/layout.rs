@@ -24,6 +24,7 @@ pub struct SbtLayout {
 impl SbtLayout {
     /// Computes the layout from, per GAS, its total material count (Σ of its inputs' material
     /// counts) and the ray-type count of each material set.
+    #[must_use]
     pub fn compute(gases: &[(u32, Vec<u32>)]) -> SbtLayout {
         let mut offset = 0u32;
         let chunks = gases
@@ -50,11 +51,13 @@ impl SbtLayout {
     }
 
     /// The chunk of a GAS (by its position in the scene) and material set.
+    #[must_use]
     pub fn chunk(&self, gas: usize, material_set: usize) -> Option<ChunkInfo> {
         self.chunks.get(gas)?.get(material_set).copied()
     }
 
     /// Hit-group records in all.
+    #[must_use]
     pub fn hit_group_count(&self) -> u32 {
         self.total
     }

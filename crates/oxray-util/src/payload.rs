@@ -11,6 +11,7 @@ use bytemuck::Pod;
 /// write_payload(&[1.0f32, 2.0, 3.0], |i, w| words[i] = w);
 /// assert_eq!(read_payload::<[f32; 3]>(&words), [1.0, 2.0, 3.0]);
 /// ```
+#[must_use]
 pub fn read_payload<T: Pod>(words: &[u32]) -> T {
     let mut v = T::zeroed();
     let bytes = bytemuck::bytes_of_mut(&mut v);
@@ -32,6 +33,7 @@ pub fn write_payload<T: Pod>(value: &T, mut set: impl FnMut(usize, u32)) {
 }
 
 /// Payload words a `T` needs.
+#[must_use]
 pub const fn payload_words<T>() -> usize {
     std::mem::size_of::<T>().div_ceil(4)
 }

@@ -39,6 +39,7 @@ pub struct ScenePipeline<P> {
 
 impl<P: Clone + Sync> ScenePipeline<P> {
     /// A pipeline with this ray-generation group and one miss group per ray type.
+    #[must_use]
     pub fn new(
         context: &DeviceContext,
         compile: PipelineCompileOptions,
@@ -59,12 +60,14 @@ impl<P: Clone + Sync> ScenePipeline<P> {
     }
 
     /// Sets the exception program.
+    #[must_use]
     pub fn exception(mut self, group: ProgramGroup<P>) -> Self {
         self.exception = Some(group);
         self
     }
 
     /// Sets the callables, by SBT index.
+    #[must_use]
     pub fn callables(mut self, groups: Vec<ProgramGroup<P>>) -> Self {
         self.callables = groups;
         self

@@ -82,6 +82,7 @@ pub struct Material<P> {
 
 impl<P> Material<P> {
     /// A material with these hit groups (by ray type) and user value.
+    #[must_use]
     pub fn new(hit_groups: Vec<Option<ProgramGroup<P>>>, user_data: u32) -> Self {
         Material {
             hit_groups,
@@ -139,6 +140,7 @@ pub struct GeometryInstance {
 
 impl GeometryInstance {
     /// Geometry distinguishing `num_materials` materials, without flags or bindings.
+    #[must_use]
     pub fn new(geometry: Geometry, num_materials: u32) -> Self {
         GeometryInstance {
             geometry,
@@ -150,18 +152,21 @@ impl GeometryInstance {
     }
 
     /// Binds `material` at (material set `set`, material index `index`).
+    #[must_use]
     pub fn material(mut self, set: u32, index: u32, material: MaterialId) -> Self {
         self.materials.insert((set, index), material);
         self
     }
 
     /// Sets the per-primitive material indices.
+    #[must_use]
     pub fn material_indices(mut self, indices: Vec<u32>) -> Self {
         self.material_indices = Some(indices);
         self
     }
 
     /// Sets the geometry flags of material `index`.
+    #[must_use]
     pub fn flags(mut self, index: u32, flags: GeometryFlags) -> Self {
         if let Some(f) = self.material_flags.get_mut(index as usize) {
             *f = flags;
@@ -170,6 +175,7 @@ impl GeometryInstance {
     }
 
     /// Sets the user value.
+    #[must_use]
     pub fn user_data(mut self, v: u32) -> Self {
         self.user_data = v;
         self
@@ -196,6 +202,7 @@ pub struct GasDesc {
 
 impl GasDesc {
     /// A GAS over `children` with these material sets.
+    #[must_use]
     pub fn new(children: Vec<GeomId>, ray_types_per_set: Vec<u32>) -> Self {
         GasDesc {
             children,
@@ -244,6 +251,7 @@ pub struct UtilInstance {
 impl UtilInstance {
     /// An instance of `gas` with material set `material_set`, identity transform, id 0, mask
     /// 0xFF.
+    #[must_use]
     pub fn new(gas: GasId, material_set: u32) -> Self {
         UtilInstance {
             gas,
@@ -295,6 +303,7 @@ impl<P> Default for Scene<P> {
 
 impl<P> Scene<P> {
     /// An empty scene.
+    #[must_use]
     pub fn new() -> Self {
         Self::default()
     }
@@ -606,6 +615,7 @@ impl<P> Scene<P> {
     }
 
     /// The handle of a built, clean IAS.
+    #[must_use]
     pub fn ias_handle(&self, id: IasId) -> Option<TraversableHandle> {
         let e = self.iases.get(id.0 as usize)?;
         (!e.dirty).then(|| e.built.clone()).flatten()
@@ -613,6 +623,7 @@ impl<P> Scene<P> {
 
     /// Whether the hit-group SBT must be regenerated (after layout, material or user-data
     /// changes since the last [`hit_group_records`](Self::hit_group_records)).
+    #[must_use]
     pub fn is_sbt_dirty(&self) -> bool {
         self.sbt_dirty
     }
@@ -670,6 +681,7 @@ impl<P> Scene<P> {
     }
 
     /// Every distinct hit group the scene's materials use (to link into a pipeline).
+    #[must_use]
     pub fn hit_groups(&self) -> Vec<ProgramGroup<P>> {
         let mut out: Vec<ProgramGroup<P>> = Vec::new();
         for m in &self.materials {
@@ -683,6 +695,7 @@ impl<P> Scene<P> {
     }
 
     /// The built GAS, if clean.
+    #[must_use]
     pub fn gas_handle(&self, id: GasId) -> Option<TraversableHandle> {
         let e = self.gases.get(id.0 as usize)?;
         (!e.dirty)
@@ -691,16 +704,19 @@ impl<P> Scene<P> {
     }
 
     /// Whether a GAS is dirty.
+    #[must_use]
     pub fn is_gas_dirty(&self, id: GasId) -> bool {
         self.gases.get(id.0 as usize).is_none_or(|e| e.dirty)
     }
 
     /// Whether an IAS is dirty.
+    #[must_use]
     pub fn is_ias_dirty(&self, id: IasId) -> bool {
         self.iases.get(id.0 as usize).is_none_or(|e| e.dirty)
     }
 
     /// Whether the layout must be recomputed.
+    #[must_use]
     pub fn is_layout_dirty(&self) -> bool {
         self.layout.is_none()
     }

@@ -72,57 +72,68 @@ impl Gas {
     }
 
     /// A handle for instances and traces.
+    #[must_use]
     pub fn handle(&self) -> TraversableHandle {
         on_gas!(self, g => g.clone().into(), g.clone().into())
     }
 
     /// The backend whose memory holds it.
+    #[must_use]
     pub fn device_kind(&self) -> BackendKind {
         on_gas!(self, _g => BackendKind::Cpu, BackendKind::Cuda)
     }
 
     /// The CPU structure, if it lives on the CPU.
+    #[must_use]
     pub fn as_cpu(&self) -> Option<&oxray_cpu::Gas> {
         on_gas!(self, g => Some(g), { let _ = g; None })
     }
 
     /// The CUDA structure, if it lives on a CUDA device.
     #[cfg(feature = "cuda")]
+    #[must_use]
     pub fn as_cuda(&self) -> Option<&oxray_cuda::CudaGas> {
         on_gas!(self, _g => None, Some(_g))
     }
 
     /// The kind of primitives.
+    #[must_use]
     pub fn kind(&self) -> BuildInputKind {
         on_gas!(self, g => g.kind(), g.info().kind)
     }
 
     /// The flags it was built with.
+    #[must_use]
     pub fn build_flags(&self) -> BuildFlags {
         on_gas!(self, g => g.build_flags, g.info().build_flags)
     }
 
     /// Primitives declared over all build inputs, inactive ones included.
+    #[must_use]
     pub fn num_primitives(&self) -> u32 {
         on_gas!(self, g => g.num_primitives, g.info().num_primitives)
     }
 
     /// Primitives that can be hit.
+    #[must_use]
     pub fn num_active_primitives(&self) -> u32 {
         on_gas!(self, g => g.num_active_primitives(), g.info().num_active_primitives)
     }
 
     /// Number of build inputs.
+    #[must_use]
     pub fn num_build_inputs(&self) -> usize {
         on_gas!(self, g => g.num_build_inputs(), g.info().num_build_inputs)
     }
 
     /// SBT records over all build inputs (the span of SBT-GAS indices).
+    #[must_use]
     pub fn num_sbt_records(&self) -> u32 {
         on_gas!(self, g => g.num_sbt_records(), g.info().record_flags.len() as u32)
     }
 
     /// The geometry flags of an SBT record, by SBT-GAS index.
+    #[must_use]
     pub fn geometry_flags(&self, sbt_gas_index: u32) -> Option<GeometryFlags> {
         on_gas!(
             self,
@@ -132,6 +143,7 @@ impl Gas {
     }
 
     /// The box around every active primitive (empty when there is none).
+    #[must_use]
     pub fn bounds(&self) -> Aabb {
         on_gas!(self, g => g.bounds, g.info().bounds)
     }
@@ -199,11 +211,13 @@ impl Gas {
     }
 
     /// Statistics of the BVH it was built with: nodes, depth, SAH cost.
+    #[must_use]
     pub fn stats(&self) -> BvhStats {
         on_gas!(self, g => g.stats(), g.info().stats)
     }
 
     /// Bytes the structure occupies in its device's memory.
+    #[must_use]
     pub fn memory(&self) -> GasMemory {
         on_gas!(self, g => g.memory(), GasMemory {
             output_bytes: g.device_bytes(),
@@ -382,22 +396,26 @@ impl Ias {
     }
 
     /// A handle for instances and traces.
+    #[must_use]
     pub fn handle(&self) -> TraversableHandle {
         on_ias!(self, i => i.clone().into(), i.clone().into())
     }
 
     /// The CPU structure, if it lives on the CPU.
+    #[must_use]
     pub fn as_cpu(&self) -> Option<&oxray_cpu::Ias> {
         on_ias!(self, i => Some(i), { let _ = i; None })
     }
 
     /// The CUDA structure, if it lives on a CUDA device.
     #[cfg(feature = "cuda")]
+    #[must_use]
     pub fn as_cuda(&self) -> Option<&oxray_cuda::CudaIas> {
         on_ias!(self, _i => None, Some(_i))
     }
 
     /// The backend whose memory holds it.
+    #[must_use]
     pub fn device_kind(&self) -> BackendKind {
         on_ias!(self, _i => BackendKind::Cpu, BackendKind::Cuda)
     }
@@ -408,11 +426,13 @@ impl Ias {
     }
 
     /// Instances in the build input.
+    #[must_use]
     pub fn num_instances(&self) -> u32 {
         self.data().num_instances
     }
 
     /// The world box of every instance that can be hit.
+    #[must_use]
     pub fn bounds(&self) -> Aabb {
         self.data().bounds
     }
@@ -436,16 +456,19 @@ impl Ias {
     }
 
     /// Levels of the traversable graph from this IAS down (an IAS over GASes is 2).
+    #[must_use]
     pub fn graph_depth(&self) -> u32 {
         self.data().depth
     }
 
     /// Statistics of the BVH over the instances.
+    #[must_use]
     pub fn stats(&self) -> BvhStats {
         self.data().stats()
     }
 
     /// The flags it was built with.
+    #[must_use]
     pub fn build_flags(&self) -> BuildFlags {
         self.data().build_flags
     }
@@ -457,6 +480,7 @@ impl Ias {
     }
 
     /// Bytes of the IAS's own tables (its children are not counted).
+    #[must_use]
     pub fn memory_bytes(&self) -> usize {
         self.data().memory_bytes()
     }

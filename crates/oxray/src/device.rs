@@ -29,6 +29,7 @@ pub enum DeviceError {
 impl DeviceError {
     /// Whether the error only says that this machine or build has no CUDA, so that a caller
     /// may fall back to the CPU or skip.
+    #[must_use]
     pub fn is_unavailable(&self) -> bool {
         matches!(
             self,
@@ -100,6 +101,7 @@ macro_rules! with_backend {
 
 impl Device {
     /// The CPU backend, on the current rayon pool.
+    #[must_use]
     pub fn cpu() -> Device {
         Device {
             repr: DeviceRepr::Cpu(oxray_cpu::Cpu::new()),
@@ -128,6 +130,7 @@ impl Device {
     }
 
     /// CUDA device 0 where this machine has one, else the CPU.
+    #[must_use]
     pub fn best() -> Device {
         Device::cuda(0).unwrap_or_else(|_| Device::cpu())
     }
@@ -147,29 +150,34 @@ impl Device {
     }
 
     /// The same device with these context options (validation mode, log callback).
+    #[must_use]
     pub fn with_context(mut self, context: DeviceContext) -> Device {
         self.context = context;
         self
     }
 
     /// The context options.
+    #[must_use]
     pub fn context(&self) -> &DeviceContext {
         &self.context
     }
 
     /// Which backend this is.
+    #[must_use]
     pub fn kind(&self) -> BackendKind {
         with_backend!(self, b => b.kind())
     }
 
     /// One line naming the device, e.g. `CPU (16 threads)` or
     /// `NVIDIA H200 (sm_90, 132 SMs)`.
+    #[must_use]
     pub fn describe(&self) -> String {
         with_backend!(self, b => b.describe())
     }
 
     /// The CUDA backend, if this is a CUDA device (for its node-layout and timing extras).
     #[cfg(feature = "cuda")]
+    #[must_use]
     pub fn as_cuda(&self) -> Option<&oxray_cuda::Cuda> {
         match &self.repr {
             DeviceRepr::Cuda(c) => Some(c),
@@ -522,21 +530,25 @@ enum BatchRepr {
 
 impl RayBatch {
     /// Rays in the batch.
+    #[must_use]
     pub fn len(&self) -> usize {
         self.len
     }
 
     /// Whether the batch holds no rays.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
 
     /// The query it runs.
+    #[must_use]
     pub fn kind(&self) -> BatchKind {
         self.kind
     }
 
     /// The device whose memory holds it.
+    #[must_use]
     pub fn device_kind(&self) -> BackendKind {
         match self.repr {
             BatchRepr::Cpu(_) => BackendKind::Cpu,

@@ -100,6 +100,7 @@ enum ModuleRepr {
 
 impl Module {
     /// Whether the source declares or defines the entry `name`.
+    #[must_use]
     pub fn has_entry(&self, name: &str) -> bool {
         match &self.0 {
             ModuleRepr::Cpu(m) => m.has_entry(name),
@@ -109,6 +110,7 @@ impl Module {
     }
 
     /// The CPU module, on a CPU device.
+    #[must_use]
     pub fn as_cpu(&self) -> Option<&CxxModule> {
         match &self.0 {
             ModuleRepr::Cpu(m) => Some(m),
@@ -119,6 +121,7 @@ impl Module {
 
     /// The CUDA module, on a CUDA device.
     #[cfg(feature = "cuda")]
+    #[must_use]
     pub fn as_cuda(&self) -> Option<&CudaModule> {
         match &self.0 {
             ModuleRepr::Cuda(m) => Some(m),
@@ -277,6 +280,7 @@ impl ProgramGroup {
 
     /// The record header naming this group (`optixSbtRecordPackHeader`).
     #[doc(alias = "optixSbtRecordPackHeader")]
+    #[must_use]
     pub fn pack_header(&self) -> SbtHeader {
         match &self.0 {
             GroupRepr::Cpu(g) => g.pack_header(),
@@ -360,6 +364,7 @@ impl Pipeline {
     }
 
     /// The CPU pipeline, on a CPU device.
+    #[must_use]
     pub fn as_cpu(&self) -> Option<&CxxPipeline> {
         match &self.0 {
             PipelineRepr::Cpu(p) => Some(p),
@@ -370,6 +375,7 @@ impl Pipeline {
 
     /// The CUDA pipeline, on a CUDA device.
     #[cfg(feature = "cuda")]
+    #[must_use]
     pub fn as_cuda(&self) -> Option<&CudaPipeline> {
         match &self.0 {
             PipelineRepr::Cuda(p) => Some(p),
@@ -428,6 +434,7 @@ impl<T: Pod> Buffer<T> {
     }
 
     /// The address of the first value (a `T*` for programs).
+    #[must_use]
     pub fn device_ptr(&self) -> u64 {
         match &self.0 {
             BufferRepr::Cpu(b) => b.device_ptr(),
@@ -437,6 +444,7 @@ impl<T: Pod> Buffer<T> {
     }
 
     /// Values held.
+    #[must_use]
     pub fn len(&self) -> usize {
         match &self.0 {
             BufferRepr::Cpu(b) => b.len(),
@@ -446,6 +454,7 @@ impl<T: Pod> Buffer<T> {
     }
 
     /// Whether it holds no values.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

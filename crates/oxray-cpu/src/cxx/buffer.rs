@@ -37,6 +37,7 @@ impl<T: Pod> std::fmt::Debug for HostBuffer<T> {
 
 impl<T: Pod> HostBuffer<T> {
     /// `len` zeroed values.
+    #[must_use]
     pub fn zeroed(len: usize) -> Self {
         HostBuffer {
             data: (0..len).map(|_| UnsafeCell::new(T::zeroed())).collect(),
@@ -60,22 +61,26 @@ impl<T: Pod> HostBuffer<T> {
     }
 
     /// The values, copied.
+    #[must_use]
     pub fn download(&self) -> Vec<T> {
         // SAFETY: no launch writes the buffer while the host reads it (see the Sync impl).
         self.data.iter().map(|c| unsafe { *c.get() }).collect()
     }
 
     /// The address of the first value (a `T*` for programs).
+    #[must_use]
     pub fn device_ptr(&self) -> u64 {
         self.data.as_ptr() as *const T as usize as u64
     }
 
     /// Values held.
+    #[must_use]
     pub fn len(&self) -> usize {
         self.data.len()
     }
 
     /// Whether it holds no values.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.data.is_empty()
     }

@@ -23,6 +23,7 @@ fn registry() -> &'static Mutex<HashMap<u64, WeakTraversableHandle>> {
 /// assert_eq!(oxray_cpu::cxx::optix_handle(&TraversableHandle::NULL), 0);
 /// ```
 #[doc(alias = "OptixTraversableHandle")]
+#[must_use]
 pub fn optix_handle(handle: &TraversableHandle) -> u64 {
     let value = handle.address();
     if value != 0 {

@@ -210,11 +210,13 @@ impl CxxModule {
     }
 
     /// The source as given.
+    #[must_use]
     pub fn source(&self) -> &str {
         &self.inner.source
     }
 
     /// Whether the source declares or defines the entry `name`.
+    #[must_use]
     pub fn has_entry(&self, name: &str) -> bool {
         self.inner.entries.iter().any(|e| e == name)
     }
@@ -348,12 +350,14 @@ impl CxxProgramGroup {
     }
 
     /// The group's kind.
+    #[must_use]
     pub fn kind(&self) -> ProgramGroupKind {
         self.group.kind()
     }
 
     /// The record header naming this group (`optixSbtRecordPackHeader`).
     #[doc(alias = "optixSbtRecordPackHeader")]
+    #[must_use]
     pub fn pack_header(&self) -> SbtHeader {
         self.group.pack_header()
     }

@@ -186,16 +186,19 @@ pub struct AllHits {
 
 impl AllHits {
     /// An empty result.
+    #[must_use]
     pub fn new() -> Self {
         Self::default()
     }
 
     /// Rays in the batch.
+    #[must_use]
     pub fn len(&self) -> usize {
         self.complete.len()
     }
 
     /// Whether the batch had no ray.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.complete.is_empty()
     }
@@ -205,6 +208,7 @@ impl AllHits {
     /// # Panics
     ///
     /// If `ray >= self.len()`.
+    #[must_use]
     pub fn hits(&self, ray: usize) -> &[Hit] {
         &self.hits[self.offsets[ray]..self.offsets[ray + 1]]
     }
@@ -214,16 +218,19 @@ impl AllHits {
     /// # Panics
     ///
     /// If `ray >= self.len()`.
+    #[must_use]
     pub fn is_complete(&self, ray: usize) -> bool {
         self.complete[ray]
     }
 
     /// Every hit of every ray, ray after ray.
+    #[must_use]
     pub fn all(&self) -> &[Hit] {
         &self.hits
     }
 
     /// Where each ray's hits start in [`all`](Self::all), and the end (`len() + 1` entries).
+    #[must_use]
     pub fn offsets(&self) -> &[usize] {
         &self.offsets
     }
