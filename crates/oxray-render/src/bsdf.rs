@@ -35,7 +35,7 @@ impl Rng {
 }
 
 /// A 32-bit integer hash (PCG output permutation).
-pub fn hash(x: u32) -> u32 {
+pub const fn hash(x: u32) -> u32 {
     let s = x.wrapping_mul(747796405).wrapping_add(2891336453);
     let w = ((s >> ((s >> 28) + 4)) ^ s).wrapping_mul(277803737);
     (w >> 22) ^ w

@@ -356,12 +356,23 @@ impl Environment {
         }
     }
 
-    fn texel_of(&self, d: Vec3) -> usize {
+    /// The map coordinates of direction `d`: u around the vertical axis, v from the top.
+    fn uv_of(d: Vec3) -> (f32, f32) {
         let u = 0.5 + d.x.atan2(-d.z) / TAU;
         let v = d.y.clamp(-1.0, 1.0).acos() / PI;
+        (u, v)
+    }
+
+    /// The texel at map coordinates `(u, v)`.
+    fn texel_at(&self, (u, v): (f32, f32)) -> usize {
         let x = ((u * self.width as f32) as usize).min(self.width - 1);
         let y = ((v * self.height as f32) as usize).min(self.height - 1);
         y * self.width + x
+    }
+
+    #[cfg(test)]
+    fn texel_of(&self, d: Vec3) -> usize {
+        self.texel_at(Self::uv_of(d))
     }
 
     /// The map and its sampling tables, as [`Environment::sample`] and [`Environment::pdf`]
@@ -384,9 +395,22 @@ impl Environment {
         if !d.is_finite() {
             return Vec3::ZERO;
         }
+        self.radiance_at(Self::uv_of(d))
+    }
+
+    /// [`radiance`](Self::radiance) and [`pdf`](Self::pdf) of direction `d` together: one
+    /// `atan2` and one `acos` for both (what a ray that leaves the scene needs).
+    pub fn radiance_and_pdf(&self, d: Vec3) -> (Vec3, f32) {
+        if !d.is_finite() {
+            return (Vec3::ZERO, 0.0);
+        }
+        let uv = Self::uv_of(d);
+        (self.radiance_at(uv), self.pdf_at(d, uv))
+    }
+
+    /// The radiance at map coordinates `(u, v)`, filtered bilinearly.
+    fn radiance_at(&self, (u, v): (f32, f32)) -> Vec3 {
         let (w, h) = (self.width, self.height);
-        let u = 0.5 + d.x.atan2(-d.z) / TAU;
-        let v = d.y.clamp(-1.0, 1.0).acos() / PI;
         let xf = u * w as f32 - 0.5;
         let yf = v * h as f32 - 0.5;
         let (x0, y0) = (xf.floor(), yf.floor());
@@ -423,10 +447,18 @@ impl Environment {
 
     /// The solid-angle pdf of [`Environment::sample`] drawing `d`.
     pub fn pdf(&self, d: Vec3) -> f32 {
-        if self.total <= 0.0 || !d.is_finite() {
+        if !d.is_finite() {
             return 0.0;
         }
-        let i = self.texel_of(d);
+        self.pdf_at(d, Self::uv_of(d))
+    }
+
+    /// [`pdf`](Self::pdf) of the finite direction `d` at map coordinates `uv`.
+    fn pdf_at(&self, d: Vec3, uv: (f32, f32)) -> f32 {
+        if self.total <= 0.0 {
+            return 0.0;
+        }
+        let i = self.texel_at(uv);
         // The cell's probability is spread uniformly over its (u, v) rectangle.
         let p = self.cell_probability(i % self.width, i / self.width);
         self.density(p, (1.0 - d.y * d.y).max(0.0).sqrt())
@@ -543,6 +575,31 @@ mod tests {
             (is - uni).abs().max_element() / uni.max_element() < 0.03,
             "{is} vs {uni}"
         );
+    }
+
+    #[test]
+    fn radiance_and_pdf_together_give_the_bits_of_each() {
+        let mut rng = super::super::bsdf::Rng::new(3, 1, 4);
+        for env in [
+            Environment::sky(1.0),
+            Environment::uniform(Vec3::ONE),
+            Environment::uniform(Vec3::ZERO),
+        ] {
+            for _ in 0..20_000 {
+                let z = 1.0 - 2.0 * rng.uniform();
+                let r = (1.0 - z * z).max(0.0).sqrt();
+                let phi = TAU * rng.uniform();
+                let d = Vec3::new(r * phi.cos(), z, r * phi.sin());
+                let (l, pdf) = env.radiance_and_pdf(d);
+                assert_eq!(
+                    l.to_array().map(f32::to_bits),
+                    env.radiance(d).to_array().map(f32::to_bits)
+                );
+                assert_eq!(pdf.to_bits(), env.pdf(d).to_bits(), "{d}");
+            }
+            let nan = Vec3::new(f32::NAN, 0.0, 1.0);
+            assert_eq!(env.radiance_and_pdf(nan), (Vec3::ZERO, 0.0));
+        }
     }
 
     #[test]

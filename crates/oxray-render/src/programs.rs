@@ -681,10 +681,10 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             let mut s = load(ctx.payload_words());
             let p = ctx.params();
             let d = ctx.world_ray_direction();
-            let l = p.env.radiance(d);
+            let (l, env_pdf) = p.env.radiance_and_pdf(d);
             if l != Vec3::ZERO {
                 let w = if s.pdf > 0.0 {
-                    power_heuristic(s.pdf, p.p_env * p.env.pdf(d))
+                    power_heuristic(s.pdf, p.p_env * env_pdf)
                 } else {
                     1.0
                 };

@@ -148,6 +148,7 @@ pub fn sobol(index: u32, d: usize) -> u32 {
 
 /// Laine and Karras' permutation of the bits of `x`, each bit flipped by a function of the
 /// lower ones (here with Nossum's improved constants).
+#[inline]
 fn lk_permute(mut x: u32, seed: u32) -> u32 {
     x ^= x.wrapping_mul(0x3d20adea);
     x = x.wrapping_add(seed);
@@ -169,13 +170,104 @@ pub fn pixel_seed(pixel: u32, salt: u32) -> u32 {
     hash(pixel ^ hash(salt ^ 0x50b0_1e5d))
 }
 
-/// Dimension `dim` of sample `index` of the pixel with seed `seed`, in [0, 1).
+/// `hash(g)` for every group of four dimensions that the sequence serves: the part of a group's
+/// seed that does not depend on the pixel.
+const GROUP_SALTS: [u32; (SOBOL_DIMENSIONS / 4) as usize] = {
+    let mut t = [0; (SOBOL_DIMENSIONS / 4) as usize];
+    let mut g = 0;
+    while g < t.len() {
+        t[g] = hash(g as u32);
+        g += 1;
+    }
+    t
+};
+
+/// `hash(k + 1)` for a dimension's place `k` in its group: the salt of its scramble's seed.
+const COORDINATE_SALTS: [u32; 4] = [hash(1), hash(2), hash(3), hash(4)];
+
+/// The Sobol points of the four dimensions, bit-reversed, as sums of one term per byte of the
+/// bit-reversed index: entry `[p][v][d]` is the XOR of the reversed direction numbers of
+/// dimension `d` whose index bits are the set bits of byte value `v` at byte `p` of
+/// `index.reverse_bits()`. A point is then four lookups and XORs instead of a loop over the
+/// 32 bits, and it comes out reversed, which is the order the output scramble permutes in.
+/// 16 KiB: it stays in the level-1 cache.
+static SOBOL_BYTES: [[[u32; 4]; 256]; 4] = {
+    let mut t = [[[0u32; 4]; 256]; 4];
+    let mut p = 0;
+    while p < 4 {
+        let mut v = 0;
+        while v < 256 {
+            let mut d = 0;
+            while d < 4 {
+                let mut x = 0u32;
+                let mut j = 0;
+                while j < 8 {
+                    if (v >> j) & 1 == 1 {
+                        // Bit 8p + j of the reversed index is bit 31 - (8p + j) of the index.
+                        x ^= SOBOL_DIRECTIONS[d][31 - (8 * p + j)].reverse_bits();
+                    }
+                    j += 1;
+                }
+                t[p][v][d] = x;
+                d += 1;
+            }
+            v += 1;
+        }
+        p += 1;
+    }
+    t
+};
+
+/// The four dimensions' Sobol points at index `reversed.reverse_bits()`, each bit-reversed.
+#[inline]
+fn sobol_reversed(reversed: u32) -> [u32; 4] {
+    let mut x = [0u32; 4];
+    for (p, table) in SOBOL_BYTES.iter().enumerate() {
+        let row = &table[((reversed >> (8 * p)) & 0xff) as usize];
+        for (x, r) in x.iter_mut().zip(row) {
+            *x ^= r;
+        }
+    }
+    x
+}
+
+/// What a group of four dimensions shares for one sample of a pixel: the seed of its scrambles
+/// and the four Sobol points at the shuffled index, bit-reversed (see [`sobol_sample`]).
+#[derive(Clone, Copy, Debug)]
+struct Group {
+    seed: u32,
+    points: [u32; 4],
+}
+
+impl Group {
+    /// Group `g` (below `SOBOL_DIMENSIONS / 4`) of sample `index` of the pixel with seed
+    /// `pixel`.
+    #[inline]
+    fn new(index: u32, g: u32, pixel: u32) -> Group {
+        let seed = hash(pixel ^ GROUP_SALTS[g as usize]);
+        // The shuffle is an Owen scramble of the index; its last bit reversal and the one
+        // before the output scramble cancel out in the reversed table.
+        let shuffled = lk_permute(index.reverse_bits(), seed);
+        Group {
+            seed,
+            points: sobol_reversed(shuffled),
+        }
+    }
+
+    /// Coordinate `k` (0..4) of the group's point, in [0, 1).
+    #[inline]
+    fn coordinate(&self, k: u32) -> f32 {
+        let k = (k & 3) as usize;
+        let x = lk_permute(self.points[k], hash(self.seed ^ COORDINATE_SALTS[k])).reverse_bits();
+        (x >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
+}
+
+/// Dimension `dim` of sample `index` of the pixel with seed `seed`, in [0, 1): the point of
+/// group `dim / 4` at the index shuffled by an Owen scramble seeded by the pixel and the group,
+/// then Owen-scrambled with a seed of its own. `dim` must be below [`SOBOL_DIMENSIONS`].
 pub fn sobol_sample(index: u32, dim: u32, seed: u32) -> f32 {
-    let group = hash(seed ^ hash(dim >> 2));
-    let shuffled = owen_scramble(index, group);
-    let x = sobol(shuffled, (dim & 3) as usize);
-    let x = owen_scramble(x, hash(group ^ hash((dim & 3) + 1)));
-    (x >> 8) as f32 * (1.0 / 16_777_216.0)
+    Group::new(index, dim >> 2, seed).coordinate(dim & 3)
 }
 
 /// The draws of one path: the hash stream, and the Sobol point when the sampler is Sobol.
@@ -189,6 +281,11 @@ pub struct Draws {
     index: u32,
     /// The first dimension of the current path vertex.
     pub base: u32,
+    /// The group of the last Sobol draw (`u32::MAX`: none yet) and what its dimensions share:
+    /// a path vertex draws up to four numbers from each of its groups, and this computes the
+    /// shuffle and the four points once.
+    group: u32,
+    cached: Group,
 }
 
 impl Draws {
@@ -200,16 +297,88 @@ impl Draws {
             sobol: (sampler == Sampler::Sobol).then(|| pixel_seed(pixel, salt)),
             index,
             base: 0,
+            group: u32::MAX,
+            cached: Group {
+                seed: 0,
+                points: [0; 4],
+            },
         }
     }
 
     /// The number of dimension `base + k` in [0, 1).
+    #[inline]
     pub fn get(&mut self, k: u32) -> f32 {
         let u = self.rng.uniform();
         let d = self.base.saturating_add(k);
         match self.sobol {
-            Some(seed) if d < SOBOL_DIMENSIONS => sobol_sample(self.index, d, seed),
+            Some(seed) if d < SOBOL_DIMENSIONS => {
+                if d >> 2 != self.group {
+                    self.group = d >> 2;
+                    self.cached = Group::new(self.index, self.group, seed);
+                }
+                self.cached.coordinate(d)
+            }
             _ => u,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The sequence as first written: one dimension at a time, the Sobol point by a loop over
+    /// the index's bits, both scrambles through [`owen_scramble`].
+    fn reference(index: u32, dim: u32, seed: u32) -> f32 {
+        let group = hash(seed ^ hash(dim >> 2));
+        let shuffled = owen_scramble(index, group);
+        let x = sobol(shuffled, (dim & 3) as usize);
+        let x = owen_scramble(x, hash(group ^ hash((dim & 3) + 1)));
+        (x >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
+
+    #[test]
+    fn the_tables_give_the_bits_of_the_plain_computation() {
+        let mut h = 0x1234_5678u32;
+        let mut indices: Vec<u32> = (0..4096).chain([u32::MAX - 1, u32::MAX]).collect();
+        indices.extend((0..4096).map(|_| {
+            h = hash(h);
+            h
+        }));
+        for seed in [0u32, 1, 0xdead_beef, u32::MAX, pixel_seed(77, 0x5eed)] {
+            for &index in &indices {
+                for dim in 0..SOBOL_DIMENSIONS {
+                    assert_eq!(
+                        sobol_sample(index, dim, seed).to_bits(),
+                        reference(index, dim, seed).to_bits(),
+                        "index {index}, dim {dim}, seed {seed}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn draws_in_any_order_give_the_numbers_of_their_dimensions() {
+        // A vertex draws its groups' dimensions out of order and goes back to earlier groups;
+        // the cached group must never leak into another's numbers.
+        let order = [3u32, 2, 0, 1, 8, 6, 4, 5, 7, 0, 11, 9, 3, 15, 12];
+        for sample in [0u32, 1, 5, 1000] {
+            for vertex in 0..7 {
+                let mut d = Draws::new(Sampler::Sobol, Rng(9), 123, sample, 0x5eed);
+                d.base = dim::vertex(vertex);
+                let mut rng = Rng(9);
+                for &k in &order {
+                    let hashed = rng.uniform();
+                    let dim = d.base + k;
+                    let want = if dim < SOBOL_DIMENSIONS {
+                        reference(sample, dim, pixel_seed(123, 0x5eed))
+                    } else {
+                        hashed
+                    };
+                    assert_eq!(d.get(k).to_bits(), want.to_bits(), "vertex {vertex}, k {k}");
+                }
+            }
         }
     }
 }
