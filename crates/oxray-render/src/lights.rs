@@ -214,6 +214,9 @@ pub struct Environment {
     marginal: Vec<f32>,
     /// Sum of the sampling weights (0: the environment is black and never sampled).
     total: f32,
+    /// Whether every texel is zero: then every lookup is zero, and a ray that leaves the scene
+    /// (every miss of a scene without an environment) skips the map's coordinates.
+    zero: bool,
 }
 
 impl Environment {
@@ -267,6 +270,7 @@ impl Environment {
         Environment {
             width,
             height,
+            zero: texels.iter().all(|&t| t == Vec3::ZERO),
             texels,
             conditional,
             marginal,
@@ -392,7 +396,7 @@ impl Environment {
     /// Radiance arriving from direction `d` (unit): the map filtered bilinearly between texel
     /// centres, wrapping around in u and clamped at the poles.
     pub fn radiance(&self, d: Vec3) -> Vec3 {
-        if !d.is_finite() {
+        if !d.is_finite() || self.zero {
             return Vec3::ZERO;
         }
         self.radiance_at(Self::uv_of(d))
@@ -401,7 +405,8 @@ impl Environment {
     /// [`radiance`](Self::radiance) and [`pdf`](Self::pdf) of direction `d` together: one
     /// `atan2` and one `acos` for both (what a ray that leaves the scene needs).
     pub fn radiance_and_pdf(&self, d: Vec3) -> (Vec3, f32) {
-        if !d.is_finite() {
+        // A zero map has no sampling weight either: its pdf is 0.
+        if !d.is_finite() || self.zero {
             return (Vec3::ZERO, 0.0);
         }
         let uv = Self::uv_of(d);
@@ -584,6 +589,8 @@ mod tests {
             Environment::sky(1.0),
             Environment::uniform(Vec3::ONE),
             Environment::uniform(Vec3::ZERO),
+            Environment::from_texels(4, 2, vec![Vec3::ZERO; 8], 1.0),
+            Environment::from_texels(2, 1, vec![Vec3::ZERO, Vec3::new(0.0, 1e-3, 0.0)], 1.0),
         ] {
             for _ in 0..20_000 {
                 let z = 1.0 - 2.0 * rng.uniform();
