@@ -12,7 +12,8 @@ per engine, the best of the rounds' medians: the figure least disturbed by the o
 Needs what scripts/bench-vs-embree.sh leaves: the meshes and rays in bench-out/rays
 (`oxray bench --export`) and bench-out/embree3_bench. Prints a markdown table of Mrays/s and
 oxray / Embree 3 ratios (above 1: oxray is faster), and oxray's batched queries (packets for
-camera rays), single-ray queries and the programmable pipeline on the camera rays.
+camera rays), single-ray queries and the programmable pipeline on the camera rays, and how
+Embree 3's answers agree with those oxray exported.
 """
 
 import argparse
@@ -21,6 +22,9 @@ import os
 import re
 import subprocess
 import sys
+
+# Embree 3's agreement with oxray's exported answers (`AGREE` lines), once per set.
+AGREE = set()
 
 SETS = [
     ("coherent", "closest"),
@@ -55,6 +59,8 @@ def embree(binary, rays, mesh, runs, threads):
                           "--builds", str(runs)], check=True, capture_output=True, text=True).stdout
     res = {}
     for line in out.splitlines():
+        if line.startswith("AGREE "):
+            AGREE.add(line[len("AGREE "):].strip())
         if line.startswith("RESULT "):
             kv = dict(x.split("=", 1) for x in line.split()[1:])
             res[kv["metric"]] = float(kv["value"])
@@ -102,6 +108,11 @@ def main():
     print("|---|---:|---:|---:|---:|")
     for mesh, b, s, p in extra:
         print(f"| {mesh} | {b:.2f} | {s:.2f} | {p:.2f} | {p / s:.2f} |")
+    if AGREE:
+        print()
+        print("Embree 3 against the answers `oxray bench --export` wrote:")
+        for line in sorted(AGREE):
+            print(f"- {line}")
 
 
 if __name__ == "__main__":
