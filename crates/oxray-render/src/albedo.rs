@@ -54,6 +54,7 @@ impl GgxAlbedo {
     }
 
     /// The table as little-endian `f32` pairs, row by row (what `ggx_albedo.bin` holds).
+    #[must_use]
     pub fn to_bytes(&self) -> Vec<u8> {
         self.cells
             .iter()
@@ -64,6 +65,7 @@ impl GgxAlbedo {
 
     /// The table from [`to_bytes`](Self::to_bytes)'s layout; `None` if the size is not
     /// [`SIZE`](Self::SIZE)² cells.
+    #[must_use]
     pub fn from_bytes(bytes: &[u8]) -> Option<GgxAlbedo> {
         if bytes.len() != Self::SIZE * Self::SIZE * 8 {
             return None;
@@ -80,6 +82,7 @@ impl GgxAlbedo {
     /// Computes the table with `strata`² visible-normal samples per cell (stratified, at the
     /// strata's centres): the estimator of `A + B` is `G1(ωi)` per sample, whose variance is
     /// small, so 64² samples give about three correct digits.
+    #[must_use]
     pub fn compute(strata: usize) -> GgxAlbedo {
         let n = Self::SIZE;
         let mut cells = Vec::with_capacity(n * n);
@@ -119,6 +122,7 @@ impl GgxAlbedo {
 
     /// `(A, B)` at `cos_o` and `alpha`, interpolated bilinearly (the same arithmetic as the
     /// C++ programs' `ggx_albedo`).
+    #[must_use]
     pub fn lookup(&self, cos_o: f32, alpha: f32) -> (f32, f32) {
         let last = (Self::SIZE - 1) as f32;
         // NaN reads as 0 (the comparisons fail), so that the index stays in the table.

@@ -22,6 +22,7 @@ pub struct Rng(pub u32);
 
 impl Rng {
     /// A stream for pixel `pixel`, sample `sample` and a purpose `salt`.
+    #[must_use]
     pub fn new(pixel: u32, sample: u32, salt: u32) -> Rng {
         Rng(hash(pixel ^ hash(sample.wrapping_add(hash(salt)))))
     }
@@ -35,6 +36,7 @@ impl Rng {
 }
 
 /// A 32-bit integer hash (PCG output permutation).
+#[must_use]
 pub const fn hash(x: u32) -> u32 {
     let s = x.wrapping_mul(747796405).wrapping_add(2891336453);
     let w = ((s >> ((s >> 28) + 4)) ^ s).wrapping_mul(277803737);
@@ -42,6 +44,7 @@ pub const fn hash(x: u32) -> u32 {
 }
 
 /// Luminance of a linear Rec. 709 colour.
+#[must_use]
 pub fn luminance(c: Vec3) -> f32 {
     c.dot(Vec3::new(0.2126, 0.7152, 0.0722))
 }
@@ -66,6 +69,7 @@ pub struct Surface {
 
 impl Surface {
     /// Builds the surface from glTF factors; `specular` is `KHR_materials_specular`'s factor.
+    #[must_use]
     pub fn new(
         base: Vec3,
         metallic: f32,
@@ -119,6 +123,7 @@ pub struct BsdfSample {
 }
 
 /// An orthonormal basis around `n`.
+#[must_use]
 pub fn basis(n: Vec3) -> (Vec3, Vec3) {
     n.any_orthonormal_pair()
 }
@@ -198,6 +203,7 @@ impl Surface {
 
     /// BSDF value times |cos| at `wi` and the pdf with which [`Surface::sample`] would draw
     /// `wi`, for the shading normal `n` (facing `wo`). Dielectrics are pure specular: (0, 0).
+    #[must_use]
     pub fn eval(&self, n: Vec3, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
         let (cos_o, cos_i) = (n.dot(wo), n.dot(wi));
         if self.dielectric || cos_o <= 0.0 || cos_i <= 0.0 {
@@ -229,6 +235,7 @@ impl Surface {
     /// Draws a direction. `wo` points away from the surface; `n` is the shading normal facing
     /// `wo`; `entering` says whether the ray arrived from outside a dielectric. `None` when the
     /// path ends (the sample fell below the surface).
+    #[must_use]
     pub fn sample(&self, n: Vec3, wo: Vec3, entering: bool, u: [f32; 3]) -> Option<BsdfSample> {
         if self.dielectric {
             return Some(self.sample_dielectric(n, wo, entering, u[0]));

@@ -96,36 +96,43 @@ impl CropWindow {
     }
 
     /// The first column.
+    #[must_use]
     pub fn x0(&self) -> u32 {
         self.x0
     }
 
     /// The first row.
+    #[must_use]
     pub fn y0(&self) -> u32 {
         self.y0
     }
 
     /// The column after the last.
+    #[must_use]
     pub fn x1(&self) -> u32 {
         self.x1
     }
 
     /// The row after the last.
+    #[must_use]
     pub fn y1(&self) -> u32 {
         self.y1
     }
 
     /// Columns.
+    #[must_use]
     pub fn width(&self) -> u32 {
         self.x1 - self.x0
     }
 
     /// Rows.
+    #[must_use]
     pub fn height(&self) -> u32 {
         self.y1 - self.y0
     }
 
     /// Pixels.
+    #[must_use]
     pub fn pixels(&self) -> u64 {
         self.width() as u64 * self.height() as u64
     }

@@ -48,6 +48,7 @@ pub const ANY_HIT: &str = "__anyhit__alpha";
 const WORDS: u32 = 16;
 
 /// The pipeline compile options the programs need (16 payload words).
+#[must_use]
 pub fn compile_options() -> PipelineCompileOptions {
     PipelineCompileOptions {
         num_payload_values: WORDS,
@@ -63,6 +64,7 @@ pub fn compile_options() -> PipelineCompileOptions {
 pub const MAX_GRAPH_DEPTH: u32 = 3;
 
 /// The pipeline link options the programs need (closest-hit programs trace shadow rays).
+#[must_use]
 pub fn link_options() -> PipelineLinkOptions {
     PipelineLinkOptions { max_trace_depth: 2 }
 }

@@ -61,6 +61,7 @@ impl FromStr for Filter {
 
 impl Filter {
     /// How far from the pixel's centre the filter reaches, in pixels.
+    #[must_use]
     pub fn radius(self) -> f32 {
         match self {
             Filter::Box => 0.5,
@@ -69,6 +70,7 @@ impl Filter {
     }
 
     /// The 1-D profile at offset `x` (pixels), unnormalised; 0 beyond the radius.
+    #[must_use]
     pub fn eval(self, x: f32) -> f32 {
         let r = self.radius() as f64;
         let x = x as f64;
@@ -93,6 +95,7 @@ impl Filter {
 
     /// The inverse cumulative distribution of the profile at `u = i / (TABLE_SIZE - 1)`: from
     /// `-radius` to `radius`, found by integrating the profile over 4,096 bins.
+    #[must_use]
     pub fn table(self) -> Vec<f32> {
         const BINS: usize = 4096;
         let r = self.radius() as f64;
@@ -126,6 +129,7 @@ impl Filter {
 
 /// An offset from a pixel's centre drawn from a filter's `table` ([`Filter::table`]) by the
 /// uniform number `u` in [0, 1).
+#[must_use]
 pub fn sample_offset(table: &[f32], u: f32) -> f32 {
     let n = table.len();
     if n < 2 {

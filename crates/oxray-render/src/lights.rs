@@ -45,6 +45,7 @@ pub struct TriangleLights {
 
 impl TriangleLights {
     /// Collects every emissive triangle of every instance.
+    #[must_use]
     pub fn new(scene: &SceneDesc) -> TriangleLights {
         Self::placed(scene, |i| scene.instances.get(i).map(|inst| inst.transform))
     }
@@ -151,6 +152,7 @@ impl TriangleLights {
     }
 
     /// Whether there is any emissive triangle.
+    #[must_use]
     pub fn is_empty(&self) -> bool {
         self.triangles.is_empty()
     }
@@ -158,6 +160,7 @@ impl TriangleLights {
     /// Picks a triangle in proportion to its power and a uniform point on it: the triangle, the
     /// point, its barycentrics (for texture lookups) and the pdf per unit area of the whole
     /// choice.
+    #[must_use]
     pub fn sample(&self, u: [f32; 3]) -> Option<(&LightTriangle, Vec3, [f32; 2], f32)> {
         let i = self
             .cdf
@@ -174,12 +177,14 @@ impl TriangleLights {
 
     /// The cumulative distribution over [`TriangleLights::triangles`] that
     /// [`TriangleLights::sample`] searches (normalised: the last entry is 1).
+    #[must_use]
     pub fn cdf(&self) -> &[f32] {
         &self.cdf
     }
 
     /// The pdf per unit area with which [`TriangleLights::sample`] picks a point on a triangle
     /// of material `material`.
+    #[must_use]
     pub fn area_pdf(&self, material: u32) -> f32 {
         if self.total_power <= 0.0 {
             return 0.0;
@@ -221,6 +226,7 @@ pub struct Environment {
 
 impl Environment {
     /// An environment from an equirectangular map of `width` x `height` linear texels.
+    #[must_use]
     pub fn from_texels(width: usize, height: usize, texels: Vec<Vec3>, scale: f32) -> Self {
         let texels: Vec<Vec3> = texels
             .into_iter()
@@ -279,6 +285,7 @@ impl Environment {
     }
 
     /// A procedural daylight sky: a blue gradient over a dim ground and a small sun.
+    #[must_use]
     pub fn sky(scale: f32) -> Self {
         let (w, h) = (512usize, 256usize);
         let sun = Vec3::new(-0.45, 0.7, 0.55).normalize();
@@ -306,6 +313,7 @@ impl Environment {
     }
 
     /// A uniform environment.
+    #[must_use]
     pub fn uniform(radiance: Vec3) -> Self {
         Environment::from_texels(1, 1, vec![radiance], 1.0)
     }
@@ -382,6 +390,7 @@ impl Environment {
     /// The map and its sampling tables, as [`Environment::sample`] and [`Environment::pdf`]
     /// read them (for renderers that evaluate the environment elsewhere, such as the device
     /// programs).
+    #[must_use]
     pub fn tables(&self) -> EnvironmentTables<'_> {
         EnvironmentTables {
             width: self.width,
@@ -395,6 +404,7 @@ impl Environment {
 
     /// Radiance arriving from direction `d` (unit): the map filtered bilinearly between texel
     /// centres, wrapping around in u and clamped at the poles.
+    #[must_use]
     pub fn radiance(&self, d: Vec3) -> Vec3 {
         if !d.is_finite() || self.zero {
             return Vec3::ZERO;
@@ -404,6 +414,7 @@ impl Environment {
 
     /// [`radiance`](Self::radiance) and [`pdf`](Self::pdf) of direction `d` together: one
     /// `atan2` and one `acos` for both (what a ray that leaves the scene needs).
+    #[must_use]
     pub fn radiance_and_pdf(&self, d: Vec3) -> (Vec3, f32) {
         // A zero map has no sampling weight either: its pdf is 0.
         if !d.is_finite() || self.zero {
@@ -446,11 +457,13 @@ impl Environment {
     }
 
     /// Whether the environment emits anything.
+    #[must_use]
     pub fn is_black(&self) -> bool {
         self.total <= 0.0
     }
 
     /// The solid-angle pdf of [`Environment::sample`] drawing `d`.
+    #[must_use]
     pub fn pdf(&self, d: Vec3) -> f32 {
         if !d.is_finite() {
             return 0.0;
@@ -470,6 +483,7 @@ impl Environment {
     }
 
     /// Draws a direction in proportion to radiance; returns it with its radiance and pdf.
+    #[must_use]
     pub fn sample(&self, u: [f32; 2]) -> Option<(Vec3, Vec3, f32)> {
         if self.total <= 0.0 {
             return None;

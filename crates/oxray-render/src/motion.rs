@@ -68,11 +68,13 @@ impl Shutter {
     }
 
     /// The time of a camera ray for a uniform number `u` in [0, 1).
+    #[must_use]
     pub fn time(&self, u: f32) -> f32 {
         (self.open + (self.close - self.open) * u).min(self.close)
     }
 
     /// Whether the shutter stays open for some time (rays then take different times).
+    #[must_use]
     pub fn is_open(&self) -> bool {
         self.close > self.open
     }

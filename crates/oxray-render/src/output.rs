@@ -12,6 +12,7 @@ pub const PNG_SOFTWARE: (&str, &str) = ("Software", "oxray");
 
 /// Whether `path` is a PNG file that oxray wrote (it carries the [`PNG_SOFTWARE`] text
 /// chunk): the `oxray` tool replaces such a file under its default output name, and no other.
+#[must_use]
 pub fn written_by_oxray(path: &Path) -> bool {
     let Ok(file) = std::fs::File::open(path) else {
         return false;
@@ -40,11 +41,13 @@ pub struct Image {
 
 impl Image {
     /// The image as 8-bit sRGB RGBA through the default [`Look`] (ACES, no exposure).
+    #[must_use]
     pub fn to_srgb8(&self) -> Vec<u8> {
         self.to_srgb8_with(&Look::default())
     }
 
     /// The image as 8-bit sRGB RGBA through `look`.
+    #[must_use]
     pub fn to_srgb8_with(&self, look: &Look) -> Vec<u8> {
         self.pixels
             .iter()

@@ -90,6 +90,7 @@ pub struct Params<'a> {
 pub const AOV_WORDS: usize = 8;
 
 /// The salt of a pixel's random stream for `seed` (the same in `device_programs.cu`).
+#[must_use]
 pub fn stream_salt(seed: u32) -> u32 {
     0x5eed ^ seed.wrapping_mul(0x9E37_79B9)
 }

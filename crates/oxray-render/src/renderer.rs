@@ -125,11 +125,13 @@ impl<'s> Renderer<'s> {
     }
 
     /// The scene as it is now (with the edits made).
+    #[must_use]
     pub fn scene(&self) -> &SceneDesc {
         &self.scene
     }
 
     /// The device that renders.
+    #[must_use]
     pub fn device(&self) -> &Device {
         &self.device
     }
@@ -326,11 +328,13 @@ enum Sums<'r> {
 
 impl<'r> Progress<'r> {
     /// Samples per pixel done.
+    #[must_use]
     pub fn samples(&self) -> u32 {
         self.samples
     }
 
     /// Samples per pixel asked for.
+    #[must_use]
     pub fn total(&self) -> u32 {
         self.total
     }

@@ -35,6 +35,7 @@ pub enum Sampler {
 
 impl Sampler {
     /// The name `FromStr` takes.
+    #[must_use]
     pub fn name(self) -> &'static str {
         match self {
             Sampler::Independent => "independent",
@@ -92,6 +93,7 @@ pub mod dim {
     pub const PUNCTUAL: u32 = 8;
 
     /// The first dimension of path vertex `depth` (0: the camera ray's hit).
+    #[must_use]
     pub const fn vertex(depth: u32) -> u32 {
         CAMERA + depth.saturating_mul(PER_VERTEX)
     }
@@ -136,6 +138,7 @@ pub const SOBOL_DIRECTIONS: [[u32; 32]; 4] = [
 ];
 
 /// Coordinate `d` (0..4) of Sobol point `index`, unscrambled, as a 32-bit binary fraction.
+#[must_use]
 pub fn sobol(index: u32, d: usize) -> u32 {
     let v = &SOBOL_DIRECTIONS[d & 3];
     let mut x = 0u32;
@@ -160,12 +163,14 @@ fn lk_permute(mut x: u32, seed: u32) -> u32 {
 
 /// A nested uniform (Owen) scramble of the binary fraction `x` by `seed`: each digit flipped by
 /// a hash of the digits before it.
+#[must_use]
 pub fn owen_scramble(x: u32, seed: u32) -> u32 {
     lk_permute(x.reverse_bits(), seed).reverse_bits()
 }
 
 /// The seed of a pixel's Sobol scrambles, for the stream salt `salt`
 /// ([`crate::programs::stream_salt`]).
+#[must_use]
 pub fn pixel_seed(pixel: u32, salt: u32) -> u32 {
     hash(pixel ^ hash(salt ^ 0x50b0_1e5d))
 }
@@ -266,6 +271,7 @@ impl Group {
 /// Dimension `dim` of sample `index` of the pixel with seed `seed`, in [0, 1): the point of
 /// group `dim / 4` at the index shuffled by an Owen scramble seeded by the pixel and the group,
 /// then Owen-scrambled with a seed of its own. `dim` must be below [`SOBOL_DIMENSIONS`].
+#[must_use]
 pub fn sobol_sample(index: u32, dim: u32, seed: u32) -> f32 {
     Group::new(index, dim >> 2, seed).coordinate(dim & 3)
 }
@@ -291,6 +297,7 @@ pub struct Draws {
 impl Draws {
     /// The draws of sample `index` of the pixel `pixel` (of the full image) with stream salt
     /// `salt`, resuming the hash stream `rng`, at the camera's dimensions.
+    #[must_use]
     pub fn new(sampler: Sampler, rng: Rng, pixel: u32, index: u32, salt: u32) -> Draws {
         Draws {
             rng,

@@ -37,6 +37,7 @@ fn wrap(i: i64, n: u32, mode: Wrap) -> usize {
 
 /// Samples `tex` at `uv` (glTF convention: v = 0 is the top row) with bilinear filtering. With
 /// `srgb`, the colour channels are decoded to linear first; alpha is always linear.
+#[must_use]
 pub fn sample(tex: &Texture, uv: Vec2, srgb: bool) -> Vec4 {
     let (w, h) = (tex.width, tex.height);
     if !uv.is_finite() {
@@ -74,6 +75,7 @@ fn texel(tex: &Texture, x: usize, y: usize, srgb: bool) -> Vec4 {
 
 /// The mean linear colour of an sRGB texture (used to weight emissive triangles for light
 /// sampling).
+#[must_use]
 pub fn mean_srgb(tex: &Texture) -> Vec4 {
     let lut = srgb_table();
     let sum = tex.texels.iter().fold(Vec4::ZERO, |s, &[r, g, b, a]| {

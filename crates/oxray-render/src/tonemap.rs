@@ -103,6 +103,7 @@ fn neutral(c: [f32; 3]) -> [f32; 3] {
 impl ToneMap {
     /// Display-linear values in [0, 1] for linear radiance `c` (negative and NaN inputs read
     /// as 0, anything above 10^6, infinity included, as 10^6: white for every curve).
+    #[must_use]
     pub fn apply(self, c: [f32; 3]) -> [f32; 3] {
         let c = c.map(|v| if v > 0.0 { v.min(1e6) } else { 0.0 });
         let out = match self {
@@ -125,6 +126,7 @@ pub struct Look {
 
 impl Look {
     /// Display-linear values in [0, 1] for linear radiance `c`.
+    #[must_use]
     pub fn display(&self, c: [f32; 3]) -> [f32; 3] {
         let k = self.exposure.exp2();
         self.tone_map.apply(c.map(|v| v * k))
@@ -137,6 +139,7 @@ impl Look {
 }
 
 /// The sRGB transfer function of a display-linear value in [0, 1], as an 8-bit code.
+#[must_use]
 pub fn srgb_encode(x: f32) -> u8 {
     let s = if x <= 0.0031308 {
         12.92 * x

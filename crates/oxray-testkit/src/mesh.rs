@@ -22,27 +22,32 @@ pub struct Mesh {
 
 impl Mesh {
     /// The vertices of triangle `i`.
+    #[must_use]
     pub fn tri(&self, i: usize) -> Tri {
         self.triangles[i].map(|k| self.positions[k as usize])
     }
 
     /// Every triangle as its three vertices, in order: the soup the oracle takes.
+    #[must_use]
     pub fn soup(&self) -> Vec<Tri> {
         (0..self.triangles.len()).map(|i| self.tri(i)).collect()
     }
 
     /// The vertex position `i`.
+    #[must_use]
     pub fn v(&self, i: u32) -> Vec3 {
         Vec3::from(self.positions[i as usize])
     }
 
     /// The (unnormalised) geometric normal `(v1 - v0) x (v2 - v0)` of triangle `i`, in `f64`.
+    #[must_use]
     pub fn face_normal(&self, i: usize) -> DVec3 {
         let [a, b, c] = self.triangles[i].map(|k| self.v(k).as_dvec3());
         (b - a).cross(c - a)
     }
 
     /// Edge (sorted vertex pair) to the triangles that use it.
+    #[must_use]
     pub fn edge_map(&self) -> HashMap<(u32, u32), Vec<usize>> {
         let mut m: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
         for (f, t) in self.triangles.iter().enumerate() {
@@ -55,12 +60,14 @@ impl Mesh {
     }
 
     /// The box around the vertices as `(min, max)` (see [`bounds`]).
+    #[must_use]
     pub fn bounds(&self) -> ([f32; 3], [f32; 3]) {
         bounds(&self.positions)
     }
 }
 
 /// The box around `positions` as `(min, max)`; `(+inf, -inf)` for no positions.
+#[must_use]
 pub fn bounds(positions: &[[f32; 3]]) -> ([f32; 3], [f32; 3]) {
     let mut lo = [f32::INFINITY; 3];
     let mut hi = [f32::NEG_INFINITY; 3];
@@ -148,6 +155,7 @@ fn subdivide<V>(
 /// times subdivided (20 * 4^subdivisions triangles, 10 * 4^subdivisions + 2 vertices),
 /// counter-clockwise seen from outside. The vertices are computed in `f64` and rounded once, so
 /// they lie on the sphere to `f32` precision (the engine's tests use this one).
+#[must_use]
 pub fn icosphere(subdivisions: u32) -> Mesh {
     let p = (1.0 + 5f64.sqrt()) / 2.0;
     let mut verts: Vec<DVec3> = (0..12)
@@ -166,6 +174,7 @@ pub fn icosphere(subdivisions: u32) -> Mesh {
 /// topology as [`icosphere`], with the vertices computed in `f32` (so they differ from
 /// [`icosphere`]'s in the last bits). The benchmark and GPU tests use this one, so that their
 /// numbers compare with the command-line tool's.
+#[must_use]
 pub fn icosphere_f32(subdivisions: u32) -> Mesh {
     let t = (1.0 + 5f32.sqrt()) / 2.0;
     let mut positions: Vec<[f32; 3]> = (0..12)
@@ -187,6 +196,7 @@ fn normalize(p: [f32; 3]) -> [f32; 3] {
 
 /// The closed surface of the cube `[-1, 1]^3`, each face an `n` x `n` grid of quads split into two
 /// triangles, with shared vertices; counter-clockwise seen from outside.
+#[must_use]
 pub fn grid_cube(n: u32) -> Mesh {
     let mut mesh = Mesh::default();
     let mut index: HashMap<[i64; 3], u32> = HashMap::new();
@@ -239,11 +249,13 @@ pub fn random_soup(rng: &mut Rng, n: usize, extent: f32, size: f32) -> Vec<Tri> 
 
 /// A triangle in the plane `z`, counter-clockwise seen from `+z` (so a ray travelling along
 /// `-z` hits its front face), containing the point `(x, y, z)` well inside it.
+#[must_use]
 pub fn tri_at(x: f32, y: f32, z: f32, s: f32) -> Tri {
     [[x - s, y - s, z], [x + s, y - s, z], [x, y + s, z]]
 }
 
 /// Flattens triangles into a soup vertex list.
+#[must_use]
 pub fn soup(tris: &[Tri]) -> Vec<[f32; 3]> {
     tris.iter().flat_map(|t| t.iter().copied()).collect()
 }
@@ -333,6 +345,7 @@ pub fn load_obj(path: &Path) -> Result<Mesh, String> {
 pub const MESH_DIR_ENV: &str = "OXRAY_MESH_DIR";
 
 /// The shared data meshes beside the checkout: `<workspace>/../shared/data/meshes`.
+#[must_use]
 pub fn shared_mesh_dir() -> PathBuf {
     // This crate sits at `<workspace>/crates/oxray-testkit`, as every crate of the workspace.
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared/data/meshes")
@@ -340,6 +353,7 @@ pub fn shared_mesh_dir() -> PathBuf {
 
 /// Where data meshes are looked for, in order: `$OXRAY_MESH_DIR`, `../shared/data/meshes` beside
 /// the checkout ([`shared_mesh_dir`]), and `carry/meshes` under the working directory.
+#[must_use]
 pub fn mesh_dirs() -> Vec<PathBuf> {
     let mut dirs: Vec<PathBuf> = Vec::new();
     if let Ok(d) = std::env::var(MESH_DIR_ENV) {
@@ -351,6 +365,7 @@ pub fn mesh_dirs() -> Vec<PathBuf> {
 }
 
 /// The first file called `name` in the [`mesh_dirs`], if any.
+#[must_use]
 pub fn find_mesh(name: &str) -> Option<PathBuf> {
     mesh_dirs()
         .into_iter()
@@ -362,6 +377,7 @@ pub fn find_mesh(name: &str) -> Option<PathBuf> {
 pub const BUNNY: &str = "stanford-bunny.obj";
 
 /// The Stanford bunny (see [`find_mesh`]), if it is present.
+#[must_use]
 pub fn bunny_path() -> Option<PathBuf> {
     find_mesh(BUNNY)
 }
@@ -371,6 +387,7 @@ pub fn bunny_path() -> Option<PathBuf> {
 /// # Panics
 ///
 /// If the file is present but cannot be read or parsed.
+#[must_use]
 pub fn load_bunny(test: &str) -> Option<Mesh> {
     let Some(path) = bunny_path() else {
         println!(

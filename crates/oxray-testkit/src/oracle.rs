@@ -18,6 +18,7 @@ pub struct RefHit {
 /// Every hit of `ray` on the soup within the closed interval `[tmin, tmax]`, in triangle order.
 /// Degenerate triangles (non-finite vertex or zero area) are skipped, as the builder makes them
 /// inactive; an invalid ray hits nothing.
+#[must_use]
 pub fn reference_hits(tris: &[Tri], ray: &Ray) -> Vec<RefHit> {
     if ray.validate().is_err() {
         return Vec::new();
@@ -37,11 +38,13 @@ pub fn reference_hits(tris: &[Tri], ray: &Ray) -> Vec<RefHit> {
 }
 
 /// The closest reference hit (the lowest triangle index among equal distances).
+#[must_use]
 pub fn reference_closest(tris: &[Tri], ray: &Ray) -> Option<RefHit> {
     closest_of(&reference_hits(tris, ray))
 }
 
 /// The closest of a set of reference hits (the first among equal distances).
+#[must_use]
 pub fn closest_of(hits: &[RefHit]) -> Option<RefHit> {
     hits.iter()
         .copied()
@@ -110,6 +113,7 @@ pub fn check_closest(got: Option<Hit>, tris: &[Tri], ray: &Ray) -> Result<(), St
 pub type HitBits = (u32, u32, u32, u32, u32, u32, u8);
 
 /// The bits of every field of a hit of a GAS, for exact comparisons.
+#[must_use]
 pub fn hit_bits(h: &Option<Hit>) -> Option<HitBits> {
     h.map(|h| {
         (

@@ -26,6 +26,7 @@ pub const SHADOW_SEED: u64 = 11;
 
 /// The centre of the box around `positions` and the radius of its bounding sphere (half the
 /// box's diagonal).
+#[must_use]
 pub fn center_radius(positions: &[[f32; 3]]) -> (Vec3, f32) {
     let (lo, hi) = bounds(positions);
     let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
@@ -35,6 +36,7 @@ pub fn center_radius(positions: &[[f32; 3]]) -> (Vec3, f32) {
 /// Primary rays of a `width` x `height` pinhole camera (30° vertical field of view) that frames
 /// the mesh from above, right and in front, in scanline order from the top row: `oxray bench`'s
 /// coherent rays.
+#[must_use]
 pub fn camera_rays(positions: &[[f32; 3]], width: u32, height: u32) -> Vec<Ray> {
     let (c, r) = center_radius(positions);
     let eye = c + Vec3::new(0.35, 0.25, 1.0).normalize() * (2.2 * r);
@@ -87,6 +89,7 @@ fn has_surface(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> bool {
 /// `n` rays leaving random points of random (non-degenerate) triangles in cosine-distributed
 /// directions about the triangle's normal, with `tmin = 1e-5 * radius`: the secondary rays of a
 /// path tracer, `oxray bench`'s incoherent rays. A mesh without area gives no rays.
+#[must_use]
 pub fn hemisphere_rays(
     positions: &[[f32; 3]],
     triangles: &[[u32; 3]],
@@ -114,6 +117,7 @@ pub fn hemisphere_rays(
 }
 
 /// The point light of [`shadow_rays`]: above and in front of the mesh.
+#[must_use]
 pub fn shadow_light(positions: &[[f32; 3]]) -> Vec3 {
     let (c, r) = center_radius(positions);
     c + Vec3::new(0.4, 1.2, 0.8) * (2.0 * r)
@@ -123,6 +127,7 @@ pub fn shadow_light(positions: &[[f32; 3]]) -> Vec3 {
 /// mesh ([`shadow_light`]), unit direction, `tmin = 1e-5 * radius` and `tmax` the light's
 /// distance. Points facing away from the light still cast their ray, as a renderer that tests
 /// visibility before shading would. A mesh without area gives no rays.
+#[must_use]
 pub fn shadow_rays(
     positions: &[[f32; 3]],
     triangles: &[[u32; 3]],
@@ -163,6 +168,7 @@ pub struct BenchRays {
 impl BenchRays {
     /// `oxray bench`'s rays for a mesh: a `side` x `side` camera and as many diffuse and shadow
     /// rays.
+    #[must_use]
     pub fn new(positions: &[[f32; 3]], triangles: &[[u32; 3]], side: u32) -> Self {
         let n = (side * side) as usize;
         BenchRays {
@@ -253,6 +259,7 @@ pub fn tricky_rays(
 
 /// A 64-bit FNV-1a hash of every field of the rays (origin, `tmin`, direction, `tmax`, time) as
 /// bits: a fingerprint for checking that a ray set has not changed.
+#[must_use]
 pub fn ray_hash(rays: &[Ray]) -> u64 {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for r in rays {

@@ -21,6 +21,7 @@ pub struct Rng(u64);
 
 impl Rng {
     /// A generator from a seed.
+    #[must_use]
     pub fn new(seed: u64) -> Self {
         Rng(seed)
     }

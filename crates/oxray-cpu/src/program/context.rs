@@ -867,17 +867,20 @@ impl<P> ExceptionCtx<'_, P> {
 
     /// `optixGetExceptionCode`.
     #[doc(alias = "optixGetExceptionCode")]
+    #[must_use]
     pub fn exception_code(&self) -> ExceptionCode {
         self.exception.code
     }
 
     /// `optixGetExceptionDetail_i`: 0 past the details given.
     #[doc(alias = "optixGetExceptionDetail_i")]
+    #[must_use]
     pub fn exception_detail(&self, i: usize) -> u32 {
         self.exception.details().get(i).copied().unwrap_or(0)
     }
 
     /// The whole exception.
+    #[must_use]
     pub fn exception(&self) -> &Exception {
         &self.exception
     }

@@ -186,6 +186,7 @@ impl<P> ProgramGroup<P> {
     }
 
     /// The group's kind.
+    #[must_use]
     pub fn kind(&self) -> ProgramGroupKind {
         match &self.inner.programs {
             GroupPrograms::RayGen(_) => ProgramGroupKind::RayGen,
@@ -198,6 +199,7 @@ impl<P> ProgramGroup<P> {
 
     /// The record header naming this group (`optixSbtRecordPackHeader`).
     #[doc(alias = "optixSbtRecordPackHeader")]
+    #[must_use]
     pub fn pack_header(&self) -> SbtHeader {
         SbtHeader::for_group(self.inner.id)
     }

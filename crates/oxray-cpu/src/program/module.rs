@@ -33,6 +33,7 @@ pub enum ProgramKind {
 
 impl ProgramKind {
     /// The entry-name prefix of this kind.
+    #[must_use]
     pub const fn prefix(self) -> &'static str {
         match self {
             ProgramKind::RayGen => "__raygen__",
@@ -47,6 +48,7 @@ impl ProgramKind {
     }
 
     /// A short name for messages.
+    #[must_use]
     pub const fn name(self) -> &'static str {
         match self {
             ProgramKind::RayGen => "ray-generation",
@@ -136,6 +138,7 @@ impl<P> Default for Module<P> {
 
 impl<P> Module<P> {
     /// An empty module.
+    #[must_use]
     pub fn new() -> Self {
         Self::default()
     }

@@ -53,6 +53,7 @@ pub struct TraceRay<'h> {
 
 impl<'h> TraceRay<'h> {
     /// A ray with the defaults above.
+    #[must_use]
     pub fn new(handle: &'h TraversableHandle, origin: Vec3, direction: Vec3) -> Self {
         TraceRay {
             handle,
@@ -70,30 +71,35 @@ impl<'h> TraceRay<'h> {
     }
 
     /// Sets the interval.
+    #[must_use]
     pub fn interval(mut self, tmin: f32, tmax: f32) -> Self {
         (self.tmin, self.tmax) = (tmin, tmax);
         self
     }
 
     /// Sets the ray flags.
+    #[must_use]
     pub fn flags(mut self, flags: RayFlags) -> Self {
         self.flags = flags;
         self
     }
 
     /// Sets the SBT offset, stride and miss index.
+    #[must_use]
     pub fn sbt(mut self, offset: u32, stride: u32, miss_index: u32) -> Self {
         (self.sbt_offset, self.sbt_stride, self.miss_index) = (offset, stride, miss_index);
         self
     }
 
     /// Sets the visibility mask.
+    #[must_use]
     pub fn visibility_mask(mut self, mask: u32) -> Self {
         self.visibility_mask = mask;
         self
     }
 
     /// Sets the time.
+    #[must_use]
     pub fn time(mut self, time: f32) -> Self {
         self.time = time;
         self
