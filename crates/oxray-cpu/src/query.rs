@@ -84,10 +84,29 @@ struct QueryVisitor<'s, 'a, C, F> {
 }
 
 impl<'s, C: CustomIntersector, F: CandidateFilter> QueryVisitor<'s, '_, C, F> {
-    /// Offers the candidate at leaf `slot` of the current GAS, whose primitive fields are
-    /// still to be filled in.
+    /// Offers the candidate at leaf `slot` of the current GAS (a built-in primitive: its
+    /// distance, attributes and hit kind), with the nearest instance's id and index.
     #[inline(always)]
-    fn offer(&mut self, gas: &'s Gas, slot: u32, mut hit: Hit) -> Decision {
+    fn offer(
+        &mut self,
+        gas: &'s Gas,
+        slot: u32,
+        t: f32,
+        uv: (f32, f32),
+        kind: HitKind,
+    ) -> Decision {
+        let (instance_id, instance_index) = self.instance();
+        let mut hit = Hit {
+            t,
+            u: uv.0,
+            v: uv.1,
+            primitive_index: 0,
+            sbt_gas_index: 0,
+            build_input: 0,
+            hit_kind: kind,
+            instance_id,
+            instance_index,
+        };
         let unresolved = if F::SEES_CANDIDATES {
             (hit.primitive_index, hit.sbt_gas_index, hit.build_input) = gas.resolve(slot);
             None
@@ -152,30 +171,16 @@ impl<'s, C: CustomIntersector, F: CandidateFilter> GasVisitor for QueryVisitor<'
         let Some(gas) = self.gas else {
             return Decision::Ignore;
         };
-        let (instance_id, instance_index) = self.instance();
         // FLIP_TRIANGLE_FACING of the nearest instance swaps the faces (guide §5.4).
         let flip = self
             .instance
             .is_some_and(|i| i.flags.contains(crate::InstanceFlags::FLIP_TRIANGLE_FACING));
-        self.offer(
-            gas,
-            slot,
-            Hit {
-                t: h.t,
-                u: h.u,
-                v: h.v,
-                primitive_index: 0,
-                sbt_gas_index: 0,
-                build_input: 0,
-                hit_kind: if h.front_face != flip {
-                    HitKind::TRIANGLE_FRONT_FACE
-                } else {
-                    HitKind::TRIANGLE_BACK_FACE
-                },
-                instance_id,
-                instance_index,
-            },
-        )
+        let kind = if h.front_face != flip {
+            HitKind::TRIANGLE_FRONT_FACE
+        } else {
+            HitKind::TRIANGLE_BACK_FACE
+        };
+        self.offer(gas, slot, h.t, (h.u, h.v), kind)
     }
 
     #[inline(always)]
@@ -183,23 +188,8 @@ impl<'s, C: CustomIntersector, F: CandidateFilter> GasVisitor for QueryVisitor<'
         let Some(gas) = self.gas else {
             return Decision::Ignore;
         };
-        let (instance_id, instance_index) = self.instance();
         // Spheres have no attributes (guide §9.4, §13.4) and only a front face.
-        self.offer(
-            gas,
-            slot,
-            Hit {
-                t,
-                u: 0.0,
-                v: 0.0,
-                primitive_index: 0,
-                sbt_gas_index: 0,
-                build_input: 0,
-                hit_kind: HitKind::SPHERE_FRONT_FACE,
-                instance_id,
-                instance_index,
-            },
-        )
+        self.offer(gas, slot, t, (0.0, 0.0), HitKind::SPHERE_FRONT_FACE)
     }
 
     #[inline(always)]
@@ -207,23 +197,9 @@ impl<'s, C: CustomIntersector, F: CandidateFilter> GasVisitor for QueryVisitor<'
         let Some(gas) = self.gas else {
             return Decision::Ignore;
         };
-        let (instance_id, instance_index) = self.instance();
         // A curve's attributes are its u (and a ribbon's v), guide §9.3.
-        self.offer(
-            gas,
-            slot,
-            Hit {
-                t: h.t,
-                u: h.u,
-                v: h.v,
-                primitive_index: 0,
-                sbt_gas_index: 0,
-                build_input: 0,
-                hit_kind: HitKind::curve(gas.curves[slot as usize].curve_type(), h.back_face),
-                instance_id,
-                instance_index,
-            },
-        )
+        let kind = HitKind::curve(gas.curves[slot as usize].curve_type(), h.back_face);
+        self.offer(gas, slot, h.t, (h.u, h.v), kind)
     }
 
     fn custom(&mut self, slot: u32, tmin: f32, tmax: f32, _: &mut [Entry]) -> (Option<f32>, bool) {

@@ -175,7 +175,9 @@ unsafe fn traverse_packet_avx2<V: GasVisitor>(
     });
     let tmin = per_ray(&|l| rays[l].tmin);
     let tmin_v = load(&tmin);
-    let packet_tmin = _mm256_set1_ps(tmin.iter().copied().fold(f32::INFINITY, f32::min));
+    // The packet's interval starts at its smallest tmin.
+    let packet_tmin_scalar = tmin.iter().copied().fold(f32::INFINITY, f32::min);
+    let packet_tmin = _mm256_set1_ps(packet_tmin_scalar);
     let mut tmax = per_ray(&|l| rays[l].tmax);
     let robust = _mm256_set1_ps(ROBUST_FAR);
     let zero = _mm256_setzero_ps();
@@ -198,7 +200,7 @@ unsafe fn traverse_packet_avx2<V: GasVisitor>(
     let mut cur = PacketEntry {
         child: 0,
         count: 0,
-        dist: packet_tmin_scalar(&tmin),
+        dist: packet_tmin_scalar,
         rays: live,
     };
     loop {
@@ -491,9 +493,4 @@ impl PacketLeaf<'_> {
         }
         changed
     }
-}
-
-/// The smallest `tmin` of the packet.
-fn packet_tmin_scalar(tmin: &[f32; PACKET]) -> f32 {
-    tmin.iter().copied().fold(f32::INFINITY, f32::min)
 }
