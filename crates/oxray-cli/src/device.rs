@@ -92,9 +92,10 @@ pub struct RaycastReport {
     pub transfer_mrays_per_s: f64,
 }
 
-/// `oxray raycast`: builds the mesh's GAS on `device` (fast-trace flags), casts the rays of
-/// `rays_path` and writes the hits (or, with `occlusion`, one u32 0/1 per ray) to `out_path`:
-/// the same bytes on every device. Each speed is that of one call after a warm-up call.
+/// `oxray raycast`: builds the mesh's GAS for `device` (fast-trace flags, with the host's
+/// builder: [`Device::with_host_builds`]), casts the rays of `rays_path` and writes the hits
+/// (or, with `occlusion`, one u32 0/1 per ray) to `out_path`: the same bytes on every device,
+/// ties at shared edges included. Each speed is that of one call after a warm-up call.
 ///
 /// Before any work, `out_path` is checked to be neither the mesh nor the ray file and to lie
 /// in a writable folder; it is written atomically. Rays follow [`check_rays`]: a negative
@@ -113,6 +114,7 @@ pub fn raycast(
     let sources: Vec<&Path> = sources.iter().map(|p| p.as_path()).collect();
     oxray_scene::files::check_output(out_path, &sources).map_err(RaycastError::Output)?;
     let (index, rays, check) = check_rays(&all_rays);
+    let device = &device.clone().with_host_builds();
     let gas = build_gas_on(device, &mesh, BuildFlags::PREFER_FAST_TRACE)?;
     let root = gas.handle();
     let n = rays.len();
@@ -541,8 +543,8 @@ pub fn bench_builds(
         let (hc, hi, ht) = trace(&host_gas)?;
         drop(host_gas);
         let mut device = None;
-        if let Some(config) = DeviceBuildConfig::for_options(&options, mesh.triangles.len() as u32)
         {
+            let config = DeviceBuildConfig::for_options(&options, mesh.triangles.len() as u32);
             let mut kernels = Vec::new();
             let mut total = Vec::new();
             let mut prepare = Vec::new();

@@ -19,12 +19,12 @@ use std::sync::Arc;
 /// The CUDA backend: one device, its compiled kernels, a node layout for the GASes it builds
 /// and where it builds them.
 ///
-/// Triangle GASes are built on the device ([`GasBuilder::Device`], as OptiX builds them) unless
-/// `OXRAY_CUDA_GAS_BUILDER=host` is set when the backend is opened or
-/// [`with_builder`](Self::with_builder) says otherwise. The device builds in the binary layout
-/// ([`NodeLayout::Bvh2`]) the presets [`DeviceBuildConfig::for_options`] accepts; the rest
-/// (`PREFER_FAST_TRACE`, `ALLOW_UPDATE`, the BVH4 layout, custom primitives, and the rare tree
-/// too deep for the traversal stacks) is built on the host and uploaded.
+/// Triangle and custom-primitive GASes are built on the device ([`GasBuilder::Device`], as
+/// OptiX builds them) unless `OXRAY_CUDA_GAS_BUILDER=host` is set when the backend is opened
+/// or [`with_builder`](Self::with_builder) says otherwise: every preset and flag, in the
+/// binary layout ([`NodeLayout::Bvh2`]), as [`DeviceBuildConfig::for_options`] configures it.
+/// The rest (spheres, curves, motion keys, the BVH4 layout, and the rare tree too deep for the
+/// traversal stacks) is built on the host and uploaded.
 #[derive(Clone, Debug)]
 pub struct Cuda {
     ctx: CudaContext,
@@ -105,7 +105,7 @@ impl Cuda {
         let n = inputs
             .iter()
             .fold(0u32, |n, i| n.saturating_add(i.num_primitives()));
-        DeviceBuildConfig::for_options(options, n)
+        Some(DeviceBuildConfig::for_options(options, n))
     }
 
     /// The memory query (`optixAccelComputeMemoryUsage`) for a GAS build on this backend: the

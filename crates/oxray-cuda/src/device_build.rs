@@ -37,8 +37,9 @@ const INODE_BYTES: usize = 64;
 /// Where a [`Cuda`](crate::Cuda) backend builds triangle GASes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum GasBuilder {
-    /// On the device, as OptiX does: the default. Builds the device cannot make (see
-    /// [`DeviceBuildConfig::for_options`]) still run on the host.
+    /// On the device, as OptiX does: the default. Builds the device does not make (spheres,
+    /// curves, motion keys, the BVH4 layout: see [`Cuda`](crate::Cuda)) still run on the
+    /// host.
     #[default]
     Device,
     /// On the host, with the binned SAH builder every backend shares, then uploaded.
@@ -93,6 +94,10 @@ pub struct DeviceBuildConfig {
     /// [`CudaError::TreeTooDeep`] (and [`Cuda`](crate::Cuda) builds on the host instead). The
     /// traversal stacks hold [`MAX_BVH2_DEPTH`] levels.
     pub max_depth: u32,
+    /// `ALLOW_UPDATE`: inactive primitives (degenerate triangles, invalid boxes) keep a leaf
+    /// slot with an empty box, since an update may make them active (guide §5.6), and the
+    /// build keeps what the device's refit needs (the slots' primitives, the nodes by height).
+    pub keep_inactive: bool,
 }
 
 impl DeviceBuildConfig {
@@ -101,11 +106,13 @@ impl DeviceBuildConfig {
     pub const FAST_BUILD: DeviceBuildConfig = DeviceBuildConfig {
         morton_bits: 30,
         max_depth: MAX_BVH2_DEPTH as u32,
+        keep_inactive: false,
     };
-    /// No preference: 60-bit codes.
+    /// No preference, and `PREFER_FAST_TRACE`: 60-bit codes.
     pub const DEFAULT: DeviceBuildConfig = DeviceBuildConfig {
         morton_bits: 60,
         max_depth: MAX_BVH2_DEPTH as u32,
+        keep_inactive: false,
     };
 
     /// Above this many triangles, `PREFER_FAST_BUILD` uses 60-bit codes too: 30-bit cells grow
@@ -114,22 +121,26 @@ impl DeviceBuildConfig {
     /// `docs/BENCHMARKS.md`).
     pub const FAST_BUILD_30_BIT_MAX: u32 = 1 << 24;
 
-    /// The configuration for a build of `num_primitives` primitives with these options, or
-    /// `None` where the device does not build it yet: `PREFER_FAST_TRACE` (the device has no
-    /// quality step yet, and the host's SAH builder traces faster) and `ALLOW_UPDATE` (the
-    /// device does not refit; an updatable structure keeps slots for inactive primitives, which
-    /// only the host builder places).
+    /// The configuration for a build of `num_primitives` primitives with these options:
+    /// `PREFER_FAST_BUILD` takes 30-bit codes (up to [`Self::FAST_BUILD_30_BIT_MAX`]
+    /// primitives), every other preset 60-bit ones, and `ALLOW_UPDATE` keeps inactive
+    /// primitives. `PREFER_FAST_TRACE` builds as the default preset: the SAH collapse into
+    /// leaves of about two triangles, which suits the device's one-triangle-at-a-time leaf
+    /// test, traces as fast as the host's fast-trace tree or faster (`docs/BENCHMARKS.md`, "GAS
+    /// builds on the device").
     #[must_use]
-    pub fn for_options(options: &BuildOptions, num_primitives: u32) -> Option<DeviceBuildConfig> {
+    pub fn for_options(options: &BuildOptions, num_primitives: u32) -> DeviceBuildConfig {
         let f = options.flags;
-        if f.intersects(BuildFlags::PREFER_FAST_TRACE | BuildFlags::ALLOW_UPDATE) {
-            None
-        } else if f.contains(BuildFlags::PREFER_FAST_BUILD)
+        let base = if f.contains(BuildFlags::PREFER_FAST_BUILD)
             && num_primitives <= Self::FAST_BUILD_30_BIT_MAX
         {
-            Some(Self::FAST_BUILD)
+            Self::FAST_BUILD
         } else {
-            Some(Self::DEFAULT)
+            Self::DEFAULT
+        };
+        DeviceBuildConfig {
+            keep_inactive: f.contains(BuildFlags::ALLOW_UPDATE),
+            ..base
         }
     }
 
@@ -190,12 +201,14 @@ pub(crate) struct BuildKernels {
     write_triangles: CudaFunction,
     bounds_aabbs: CudaFunction,
     write_aabbs: CudaFunction,
+    heights: CudaFunction,
     pub(crate) refit_triangles: CudaFunction,
     pub(crate) refit_nodes: CudaFunction,
+    pub(crate) refit_nodes4: CudaFunction,
 }
 
 /// Every kernel entry of [`BUILD_SOURCE`].
-pub const BUILD_ENTRIES: [&str; 21] = [
+pub const BUILD_ENTRIES: [&str; 23] = [
     "oxray_build_bounds",
     "oxray_build_morton32",
     "oxray_build_morton64",
@@ -215,8 +228,10 @@ pub const BUILD_ENTRIES: [&str; 21] = [
     "oxray_build_write_triangles",
     "oxray_refit_triangles",
     "oxray_refit_nodes",
+    "oxray_refit_nodes4",
     "oxray_build_bounds_aabbs",
     "oxray_build_write_aabbs",
+    "oxray_build_heights",
 ];
 
 /// NVRTC options of the builder: the trace kernels' (no FMA contraction, which the degeneracy
@@ -279,8 +294,10 @@ impl BuildKernels {
             write_triangles: f("oxray_build_write_triangles")?,
             bounds_aabbs: f("oxray_build_bounds_aabbs")?,
             write_aabbs: f("oxray_build_write_aabbs")?,
+            heights: f("oxray_build_heights")?,
             refit_triangles: f("oxray_refit_triangles")?,
             refit_nodes: f("oxray_refit_nodes")?,
+            refit_nodes4: f("oxray_refit_nodes4")?,
         })
     }
 }
@@ -382,27 +399,36 @@ fn stage<'a>(t: &TriangleInput<'a>) -> Staged<'a> {
     }
 }
 
+/// Words of the build's counters (`C_*` in the kernels).
+const COUNTERS: usize = 9;
+
 /// The device memory a build of `n` triangles takes besides its staged inputs, in bytes: the
 /// boxes, the sort's keys, values and counts, the radix tree, the parents of its leaves, the
-/// kept-node flags and their prefix sum (some are freed before others are allocated: the sum
-/// bounds the peak).
-fn scratch_bytes(n: usize, key_bytes: usize) -> usize {
+/// kept-node flags and their prefix sum, the counters, and for an updatable build the nodes'
+/// heights (some are freed before others are allocated: the sum bounds the peak).
+fn scratch_bytes(n: usize, config: &DeviceBuildConfig) -> usize {
     let tiles = n.div_ceil(TILE).max(1);
     32 * n.max(1)
-        + 2 * key_bytes * n.max(1)
+        + 2 * config.key_bytes() * n.max(1)
         + 2 * 4 * n.max(1)
         + 4 * 256 * tiles
         + 4 * 256
         + INODE_BYTES * n.max(2)
         + 3 * 4 * n.max(1)
         + 4 * tiles
-        + 4 * 8
+        + 4 * COUNTERS
+        + if config.keep_inactive {
+            4 * n.max(1)
+        } else {
+            0
+        }
 }
 
 /// The memory query of a device build (`optixAccelComputeMemoryUsage` on this device), from the
 /// inputs' counts and formats: the output is the node and triangle arrays at their largest (one
 /// node per triangle, 64 bytes, and 48 bytes of triangle per triangle); the temporary memory is
-/// the staged inputs and the scratch arrays, exactly what [`build_gas`] allocates.
+/// the staged inputs and the scratch arrays, exactly what [`build_gas`] allocates; an update
+/// (of a build with `ALLOW_UPDATE`) stages the inputs again.
 /// Validates as the build does, short of reading the buffers.
 #[doc(alias = "optixAccelComputeMemoryUsage")]
 pub fn memory_usage(
@@ -426,8 +452,12 @@ pub fn memory_usage(
     };
     Ok(AccelBufferSizes {
         output_size_in_bytes: 64 * n.max(1) + per_prim * n.max(1),
-        temp_size_in_bytes: staged + scratch_bytes(n, config.key_bytes()),
-        temp_update_size_in_bytes: 0,
+        temp_size_in_bytes: staged + scratch_bytes(n, config),
+        temp_update_size_in_bytes: if options.flags.contains(BuildFlags::ALLOW_UPDATE) {
+            staged
+        } else {
+            0
+        },
     })
 }
 
@@ -539,19 +569,26 @@ pub fn build_gas(
         })
         .collect();
     prepared.bounds = result.bounds;
-    // Device builds are never updatable: only an update reads the inputs' shapes.
-    prepared.shapes = Vec::new();
+    // What an update needs: the inputs' shapes (its rules compare them), every slot's
+    // primitive and the nodes by height (the refit's launches).
+    let refit = match &result.heights {
+        Some(h) => Some(crate::refit::RefitPlan::from_heights(ctx, ids, h)?),
+        None => {
+            prepared.shapes = Vec::new();
+            None
+        }
+    };
     let info = GasInfo {
         kind: prepared.kind(),
         build_flags: prepared.build_flags,
         num_primitives: prepared.num_primitives,
-        num_active_primitives: result.active as u32,
+        num_active_primitives: result.live as u32,
         num_build_inputs: prepared.inputs.len(),
         record_flags: prepared.record_flags.clone(),
         bounds: result.bounds,
         stats: result.stats,
     };
-    let gas = CudaGas::from_device_build(
+    let mut gas = CudaGas::from_device_build(
         ctx,
         result.nodes,
         result.num_nodes,
@@ -560,6 +597,7 @@ pub fn build_gas(
         info,
         prepared,
     );
+    gas.refit = refit;
     let total_ms = start.elapsed().as_secs_f64() * 1e3;
     Ok((
         gas,
@@ -671,7 +709,12 @@ struct Built {
     triangles: CudaSlice<u32>,
     /// The sorted triangle ids (the first `active` are the slots').
     values: CudaSlice<u32>,
+    /// Primitives in the tree: the active ones, or all of them with `keep_inactive`.
     active: usize,
+    /// Active primitives.
+    live: usize,
+    /// With `keep_inactive`, the height of every node (1 above leaves only).
+    heights: Option<Vec<u32>>,
     bounds: Aabb,
     stats: BvhStats,
 }
@@ -725,32 +768,40 @@ fn run_kernels(
     let launch = |what| driver(what);
 
     // Counters: centroid minima start at the largest order-preserving value, the rest at 0.
-    let mut init = [0u32; 8];
+    let mut init = [0u32; COUNTERS];
     init[..3].fill(u32::MAX);
     let mut counters = s
         .clone_htod(&init[..])
         .map_err(launch("copying the build counters"))?;
     let mut boxes: CudaSlice<f32> = scratch(ctx, 8 * n)?;
+    let keep = u32::from(config.keep_inactive);
     match prims {
         DevicePrims::Triangles { table, n_in } => {
             let mut b = s.launch_builder(&k.bounds);
             b.arg(*table)
                 .arg(n_in)
                 .arg(&n32)
+                .arg(&keep)
                 .arg(&mut boxes)
                 .arg(&mut counters);
-            // SAFETY: oxray_build_bounds(const InputDesc*, u32 n_in, u32 n, float4* boxes,
-            // u32* counters): the table holds n_in descriptors of buffers alive until the
-            // kernels are done, whose triangles 0..n have in-range indices (checked by
-            // `GasData::prepare`); boxes holds 8 floats per triangle, counters 8 words.
+            // SAFETY: oxray_build_bounds(const InputDesc*, u32 n_in, u32 n, u32 keep_inactive,
+            // float4* boxes, u32* counters): the table holds n_in descriptors of buffers alive
+            // until the kernels are done, whose triangles 0..n have in-range indices (checked
+            // by `GasData::prepare`); boxes holds 8 floats per triangle, counters COUNTERS
+            // words.
             unsafe { b.launch(grid(n)) }.map_err(launch("launching the bounds kernel"))?;
         }
         DevicePrims::Boxes(aabbs) => {
             let mut b = s.launch_builder(&k.bounds_aabbs);
-            b.arg(*aabbs).arg(&n32).arg(&mut boxes).arg(&mut counters);
-            // SAFETY: oxray_build_bounds_aabbs(const float* aabbs, u32 n, float4* boxes,
-            // u32* counters): 6 floats per primitive for n primitives (`stage_aabbs` of inputs
-            // whose counts sum to n), 8 floats of boxes per primitive, counters 8 words.
+            b.arg(*aabbs)
+                .arg(&n32)
+                .arg(&keep)
+                .arg(&mut boxes)
+                .arg(&mut counters);
+            // SAFETY: oxray_build_bounds_aabbs(const float* aabbs, u32 n, u32 keep_inactive,
+            // float4* boxes, u32* counters): 6 floats per primitive for n primitives
+            // (`stage_aabbs` of inputs whose counts sum to n), 8 floats of boxes per
+            // primitive, counters COUNTERS words.
             unsafe { b.launch(grid(n)) }.map_err(launch("launching the bounds kernel"))?;
         }
     }
@@ -882,8 +933,8 @@ fn run_kernels(
     }
     drop(sums);
 
-    // What the tree came to: active triangles, kept nodes, and the root.
-    let mut c = [0u32; 8];
+    // What the tree came to: its triangles, kept nodes, active triangles, and the root.
+    let mut c = [0u32; COUNTERS];
     s.memcpy_dtoh(&counters, &mut c[..])
         .map_err(launch("copying the build counters"))?;
     let mut root = [0u32; INODE_BYTES / 4];
@@ -892,6 +943,7 @@ fn run_kernels(
     ctx.synchronize()?;
     let active = c[6] as usize;
     let kept_nodes = c[7] as usize;
+    let live = c[8] as usize;
     let f = f32::from_bits;
     let (height, bounds, stat) = if active >= 2 {
         (
@@ -930,6 +982,27 @@ fn run_kernels(
         unsafe { b.launch(grid(active.saturating_sub(1).max(1))) }
             .map_err(launch("launching the node writer"))?;
     }
+    let heights = if config.keep_inactive {
+        let mut h: CudaSlice<u32> = scratch(ctx, num_nodes)?;
+        let mut b = s.launch_builder(&k.heights);
+        b.arg(&inodes)
+            .arg(&kept)
+            .arg(&index)
+            .arg(&counters)
+            .arg(&mut h);
+        // SAFETY: oxray_build_heights(const INode*, const u32* kept, const u32* index,
+        // const u32* counters, u32* out): each kept node writes the word at its index, below
+        // the kept count `num_nodes` (thread 0 writes word 0 with fewer than two triangles),
+        // which is every word of `h`.
+        unsafe { b.launch(grid(active.saturating_sub(1).max(1))) }
+            .map_err(launch("launching the height kernel"))?;
+        let mut host = vec![0u32; num_nodes];
+        s.memcpy_dtoh(&h, &mut host[..])
+            .map_err(launch("copying the node heights"))?;
+        Some(host)
+    } else {
+        None
+    };
     let per_slot = match prims {
         DevicePrims::Triangles { .. } => 12,
         DevicePrims::Boxes(_) => 8,
@@ -945,18 +1018,21 @@ fn run_kernels(
             b.arg(*table)
                 .arg(n_in)
                 .arg(&values)
+                .arg(&boxes)
                 .arg(&a32)
                 .arg(&mut triangles);
             // SAFETY: oxray_build_write_triangles(const InputDesc*, u32 n_in,
-            // const u32* values, u32 n_act, float4* out): `active` sorted ids of triangles of
-            // the inputs, 12 words each.
+            // const u32* values, const float4* boxes, u32 n_act, float4* out): `active` sorted
+            // ids of triangles of the inputs, whose boxes the bounds kernel wrote; 12 words
+            // each.
             unsafe { b.launch(grid(active)) }.map_err(launch("launching the triangle writer"))?;
         }
-        DevicePrims::Boxes(aabbs) => {
+        DevicePrims::Boxes(_) => {
             let mut b = s.launch_builder(&k.write_aabbs);
-            b.arg(*aabbs).arg(&values).arg(&a32).arg(&mut triangles);
-            // SAFETY: oxray_build_write_aabbs(const float* aabbs, const u32* values,
-            // u32 n_act, float4* out): `active` sorted ids of the staged boxes, 8 words each.
+            b.arg(&boxes).arg(&values).arg(&a32).arg(&mut triangles);
+            // SAFETY: oxray_build_write_aabbs(const float4* boxes, const u32* values,
+            // u32 n_act, float4* out): `active` sorted ids of primitives whose boxes (8 floats
+            // each) the bounds kernel wrote; 8 words each out.
             unsafe { b.launch(grid(active)) }.map_err(launch("launching the box writer"))?;
         }
     }
@@ -1002,6 +1078,8 @@ fn run_kernels(
         triangles,
         values,
         active,
+        live,
+        heights,
         bounds,
         stats,
     })
@@ -1024,20 +1102,34 @@ mod tests {
     #[test]
     fn presets_choose_the_device_build() {
         let with = |f| DeviceBuildConfig::for_options(&BuildOptions::new(f), 1000);
-        assert_eq!(with(BuildFlags::empty()), Some(DeviceBuildConfig::DEFAULT));
+        assert_eq!(with(BuildFlags::empty()), DeviceBuildConfig::DEFAULT);
         assert_eq!(
             with(BuildFlags::PREFER_FAST_BUILD | BuildFlags::ALLOW_COMPACTION),
-            Some(DeviceBuildConfig::FAST_BUILD)
+            DeviceBuildConfig::FAST_BUILD
         );
         // Large meshes get the finer codes whatever the preset.
         let big = DeviceBuildConfig::FAST_BUILD_30_BIT_MAX + 1;
         let fast = BuildOptions::new(BuildFlags::PREFER_FAST_BUILD);
         assert_eq!(
             DeviceBuildConfig::for_options(&fast, big),
-            Some(DeviceBuildConfig::DEFAULT)
+            DeviceBuildConfig::DEFAULT
         );
-        assert_eq!(with(BuildFlags::PREFER_FAST_TRACE), None);
-        assert_eq!(with(BuildFlags::ALLOW_UPDATE), None);
+        assert_eq!(
+            with(BuildFlags::PREFER_FAST_TRACE),
+            DeviceBuildConfig::DEFAULT
+        );
+        // Updatable builds keep inactive primitives, with either code width.
+        let updatable = DeviceBuildConfig {
+            keep_inactive: true,
+            ..DeviceBuildConfig::DEFAULT
+        };
+        assert_eq!(with(BuildFlags::ALLOW_UPDATE), updatable);
+        assert_eq!(
+            with(BuildFlags::ALLOW_UPDATE | BuildFlags::PREFER_FAST_TRACE),
+            updatable
+        );
+        assert!(with(BuildFlags::ALLOW_UPDATE | BuildFlags::PREFER_FAST_BUILD).keep_inactive);
+        const { assert!(!DeviceBuildConfig::FAST_BUILD.keep_inactive) };
         // 30-bit keys with position tie-breaks: at most 30 + 31 levels, within the traversal's.
         const { assert!(30 + 31 <= MAX_BVH2_DEPTH) };
     }
@@ -1096,10 +1188,17 @@ mod tests {
         assert_eq!(sizes.output_size_in_bytes, 112 * 100);
         let tiles = 1;
         let scratch =
-            32 * 100 + 16 * 100 + 8 * 100 + 1024 * tiles + 1024 + 64 * 100 + 1200 + 4 + 32;
+            32 * 100 + 16 * 100 + 8 * 100 + 1024 * tiles + 1024 + 64 * 100 + 1200 + 4 + 36;
         assert_eq!(sizes.temp_size_in_bytes, 3600 + 1200 + 32 + scratch);
+        assert_eq!(sizes.temp_update_size_in_bytes, 0);
         let fast = memory_usage(&o, &inputs, &DeviceBuildConfig::FAST_BUILD).unwrap();
         assert_eq!(sizes.temp_size_in_bytes - fast.temp_size_in_bytes, 800);
+        // An updatable build keeps the nodes' heights; its update stages the inputs again.
+        let u = BuildOptions::new(BuildFlags::ALLOW_UPDATE);
+        let config = DeviceBuildConfig::for_options(&u, 100);
+        let up = memory_usage(&u, &inputs, &config).unwrap();
+        assert_eq!(up.temp_size_in_bytes - sizes.temp_size_in_bytes, 400);
+        assert_eq!(up.temp_update_size_in_bytes, 3600 + 1200 + 32);
         // The same validation as the build.
         let bad = BuildOptions::new(BuildFlags::PREFER_FAST_BUILD | BuildFlags::PREFER_FAST_TRACE);
         assert_eq!(

@@ -1,10 +1,14 @@
 //! Updates (refits) of GASes on the device (guide §5.6): the same tree and leaf slots, new
 //! primitives, boxes recomputed bottom-up by the kernels at the end of `kernels/build.cu`.
 //!
-//! A GAS built with `ALLOW_UPDATE` is built by the host's builder (which keeps a slot for every
-//! primitive, inactive ones included, so that an update can make them active) and uploaded in
-//! the binary layout; the upload keeps a [`RefitPlan`]: the global primitive of every leaf slot
-//! (host and device), and the device nodes ordered by depth. An update then
+//! A GAS built with `ALLOW_UPDATE` keeps a slot for every primitive, inactive ones included, so
+//! that an update can make them active. Triangles and custom primitives are built so by the
+//! device's builder (`device_build.rs`, which places inactive primitives, with empty boxes,
+//! after the active ones); spheres, curves, the BVH4 layout and a host-builder backend build on
+//! the host and upload in the binary layout. Either keeps a [`RefitPlan`]: the global primitive
+//! of every leaf slot (host and device), and the device nodes in an order that puts every node
+//! after its inner children (by depth for an upload, by height for a device build). An update
+//! then
 //!
 //! 1. checks the guide's rules against what the build kept ([`GasData::check_update`]), so that
 //!    a refused update changes nothing and gives the CPU backend's typed error;
@@ -28,36 +32,69 @@ use oxray_bvh::{GasData, GasKind, SlotPrimitives, NO_PRIMITIVE};
 use oxray_core::{Aabb, BuildError, BuildFlags, BuildInput, BuildOptions};
 use rayon::prelude::*;
 
-/// What an update of an uploaded GAS needs: the global primitive of each leaf slot, on the
-/// host and the device, and the device nodes by depth.
+/// What an update of a GAS needs: the global primitive of each leaf slot, on the host and the
+/// device, and the device nodes in groups, each group's inner children in earlier groups.
 #[derive(Debug)]
 pub(crate) struct RefitPlan {
     /// Global primitive of each leaf slot ([`NO_PRIMITIVE`] for padding).
     pub(crate) slot_prim: Vec<u32>,
     d_slot_prim: CudaSlice<u32>,
-    /// Device node indices, deepest level first.
+    /// Device node indices, children's groups first.
     order: CudaSlice<u32>,
-    /// `(first, count)` of each level in `order`, deepest first.
+    /// `(first, count)` of each group in `order`, in launch order.
     levels: Vec<(u32, u32)>,
+    /// The node layout the plan's indices and the refit kernel are for.
+    layout: NodeLayout,
 }
 
 /// Words of one binary node (`layout.rs`).
 const NODE_WORDS: usize = 16;
+/// Words of one BVH4-layout node (`oxray_bvh::Bvh4Node`).
+const NODE4_WORDS: usize = 32;
+
+/// Where a layout's node keeps child `k`'s link and count, and how many children it has.
+struct Links {
+    words: usize,
+    children: usize,
+    child: usize,
+    count: usize,
+}
+
+impl Links {
+    fn of(layout: NodeLayout) -> Links {
+        match layout {
+            NodeLayout::Bvh2 => Links {
+                words: NODE_WORDS,
+                children: 2,
+                child: 12,
+                count: 14,
+            },
+            NodeLayout::Bvh4 => Links {
+                words: NODE4_WORDS,
+                children: 4,
+                child: 24,
+                count: 28,
+            },
+        }
+    }
+}
 
 impl RefitPlan {
-    /// The plan of a GAS uploaded with `nodes` (binary-layout words): `None` unless it was
-    /// built with `ALLOW_UPDATE` in the binary layout (the BVH4 layout is not refit on the
-    /// device; its update is refused).
+    /// The plan of a GAS uploaded with `nodes` (words of `layout`): `None` unless it was built
+    /// with `ALLOW_UPDATE` (in the binary layout, or in the BVH4 layout, which holds only
+    /// triangles).
     pub(crate) fn for_upload(
         ctx: &CudaContext,
         gas: &GasData,
         nodes: &[u32],
         layout: NodeLayout,
     ) -> Result<Option<RefitPlan>, CudaError> {
-        if !gas.build_flags.contains(BuildFlags::ALLOW_UPDATE) || layout != NodeLayout::Bvh2 {
+        if !gas.build_flags.contains(BuildFlags::ALLOW_UPDATE)
+            || (layout == NodeLayout::Bvh4 && gas.kind != GasKind::Triangles)
+        {
             return Ok(None);
         }
-        let (order, levels) = levels(nodes);
+        let (order, levels) = levels(nodes, layout);
         let upload = |w: &[u32]| {
             let w: &[u32] = if w.is_empty() { &[0] } else { w };
             ctx.stream
@@ -69,7 +106,33 @@ impl RefitPlan {
             order: upload(&order)?,
             slot_prim: gas.slot_prim.clone(),
             levels,
+            layout,
         }))
+    }
+
+    /// The plan of a GAS the device built with `ALLOW_UPDATE`: `slot_prim` the global primitive
+    /// of every leaf slot (the sorted ids, inactive primitives included) and `heights` the
+    /// height of every device node, by which the refit's launches go (lowest first: a node's
+    /// inner children are lower than it).
+    pub(crate) fn from_heights(
+        ctx: &CudaContext,
+        slot_prim: Vec<u32>,
+        heights: &[u32],
+    ) -> Result<RefitPlan, CudaError> {
+        let (order, levels) = by_height(heights);
+        let upload = |w: &[u32]| {
+            let w: &[u32] = if w.is_empty() { &[0] } else { w };
+            ctx.stream
+                .clone_htod(w)
+                .map_err(driver("copying refit tables to the device"))
+        };
+        Ok(RefitPlan {
+            d_slot_prim: upload(&slot_prim)?,
+            order: upload(&order)?,
+            slot_prim,
+            levels,
+            layout: NodeLayout::Bvh2,
+        })
     }
 
     /// A copy of the plan's device tables (for a copy of the structure).
@@ -84,14 +147,16 @@ impl RefitPlan {
             d_slot_prim: copy(&self.d_slot_prim)?,
             order: copy(&self.order)?,
             levels: self.levels.clone(),
+            layout: self.layout,
         })
     }
 }
 
-/// The device nodes grouped by depth below the root (node 0), deepest group first: the order
-/// and the `(first, count)` of each group.
-fn levels(nodes: &[u32]) -> (Vec<u32>, Vec<(u32, u32)>) {
-    let n = nodes.len() / NODE_WORDS;
+/// The device nodes (words of `layout`) grouped by depth below the root (node 0), deepest group
+/// first: the order and the `(first, count)` of each group.
+fn levels(nodes: &[u32], layout: NodeLayout) -> (Vec<u32>, Vec<(u32, u32)>) {
+    let links = Links::of(layout);
+    let n = nodes.len() / links.words;
     let mut by_depth: Vec<Vec<u32>> = Vec::new();
     if n > 0 {
         let mut seen = vec![false; n];
@@ -100,9 +165,9 @@ fn levels(nodes: &[u32]) -> (Vec<u32>, Vec<(u32, u32)>) {
         while !frontier.is_empty() {
             let mut next = Vec::new();
             for &i in &frontier {
-                let w = &nodes[i as usize * NODE_WORDS..(i as usize + 1) * NODE_WORDS];
-                for k in 0..2 {
-                    let (child, count) = (w[12 + k], w[14 + k]);
+                let w = &nodes[i as usize * links.words..(i as usize + 1) * links.words];
+                for k in 0..links.children {
+                    let (child, count) = (w[links.child + k], w[links.count + k]);
                     // Each node once, so that the walk ends whatever the words say.
                     if count == 0
                         && (child as usize) < n
@@ -124,6 +189,30 @@ fn levels(nodes: &[u32]) -> (Vec<u32>, Vec<(u32, u32)>) {
     (order, levels)
 }
 
+/// The nodes grouped by height, lowest group first (a counting sort): the order and the
+/// `(first, count)` of each group.
+fn by_height(heights: &[u32]) -> (Vec<u32>, Vec<(u32, u32)>) {
+    let top = heights.iter().copied().max().unwrap_or(0) as usize;
+    let mut starts = vec![0u32; top + 2];
+    for &h in heights {
+        starts[h as usize + 1] += 1;
+    }
+    for k in 1..starts.len() {
+        starts[k] += starts[k - 1];
+    }
+    let levels = (0..=top)
+        .map(|h| (starts[h], starts[h + 1] - starts[h]))
+        .filter(|&(_, count)| count > 0)
+        .collect();
+    let mut next = starts;
+    let mut order = vec![0u32; heights.len()];
+    for (i, &h) in heights.iter().enumerate() {
+        order[next[h as usize] as usize] = i as u32;
+        next[h as usize] += 1;
+    }
+    (order, levels)
+}
+
 fn device(e: CudaError) -> BuildError {
     BuildError::Device(e.to_string())
 }
@@ -140,8 +229,7 @@ impl CudaGas {
     /// of the same build. The handle a pipeline got ([`optix_handle`](Self::optix_handle))
     /// stays valid and sees the new primitives.
     ///
-    /// GASes in the BVH4 node layout are not updated on the device
-    /// ([`BuildError::Unsupported`]).
+    /// GASes in either node layout are refit on the device.
     #[doc(alias = "optixAccelBuild")]
     #[doc(alias = "OPTIX_BUILD_OPERATION_UPDATE")]
     pub fn update(
@@ -151,8 +239,9 @@ impl CudaGas {
     ) -> Result<(), BuildError> {
         self.meta.check_update(options, inputs)?;
         let Some(plan) = &self.refit else {
-            return Err(BuildError::Unsupported(
-                "updating a GAS in the BVH4 node layout on the CUDA backend",
+            // Every structure built with ALLOW_UPDATE keeps a plan, which check_update asked.
+            return Err(BuildError::Device(
+                "the structure kept no refit plan".into(),
             ));
         };
         let n_slots = plan.slot_prim.len();
@@ -212,37 +301,60 @@ impl CudaGas {
         };
         {
             let k = self.ctx.build_kernels().map_err(device)?;
+            let wide = plan.layout == NodeLayout::Bvh4;
             for &(first, count) in &plan.levels {
-                let mut b = self.ctx.stream.launch_builder(&k.refit_nodes);
                 let prims_arg = prims.as_ref().unwrap_or(&self.triangles);
-                b.arg(&mut self.nodes)
-                    .arg(&plan.order)
-                    .arg(&first)
-                    .arg(&count)
-                    .arg(prims_arg)
-                    .arg(&triangles);
-                // SAFETY: oxray_refit_nodes(u32* nodes, const u32* order, u32 begin, u32 count,
-                // const float4* prims, u32 triangles): order[begin..begin + count] are nodes of
-                // the array (made from its own words); each node's leaf children are slot ranges
-                // of the upload, whose prims hold 3 float4 (triangles) or 2 float4 (boxes) per
-                // slot; inner children are nodes of a deeper level, written by an earlier launch
-                // on the same stream.
-                unsafe { b.launch(build_grid(count)) }
+                let launched = if wide {
+                    let mut b = self.ctx.stream.launch_builder(&k.refit_nodes4);
+                    b.arg(&mut self.nodes)
+                        .arg(&plan.order)
+                        .arg(&first)
+                        .arg(&count)
+                        .arg(prims_arg);
+                    // SAFETY: oxray_refit_nodes4(u32* nodes, const u32* order, u32 begin,
+                    // u32 count, const float4* prims): order[begin..begin + count] are 32-word
+                    // nodes of the array (made from its own words); each node's leaf children
+                    // are slot ranges of the upload, whose prims hold 3 float4 per slot (the
+                    // BVH4 layout holds triangles only: `for_upload`); inner children are
+                    // nodes of a deeper level, written by an earlier launch on the stream.
+                    unsafe { b.launch(build_grid(count)) }
+                } else {
+                    let mut b = self.ctx.stream.launch_builder(&k.refit_nodes);
+                    b.arg(&mut self.nodes)
+                        .arg(&plan.order)
+                        .arg(&first)
+                        .arg(&count)
+                        .arg(prims_arg)
+                        .arg(&triangles);
+                    // SAFETY: oxray_refit_nodes(u32* nodes, const u32* order, u32 begin,
+                    // u32 count, const float4* prims, u32 triangles): order[begin..begin +
+                    // count] are nodes of the array (made from its own words, or from the
+                    // device build's heights); each node's leaf children are slot ranges of
+                    // the structure, whose prims hold 3 float4 (triangles) or 2 float4 (boxes)
+                    // per slot; inner children are nodes of an earlier group, written by an
+                    // earlier launch on the same stream.
+                    unsafe { b.launch(build_grid(count)) }
+                };
+                launched
                     .map_err(driver("launching the node update kernel"))
                     .map_err(device)?;
             }
         }
-        let mut root = [0u32; NODE_WORDS];
+        let words = Links::of(plan.layout).words;
+        let mut root = vec![0u32; words];
         self.ctx
             .stream
-            .memcpy_dtoh(&self.nodes.slice(..NODE_WORDS), &mut root[..])
+            .memcpy_dtoh(&self.nodes.slice(..words), &mut root[..])
             .map_err(driver("copying the root node"))
             .map_err(device)?;
         self.ctx.synchronize().map_err(device)?;
         if let Some(p) = prims {
             _keep.push(p);
         }
-        let bounds = root_bounds(&root);
+        let bounds = match plan.layout {
+            NodeLayout::Bvh2 => root_bounds(&root),
+            NodeLayout::Bvh4 => root_bounds4(&root),
+        };
         self.meta.bounds = bounds;
         self.info.bounds = bounds;
         // The slot table names every slot's primitive from the upload on
@@ -350,8 +462,20 @@ pub(crate) fn slot_words(slots: &SlotPrimitives) -> (Vec<u32>, Option<Vec<u32>>)
     }
 }
 
+/// The box of a BVH4-layout node 0's four children (rows of four lanes: lower x, y, z, upper
+/// x, y, z; unused lanes are empty).
+fn root_bounds4(w: &[u32]) -> Aabb {
+    let f = |i: usize| f32::from_bits(w[i]);
+    (0..4).fold(Aabb::EMPTY, |b, k| {
+        b.union(&Aabb::new(
+            [f(k), f(4 + k), f(8 + k)].into(),
+            [f(12 + k), f(16 + k), f(20 + k)].into(),
+        ))
+    })
+}
+
 /// The box of node 0's two children.
-pub(crate) fn root_bounds(w: &[u32; NODE_WORDS]) -> Aabb {
+pub(crate) fn root_bounds(w: &[u32]) -> Aabb {
     let f = |i: usize| f32::from_bits(w[i]);
     let child = |k: usize| {
         Aabb::new(
@@ -382,38 +506,65 @@ mod tests {
         let v: Vec<[f32; 3]> = (0..3000)
             .map(|i| [(i % 37) as f32, (i % 11) as f32 * 0.5, (i / 100) as f32])
             .collect();
-        let (_, tree): (GasData, Bvh2) = GasData::build_with_tree(
+        let (gas, tree): (GasData, Bvh2) = GasData::build_with_tree(
             &BuildOptions::new(BuildFlags::ALLOW_UPDATE),
             &[TriangleInput::new(VertexBuffer::f32x3(&v)).into()],
         )
         .unwrap();
-        let words = crate::layout::bvh2_words(&tree).unwrap();
-        let n = words.len() / NODE_WORDS;
-        let (order, levels) = levels(&words);
-        let mut seen = order.clone();
-        seen.sort_unstable();
-        assert_eq!(seen, (0..n as u32).collect::<Vec<_>>());
-        assert_eq!(
-            levels.last().unwrap(),
-            &(n as u32 - 1, 1),
-            "the root comes last"
-        );
-        // Each node's inner children sit in an earlier level.
-        let level_of = |node: u32| {
-            let at = order.iter().position(|&x| x == node).unwrap() as u32;
-            levels
-                .iter()
-                .position(|&(f, c)| at >= f && at < f + c)
-                .unwrap()
-        };
-        for i in 0..n as u32 {
-            let w = &words[i as usize * NODE_WORDS..];
-            for k in 0..2 {
-                if w[14 + k] == 0 && w[12 + k] != u32::MAX {
-                    assert!(level_of(w[12 + k]) < level_of(i));
+        let binary = crate::layout::bvh2_words(&tree).unwrap();
+        let wide: Vec<u32> = bytemuck::cast_slice(&gas.bvh.nodes).to_vec();
+        for (words, layout) in [(binary, NodeLayout::Bvh2), (wide, NodeLayout::Bvh4)] {
+            let links = Links::of(layout);
+            let n = words.len() / links.words;
+            assert!(n > 10, "{layout:?}");
+            let (order, levels) = levels(&words, layout);
+            let mut seen = order.clone();
+            seen.sort_unstable();
+            assert_eq!(seen, (0..n as u32).collect::<Vec<_>>(), "{layout:?}");
+            assert_eq!(
+                levels.last().unwrap(),
+                &(n as u32 - 1, 1),
+                "the root comes last"
+            );
+            // Each node's inner children sit in an earlier level.
+            let level_of = |node: u32| {
+                let at = order.iter().position(|&x| x == node).unwrap() as u32;
+                levels
+                    .iter()
+                    .position(|&(f, c)| at >= f && at < f + c)
+                    .unwrap()
+            };
+            let mut inner = 0;
+            for i in 0..n as u32 {
+                let w = &words[i as usize * links.words..];
+                for k in 0..links.children {
+                    let (child, count) = (w[links.child + k], w[links.count + k]);
+                    if count == 0 && child != u32::MAX {
+                        assert!(level_of(child) < level_of(i), "{layout:?}");
+                        inner += 1;
+                    }
                 }
             }
+            assert_eq!(
+                inner,
+                n - 1,
+                "{layout:?}: every node but the root is a child"
+            );
         }
+        // The root box of the 4-wide layout is the structure's.
+        let wide: Vec<u32> = bytemuck::cast_slice(&gas.bvh.nodes[..1]).to_vec();
+        assert_eq!(root_bounds4(&wide), gas.bounds);
+    }
+
+    #[test]
+    fn nodes_by_height_come_lowest_first_each_once() {
+        let heights = [3, 1, 2, 1, 1, 2, 4];
+        let (order, levels) = by_height(&heights);
+        assert_eq!(order, vec![1, 3, 4, 2, 5, 0, 6]);
+        assert_eq!(levels, vec![(0, 3), (3, 2), (5, 1), (6, 1)]);
+        // A single node (a device build of fewer than two primitives).
+        assert_eq!(by_height(&[1]), (vec![0], vec![(0, 1)]));
+        assert_eq!(by_height(&[]), (vec![], vec![]));
     }
 
     #[test]

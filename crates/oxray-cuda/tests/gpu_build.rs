@@ -31,14 +31,30 @@ fn gpu() -> Option<(CudaContext, MutexGuard<'static, ()>)> {
     }
 }
 
-const PRESETS: [(&str, BuildFlags, DeviceBuildConfig); 2] = [
+const PRESETS: [(&str, BuildFlags, DeviceBuildConfig); 3] = [
     (
         "fast build",
         BuildFlags::PREFER_FAST_BUILD,
         DeviceBuildConfig::FAST_BUILD,
     ),
     ("default", BuildFlags::empty(), DeviceBuildConfig::DEFAULT),
+    (
+        "updatable",
+        BuildFlags::ALLOW_UPDATE,
+        DeviceBuildConfig {
+            keep_inactive: true,
+            ..DeviceBuildConfig::DEFAULT
+        },
+    ),
 ];
+
+fn update(flags: BuildFlags) -> BuildOptions {
+    BuildOptions {
+        flags,
+        operation: oxray_core::BuildOperation::Update,
+        ..Default::default()
+    }
+}
 
 fn soup_input(vertices: &[[f32; 3]]) -> BuildInput<'_> {
     TriangleInput::new(VertexBuffer::f32x3(vertices)).into()
@@ -444,8 +460,12 @@ fn the_backend_builds_on_the_device_by_default_and_on_the_host_when_asked() {
         (BuildFlags::empty(), GasBuilder::Device),
         (BuildFlags::PREFER_FAST_BUILD, GasBuilder::Device),
         (BuildFlags::ALLOW_COMPACTION, GasBuilder::Device),
-        (BuildFlags::PREFER_FAST_TRACE, GasBuilder::Host),
-        (BuildFlags::ALLOW_UPDATE, GasBuilder::Host),
+        (BuildFlags::PREFER_FAST_TRACE, GasBuilder::Device),
+        (BuildFlags::ALLOW_UPDATE, GasBuilder::Device),
+        (
+            BuildFlags::ALLOW_UPDATE | BuildFlags::PREFER_FAST_BUILD,
+            GasBuilder::Device,
+        ),
     ] {
         let options = BuildOptions::new(flags);
         let gas = cuda.build_gas(&options, &inputs).unwrap();
@@ -551,4 +571,209 @@ fn custom_primitive_gases_build_on_the_device() {
 
 fn bits(b: &oxray_core::Aabb) -> [u32; 6] {
     [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z].map(f32::to_bits)
+}
+
+/// §5.6 on a structure the device built with `ALLOW_UPDATE`: inactive triangles keep slots
+/// (found in the slot table read back), an update makes them active and others inactive, and
+/// every state traces the oracle's hits and the distances of the CPU's update of the same
+/// geometry.
+#[test]
+fn device_built_updatable_gases_refit_inactive_triangles_into_hits() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let mut rng = Rng::new(0x0BD7);
+    for n in [1usize, 2, 7, 300, 20_000] {
+        let base = random_soup(&mut rng, n, 10.0, 0.6);
+        let mut tris = base.clone();
+        // Every fifth triangle starts inactive (collapsed, or with a NaN).
+        for (k, t) in tris.iter_mut().enumerate() {
+            match k % 10 {
+                0 => t[1] = t[0],
+                5 => t[2][1] = f32::NAN,
+                _ => {}
+            }
+        }
+        let flags = BuildFlags::ALLOW_UPDATE | BuildFlags::ALLOW_COMPACTION;
+        let config = DeviceBuildConfig::for_options(&BuildOptions::new(flags), n as u32);
+        assert!(config.keep_inactive);
+        let vertices = soup(&tris);
+        let mut gas = device_gas(&ctx, &config, flags, &[soup_input(&vertices)]);
+        let active = |tris: &[Tri]| {
+            tris.iter()
+                .filter(|t| {
+                    !oxray_bvh::triangle::is_degenerate(t[0].into(), t[1].into(), t[2].into())
+                })
+                .count()
+        };
+        assert_eq!(gas.info().num_active_primitives as usize, active(&tris));
+        let back = gas.to_data().unwrap();
+        let mut kept: Vec<u32> = back
+            .slot_prim
+            .iter()
+            .copied()
+            .filter(|&g| g != oxray_bvh::NO_PRIMITIVE)
+            .collect();
+        kept.sort_unstable();
+        assert_eq!(
+            kept,
+            (0..n as u32).collect::<Vec<_>>(),
+            "{n}: a slot for every triangle"
+        );
+        let rays = random_rays(&mut rng, &base, 3000, 10.0);
+        check_oracle(&gas, &tris, &rays, &format!("{n}: as built"));
+        let mut cpu =
+            oxray_cpu::Gas::build(&BuildOptions::new(flags), &[soup_input(&vertices)]).unwrap();
+        // Round 1: every triangle active, moved a little; round 2: others inactive.
+        for round in 1..=2 {
+            tris = base.clone();
+            for (k, t) in tris.iter_mut().enumerate() {
+                for p in t.iter_mut() {
+                    p[2] += 0.01 * round as f32 * (k % 3) as f32;
+                }
+                if round == 2 && k % 10 == 3 {
+                    t[2] = t[1];
+                }
+            }
+            let vertices = soup(&tris);
+            let inputs = [soup_input(&vertices)];
+            gas.update(&update(flags), &inputs).unwrap();
+            cpu.update(&update(flags), &inputs).unwrap();
+            let what = format!("{n}: update {round}");
+            check_oracle(&gas, &tris, &rays, &what);
+            let hits = gas.intersect_batch(&rays).unwrap();
+            for (i, r) in rays.iter().enumerate() {
+                let want = cpu.intersect(r).map(|h| h.t.to_bits());
+                assert_eq!(hits[i].map(|h| h.t.to_bits()), want, "{what}: ray {i}");
+            }
+        }
+        // Compaction keeps what an update needs.
+        let mut compacted = gas.compact().unwrap();
+        let vertices = soup(&base);
+        compacted
+            .update(&update(flags), &[soup_input(&vertices)])
+            .unwrap();
+        check_oracle(
+            &compacted,
+            &base,
+            &rays,
+            &format!("{n}: compacted, updated"),
+        );
+    }
+}
+
+fn box_input(b: &[oxray_core::Aabb]) -> BuildInput<'_> {
+    oxray_core::CustomPrimitiveInput::new(oxray_core::AabbBuffer::new(b)).into()
+}
+
+/// The same for custom primitives: invalid boxes keep slots in an updatable device build and
+/// an update makes them valid; the slots read back hold the new boxes.
+#[test]
+fn device_built_updatable_custom_primitives_take_new_boxes() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let mut rng = Rng::new(0xB0C5);
+    let valid: Vec<oxray_core::Aabb> = (0..5000)
+        .map(|_| {
+            let c = rng.vec3(-10.0, 10.0);
+            let e = rng.vec3(0.01, 0.3);
+            oxray_core::Aabb::new(c - e, c + e)
+        })
+        .collect();
+    let mut boxes = valid.clone();
+    for b in boxes.iter_mut().step_by(7) {
+        *b = oxray_core::Aabb::new(b.max, b.min);
+    }
+    let flags = BuildFlags::ALLOW_UPDATE;
+    let config = DeviceBuildConfig::for_options(&BuildOptions::new(flags), 5000);
+    let mut gas = device_gas(&ctx, &config, flags, &[box_input(&boxes)]);
+    assert_eq!(gas.info().num_active_primitives, 5000 - 5000u32.div_ceil(7));
+    let slots_of = |gas: &CudaGas| {
+        let back = gas.to_data().unwrap();
+        let mut got: Vec<(u32, [u32; 6])> = back
+            .slot_prim
+            .iter()
+            .zip(&back.aabbs)
+            .filter(|(&g, _)| g != oxray_bvh::NO_PRIMITIVE)
+            .map(|(&g, b)| (g, bits(b)))
+            .collect();
+        got.sort_unstable();
+        (got, back.bounds)
+    };
+    let (got, _) = slots_of(&gas);
+    assert_eq!(
+        got.len(),
+        5000,
+        "a slot for every box, inactive ones included"
+    );
+    for (g, b) in &got {
+        if g % 7 == 0 {
+            assert_eq!(*b, bits(&oxray_core::Aabb::EMPTY), "box {g} is inactive");
+        } else {
+            assert_eq!(*b, bits(&valid[*g as usize]));
+        }
+    }
+    gas.update(&update(flags), &[box_input(&valid)]).unwrap();
+    let (got, bounds) = slots_of(&gas);
+    let want: Vec<(u32, [u32; 6])> = (0..5000u32)
+        .map(|g| (g, bits(&valid[g as usize])))
+        .collect();
+    assert_eq!(got, want, "every box active and updated");
+    let host = oxray_bvh::GasData::build(&BuildOptions::default(), &[box_input(&valid)]).unwrap();
+    assert_eq!(bounds, host.bounds);
+}
+
+/// §5.6 in the BVH4 node layout (the CPU's 4-wide nodes, byte for byte, built on the host):
+/// refit on the device by its own node kernel, the updated structure traces the hits of the
+/// CPU's update of the same build, ties included (both walk the same 4-wide tree in the same
+/// order), through collapsed triangles becoming active and active ones collapsing.
+#[test]
+fn bvh4_layout_gases_refit_on_the_device_as_the_cpu_updates() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let cuda = Cuda::from_context(ctx).with_layout(oxray_cuda::NodeLayout::Bvh4);
+    let base = grid_cube(12);
+    let mut mesh = base.clone();
+    for t in mesh.triangles.iter().step_by(9) {
+        mesh.positions[t[1] as usize] = mesh.positions[t[0] as usize];
+    }
+    let flags = BuildFlags::ALLOW_UPDATE;
+    let options = BuildOptions::new(flags);
+    let input = |m: &Mesh| -> Vec<[f32; 3]> { m.positions.clone() };
+    let positions = input(&mesh);
+    let inputs = [TriangleInput::new(VertexBuffer::f32x3(&positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles))
+        .into()];
+    let mut gas = cuda.build_gas(&options, &inputs).unwrap();
+    assert_eq!(
+        gas.builder(),
+        GasBuilder::Host,
+        "the BVH4 layout is built on the host"
+    );
+    let mut cpu = oxray_cpu::Gas::build_with_isa(oxray_cpu::Isa::Sse, &options, &inputs).unwrap();
+    let mut rng = Rng::new(0xB4);
+    let rays = random_rays(&mut rng, &base.soup(), 4000, 2.0);
+    for round in 0..3 {
+        if round > 0 {
+            mesh.positions = base
+                .positions
+                .iter()
+                .map(|p| {
+                    let s = 1.0 + 0.05 * round as f32 * (p[0] * 3.0).sin();
+                    [p[0] * s, p[1] * s, p[2] + 0.02 * round as f32]
+                })
+                .collect();
+            // The other half of the collapsed triangles this time.
+            for t in mesh.triangles.iter().skip(round).step_by(9) {
+                mesh.positions[t[2] as usize] = mesh.positions[t[0] as usize];
+            }
+            let positions = input(&mesh);
+            let inputs = [TriangleInput::new(VertexBuffer::f32x3(&positions))
+                .indices(IndexBuffer::u32x3(&mesh.triangles))
+                .into()];
+            gas.update(&update(flags), &inputs).unwrap();
+            cpu.update(&update(flags), &inputs).unwrap();
+        }
+        assert_eq!(gas.info().bounds, cpu.data().bounds, "round {round}");
+        let hits = gas.intersect_batch(&rays).unwrap();
+        let want: Vec<Option<Hit>> = rays.iter().map(|r| cpu.intersect(r)).collect();
+        assert_eq!(hits, want, "round {round}: the CPU's update, ties included");
+        check_oracle(&gas, &mesh.soup(), &rays, &format!("BVH4 round {round}"));
+    }
 }

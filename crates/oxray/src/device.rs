@@ -175,6 +175,31 @@ impl Device {
         with_backend!(self, b => b.describe())
     }
 
+    /// The same device with its GASes built by the host's builder (the binned SAH builder every
+    /// backend shares, then uploaded) instead of the device's kernels; the CPU is returned as
+    /// it is. Every device then traces the same tree of the same inputs, so that even rays
+    /// through shared edges and vertices report the same primitive everywhere (which of two
+    /// primitives at exactly the same distance a query reports depends on the tree).
+    ///
+    /// ```
+    /// use oxray::Device;
+    /// let device = Device::cpu().with_host_builds();
+    /// assert_eq!(device.kind(), oxray::BackendKind::Cpu);
+    /// ```
+    #[must_use]
+    pub fn with_host_builds(self) -> Device {
+        match self.repr {
+            DeviceRepr::Cpu(_) => self,
+            #[cfg(feature = "cuda")]
+            DeviceRepr::Cuda(c) => Device {
+                repr: DeviceRepr::Cuda(Arc::new(
+                    (*c).clone().with_builder(oxray_cuda::GasBuilder::Host),
+                )),
+                context: self.context,
+            },
+        }
+    }
+
     /// The CUDA backend, if this is a CUDA device (for its node-layout and timing extras).
     #[cfg(feature = "cuda")]
     #[must_use]

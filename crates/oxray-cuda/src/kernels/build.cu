@@ -2,7 +2,9 @@
 // by NVRTC. The host side is `src/device_build.rs`, which launches these kernels in order:
 //
 //   1. oxray_build_bounds     per triangle: fetch, the CPU's degeneracy rule, box; centroid
-//                             bounds and the count of active triangles (atomics).
+//                             bounds, the count of active triangles and of the tree's
+//                             triangles (atomics): the active ones, or with `keep_inactive`
+//                             (ALLOW_UPDATE: an update may make them active) all of them.
 //   2. oxray_build_morton32/64  Morton code of each active centroid (30 or 60 bits); inactive
 //                             triangles get the key 1 << bits, which sorts after every code.
 //   3. oxray_sort_hist32/64, oxray_sort_scan, oxray_sort_scatter32/64
@@ -16,6 +18,8 @@
 //   7. oxray_build_write_nodes, oxray_build_write_triangles
 //                             the exact layout of `layout.rs` that trace.cu and oxray_device.h
 //                             walk: 64-byte binary nodes, 3 float4 per leaf slot.
+//   8. oxray_build_heights    (updatable builds) the height of each written node, by which the
+//                             refit orders its launches.
 //
 // Leaf slots are positions in the sorted order: a leaf of the collapsed tree is a range of
 // consecutive sorted triangles, so the triangle array needs no padding and the slot table is the
@@ -57,9 +61,11 @@ struct InputDesc {
 
 // Counters the host zeroes (and sets the minima of) before the build.
 // [0..3) centroid minima, [3..6) centroid maxima (as order-preserving integers),
-// [6] active triangles, [7] inner nodes kept.
+// [6] triangles in the tree (the active ones, or all with `keep_inactive`), [7] inner nodes
+// kept, [8] active triangles.
 #define C_ACTIVE 6
 #define C_KEPT 7
+#define C_LIVE 8
 
 // One node of the binary radix tree. `left`/`right` are inner nodes or, with LEAF_BIT, sorted
 // positions; `first..=last` is the range of sorted positions below it. Written by
@@ -128,7 +134,10 @@ __device__ __forceinline__ bool degenerate(const float3 p[3]) {
     return nx == 0.0 && ny == 0.0 && nz == 0.0;
 }
 
+// Half the surface area of a box; 0 for the empty box of an inactive primitive (and of a
+// subtree of inactive primitives only), which an updatable build keeps in its tree.
 __device__ __forceinline__ float half_area(float3 lo, float3 hi) {
+    if (!(lo.x <= hi.x)) return 0.0f;
     float x = hi.x - lo.x, y = hi.y - lo.y, z = hi.z - lo.z;
     return x * y + y * z + z * x;
 }
@@ -136,15 +145,18 @@ __device__ __forceinline__ float half_area(float3 lo, float3 hi) {
 // ---------------------------------------------------------------------------------------------
 // 1. Bounds.
 
-// Stores primitive i's box (an empty one when inactive: never a leaf's, sorted last by its
-// key) and adds its centroid and activity to the block's reduction into `counters`. Every
-// thread of the block calls it (i past n: inactive).
-__device__ __forceinline__ void store_box(u32 i, u32 n, bool active, float3 lo, float3 hi,
-                                          float4* __restrict__ boxes, u32* __restrict__ counters) {
+// Stores primitive i's box (an empty one when inactive: sorted last by its key, and a leaf's
+// only with `keep_inactive`) and adds its centroid, its activity and whether the tree holds it
+// to the block's reduction into `counters`. Every thread of the block calls it (i past n:
+// inactive, not kept).
+__device__ __forceinline__ void store_box(u32 i, u32 n, bool active, u32 keep_inactive, float3 lo,
+                                          float3 hi, float4* __restrict__ boxes,
+                                          u32* __restrict__ counters) {
     float c_lo[3] = {F32_INF, F32_INF, F32_INF};
     float c_hi[3] = {-F32_INF, -F32_INF, -F32_INF};
-    u32 act = 0;
+    u32 act = 0, tree = 0;
     if (i < n) {
+        tree = active || keep_inactive ? 1 : 0;
         if (!active) {
             boxes[2 * (size_t)i] = make_float4(F32_INF, F32_INF, F32_INF, 0.0f);
             boxes[2 * (size_t)i + 1] = make_float4(-F32_INF, -F32_INF, -F32_INF, 0.0f);
@@ -163,9 +175,10 @@ __device__ __forceinline__ void store_box(u32 i, u32 n, bool active, float3 lo, 
             c_hi[k] = fmaxf(c_hi[k], __shfl_xor_sync(FULL_MASK, c_hi[k], off));
         }
         act += __shfl_xor_sync(FULL_MASK, act, off);
+        tree += __shfl_xor_sync(FULL_MASK, tree, off);
     }
     __shared__ float s_lo[3][SORT_WARPS], s_hi[3][SORT_WARPS];
-    __shared__ u32 s_active[SORT_WARPS];
+    __shared__ u32 s_active[SORT_WARPS], s_tree[SORT_WARPS];
     const u32 lane = threadIdx.x & 31, warp = threadIdx.x >> 5;
     if (lane == 0) {
         for (int k = 0; k < 3; ++k) {
@@ -173,6 +186,7 @@ __device__ __forceinline__ void store_box(u32 i, u32 n, bool active, float3 lo, 
             s_hi[k][warp] = c_hi[k];
         }
         s_active[warp] = act;
+        s_tree[warp] = tree;
     }
     __syncthreads();
     if (threadIdx.x < 3) {
@@ -187,15 +201,19 @@ __device__ __forceinline__ void store_box(u32 i, u32 n, bool active, float3 lo, 
             atomicMax(&counters[3 + k], ordered(h));
         }
     } else if (threadIdx.x == 3) {
-        u32 a = 0;
-        for (int w = 0; w < SORT_WARPS; ++w) a += s_active[w];
-        if (a) atomicAdd(&counters[C_ACTIVE], a);
+        u32 a = 0, t = 0;
+        for (int w = 0; w < SORT_WARPS; ++w) {
+            a += s_active[w];
+            t += s_tree[w];
+        }
+        if (a) atomicAdd(&counters[C_LIVE], a);
+        if (t) atomicAdd(&counters[C_ACTIVE], t);
     }
 }
 
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
-    oxray_build_bounds(const InputDesc* __restrict__ in, u32 n_in, u32 n, float4* __restrict__ boxes,
-                       u32* __restrict__ counters) {
+    oxray_build_bounds(const InputDesc* __restrict__ in, u32 n_in, u32 n, u32 keep_inactive,
+                       float4* __restrict__ boxes, u32* __restrict__ counters) {
     const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
     bool active = false;
     float3 lo = make_float3(0.0f, 0.0f, 0.0f), hi = lo;
@@ -208,15 +226,15 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
         hi = make_float3(fmaxf(fmaxf(p[0].x, p[1].x), p[2].x), fmaxf(fmaxf(p[0].y, p[1].y), p[2].y),
                          fmaxf(fmaxf(p[0].z, p[1].z), p[2].z));
     }
-    store_box(i, n, active, lo, hi, boxes, counters);
+    store_box(i, n, active, keep_inactive, lo, hi, boxes, counters);
 }
 
 // Custom primitives (guide §5.3): `aabbs` holds 6 floats per primitive (lower, upper corner),
 // decoded by the host. A box is active when it is finite and not inverted
 // (`Aabb::is_finite_valid`), as on the CPU.
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
-    oxray_build_bounds_aabbs(const float* __restrict__ aabbs, u32 n, float4* __restrict__ boxes,
-                             u32* __restrict__ counters) {
+    oxray_build_bounds_aabbs(const float* __restrict__ aabbs, u32 n, u32 keep_inactive,
+                             float4* __restrict__ boxes, u32* __restrict__ counters) {
     const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
     bool active = false;
     float3 lo = make_float3(0.0f, 0.0f, 0.0f), hi = lo;
@@ -227,7 +245,7 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
         active = isfinite(lo.x) && isfinite(lo.y) && isfinite(lo.z) && isfinite(hi.x) &&
                  isfinite(hi.y) && isfinite(hi.z) && lo.x <= hi.x && lo.y <= hi.y && lo.z <= hi.z;
     }
-    store_box(i, n, active, lo, hi, boxes, counters);
+    store_box(i, n, active, keep_inactive, lo, hi, boxes, counters);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -701,28 +719,54 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
                out_child(m.right, nodes, boxes, values, index));
 }
 
-// One thread per leaf slot: the triangle's vertices as three float4 (w = 0).
+// One thread per leaf slot: the triangle's vertices as three float4 (w = 0); NaN for an
+// inactive triangle an updatable build keeps (its box is empty), as oxray_refit_triangles
+// writes it, so that no ray hits it until an update makes it active.
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     oxray_build_write_triangles(const InputDesc* __restrict__ in, u32 n_in,
-                                const u32* __restrict__ values, u32 n_act,
-                                float4* __restrict__ out) {
+                                const u32* __restrict__ values, const float4* __restrict__ boxes,
+                                u32 n_act, float4* __restrict__ out) {
     const u32 s = blockIdx.x * BUILD_BLOCK + threadIdx.x;
     if (s >= n_act) return;
+    const u32 g = values[s];
+    if (!(boxes[2 * (size_t)g].x <= boxes[2 * (size_t)g + 1].x)) {
+        const float nan = __int_as_float(0x7fc00000);
+        for (int k = 0; k < 3; ++k) out[3 * (size_t)s + k] = make_float4(nan, nan, nan, 0.0f);
+        return;
+    }
     float3 p[3];
-    fetch(in, n_in, values[s], p);
+    fetch(in, n_in, g, p);
     for (int k = 0; k < 3; ++k) out[3 * (size_t)s + k] = make_float4(p[k].x, p[k].y, p[k].z, 0.0f);
 }
 
 // The boxes of a custom-primitive GAS in leaf-slot order: 2 float4 per slot (lower corner, 0,
-// upper corner, 0), the layout the pipelines' traversal reads.
+// upper corner, 0), the layout the pipelines' traversal reads: the bounds kernel's boxes, in
+// which an inactive primitive's is empty.
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
-    oxray_build_write_aabbs(const float* __restrict__ aabbs, const u32* __restrict__ values,
+    oxray_build_write_aabbs(const float4* __restrict__ boxes, const u32* __restrict__ values,
                             u32 n_act, float4* __restrict__ out) {
     const u32 s = blockIdx.x * BUILD_BLOCK + threadIdx.x;
     if (s >= n_act) return;
-    const float* a = aabbs + 6 * (size_t)values[s];
-    out[2 * (size_t)s] = make_float4(a[0], a[1], a[2], 0.0f);
-    out[2 * (size_t)s + 1] = make_float4(a[3], a[4], a[5], 0.0f);
+    const size_t g = values[s];
+    out[2 * (size_t)s] = boxes[2 * g];
+    out[2 * (size_t)s + 1] = boxes[2 * g + 1];
+}
+
+// 8. The height of every written node (1 for a node whose children are leaves), for the refit
+// of an updatable build: a node's inner children are lower, so refitting by increasing height
+// finishes every child before its parent.
+extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
+    oxray_build_heights(const INode* __restrict__ nodes, const u32* __restrict__ kept,
+                        const u32* __restrict__ index, const u32* __restrict__ counters,
+                        u32* __restrict__ out) {
+    const u32 n = counters[C_ACTIVE];
+    const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
+    if (n < 2) {
+        if (i == 0) out[0] = 1;
+        return;
+    }
+    if (i >= n - 1 || !kept[i]) return;
+    out[index[i]] = nodes[i].shape & ~LEAF_BIT;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -732,10 +776,12 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
 //   oxray_refit_triangles  per leaf slot: its triangle fetched again from the inputs, written as
 //                          the layout's three float4, NaN where the CPU's degeneracy rule makes
 //                          it inactive (no ray hits NaN), as `GasData::update` writes it.
-//   oxray_refit_nodes      one launch per depth of the tree, deepest first, one thread per node:
-//                          a leaf child's box from its slots, an inner child's as the union of
-//                          that node's two boxes (written by the launch before). fminf / fmaxf
-//                          skip NaN, so inactive triangles add nothing, as on the CPU.
+//   oxray_refit_nodes      one launch per level of the tree, children's levels first, one thread
+//                          per node: a leaf child's box from its slots, an inner child's as the
+//                          union of that node's two boxes (written by an earlier launch).
+//                          fminf / fmaxf skip NaN, so inactive triangles add nothing, as on the
+//                          CPU.
+//   oxray_refit_nodes4     the same over the BVH4 layout's 4-wide nodes.
 
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     oxray_refit_triangles(const InputDesc* __restrict__ in, u32 n_in,
@@ -756,6 +802,32 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     }
 }
 
+// The box of leaf slots first .. first + n: triangles (3 float4 each) or boxes (2 float4).
+__device__ __forceinline__ void slot_bounds(const float4* __restrict__ prims, u32 first, u32 n,
+                                            u32 triangles, float lo[3], float hi[3]) {
+    for (u32 s = first; s < first + n; ++s) {
+        if (triangles) {
+            for (int v = 0; v < 3; ++v) {
+                const float4 p = prims[3 * (size_t)s + v];
+                lo[0] = fminf(lo[0], p.x);
+                lo[1] = fminf(lo[1], p.y);
+                lo[2] = fminf(lo[2], p.z);
+                hi[0] = fmaxf(hi[0], p.x);
+                hi[1] = fmaxf(hi[1], p.y);
+                hi[2] = fmaxf(hi[2], p.z);
+            }
+        } else {
+            const float4 a = prims[2 * (size_t)s], b = prims[2 * (size_t)s + 1];
+            lo[0] = fminf(lo[0], a.x);
+            lo[1] = fminf(lo[1], a.y);
+            lo[2] = fminf(lo[2], a.z);
+            hi[0] = fmaxf(hi[0], b.x);
+            hi[1] = fmaxf(hi[1], b.y);
+            hi[2] = fmaxf(hi[2], b.z);
+        }
+    }
+}
+
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     oxray_refit_nodes(u32* __restrict__ nodes, const u32* __restrict__ order, u32 begin, u32 count,
                       const float4* __restrict__ prims, u32 triangles) {
@@ -768,27 +840,7 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
         float lo[3] = {F32_INF, F32_INF, F32_INF};
         float hi[3] = {-F32_INF, -F32_INF, -F32_INF};
         if (n > 0) {
-            for (u32 s = child; s < child + n; ++s) {
-                if (triangles) {
-                    for (int v = 0; v < 3; ++v) {
-                        const float4 p = prims[3 * (size_t)s + v];
-                        lo[0] = fminf(lo[0], p.x);
-                        lo[1] = fminf(lo[1], p.y);
-                        lo[2] = fminf(lo[2], p.z);
-                        hi[0] = fmaxf(hi[0], p.x);
-                        hi[1] = fmaxf(hi[1], p.y);
-                        hi[2] = fmaxf(hi[2], p.z);
-                    }
-                } else {
-                    const float4 a = prims[2 * (size_t)s], b = prims[2 * (size_t)s + 1];
-                    lo[0] = fminf(lo[0], a.x);
-                    lo[1] = fminf(lo[1], a.y);
-                    lo[2] = fminf(lo[2], a.z);
-                    hi[0] = fmaxf(hi[0], b.x);
-                    hi[1] = fmaxf(hi[1], b.y);
-                    hi[2] = fmaxf(hi[2], b.z);
-                }
-            }
+            slot_bounds(prims, child, n, triangles, lo, hi);
         } else if (child != NO_NODE) {
             const float* c = reinterpret_cast<const float*>(nodes + 16 * (size_t)child);
             lo[0] = fminf(c[0], c[4]);
@@ -807,5 +859,39 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
         f[4 * k + 3] = hi[1];
         f[8 + 2 * k] = lo[2];
         f[9 + 2 * k] = hi[2];
+    }
+}
+
+// The same for the BVH4 layout (`layout.rs`: the CPU's 4-wide nodes, `oxray_bvh::Bvh4Node`,
+// 32 words: rows of four lanes for lower x, y, z and upper x, y, z, then the four children and
+// the four counts; an unused lane has child NO_NODE and count 0), whose leaves are triangles.
+extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
+    oxray_refit_nodes4(u32* __restrict__ nodes, const u32* __restrict__ order, u32 begin, u32 count,
+                       const float4* __restrict__ prims) {
+    const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
+    if (i >= count) return;
+    u32* w = nodes + 32 * (size_t)order[begin + i];
+    float* f = reinterpret_cast<float*>(w);
+    for (int k = 0; k < 4; ++k) {
+        const u32 child = w[24 + k], n = w[28 + k];
+        float lo[3] = {F32_INF, F32_INF, F32_INF};
+        float hi[3] = {-F32_INF, -F32_INF, -F32_INF};
+        if (n > 0) {
+            slot_bounds(prims, child, n, 1, lo, hi);
+        } else if (child != NO_NODE) {
+            const float* c = reinterpret_cast<const float*>(nodes + 32 * (size_t)child);
+            for (int a = 0; a < 3; ++a) {
+                for (int l = 0; l < 4; ++l) {
+                    lo[a] = fminf(lo[a], c[4 * a + l]);
+                    hi[a] = fmaxf(hi[a], c[4 * (3 + a) + l]);
+                }
+            }
+        } else {
+            continue;
+        }
+        for (int a = 0; a < 3; ++a) {
+            f[4 * a + k] = lo[a];
+            f[4 * (3 + a) + k] = hi[a];
+        }
     }
 }
