@@ -136,6 +136,77 @@ fn instance_list<'a>(inputs: &'a [BuildInput<'a>]) -> Result<Vec<&'a Instance>, 
     Ok(list)
 }
 
+/// Leaf size of the top-level trees: an instance costs a ray transform, so leaves stay small.
+pub const IAS_MAX_LEAF: u32 = 2;
+
+/// An IAS build between validation and its tree ([`IasData::prepare`]).
+#[derive(Debug)]
+pub struct PreparedIas {
+    records: Vec<InstanceData>,
+    world: Vec<Option<Aabb>>,
+    ids: Vec<u32>,
+    /// The boxes the tree is built over, each finite and valid: the world box of every
+    /// instance that can be hit (with `ALLOW_UPDATE` or `ALLOW_RANDOM_INSTANCE_ACCESS`, every
+    /// instance: a point at the centre of the others for those that cannot be hit yet).
+    pub boxes: Vec<Aabb>,
+    keep_inactive: bool,
+    depth: u32,
+    options: BuildOptions,
+    num_instances: u32,
+    input_kind: BuildInputKind,
+}
+
+impl PreparedIas {
+    /// The structure over `tree`, a binary tree over [`boxes`](Self::boxes) whose
+    /// `prim_order` maps each leaf slot to the index of its box (every box once). Returns the
+    /// tree too, its leaves now pointing at the structure's instance slots.
+    #[must_use]
+    pub fn finish(self, mut tree: Bvh2) -> (IasData, Bvh2) {
+        let PreparedIas {
+            records,
+            world,
+            ids,
+            boxes: _,
+            keep_inactive,
+            depth,
+            options,
+            num_instances,
+            input_kind,
+        } = self;
+        let bounds = tree.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
+        let bvh = Bvh4::from(&tree);
+        let order: Vec<u32> = tree.prim_order.iter().map(|&k| ids[k as usize]).collect();
+        let mut slot_of = vec![u32::MAX; records.len()];
+        for (slot, &i) in order.iter().enumerate() {
+            slot_of[i as usize] = slot as u32;
+        }
+        let instances = order.iter().map(|&i| records[i as usize].clone()).collect();
+        let boxes = order
+            .iter()
+            .map(|&i| world[i as usize].unwrap_or(Aabb::EMPTY))
+            .collect();
+        let mut data = IasData {
+            bvh,
+            instances,
+            boxes,
+            slot_of,
+            bounds,
+            build_flags: options.flags,
+            num_instances,
+            depth,
+            input_kind,
+            lineage: crate::next_lineage(),
+            motion: options.motion,
+        };
+        if keep_inactive {
+            data.refit();
+        }
+        // The tree's slots are the structure's: instances are not packed.
+        tree.prim_order = Vec::new();
+        (data, tree)
+    }
+}
+
 impl IasData {
     /// Builds an IAS from exactly one instance build input (guide §5.4). Instance fields with
     /// bits above their limits, singular transforms and graphs deeper than 31 levels are
@@ -150,6 +221,30 @@ impl IasData {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<(IasData, Bvh2), BuildError> {
+        let prepared = Self::prepare(options, inputs)?;
+        let config = BuildConfig {
+            block_size: 1,
+            max_leaf_size: IAS_MAX_LEAF as usize,
+            ..if options.flags.contains(BuildFlags::PREFER_FAST_TRACE) {
+                BuildConfig::FAST_TRACE
+            } else if options.flags.contains(BuildFlags::PREFER_FAST_BUILD) {
+                BuildConfig::FAST_BUILD
+            } else {
+                BuildConfig::BALANCED
+            }
+        };
+        let tree = build_bvh2(&prepared.boxes, &config);
+        Ok(prepared.finish(tree))
+    }
+
+    /// The first half of a build: the rules checked, every instance validated and inverted,
+    /// and the world boxes the tree is built over ([`PreparedIas::boxes`]). A builder (the
+    /// host's in [`build_with_tree`](Self::build_with_tree), or a device's) makes a binary
+    /// tree over those boxes and [`PreparedIas::finish`] makes the structure.
+    pub fn prepare(
+        options: &BuildOptions,
+        inputs: &[BuildInput<'_>],
+    ) -> Result<PreparedIas, BuildError> {
         if options
             .flags
             .contains(BuildFlags::PREFER_FAST_TRACE | BuildFlags::PREFER_FAST_BUILD)
@@ -215,49 +310,17 @@ impl IasData {
                 None => None,
             })
             .unzip();
-        let config = BuildConfig {
-            block_size: 1,
-            max_leaf_size: 2,
-            ..if options.flags.contains(BuildFlags::PREFER_FAST_TRACE) {
-                BuildConfig::FAST_TRACE
-            } else if options.flags.contains(BuildFlags::PREFER_FAST_BUILD) {
-                BuildConfig::FAST_BUILD
-            } else {
-                BuildConfig::BALANCED
-            }
-        };
-        let mut bvh2 = build_bvh2(&boxes, &config);
-        let bounds = bvh2.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds());
-        let bvh = Bvh4::from(&bvh2);
-        let order: Vec<u32> = bvh2.prim_order.iter().map(|&k| ids[k as usize]).collect();
-        let mut slot_of = vec![u32::MAX; records.len()];
-        for (slot, &i) in order.iter().enumerate() {
-            slot_of[i as usize] = slot as u32;
-        }
-        let instances = order.iter().map(|&i| records[i as usize].clone()).collect();
-        let boxes = order
-            .iter()
-            .map(|&i| world[i as usize].unwrap_or(Aabb::EMPTY))
-            .collect();
-        let mut data = IasData {
-            bvh,
-            instances,
+        Ok(PreparedIas {
+            records,
+            world,
+            ids,
             boxes,
-            slot_of,
-            bounds,
-            build_flags: options.flags,
-            num_instances: list.len() as u32,
+            keep_inactive,
             depth,
+            options: *options,
+            num_instances: list.len() as u32,
             input_kind: inputs[0].kind(),
-            lineage: crate::next_lineage(),
-            motion: options.motion,
-        };
-        if keep_inactive {
-            data.refit();
-        }
-        // The tree's slots are the structure's: instances are not packed.
-        bvh2.prim_order = Vec::new();
-        Ok((data, bvh2))
+        })
     }
 
     /// Refits the node boxes from the instance boxes.

@@ -61,7 +61,7 @@ pub use gas::{
     spatial_splits, GasData, GasInfo, GasKind, GasMemory, InputRecord, InputShape, NodeWidth,
     NO_PRIMITIVE,
 };
-pub use ias::{IasData, InstanceData};
+pub use ias::{IasData, InstanceData, PreparedIas, IAS_MAX_LEAF};
 pub use memory::{compute_memory_usage, AccelBufferSizes};
 pub use motion::GasMotion;
 pub use random_access::NO_SLOT;

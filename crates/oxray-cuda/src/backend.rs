@@ -19,9 +19,10 @@ use std::sync::Arc;
 /// The CUDA backend: one device, its compiled kernels, a node layout for the GASes it builds
 /// and where it builds them.
 ///
-/// Triangle and custom-primitive GASes are built on the device ([`GasBuilder::Device`], as
-/// OptiX builds them) unless `OXRAY_CUDA_GAS_BUILDER=host` is set when the backend is opened
-/// or [`with_builder`](Self::with_builder) says otherwise: every preset and flag, in the
+/// Triangle and custom-primitive GASes, and the top-level trees of IASes, are built on the
+/// device ([`GasBuilder::Device`], as OptiX builds them) unless `OXRAY_CUDA_GAS_BUILDER=host`
+/// is set when the backend is opened or [`with_builder`](Self::with_builder) says otherwise:
+/// every preset and flag, GASes in the
 /// binary layout ([`NodeLayout::Bvh2`]), as [`DeviceBuildConfig::for_options`] configures it.
 /// The rest (spheres, curves, motion keys, the BVH4 layout, and the rare tree too deep for the
 /// traversal stacks) is built on the host and uploaded.
@@ -238,6 +239,21 @@ impl AccelBackend for Cuda {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<CudaIas, BuildError> {
+        if self.builder == GasBuilder::Device {
+            let prepared = IasData::prepare(options, inputs)?;
+            let config = device_build::ias_config(options, prepared.boxes.len() as u32);
+            match device_build::build_box_tree(&self.ctx, &prepared.boxes, &config) {
+                Ok((tree, _)) => {
+                    let (data, tree) = prepared.finish(tree);
+                    return Ok(
+                        CudaIas::upload(&self.ctx, data, &tree)?.built_by(GasBuilder::Device)
+                    );
+                }
+                // Too deep for the traversal stacks: the host's builder bounds the depth.
+                Err(CudaError::TreeTooDeep { .. }) => {}
+                Err(e) => return Err(build_error(e)),
+            }
+        }
         let (data, tree) = IasData::build_with_tree(options, inputs)?;
         CudaIas::upload(&self.ctx, data, &tree)
     }

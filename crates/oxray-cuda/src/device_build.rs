@@ -13,7 +13,7 @@ use crate::error::{driver, CudaError};
 use crate::gas::CudaGas;
 use crate::layout::{SlotInfo, MAX_SLOTS};
 use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig, PushKernelArg};
-use oxray_bvh::{AccelBufferSizes, BvhStats, GasData, GasInfo, GasKind, MAX_BVH2_DEPTH};
+use oxray_bvh::{AccelBufferSizes, Bvh2, BvhStats, GasData, GasInfo, GasKind, MAX_BVH2_DEPTH};
 use oxray_core::{
     Aabb, BuildError, BuildFlags, BuildInput, BuildOptions, IndexFormat, TriangleInput,
     VertexFormat,
@@ -29,7 +29,7 @@ pub const BUILD_SOURCE: &str = include_str!("kernels/build.cu");
 const BLOCK: u32 = 256;
 /// Keys per tile of the radix sort and the prefix sums (`SORT_TILE`).
 const TILE: usize = 2048;
-/// Largest leaf the collapse makes (`OXRAY_MAX_LEAF`), as the CPU builder's presets.
+/// Largest leaf the collapse makes in a GAS, as the CPU builder's presets.
 pub const MAX_LEAF: u32 = 8;
 /// Bytes of one node of the radix tree (`INode`).
 const INODE_BYTES: usize = 64;
@@ -98,6 +98,10 @@ pub struct DeviceBuildConfig {
     /// slot with an empty box, since an update may make them active (guide §5.6), and the
     /// build keeps what the device's refit needs (the slots' primitives, the nodes by height).
     pub keep_inactive: bool,
+    /// The largest leaf the SAH collapse makes: [`MAX_LEAF`] for a GAS,
+    /// [`oxray_bvh::IAS_MAX_LEAF`] for the top level of an IAS (an instance costs a ray
+    /// transform).
+    pub max_leaf: u32,
 }
 
 impl DeviceBuildConfig {
@@ -107,12 +111,14 @@ impl DeviceBuildConfig {
         morton_bits: 30,
         max_depth: MAX_BVH2_DEPTH as u32,
         keep_inactive: false,
+        max_leaf: MAX_LEAF,
     };
     /// No preference, and `PREFER_FAST_TRACE`: 60-bit codes.
     pub const DEFAULT: DeviceBuildConfig = DeviceBuildConfig {
         morton_bits: 60,
         max_depth: MAX_BVH2_DEPTH as u32,
         keep_inactive: false,
+        max_leaf: MAX_LEAF,
     };
 
     /// Above this many triangles, `PREFER_FAST_BUILD` uses 60-bit codes too: 30-bit cells grow
@@ -234,17 +240,14 @@ pub const BUILD_ENTRIES: [&str; 23] = [
     "oxray_build_heights",
 ];
 
-/// NVRTC options of the builder: the trace kernels' (no FMA contraction, which the degeneracy
-/// test relies on) and the leaf size.
-pub(crate) fn build_options(cc: (i32, i32)) -> Vec<String> {
-    let mut o = crate::context::compile_options(cc);
-    o.push(format!("-DOXRAY_MAX_LEAF={MAX_LEAF}"));
-    o
-}
-
-/// Compiles the builder for compute capability `cc` (PTX).
+/// Compiles the builder for compute capability `cc` (PTX), with the trace kernels' options (no
+/// FMA contraction, which the degeneracy test relies on).
 pub(crate) fn compile_builder(cc: (i32, i32)) -> Result<cudarc::nvrtc::Ptx, CudaError> {
-    nvrtc_compile(BUILD_SOURCE, build_options(cc), "oxray_build.cu")
+    nvrtc_compile(
+        BUILD_SOURCE,
+        crate::context::compile_options(cc),
+        "oxray_build.cu",
+    )
 }
 
 impl BuildKernels {
@@ -610,6 +613,107 @@ pub fn build_gas(
     ))
 }
 
+/// The configuration of an IAS's top-level tree on the device: the GAS presets' Morton codes
+/// ([`DeviceBuildConfig::for_options`]), leaves of up to [`oxray_bvh::IAS_MAX_LEAF`]
+/// instances, and no inactive slots (the prepared boxes already hold every instance that needs
+/// one: [`oxray_bvh::PreparedIas::boxes`]).
+#[must_use]
+pub fn ias_config(options: &BuildOptions, num_instances: u32) -> DeviceBuildConfig {
+    DeviceBuildConfig {
+        keep_inactive: false,
+        max_leaf: oxray_bvh::IAS_MAX_LEAF,
+        ..DeviceBuildConfig::for_options(options, num_instances)
+    }
+}
+
+/// A binary tree over `boxes` (each finite and valid, as [`oxray_bvh::PreparedIas::boxes`])
+/// built by the device's kernels with `config`, read back to the host: what an IAS's top
+/// level is built with on the device. Its `prim_order` maps each leaf slot to its box. The
+/// words read back are checked as loaded bytes are ([`CudaError::DeviceData`] otherwise); a
+/// tree deeper than `config.max_depth` is [`CudaError::TreeTooDeep`].
+pub fn build_box_tree(
+    ctx: &CudaContext,
+    boxes: &[Aabb],
+    config: &DeviceBuildConfig,
+) -> Result<(Bvh2, BuildTimes), CudaError> {
+    let start = Instant::now();
+    let n = boxes.len();
+    if n > MAX_SLOTS {
+        return Err(CudaError::TooLarge(format!(
+            "{n} boxes; at most {MAX_SLOTS}"
+        )));
+    }
+    if n == 0 {
+        return Ok((Bvh2::default(), BuildTimes::default()));
+    }
+    let kernels = ctx.build_kernels()?;
+    let flat: Vec<f32> = boxes
+        .par_iter()
+        .flat_map_iter(|b| [b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z])
+        .collect();
+    let prepare_ms = start.elapsed().as_secs_f64() * 1e3;
+    let s = &ctx.stream;
+    let d = s
+        .clone_htod(&flat[..])
+        .map_err(driver("copying instance boxes to the device"))?;
+    ctx.synchronize()?;
+    let upload_ms = start.elapsed().as_secs_f64() * 1e3 - prepare_ms;
+    let timing = |what| driver(what);
+    let t0 = s
+        .record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT))
+        .map_err(timing("recording an event"))?;
+    let result = run_kernels(ctx, kernels, &DevicePrims::Boxes(&d), n, config)?;
+    let t1 = s
+        .record_event(Some(cudarc::driver::sys::CUevent_flags::CU_EVENT_DEFAULT))
+        .map_err(timing("recording an event"))?;
+    let kernels_ms = t0.elapsed_ms(&t1).map_err(timing("reading an event"))? as f64;
+    let mut words = vec![0u32; 16 * result.num_nodes];
+    s.memcpy_dtoh(&result.nodes, &mut words[..])
+        .map_err(driver("copying the tree to the host"))?;
+    let mut order = vec![0u32; result.active];
+    s.memcpy_dtoh(&result.values.slice(..result.active), &mut order[..])
+        .map_err(driver("copying the leaf order to the host"))?;
+    ctx.synchronize()?;
+    let mut tree = crate::relocate::tree_of_words(&words)
+        .map_err(|e| CudaError::DeviceData(format!("the top-level tree: {e}")))?;
+    // Every box in exactly one slot, and every slot in exactly one leaf.
+    let mut seen = vec![false; n];
+    if order.len() != n
+        || order
+            .iter()
+            .any(|&k| (k as usize) >= n || std::mem::replace(&mut seen[k as usize], true))
+    {
+        return Err(CudaError::DeviceData(format!(
+            "the leaf order holds {} of {n} boxes",
+            order.len()
+        )));
+    }
+    let mut covered = vec![false; n];
+    for node in tree.nodes.iter().filter(|m| m.count > 0) {
+        let (first, count) = (node.left_first as usize, node.count as usize);
+        let range = covered.get_mut(first..first.saturating_add(count));
+        if !range.is_some_and(|r| r.iter_mut().all(|c| !std::mem::replace(c, true))) {
+            return Err(CudaError::DeviceData(format!(
+                "a leaf of slots {first}..{} overlaps another or passes {n}",
+                first.saturating_add(count)
+            )));
+        }
+    }
+    if covered.contains(&false) {
+        return Err(CudaError::DeviceData("a slot in no leaf".into()));
+    }
+    tree.prim_order = order;
+    Ok((
+        tree,
+        BuildTimes {
+            prepare_ms,
+            upload_ms,
+            kernels_ms,
+            total_ms: start.elapsed().as_secs_f64() * 1e3,
+        },
+    ))
+}
+
 /// The inputs' vertices and indices in device memory and their table of `InputDesc`s (8 words
 /// each): what the build and update kernels fetch triangles through.
 pub(crate) struct DeviceInputs {
@@ -895,19 +999,24 @@ fn run_kernels(
             .arg(&leaf_parent)
             .arg(&boxes)
             .arg(&values)
-            .arg(&counters);
+            .arg(&counters)
+            .arg(&config.max_leaf);
         // SAFETY: oxray_build_bottom_up(INode*, const u32* leaf_parent, const float4* boxes,
-        // const u32* values, const u32* counters): threads below n_act walk from their leaf's
-        // parent to the root through nodes the hierarchy kernel linked.
+        // const u32* values, const u32* counters, u32 max_leaf): threads below n_act walk
+        // from their leaf's parent to the root through nodes the hierarchy kernel linked.
         unsafe { b.launch(grid(n)) }.map_err(launch("launching the bottom-up kernel"))?;
     }
     let mut kept: CudaSlice<u32> = scratch(ctx, n)?;
     let mut sums: CudaSlice<u32> = scratch(ctx, tiles)?;
     {
         let mut b = s.launch_builder(&k.mark);
-        b.arg(&inodes).arg(&counters).arg(&n32).arg(&mut kept);
-        // SAFETY: oxray_build_mark(const INode*, const u32* counters, u32 cap, u32* kept):
-        // n flags; nodes and parents as linked above.
+        b.arg(&inodes)
+            .arg(&counters)
+            .arg(&n32)
+            .arg(&config.max_leaf)
+            .arg(&mut kept);
+        // SAFETY: oxray_build_mark(const INode*, const u32* counters, u32 cap, u32 max_leaf,
+        // u32* kept): n flags; nodes and parents as linked above.
         unsafe { b.launch(grid(n)) }.map_err(launch("launching the collapse kernel"))?;
     }
     let mut index = s

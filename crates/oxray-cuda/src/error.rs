@@ -56,6 +56,10 @@ pub enum CudaError {
         /// The deepest accepted.
         max: u32,
     },
+    /// What the device's kernels wrote failed the host's checks (read back from device
+    /// memory, as a loader checks bytes).
+    #[error("device data failed its check: {0}")]
+    DeviceData(String),
     /// A setting (an environment variable) has a value this crate does not know.
     #[error("{0}")]
     Config(String),

@@ -3,6 +3,7 @@
 //! pipelines trace any graph: instances of IASes, static transforms and custom-primitive GASes.
 
 use crate::context::CudaContext;
+use crate::device_build::GasBuilder;
 use crate::error::{driver, CudaError};
 use crate::gas::{check_batch, grid, hit_of, HitRecord, ProgramView, Scratch};
 use crate::gas::{DESCRIPTOR_IAS, DESCRIPTOR_INSTANCE};
@@ -41,6 +42,8 @@ pub struct CudaIas {
     /// The `__oxray_Motion` header of an IAS built with motion options (guide §5.10.3), whose
     /// vanish flags hide its instances outside its time range.
     motion: Option<CudaSlice<u32>>,
+    /// Where its top-level tree was built.
+    builder: GasBuilder,
 }
 
 impl CudaIas {
@@ -86,7 +89,22 @@ impl CudaIas {
             scratch: Mutex::new(Scratch::default()),
             program_view: Mutex::new(None),
             motion,
+            builder: GasBuilder::Host,
         })
+    }
+
+    /// Where the top-level tree was built: [`GasBuilder::Device`] for an IAS whose tree the
+    /// device's kernels made ([`crate::device_build::build_box_tree`]), [`GasBuilder::Host`]
+    /// for one built (or loaded) on the host and uploaded.
+    #[must_use]
+    pub fn builder(&self) -> GasBuilder {
+        self.builder
+    }
+
+    /// The same IAS, saying its tree was built by `builder`.
+    pub(crate) fn built_by(mut self, builder: GasBuilder) -> Self {
+        self.builder = builder;
+        self
     }
 
     /// Updates (refits) the IAS in place (guide §5.6): new transforms, ids, SBT offsets, masks
@@ -174,14 +192,14 @@ impl CudaIas {
     /// A copy of the IAS in new device memory over the same children: what an update of an IAS
     /// that is shared writes into.
     pub fn duplicate(&self) -> Result<CudaIas, BuildError> {
-        CudaIas::upload(&self.ctx, self.data.clone(), &self.tree)
+        Ok(CudaIas::upload(&self.ctx, self.data.clone(), &self.tree)?.built_by(self.builder))
     }
 
     /// The compacted IAS (guide §5.8): the same instances over the same children, exactly
     /// sized (device IASes are exactly sized from the start). Refused without
     /// `ALLOW_COMPACTION`.
     pub fn compact(&self) -> Result<CudaIas, BuildError> {
-        CudaIas::upload(&self.ctx, self.data.compact()?, &self.tree)
+        Ok(CudaIas::upload(&self.ctx, self.data.compact()?, &self.tree)?.built_by(self.builder))
     }
 
     /// An IAS given as host data ([`IasData::from_bytes`], over children that live on this

@@ -222,7 +222,7 @@ impl CudaGas {
 /// The binary tree of the device layout's words: node 0 holds the root's children (one child:
 /// the root is that child; none: an empty tree), each inner child the index of a later node.
 /// Leaves keep their slot ranges. A node reached twice is an error.
-fn tree_of_words(words: &[u32]) -> Result<Bvh2, LoadError> {
+pub(crate) fn tree_of_words(words: &[u32]) -> Result<Bvh2, LoadError> {
     let n = words.len() / NODE_WORDS;
     let bad = |i: usize| LoadError::Invalid {
         what: "device node",

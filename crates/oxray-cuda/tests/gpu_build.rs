@@ -777,3 +777,129 @@ fn bvh4_layout_gases_refit_on_the_device_as_the_cpu_updates() {
         check_oracle(&gas, &mesh.soup(), &rays, &format!("BVH4 round {round}"));
     }
 }
+
+/// Instances placed at random: translated, rotated, scaled (mirrored too), some of the null
+/// handle (never hit).
+fn random_instances(
+    rng: &mut Rng,
+    children: &[oxray_core::TraversableHandle],
+    n: usize,
+) -> Vec<oxray_core::Instance> {
+    (0..n)
+        .map(|k| {
+            let child = if k % 23 == 5 {
+                TraversableHandle::NULL
+            } else {
+                children[k % children.len()].clone()
+            };
+            let axis = rng.dir();
+            let scale = rng.range(0.2, 1.5) * if k % 7 == 0 { -1.0 } else { 1.0 };
+            let a = glam::Affine3A::from_scale_rotation_translation(
+                glam::Vec3::splat(scale),
+                glam::Quat::from_axis_angle(axis, rng.range(0.0, 6.0)),
+                rng.vec3(-40.0, 40.0),
+            );
+            oxray_core::Instance::new(child)
+                .transform(oxray_core::Transform::from_affine(&a))
+                .instance_id(k as u32)
+        })
+        .collect()
+}
+
+/// IAS top-level trees built by the device's kernels (guide §5.4 builds, §5.6 updates): every
+/// preset and flag, against the same instances built by the host's builder: the same
+/// distances and instances for every ray, random instance access reaching every instance,
+/// and an update and a compaction of the device-built IAS tracing as a new host build does.
+#[test]
+fn ias_trees_build_on_the_device_and_trace_as_host_built_ones() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let device = Cuda::from_context(ctx.clone());
+    let host = Cuda::from_context(ctx).with_builder(GasBuilder::Host);
+    let sphere = icosphere_f32(2);
+    let cube = grid_cube(3);
+    let gases: Vec<TraversableHandle> = [&sphere, &cube]
+        .iter()
+        .map(|m| {
+            TraversableHandle::from(
+                device
+                    .build_gas(&BuildOptions::default(), &[mesh_input(m)])
+                    .unwrap(),
+            )
+        })
+        .collect();
+    let mut rng = Rng::new(0x1A5);
+    let closest = |cuda: &Cuda, ias: oxray_cuda::CudaIas, rays: &[Ray]| {
+        let handle = TraversableHandle::from(ias);
+        let mut hits = vec![None; rays.len()];
+        cuda.intersect_closest(&handle, rays, &mut hits).unwrap();
+        hits.iter()
+            .map(|h| h.map(|h| (h.t.to_bits(), h.instance_index)))
+            .collect::<Vec<_>>()
+    };
+    for n in [1usize, 2, 5, 300, 20_000] {
+        let instances = random_instances(&mut rng, &gases, n);
+        let input = [(&instances[..]).into()];
+        let rays: Vec<Ray> = (0..4000)
+            .map(|k| {
+                let o = rng.vec3(-60.0, 60.0);
+                let target = if k % 2 == 0 {
+                    instances[rng.below(n)]
+                        .transform
+                        .transform_point(glam::Vec3::ZERO)
+                } else {
+                    rng.vec3(-40.0, 40.0)
+                };
+                Ray::new(o, target - o)
+            })
+            .collect();
+        for flags in [
+            BuildFlags::empty(),
+            BuildFlags::PREFER_FAST_BUILD,
+            BuildFlags::PREFER_FAST_TRACE | BuildFlags::ALLOW_COMPACTION,
+            BuildFlags::ALLOW_UPDATE,
+            BuildFlags::ALLOW_RANDOM_INSTANCE_ACCESS,
+        ] {
+            let options = BuildOptions::new(flags);
+            let ias = device.build_ias(&options, &input).unwrap();
+            assert_eq!(ias.builder(), GasBuilder::Device, "{n} {flags:?}");
+            let reference = host.build_ias(&options, &input).unwrap();
+            assert_eq!(reference.builder(), GasBuilder::Host);
+            assert_eq!(ias.data().bounds, reference.data().bounds, "{n} {flags:?}");
+            let mut slots = ias.data().slot_of.clone();
+            slots.sort_unstable();
+            slots.dedup();
+            let kept = if flags
+                .intersects(BuildFlags::ALLOW_UPDATE | BuildFlags::ALLOW_RANDOM_INSTANCE_ACCESS)
+            {
+                n
+            } else {
+                instances.iter().filter(|i| !i.child.is_null()).count()
+            };
+            assert_eq!(
+                slots.iter().filter(|&&s| s != u32::MAX).count(),
+                kept,
+                "{n} {flags:?}: a slot for every instance that needs one"
+            );
+            let want = closest(&host, reference, &rays);
+            if flags.contains(BuildFlags::ALLOW_COMPACTION) {
+                let compacted = ias.compact().unwrap();
+                assert_eq!(compacted.builder(), GasBuilder::Device);
+                assert_eq!(closest(&device, compacted, &rays), want, "{n} compacted");
+            }
+            if flags.contains(BuildFlags::ALLOW_UPDATE) {
+                let moved = random_instances(&mut rng, &gases, n);
+                let moved_input = [(&moved[..]).into()];
+                let mut ias = ias;
+                ias.update(&update(flags), &moved_input).unwrap();
+                let rebuilt = host.build_ias(&options, &moved_input).unwrap();
+                assert_eq!(
+                    closest(&device, ias, &rays),
+                    closest(&host, rebuilt, &rays),
+                    "{n}: the device-built IAS updated"
+                );
+            } else {
+                assert_eq!(closest(&device, ias, &rays), want, "{n} {flags:?}");
+            }
+        }
+    }
+}

@@ -12,7 +12,7 @@
 //   4. oxray_build_karras     the binary radix tree over the sorted keys, ties broken by
 //                             position (Karras' trick), so that the tree is valid and its depth
 //                             bounded by the key's bits plus log2(n).
-//   5. oxray_build_bottom_up  boxes, SAH costs and the collapse into leaves of up to MAX_LEAF
+//   5. oxray_build_bottom_up  boxes, SAH costs and the collapse into leaves of up to max_leaf
 //                             triangles, bottom-up with one atomic counter per node.
 //   6. oxray_build_mark, oxray_scan_*  which inner nodes remain, numbered by a prefix sum.
 //   7. oxray_build_write_nodes, oxray_build_write_triangles
@@ -40,9 +40,6 @@ typedef unsigned long long u64;
 #define FULL_MASK 0xFFFFFFFFu
 #define F32_INF __int_as_float(0x7f800000)
 
-#ifndef OXRAY_MAX_LEAF
-#define OXRAY_MAX_LEAF 8
-#endif
 // SAH costs of visiting a binary node and of testing one triangle (Karras 2013's 1.2 and 1).
 #define COST_NODE 1.2f
 #define COST_TRI 1.0f
@@ -543,7 +540,7 @@ __device__ __forceinline__ ChildInfo child_info(u32 c, const INode* nodes, const
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     oxray_build_bottom_up(INode* nodes, const u32* __restrict__ leaf_parent,
                           const float4* __restrict__ boxes, const u32* __restrict__ values,
-                          const u32* __restrict__ counters) {
+                          const u32* __restrict__ counters, u32 max_leaf) {
     const u32 n = counters[C_ACTIVE];
     const u32 j = blockIdx.x * BUILD_BLOCK + threadIdx.x;
     if (n < 2 || j >= n) return;
@@ -562,7 +559,7 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
         const u32 count = __ldcg(&m->last) - __ldcg(&m->first) + 1;
         const float split = COST_NODE * area + a.cost + b.cost;
         const float as_leaf = COST_TRI * area * (float)count;
-        const bool leaf = p != 0 && count <= OXRAY_MAX_LEAF && as_leaf <= split;
+        const bool leaf = p != 0 && count <= max_leaf && as_leaf <= split;
         m->lo[0] = lo.x;
         m->lo[1] = lo.y;
         m->lo[2] = lo.z;
@@ -577,12 +574,12 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
 }
 
 // ---------------------------------------------------------------------------------------------
-// 6. Inner nodes that remain: not leaves, and not below a leaf. Only nodes of at most MAX_LEAF
+// 6. Inner nodes that remain: not leaves, and not below a leaf. Only nodes of at most max_leaf
 // triangles can be leaves, and counts grow towards the root, so the walk up stops early.
 
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     oxray_build_mark(const INode* __restrict__ nodes, const u32* __restrict__ counters, u32 cap,
-                     u32* __restrict__ kept) {
+                     u32 max_leaf, u32* __restrict__ kept) {
     const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
     if (i >= cap) return;
     const u32 n = counters[C_ACTIVE];
@@ -590,7 +587,7 @@ extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     if (n >= 2 && i < n - 1 && !(nodes[i].shape & LEAF_BIT)) {
         keep = 1;
         u32 p = nodes[i].parent;
-        while (p != NO_NODE && nodes[p].last - nodes[p].first + 1 <= OXRAY_MAX_LEAF) {
+        while (p != NO_NODE && nodes[p].last - nodes[p].first + 1 <= max_leaf) {
             if (nodes[p].shape & LEAF_BIT) {
                 keep = 0;
                 break;
