@@ -926,13 +926,22 @@ impl GasData {
         fn bytes<T>(v: &Vec<T>) -> usize {
             v.capacity() * std::mem::size_of::<T>()
         }
-        let node_bytes = bytes(&self.bvh.nodes) + self.bvh8.as_ref().map_or(0, |b| bytes(&b.nodes));
+        // A motion structure's time parts are copies of its nodes.
+        let parts = self
+            .motion
+            .as_ref()
+            .and_then(|m| m.segments.as_ref())
+            .map_or(0, |p| {
+                p.bvh.iter().map(bytes).sum::<usize>() + p.bvh8.iter().map(bytes).sum::<usize>()
+            });
+        let node_bytes =
+            bytes(&self.bvh.nodes) + self.bvh8.as_ref().map_or(0, |b| bytes(&b.nodes)) + parts;
         let primitive_bytes = bytes(&self.triangles)
             + bytes(&self.aabbs)
             + bytes(&self.spheres)
             + bytes(&self.curves)
             + self.motion.as_ref().map_or(0, |m| {
-                bytes(&m.triangles) + bytes(&m.aabbs) + bytes(&m.spheres)
+                bytes(&m.triangles) + bytes(&m.aabbs) + bytes(&m.spheres) + bytes(&m.curves)
             });
         GasMemory {
             output_bytes: node_bytes

@@ -86,6 +86,23 @@ pub fn compute_memory_usage(
         };
         sizes.output_size_in_bytes += later * n * per_prim;
         sizes.temp_size_in_bytes += (later + 1) * n * decoded;
+        // The time parts (`MotionSegments`): a copy of the nodes each.
+        let parts = crate::motion::MotionSegments::per_interval(later as u32)
+            .filter(|_| {
+                !options
+                    .flags
+                    .contains(oxray_core::BuildFlags::PREFER_FAST_BUILD)
+            })
+            .map_or(0, |m| m as usize * later);
+        let refs = match summary.kind {
+            oxray_core::BuildInputKind::Curves => {
+                n * crate::gas::curve_splits(options).map_or(1, |s| s.max_pieces.max(1) as usize)
+            }
+            _ => n,
+        };
+        sizes.output_size_in_bytes += parts
+            * refs.saturating_sub(1).max(1)
+            * (std::mem::size_of::<Bvh4Node>() + std::mem::size_of::<crate::Bvh8Node>());
     }
     if options.flags.contains(oxray_core::BuildFlags::ALLOW_UPDATE) {
         // A refit works in place: the table of input starts and the thread pool's jobs.

@@ -37,6 +37,93 @@ pub struct GasMotion {
     pub spheres: Vec<Sphere>,
     /// Curve segments of keys 1, 2, … (curve GAS), one per leaf slot like key 0's.
     pub curves: Vec<CurveSegment>,
+    /// The node boxes of parts of the time range ([`MotionSegments`]); `None` for a
+    /// `PREFER_FAST_BUILD` structure, whose rays at every time walk the one tree over each
+    /// primitive's union of key boxes.
+    pub segments: Option<MotionSegments>,
+}
+
+/// The same tree as a motion GAS's, once per part of its time range, each with boxes that bound
+/// the primitives only over that part: the key intervals split in `per_interval` equal parts
+/// (8, 4, 2 or 1 of them, at most 8 parts for the whole range, one per interval beyond 8
+/// intervals). A ray walks the nodes of the part holding its time. The tree over the union of
+/// every key's boxes makes a moving primitive's box as large as its whole path; a part's box is
+/// that of the path within the part, so rays enter far fewer nodes (measured in
+/// `docs/BENCHMARKS.md`, "Motion blur: what it costs, and whether splitting the time range
+/// pays"). The leaves, their slots and the primitives are the structure's: only boxes differ,
+/// so every hit is the one-tree traversal's.
+///
+/// Each box is the intersection of the tree's own box with the union of the part's end
+/// boxes, grown by a few ulps of the keys' coordinates: a primitive interpolated linearly lies
+/// between its positions at the part's ends, and its interpolation in `f32` rounds by at most
+/// a few ulps of the larger key.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MotionSegments {
+    /// Parts per key interval: a power of two, so that a ray's part is exact.
+    pub per_interval: u32,
+    /// The 4-wide nodes of each part, in time order, for a structure without the 8-wide
+    /// layout (empty otherwise).
+    pub bvh: Vec<Vec<crate::bvh4::Bvh4Node>>,
+    /// The 8-wide nodes of each part, in time order, for a structure with the 8-wide layout
+    /// (empty otherwise: parts are kept for the layout the 8-wide kernels walk; a 4-wide
+    /// kernel forced on such a structure walks the one tree).
+    pub bvh8: Vec<Vec<crate::bvh8::Bvh8Node>>,
+}
+
+impl MotionSegments {
+    /// The most parts a structure is split in; a structure of more key intervals gets one
+    /// part per interval up to [`MAX_INTERVALS`](Self::MAX_INTERVALS), and none beyond.
+    pub const PARTS: u32 = 8;
+    /// The most key intervals a structure has parts for (each part a copy of the nodes).
+    pub const MAX_INTERVALS: u32 = 16;
+
+    /// Parts per key interval for `intervals` key intervals, `None` where none are made.
+    #[must_use]
+    pub fn per_interval(intervals: u32) -> Option<u32> {
+        match intervals {
+            0 => None,
+            n if n > Self::MAX_INTERVALS => None,
+            // 8, 4, 2 (for 3 intervals), then 1: every value a power of two.
+            n => Some((Self::PARTS / n).max(1)),
+        }
+    }
+
+    /// The part a ray at key sample `s` walks (the last one at the last key, where a time at
+    /// or past the end is clamped).
+    #[inline(always)]
+    #[must_use]
+    pub fn part(&self, s: KeySample) -> usize {
+        let m = self.per_interval as usize;
+        // `fraction * m` is exact (m is a power of two) and below m for a fraction below 1.
+        let j = ((s.fraction * m as f32) as usize).min(m - 1);
+        (s.key * m + j).min(self.len().saturating_sub(1))
+    }
+
+    /// The number of parts.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.bvh.len().max(self.bvh8.len())
+    }
+
+    /// Whether there are no parts.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Bytes of the parts' nodes.
+    #[must_use]
+    pub fn bytes(&self) -> usize {
+        self.bvh
+            .iter()
+            .map(|n| std::mem::size_of_val(&n[..]))
+            .sum::<usize>()
+            + self
+                .bvh8
+                .iter()
+                .map(|n| std::mem::size_of_val(&n[..]))
+                .sum::<usize>()
+    }
 }
 
 impl GasMotion {
@@ -58,13 +145,14 @@ impl GasMotion {
         self.curves.shrink_to_fit();
     }
 
-    /// Bytes of the later keys' primitives.
+    /// Bytes of the later keys' primitives and of the time parts' nodes.
     #[must_use]
     pub fn bytes(&self) -> usize {
         std::mem::size_of_val(&self.triangles[..])
             + std::mem::size_of_val(&self.aabbs[..])
             + std::mem::size_of_val(&self.spheres[..])
             + std::mem::size_of_val(&self.curves[..])
+            + self.segments.as_ref().map_or(0, MotionSegments::bytes)
     }
 }
 
@@ -96,6 +184,7 @@ pub(crate) fn build_motion(
         aabbs: Vec::new(),
         spheres: Vec::new(),
         curves: Vec::new(),
+        segments: None,
     };
     let tree = match gas.kind {
         GasKind::Triangles => {
@@ -303,7 +392,153 @@ pub(crate) fn build_motion(
         }
     };
     gas.motion = Some(out);
+    if !gas
+        .build_flags
+        .contains(oxray_core::BuildFlags::PREFER_FAST_BUILD)
+    {
+        gas.build_motion_segments();
+    }
     tree
+}
+
+/// A box grown by `pad` on every side (an empty box stays empty).
+fn grow(b: Aabb, pad: f32) -> Aabb {
+    if b.is_valid() {
+        Aabb::new(b.min - Vec3::splat(pad), b.max + Vec3::splat(pad))
+    } else {
+        b
+    }
+}
+
+/// The common part of two boxes (empty where they do not meet).
+fn meet(a: &Aabb, b: &Aabb) -> Aabb {
+    let out = Aabb::new(a.min.max(b.min), a.max.min(b.max));
+    if out.is_valid() {
+        out
+    } else {
+        Aabb::EMPTY
+    }
+}
+
+/// A copy of `nodes` whose boxes are `leaf`'s for leaf lanes and the union of the child's
+/// lanes for inner ones, each met with the original lane's box (children follow their parents
+/// in the array).
+fn part_nodes<N: crate::wide::WideNode>(
+    nodes: &[N],
+    leaf: impl Fn(u32, u32) -> Aabb + Sync + Send,
+) -> Vec<N> {
+    let mut out = nodes.to_vec();
+    out.par_iter_mut().for_each(|n| {
+        for lane in 0..N::WIDTH {
+            if n.count(lane) > 0 {
+                let b = meet(&leaf(n.child(lane), n.count(lane)), &n.child_bounds(lane));
+                n.set_bounds(lane, &b);
+            }
+        }
+    });
+    for i in (0..out.len()).rev() {
+        for lane in 0..N::WIDTH {
+            let (child, count) = (out[i].child(lane), out[i].count(lane));
+            if count == 0 && child != u32::MAX {
+                let b = meet(&out[child as usize].bounds(), &nodes[i].child_bounds(lane));
+                out[i].set_bounds(lane, &b);
+            }
+        }
+    }
+    out
+}
+
+impl GasData {
+    /// The box of leaf slot `slot` over key interval `key` .. `key + 1` from fraction `f0` to
+    /// `f1`, grown for the rounding of the interpolation; empty for an inactive slot.
+    fn slot_box_over(&self, slot: usize, key: usize, f0: f32, f1: f32) -> Aabb {
+        if !self.slot_is_active(slot) {
+            return Aabb::EMPTY;
+        }
+        let s = KeySample {
+            key,
+            next: key + 1,
+            fraction: 0.0,
+        };
+        let at = |f: f32| -> Aabb {
+            match self.kind {
+                GasKind::Triangles => {
+                    let (a, b) = self.triangle_keys(s);
+                    let t = lerp_triangle4(&a[slot / 4], &b[slot / 4], f).get(slot % 4);
+                    Aabb::from_points(&t.map(Vec3::from))
+                }
+                GasKind::CustomPrimitives => {
+                    let (a, b) = self.aabb_keys(s);
+                    lerp_aabb(&a[slot], &b[slot], f)
+                }
+                GasKind::Spheres => {
+                    let (a, b) = self.sphere_keys(s);
+                    lerp_sphere(&a[slot], &b[slot], f).bounds()
+                }
+                GasKind::Curves => {
+                    let (a, b) = self.curve_keys(s);
+                    lerp_curve(&a[slot], &b[slot], f).bounds()
+                }
+            }
+        };
+        let (k0, k1) = (at(0.0), at(1.0));
+        if !(k0.is_finite_valid() && k1.is_finite_valid()) {
+            // A key where the primitive is not hit: the tree's own box stands.
+            return Aabb::new(Vec3::splat(f32::NEG_INFINITY), Vec3::splat(f32::INFINITY));
+        }
+        // `lerp` rounds by under 3 ulps of the larger operand, at the part's ends as at the
+        // ray's fraction: 8 ulps of the keys' largest coordinate cover both.
+        let scale = [k0.min, k0.max, k1.min, k1.max]
+            .iter()
+            .map(|v| v.abs().max_element())
+            .fold(0.0f32, f32::max);
+        let pad = scale * 8.0 * f32::EPSILON + f32::MIN_POSITIVE;
+        grow(at(f0).union(&at(f1)), pad)
+    }
+
+    /// Makes (again) the time parts of a motion GAS ([`MotionSegments`]) from its tree and
+    /// primitives; nothing for a static structure or one of more than
+    /// [`MotionSegments::MAX_INTERVALS`] key intervals.
+    pub fn build_motion_segments(&mut self) {
+        let Some(motion) = &self.motion else { return };
+        let intervals = motion.options.key_count().saturating_sub(1) as u32;
+        let Some(m) = MotionSegments::per_interval(intervals) else {
+            return;
+        };
+        let parts = (intervals * m) as usize;
+        let this: &GasData = self;
+        let leaf = |part: usize| {
+            let key = part / m as usize;
+            let j = (part % m as usize) as f32;
+            let (f0, f1) = (j / m as f32, (j + 1.0) / m as f32);
+            move |first: u32, count: u32| {
+                (first..first + count).fold(Aabb::EMPTY, |b, slot| {
+                    b.union(&this.slot_box_over(slot as usize, key, f0, f1))
+                })
+            }
+        };
+        // Parts of the layout the structure's widest kernel walks.
+        let (bvh, bvh8) = match &this.bvh8 {
+            Some(b8) => (
+                Vec::new(),
+                (0..parts).map(|p| part_nodes(&b8.nodes, leaf(p))).collect(),
+            ),
+            None => (
+                (0..parts)
+                    .map(|p| part_nodes(&this.bvh.nodes, leaf(p)))
+                    .collect(),
+                Vec::new(),
+            ),
+        };
+        let segments = MotionSegments {
+            per_interval: m,
+            bvh,
+            bvh8,
+        };
+        if let Some(motion) = &mut self.motion {
+            motion.segments = Some(segments);
+        }
+    }
 }
 
 /// Four triangles interpolated lane by lane between two keys' blocks (key `a` exactly where

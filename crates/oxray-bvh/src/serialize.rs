@@ -334,6 +334,7 @@ fn read_motion(
         aabbs,
         spheres,
         curves,
+        segments: None,
     }))
 }
 
@@ -626,7 +627,7 @@ impl GasData {
             shapes.push(shape);
         }
 
-        let gas = GasData {
+        let mut gas = GasData {
             kind,
             build_flags,
             bvh: Bvh4 { nodes },
@@ -647,6 +648,11 @@ impl GasData {
         };
         if let Some(slot) = gas.repeated_reference() {
             return Err(invalid("primitive referenced from two leaf slots", slot));
+        }
+        // The time parts of a motion structure are not saved: they follow from its tree and
+        // primitives, as the build made them.
+        if !build_flags.contains(BuildFlags::PREFER_FAST_BUILD) {
+            gas.build_motion_segments();
         }
         Ok(gas)
     }

@@ -2,7 +2,10 @@
 //! GASes with two motion keys — motionless (both keys equal: the cost of interpolating every
 //! block tested), small motion (a translation of 2 % of the mesh's size) and large motion (half
 //! its size, where the tree's boxes, the union over both keys, grow) — with camera rays at
-//! random times and with incoherent rays. Prints Mrays/s and the ratio to the static GAS.
+//! random times and with incoherent rays. Prints Mrays/s and the ratio to the static GAS. The
+//! large motion is traced with the structure's time parts (`oxray_bvh::MotionSegments`, built
+//! in) and without them (one tree over the union boxes), and against separate GASes per time
+//! segment, each with its own tree (the upper bound of splitting the time range).
 //!
 //! `cargo bench -p oxray-cpu --bench motion` (numbers depend on the machine and its load: compare
 //! the ratios of one run).
@@ -68,29 +71,39 @@ fn main() {
             .map(|p| [p[0] + d * size, p[1], p[2]])
             .collect()
     };
-    let cases: [(&str, Option<Vec<[f32; 3]>>); 4] = [
+    let cases: [(&str, Option<Vec<[f32; 3]>>); 5] = [
         ("static", None),
         ("motionless 2 keys", Some(shifted(0.0))),
         ("small motion (2 %)", Some(shifted(0.02))),
         ("large motion (50 %)", Some(shifted(0.5))),
+        // The same GAS with its time parts removed: rays at every time walk one tree.
+        ("large, one tree", Some(shifted(0.5))),
     ];
     println!(
         "{name}: {} triangles, {} threads; Mrays/s (ratio to static)",
         m.triangles.len(),
         rayon::current_num_threads()
     );
-    println!("{:<22} {:>18} {:>18}", "", "camera", "diffuse");
+    println!("{:<22} {:>18} {:>18} {:>10}", "", "camera", "diffuse", "MB");
     let mut base = (0.0, 0.0);
     for (label, later) in cases {
-        let gas = build(&m, later.as_deref());
+        let mut gas = build(&m, later.as_deref());
+        if label == "large, one tree" {
+            let mut data = gas.data().clone();
+            if let Some(m) = &mut data.motion {
+                m.segments = None;
+            }
+            gas = Gas::from_data_with_isa(data, gas.isa());
+        }
         let (c, d) = (mrays(&gas, &camera, 7), mrays(&gas, &diffuse, 7));
         if later.is_none() {
             base = (c, d);
         }
         println!(
-            "{label:<22} {c:>10.2} ({:>4.2}) {d:>10.2} ({:>4.2})",
+            "{label:<22} {c:>10.2} ({:>4.2}) {d:>10.2} ({:>4.2}) {:>10.2}",
             c / base.0,
-            d / base.1
+            d / base.1,
+            gas.data().memory().output_bytes as f64 / 1e6
         );
     }
     // Whether splitting the time range pays (guide §5.10.2 leaves the motion BVH to the

@@ -817,3 +817,81 @@ fn s5_6_an_update_keeps_the_motion_options() {
     };
     assert!(gas.update(&up, &[input.into()]).is_err());
 }
+
+/// §5.10.2 with the time range split in parts (`oxray_bvh::MotionSegments`): the parts'
+/// boxes bound the moving triangles at every time of their part, so every ray at every time
+/// finds exactly the hit of the one tree over the union of the key boxes; the number of parts
+/// follows the key count, `PREFER_FAST_BUILD` makes none, and a saved structure loads with the
+/// same parts.
+#[test]
+fn s5_10_2_time_parts_trace_the_hits_of_the_one_tree() {
+    let mut rng = Rng::new(5102);
+    for (keys, parts) in [(2usize, 8usize), (3, 8), (4, 6), (6, 5), (17, 16), (18, 0)] {
+        let m = MotionOptions::new(keys as u16, 0.0, 1.0);
+        let soup = moving_soup(&mut rng, 400, keys, 3.0);
+        for isa in kernels() {
+            let gas = motion_triangle_gas(isa, &soup, m, BuildFlags::empty());
+            let data = gas.data();
+            let made = data
+                .motion
+                .as_ref()
+                .and_then(|m| m.segments.as_ref())
+                .map_or(0, |s| s.len());
+            assert_eq!(made, parts, "{keys} keys");
+            // The memory query bounds the structure with its parts.
+            let verts: Vec<Vec<[f32; 3]>> = soup.iter().map(|k| flat(k)).collect();
+            let later: Vec<VertexBuffer<'_>> =
+                verts[1..].iter().map(|v| VertexBuffer::f32x3(v)).collect();
+            let input = TriangleInput::new(VertexBuffer::f32x3(&verts[0])).motion_vertices(&later);
+            let sizes = oxray_bvh::compute_memory_usage(
+                &BuildOptions::default().with_motion(m),
+                &[input.into()],
+            )
+            .unwrap();
+            assert!(
+                data.memory().output_bytes <= sizes.output_size_in_bytes,
+                "{keys} keys: {} > {}",
+                data.memory().output_bytes,
+                sizes.output_size_in_bytes
+            );
+            let mut one_tree = data.clone();
+            if let Some(m) = &mut one_tree.motion {
+                m.segments = None;
+            }
+            let one_tree = Gas::from_data_with_isa(one_tree, isa);
+            let loaded =
+                Gas::from_data_with_isa(GasData::from_bytes(&data.to_bytes()).unwrap(), isa);
+            assert_eq!(
+                loaded.data().motion,
+                data.motion,
+                "{keys} keys: the parts are made again on load"
+            );
+            let mut hits = 0;
+            for k in 0..3000 {
+                let mut ray = random_ray(&mut rng, -0.1, 1.1);
+                // Times at the parts' ends and at the keys, where rounding could put a ray
+                // across a boundary.
+                if k % 3 == 0 {
+                    let ends = (keys - 1) * 8;
+                    ray.time = rng.below(ends + 1) as f32 / ends as f32;
+                }
+                let want = one_tree.intersect(&ray);
+                hits += want.is_some() as usize;
+                assert_eq!(
+                    hit_bits(&gas.intersect(&ray)),
+                    hit_bits(&want),
+                    "{isa} {keys} keys: {ray:?}"
+                );
+                assert_eq!(gas.occluded(&ray), want.is_some(), "{isa} {keys} keys");
+            }
+            assert!(hits > 500, "{hits} hits");
+        }
+    }
+    let fast = motion_triangle_gas(
+        Isa::selected(),
+        &moving_soup(&mut rng, 50, 2, 1.0),
+        MotionOptions::new(2, 0.0, 1.0),
+        BuildFlags::PREFER_FAST_BUILD,
+    );
+    assert!(fast.data().motion.as_ref().unwrap().segments.is_none());
+}

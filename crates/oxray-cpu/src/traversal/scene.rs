@@ -280,26 +280,46 @@ fn traverse_motion_gas<V: GasVisitor>(
     stack: &mut [Entry],
 ) -> (f32, bool) {
     let f = s.fraction;
+    // The nodes of the time part holding the ray's time, where the structure has parts.
+    // Parts are kept for one layout: the 8-wide one where the structure has it (a 4-wide
+    // kernel then walks the one tree), else the 4-wide one.
+    let one_tree = (&gas.bvh.nodes[..], gas.bvh8.as_ref().map(|b| &b.nodes[..]));
+    let (bvh, bvh8) = match gas.motion.as_ref().and_then(|m| m.segments.as_ref()) {
+        Some(parts) => {
+            let p = parts.part(s);
+            match (parts.bvh.get(p), parts.bvh8.get(p)) {
+                (_, Some(b8)) => (one_tree.0, Some(&b8[..])),
+                (Some(b4), None) => (&b4[..], None),
+                (None, None) => one_tree,
+            }
+        }
+        None => one_tree,
+    };
+    let nodes = Nodes {
+        isa: gas.isa(),
+        bvh,
+        bvh8,
+    };
     match gas.kind {
         GasKind::Triangles => {
             let (a, b) = gas.triangle_keys(s);
             let leaves = MotionTriangleLeaves { a, b, f };
-            traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
+            traverse_nodes(nodes, &leaves, prepared, tmin, tmax, visitor, stack)
         }
         GasKind::CustomPrimitives => {
             let (a, b) = gas.aabb_keys(s);
             let leaves = MotionAabbLeaves { a, b, f };
-            traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
+            traverse_nodes(nodes, &leaves, prepared, tmin, tmax, visitor, stack)
         }
         GasKind::Spheres => {
             let (a, b) = gas.sphere_keys(s);
             let leaves = MotionSphereLeaves { a, b, f };
-            traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
+            traverse_nodes(nodes, &leaves, prepared, tmin, tmax, visitor, stack)
         }
         GasKind::Curves => {
             let (a, b) = gas.curve_keys(s);
             let leaves = MotionCurveLeaves { a, b, f };
-            traverse_gas(gas, &leaves, prepared, tmin, tmax, visitor, stack)
+            traverse_nodes(nodes, &leaves, prepared, tmin, tmax, visitor, stack)
         }
     }
 }
@@ -316,12 +336,38 @@ fn traverse_gas<L: LeafIntersector<V>, V: GasVisitor>(
     visitor: &mut V,
     stack: &mut [Entry],
 ) -> (f32, bool) {
-    let isa = gas.isa();
-    let Some(b8) = gas.bvh8.as_ref().filter(|_| isa != Isa::Sse) else {
-        let nodes = &gas.bvh.nodes;
-        return traverse::<Bvh4, _, _>(nodes, leaves, prepared, tmin, tmax, visitor, stack);
+    let nodes = Nodes {
+        isa: gas.isa(),
+        bvh: &gas.bvh.nodes,
+        bvh8: gas.bvh8.as_ref().map(|b| &b.nodes[..]),
     };
-    let nodes = &b8.nodes;
+    traverse_nodes(nodes, leaves, prepared, tmin, tmax, visitor, stack)
+}
+
+/// A GAS's nodes (its own, or a motion structure's time part's) and the kernel that walks them
+/// (the structure's: see [`Gas::isa`]).
+#[derive(Clone, Copy)]
+struct Nodes<'a> {
+    isa: Isa,
+    bvh: &'a [oxray_bvh::Bvh4Node],
+    bvh8: Option<&'a [oxray_bvh::Bvh8Node]>,
+}
+
+/// Traverses `nodes`: the 8-wide ones where there are some and the kernel is not the 4-wide
+/// one.
+#[inline(always)]
+fn traverse_nodes<L: LeafIntersector<V>, V: GasVisitor>(
+    Nodes { isa, bvh, bvh8 }: Nodes<'_>,
+    leaves: &L,
+    prepared: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    let Some(nodes) = bvh8.filter(|_| isa != Isa::Sse) else {
+        return traverse::<Bvh4, _, _>(bvh, leaves, prepared, tmin, tmax, visitor, stack);
+    };
     match isa {
         #[cfg(target_arch = "x86_64")]
         // SAFETY: a `Gas` is given `Isa::Avx2` only where `Isa::is_available` found AVX2 and
