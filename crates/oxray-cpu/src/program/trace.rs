@@ -373,9 +373,9 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
         }
         self.gas = Some(gas);
         if path.len == 0 {
+            // The root GAS: entered once per trace, whose visitor starts with no path and the
+            // world placement.
             (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
-            self.path = None;
-            self.place = Placement::world(&self.ray);
             return;
         }
         (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
@@ -658,7 +658,11 @@ fn check_graph<P>(
             return Err(Interrupt::exception(code, &[]));
         }
     }
-    if handle.graph_depth() > pipe.max_traversable_graph_depth {
+    // Every traversable is at most MAX_TRAVERSABLE_GRAPH_DEPTH deep (its constructor checks),
+    // so only a lowered limit needs the handle's depth.
+    if pipe.max_traversable_graph_depth < oxray_core::MAX_TRAVERSABLE_GRAPH_DEPTH
+        && handle.graph_depth() > pipe.max_traversable_graph_depth
+    {
         return Err(Interrupt::exception(
             ExceptionCode::TRAVERSAL_DEPTH_EXCEEDED,
             &[],

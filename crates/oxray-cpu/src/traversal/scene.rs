@@ -131,6 +131,10 @@ impl<'s> NodeRef<'s> {
     /// The CPU structure behind a handle, borrowed; `None` for the null handle or a structure
     /// of another backend (which a CPU traversal cannot enter).
     pub fn of(handle: &'s oxray_core::TraversableHandle) -> Option<NodeRef<'s>> {
+        // The CPU's own structures first (the common root, found without asking the backend).
+        if let Some(g) = handle.downcast_ref::<Gas>() {
+            return Some(NodeRef::Gas(g));
+        }
         // A static transform reports its child's backend: over another device's structure, it
         // cannot be entered either.
         if !matches!(
@@ -138,9 +142,6 @@ impl<'s> NodeRef<'s> {
             Some(oxray_core::BackendKind::Cpu | oxray_core::BackendKind::Any)
         ) {
             return None;
-        }
-        if let Some(g) = handle.downcast_ref::<Gas>() {
-            return Some(NodeRef::Gas(g));
         }
         if let Some(i) = handle.downcast_ref::<Ias>() {
             return Some(NodeRef::Ias(i));
