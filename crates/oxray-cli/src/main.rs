@@ -438,6 +438,7 @@ impl CameraOverride {
             to_world: oxray_scene::Camera::to_world_looking_at(eye, target, up),
             yfov,
             aspect: None,
+            node: None,
         })
     }
 }

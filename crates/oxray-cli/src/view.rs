@@ -344,6 +344,7 @@ impl Orbit {
             to_world: Camera::to_world_looking_at(self.eye, self.target, self.up),
             yfov: self.yfov,
             aspect: None,
+            node: None,
         }
     }
 

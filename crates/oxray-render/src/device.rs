@@ -242,12 +242,15 @@ struct ParamsGpu {
     shutter_on: u32,
     shutter_open: f32,
     shutter_close: f32,
-    pad: u32,
+    /// A camera the animation moves: its frames over the shutter (12 floats each: origin,
+    /// forward, right, up; [`CameraFrame::at`]), and how many (0: the still camera above).
+    num_cam_keys: u32,
+    cam_keys: u64,
 }
 
 const _: () = assert!(std::mem::size_of::<MaterialGpu>() == 192);
 const _: () = assert!(std::mem::size_of::<HitDataGpu>() == 56);
-const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 280);
+const _: () = assert!(std::mem::size_of::<ParamsGpu>() == 288);
 const _: () = assert!(std::mem::offset_of!(ParamsGpu, crop_x0) == 244);
 
 fn tex_ref(r: Option<TextureRef>) -> TexRefGpu {
@@ -821,7 +824,8 @@ impl GpuScene {
             shutter_on: 0,
             shutter_open: 0.0,
             shutter_close: 0.0,
-            pad: 0,
+            num_cam_keys: 0,
+            cam_keys: 0,
         };
         if let (Some((s, _)), true) = (shutter, lit.has_motion()) {
             (params.shutter_on, params.shutter_open, params.shutter_close) = (1, s.open, s.close);
@@ -840,9 +844,10 @@ impl GpuScene {
         })
     }
 
-    /// The launches of one render: these tables seen from `camera` with `opts`, over the
-    /// pixels of `window` (of the `opts.width` x `opts.height` image), adding to `accum` (and
-    /// `aov`), the window's pixels, with the pixel filter's table in `filter`.
+    /// The launches of one render: these tables seen from `camera` with `opts` (a camera the
+    /// animation moves over the shutter: its frames in `camera_keys`), over the pixels of
+    /// `window` (of the `opts.width` x `opts.height` image), adding to `accum` (and `aov`),
+    /// the window's pixels, with the pixel filter's table in `filter`.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn pass<'a>(
         &'a self,
@@ -850,6 +855,7 @@ impl GpuScene {
         opts: &RenderOptions,
         window: CropWindow,
         camera: CameraFrame,
+        camera_keys: Option<&Buffer<[f32; 12]>>,
         accum: &Buffer<[f32; 4]>,
         aov: Option<&Buffer<[f32; 8]>>,
         filter: &Buffer<f32>,
@@ -863,6 +869,11 @@ impl GpuScene {
         params.cam_forward = camera.forward.to_array();
         params.cam_right = camera.right.to_array();
         params.cam_up = camera.up.to_array();
+        if let (Some(keys), Some(s)) = (camera_keys, opts.shutter.filter(|s| s.is_open())) {
+            // Rays take the shutter's times for the camera's sake too.
+            (params.shutter_on, params.shutter_open, params.shutter_close) = (1, s.open, s.close);
+            (params.num_cam_keys, params.cam_keys) = (keys.len() as u32, keys.device_ptr());
+        }
         params.max_depth = opts.max_depth.max(1);
         params.roulette_depth = opts.roulette_depth.max(1);
         params.seed = opts.seed;

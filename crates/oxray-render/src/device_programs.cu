@@ -128,7 +128,11 @@ struct Params {
     // transforms; without it every ray's time is 0.
     u32 shutter_on;
     float shutter_open, shutter_close;
-    u32 pad;
+    // A camera the animation moves while the shutter is open: num_cam_keys frames evenly
+    // spaced over it, 12 floats each (origin, forward, right, up; programs.rs CameraFrame::at);
+    // 0: the still camera above.
+    u32 num_cam_keys;
+    u64 cam_keys;
 };
 
 }  // namespace pt
@@ -1087,8 +1091,6 @@ extern "C" __global__ void __raygen__camera() {
     float oy = 0.5f + filter_offset(jy);
     float sx = 2.0f * ((float)x + ox) / (float)w - 1.0f;
     float sy = 1.0f - 2.0f * ((float)y + oy) / (float)h;
-    V3 dir = normalize(v3a(params.cam_forward) + v3a(params.cam_right) * sx +
-                       v3a(params.cam_up) * sy);
     // The path's time (motion.rs Shutter::time), drawn after the pixel's offsets so that a
     // render without motion keeps its random sequence; every ray of the path takes it.
     float time = 0.0f;
@@ -1097,6 +1099,36 @@ extern "C" __global__ void __raygen__camera() {
         time = fminf(params.shutter_open + (params.shutter_close - params.shutter_open) * u,
                      params.shutter_close);
     }
+    // The camera at that time (programs.rs CameraFrame::at: linear between its keys).
+    V3 origin = v3a(params.cam_origin), forward = v3a(params.cam_forward);
+    V3 right = v3a(params.cam_right), up = v3a(params.cam_up);
+    if (params.shutter_on != 0u && params.num_cam_keys >= 2u &&
+        params.shutter_close > params.shutter_open) {
+        const float* keys = reinterpret_cast<const float*>(params.cam_keys);
+        const u32 last = params.num_cam_keys - 1u;
+        const float u =
+            fminf(fmaxf((time - params.shutter_open) / (params.shutter_close - params.shutter_open),
+                        0.0f),
+                  1.0f) *
+            (float)last;
+        if (u >= (float)last) {
+            const float* b = keys + 12ull * last;
+            origin = v3a(b);
+            forward = v3a(b + 3);
+            right = v3a(b + 6);
+            up = v3a(b + 9);
+        } else {
+            const u32 k = (u32)u < last - 1u ? (u32)u : last - 1u;
+            const float f = u - (float)k;
+            const float* a = keys + 12ull * k;
+            const float* b = a + 12;
+            origin = v3a(a) + (v3a(b) - v3a(a)) * f;
+            forward = v3a(a + 3) + (v3a(b + 3) - v3a(a + 3)) * f;
+            right = v3a(a + 6) + (v3a(b + 6) - v3a(a + 6)) * f;
+            up = v3a(a + 9) + (v3a(b + 9) - v3a(a + 9)) * f;
+        }
+    }
+    V3 dir = normalize(forward + right * sx + up * sy);
     PathState s;
     s.seed = rng.rng.s;
     s.done = 0u;
@@ -1104,7 +1136,7 @@ extern "C" __global__ void __raygen__camera() {
     s.pdf = 0.0f;
     s.radiance = v3s(0.0f);
     s.throughput = v3s(1.0f);
-    s.origin = v3a(params.cam_origin);
+    s.origin = origin;
     s.direction = dir;
     // Each trace either ends the path or adds a vertex, and vertices are capped.
     for (u32 k = 0; k <= params.max_depth; ++k) {

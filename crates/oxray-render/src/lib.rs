@@ -220,9 +220,51 @@ pub(crate) fn camera_frame_with(
 ) -> Result<CameraFrame, RenderError> {
     let camera = match camera {
         Some(c) => c,
-        None => select_camera(scene, opts)?,
+        None => {
+            let c = select_camera(scene, opts)?;
+            // With a shutter, the animation places the camera: a closed one renders the pose
+            // at its time (an open one keys the camera over it: `camera_keys`).
+            match opts.shutter {
+                Some(s) => Camera {
+                    to_world: scene.camera_transform_at(&c, opts.animation, s.open),
+                    ..c
+                },
+                None => c,
+            }
+        }
     };
     frame_of(&camera, opts)
+}
+
+/// How many frames key a camera that the animation moves while the shutter is open (evenly
+/// spaced, linear between them: [`CameraFrame::at`]).
+pub const CAMERA_KEYS: usize = 33;
+
+/// The camera's frames over the shutter when the scene's animation (`opts.animation`) moves it
+/// while `opts.shutter` is open; empty otherwise, and for a camera given by the caller
+/// (`camera`: a [`Renderer`]'s own, which does not hang on a node).
+pub(crate) fn camera_keys(
+    scene: &SceneDesc,
+    opts: &RenderOptions,
+    camera: Option<Camera>,
+) -> Result<Vec<CameraFrame>, RenderError> {
+    let Some(shutter) = opts.shutter.filter(|s| s.is_open()) else {
+        return Ok(Vec::new());
+    };
+    let camera = match camera {
+        Some(c) => c,
+        None => select_camera(scene, opts)?,
+    };
+    if !scene.is_camera_animated(&camera, opts.animation) {
+        return Ok(Vec::new());
+    }
+    (0..CAMERA_KEYS)
+        .map(|k| {
+            let u = k as f32 / (CAMERA_KEYS - 1) as f32;
+            let to_world = scene.camera_transform_at(&camera, opts.animation, shutter.time(u));
+            frame_of(&Camera { to_world, ..camera }, opts)
+        })
+        .collect()
 }
 
 fn select_camera(scene: &SceneDesc, opts: &RenderOptions) -> Result<Camera, RenderError> {
@@ -281,6 +323,8 @@ fn framing_camera(scene: &SceneDesc) -> Result<Camera, RenderError> {
 /// tracing: the camera and the lighting, with the options that shape the paths.
 pub(crate) struct Prepared {
     pub camera: CameraFrame,
+    /// The camera's frames over the shutter where the animation moves it ([`camera_keys`]).
+    pub camera_keys: Vec<CameraFrame>,
     pub lit: Lighting,
     pub max_depth: u32,
     /// The pixel filter's inverse-CDF table ([`filter::Filter::table`]).
@@ -338,6 +382,7 @@ pub(crate) fn prepare(
     let camera = camera_frame(scene, opts)?;
     Ok(Prepared {
         camera,
+        camera_keys: camera_keys(scene, opts, None)?,
         lit: prepare_lighting(scene, env, opts.shutter.map(|s| (s, opts.animation)))?,
         max_depth: opts.max_depth.max(1),
         filter: opts.filter.table(),
@@ -613,6 +658,7 @@ pub fn render_passes(
             env,
             p_env: prep.lit.p_env,
             camera: prep.camera,
+            camera_keys: &prep.camera_keys,
             sample,
             max_depth: prep.max_depth,
             eps: prep.lit.eps,
@@ -625,7 +671,7 @@ pub fn render_passes(
             image: [opts.width, opts.height],
             shutter: opts
                 .shutter
-                .filter(|s| s.is_open() && prep.lit.has_motion()),
+                .filter(|s| s.is_open() && (prep.lit.has_motion() || !prep.camera_keys.is_empty())),
             moving: &prep.lit.moving,
         };
         // One launch index per pixel of the window.

@@ -10,6 +10,12 @@
 //! most 10 degrees per key interval and the instance's box within 1/1000 of its size at every
 //! interval's middle, up to [`MAX_KEYS`] keys).
 //!
+//! A camera that the animation moves (a glTF camera on an animated node, or below one) is
+//! keyed by [`CAMERA_KEYS`](crate::CAMERA_KEYS) frames evenly spaced over the shutter, and
+//! each camera ray starts from the frame at its time, linear between the keys
+//! ([`CameraFrame::at`](crate::programs::CameraFrame::at)); a closed shutter sees the scene
+//! from where the camera is at its time.
+//!
 //! A moving emitter is not sampled by next-event estimation (its triangles' places depend on
 //! the ray's time); its light is found by the paths that hit it, with their full weight, so the
 //! image stays unbiased.

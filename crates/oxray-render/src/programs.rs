@@ -36,6 +36,51 @@ pub struct CameraFrame {
     pub up: Vec3,
 }
 
+impl CameraFrame {
+    /// The frame at `time` of a camera keyed by `keys`, evenly spaced over `shutter` from its
+    /// opening to its closing: linear between the two keys around `time`, the ends outside.
+    /// `None` with fewer than two keys or a closed shutter. `device_programs.cu`
+    /// (`camera_at`) does the same arithmetic.
+    ///
+    /// ```
+    /// use glam::Vec3;
+    /// use oxray_render::motion::Shutter;
+    /// use oxray_render::programs::CameraFrame;
+    /// let at = |x: f32| CameraFrame { origin: Vec3::new(x, 0.0, 0.0), forward: Vec3::NEG_Z, right: Vec3::X, up: Vec3::Y };
+    /// let keys = [at(0.0), at(1.0), at(4.0)];
+    /// let s = Shutter::new(0.0, 2.0).unwrap();
+    /// assert_eq!(CameraFrame::at(&keys, s, 1.5).unwrap().origin.x, 2.5);
+    /// assert_eq!(CameraFrame::at(&keys, s, 9.0).unwrap().origin.x, 4.0);
+    /// assert!(CameraFrame::at(&keys[..1], s, 1.0).is_none());
+    /// ```
+    #[must_use]
+    pub fn at(
+        keys: &[CameraFrame],
+        shutter: crate::motion::Shutter,
+        time: f32,
+    ) -> Option<CameraFrame> {
+        if keys.len() < 2 || !shutter.is_open() {
+            return None;
+        }
+        let last = keys.len() - 1;
+        let u =
+            ((time - shutter.open) / (shutter.close - shutter.open)).clamp(0.0, 1.0) * last as f32;
+        if u >= last as f32 {
+            return Some(keys[last]);
+        }
+        let k = (u as usize).min(last - 1);
+        let f = u - k as f32;
+        let (a, b) = (&keys[k], &keys[k + 1]);
+        let mix = |x: Vec3, y: Vec3| x + (y - x) * f;
+        Some(CameraFrame {
+            origin: mix(a.origin, b.origin),
+            forward: mix(a.forward, b.forward),
+            right: mix(a.right, b.right),
+            up: mix(a.up, b.up),
+        })
+    }
+}
+
 /// Launch parameters (one launch per sample pass).
 #[derive(Clone)]
 pub struct Params<'a> {
@@ -55,6 +100,9 @@ pub struct Params<'a> {
     pub p_env: f32,
     /// The camera.
     pub camera: CameraFrame,
+    /// The camera's frames over the shutter when the scene's animation moves it while the
+    /// shutter is open (evenly spaced, [`CameraFrame::at`]); empty otherwise.
+    pub camera_keys: &'a [CameraFrame],
     /// Index of this pass's sample.
     pub sample: u32,
     /// Path length limit.
@@ -640,11 +688,14 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             let oy = 0.5 + sample_offset(p.filter, jy);
             let sx = 2.0 * (x as f32 + ox) / w as f32 - 1.0;
             let sy = 1.0 - 2.0 * (y as f32 + oy) / h as f32;
-            let c = &p.camera;
-            let dir = (c.forward + c.right * sx + c.up * sy).normalize();
             // The path's time, drawn after the pixel's offsets so that a render without motion
-            // keeps its random sequence.
+            // keeps its random sequence; a moving camera is where it is at that time.
             let time = p.shutter.map_or(0.0, |s| s.time(rng.get(dim::TIME)));
+            let c = p
+                .shutter
+                .and_then(|s| CameraFrame::at(p.camera_keys, s, time))
+                .unwrap_or(p.camera);
+            let dir = (c.forward + c.right * sx + c.up * sy).normalize();
             let mut s = PathState {
                 seed: rng.rng.0,
                 throughput: [1.0; 3],

@@ -240,6 +240,7 @@ impl<'s> Renderer<'s> {
             self.tables = None;
         }
         let camera = camera_frame_with(&self.scene, opts, self.camera)?;
+        let keys = crate::camera_keys(&self.scene, opts, self.camera)?;
         let tables = match &mut self.tables {
             Some(t) => t,
             slot @ None => {
@@ -261,11 +262,25 @@ impl<'s> Renderer<'s> {
             false => None,
         };
         let filter = self.device.buffer_from_slice(&opts.filter.table())?;
+        let keys = match keys.is_empty() {
+            true => None,
+            false => {
+                let words: Vec<[f32; 12]> = keys
+                    .iter()
+                    .map(|c| {
+                        let v = [c.origin, c.forward, c.right, c.up];
+                        std::array::from_fn(|i| v[i / 3][i % 3])
+                    })
+                    .collect();
+                Some(self.device.buffer_from_slice(&words)?)
+            }
+        };
         let mut pass = tables.pass(
             &self.geometry,
             opts,
             window,
             camera,
+            keys.as_ref(),
             &accum,
             aov.as_ref(),
             &filter,

@@ -362,3 +362,88 @@ fn s5_10_a_moving_emitter_lights_alike_with_the_cuda_cpp_programs_on_every_devic
         );
     }
 }
+
+/// The still strip, seen by a camera on node 1 that slides from x = +1 to x = -1 while the
+/// shutter is open: relative to the camera the strip slides as in the scenes above, so every
+/// column is uncovered for the same fraction of the shutter.
+fn panning_camera() -> SceneDesc {
+    let mut s = scene(false, Vec3::ZERO);
+    s.nodes.push(NodeDesc {
+        translation: Vec3::new(0.0, 0.0, 5.0),
+        ..Default::default()
+    });
+    s.cameras[0] = s.cameras[0].at_node(1);
+    s.animations.push(Animation {
+        name: "pan".into(),
+        channels: vec![Channel {
+            node: 1,
+            property: Property::Translation,
+            interpolation: Interpolation::Linear,
+            times: vec![0.0, 1.0],
+            values: vec![[1.0, 0.0, 5.0, 0.0], [-1.0, 0.0, 5.0, 0.0]],
+        }],
+    });
+    s
+}
+
+/// Checks the blur of the sliding strip (or of the still strip seen by the panning camera).
+fn assert_strip_blur(img: &Image, what: &str) {
+    for x in 0..WIDTH {
+        let xp = looks_at(x);
+        let lo = ((xp + 0.5) / 2.0).clamp(0.0, 1.0);
+        let hi = ((xp + 1.5) / 2.0).clamp(0.0, 1.0);
+        let want = 1.0 - (hi - lo);
+        let got = column_mean(img, x);
+        assert!(
+            (got - want).abs() < 0.05,
+            "{what}: column {x} (x = {xp}): {got}, uncovered {want} of the time"
+        );
+    }
+}
+
+#[test]
+fn s5_10_a_camera_the_animation_moves_blurs_the_still_scene() {
+    let s = panning_camera();
+    let open = Some(Shutter::new(0.0, 1.0).unwrap());
+    let img = render(&s, &white(), &options(1024, open), |_| {}).unwrap();
+    assert_strip_blur(&img, "Rust programs");
+    // A closed shutter sees the scene from where the camera is at its time: at t = 0.25 the
+    // camera is at x = 0.5, so the strip sits at x = -0.5 in the image, as the still strip
+    // placed there.
+    let posed = render(
+        &s,
+        &white(),
+        &options(16, Some(Shutter::new(0.25, 0.25).unwrap())),
+        |_| {},
+    )
+    .unwrap();
+    let still = render(
+        &scene(false, Vec3::new(-0.5, 0.0, 0.0)),
+        &white(),
+        &options(16, None),
+        |_| {},
+    )
+    .unwrap();
+    assert_eq!(column_mean(&posed, 15), 0.0, "x = -0.5 is covered");
+    assert_eq!(column_mean(&posed, 25), 1.0);
+    for x in 0..WIDTH {
+        assert_eq!(column_mean(&posed, x), column_mean(&still, x), "column {x}");
+    }
+    // Without a shutter, the camera stays where the scene placed it.
+    let rest = render(&s, &white(), &options(16, None), |_| {}).unwrap();
+    assert_eq!(column_mean(&rest, 20), 0.0);
+    assert_eq!(column_mean(&rest, 0), 1.0);
+    // The CUDA C++ programs on every device (the CPU compiles them for the host).
+    for device in devices() {
+        let img = render_on(&device, &s, &white(), &options(1024, open));
+        assert_strip_blur(&img, &device.describe());
+        let posed = render_on(
+            &device,
+            &s,
+            &white(),
+            &options(16, Some(Shutter::new(0.25, 0.25).unwrap())),
+        );
+        assert_eq!(column_mean(&posed, 15), 0.0, "{}", device.describe());
+        assert_eq!(column_mean(&posed, 25), 1.0, "{}", device.describe());
+    }
+}

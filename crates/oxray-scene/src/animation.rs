@@ -301,14 +301,41 @@ impl SceneDesc {
         })
     }
 
-    /// The nodes from an instance's node up to its root (none without a node). Bounded by the
-    /// number of nodes, so that a malformed parent cycle ends.
+    /// Whether animation `animation` moves `camera` (a channel targets its node or one of the
+    /// node's ancestors).
+    #[must_use]
+    pub fn is_camera_animated(&self, camera: &crate::Camera, animation: usize) -> bool {
+        let Some(a) = self.animations.get(animation) else {
+            return false;
+        };
+        self.chain_from(camera.node).any(|node| {
+            self.nodes[node as usize].matrix.is_none() && a.channels.iter().any(|c| c.node == node)
+        })
+    }
+
+    /// The camera-to-world transform of `camera` at `time` under animation `animation`: the
+    /// product of its node's and its ancestors' animated local transforms. A camera the
+    /// animation does not move keeps [`Camera::to_world`](crate::Camera::to_world).
+    #[must_use]
+    pub fn camera_transform_at(&self, camera: &crate::Camera, animation: usize, time: f32) -> Mat4 {
+        if !self.is_camera_animated(camera, animation) {
+            return camera.to_world;
+        }
+        self.chain_from(camera.node)
+            .fold(Mat4::IDENTITY, |below, node| {
+                self.node_transform_at(node, animation, time) * below
+            })
+    }
+
+    /// The nodes from an instance's node up to its root (none without a node).
     fn chain(&self, instance: usize) -> impl Iterator<Item = u32> + '_ {
-        let start = self
-            .instances
-            .get(instance)
-            .and_then(|i| i.node)
-            .filter(|&n| (n as usize) < self.nodes.len());
+        self.chain_from(self.instances.get(instance).and_then(|i| i.node))
+    }
+
+    /// The nodes from `node` up to its root (none without a node). Bounded by the number of
+    /// nodes, so that a malformed parent cycle ends.
+    fn chain_from(&self, node: Option<u32>) -> impl Iterator<Item = u32> + '_ {
+        let start = node.filter(|&n| (n as usize) < self.nodes.len());
         std::iter::successors(start, move |&n| {
             self.nodes[n as usize]
                 .parent
@@ -457,5 +484,51 @@ mod tests {
         scene.nodes[0].parent = None;
         scene.nodes[0].matrix = Some(Mat4::IDENTITY);
         assert!(!scene.is_animated(0, 0));
+    }
+
+    #[test]
+    fn cameras_move_with_their_node_and_its_ancestors() {
+        // A camera at (0, 0, 5) on node 1, a child of node 0, which slides along x.
+        let mut scene = SceneDesc::default();
+        scene.nodes.push(NodeDesc::default());
+        scene.nodes.push(NodeDesc {
+            parent: Some(0),
+            translation: Vec3::new(0.0, 0.0, 5.0),
+            ..Default::default()
+        });
+        let camera = crate::Camera {
+            to_world: Mat4::from_translation(Vec3::new(0.0, 0.0, 5.0)),
+            yfov: 0.5,
+            aspect: None,
+            node: Some(1),
+        };
+        assert!(!scene.is_camera_animated(&camera, 0));
+        assert_eq!(scene.camera_transform_at(&camera, 0, 0.5), camera.to_world);
+        scene.animations.push(Animation {
+            name: "pan".into(),
+            channels: vec![Channel {
+                node: 0,
+                property: Property::Translation,
+                interpolation: Interpolation::Linear,
+                times: vec![0.0, 1.0],
+                values: vec![[1.0, 0.0, 0.0, 0.0], [-1.0, 0.0, 0.0, 0.0]],
+            }],
+        });
+        assert!(scene.is_camera_animated(&camera, 0));
+        assert!(!scene.is_camera_animated(&camera, 1));
+        let eye = |t: f32| {
+            scene
+                .camera_transform_at(&camera, 0, t)
+                .transform_point3(Vec3::ZERO)
+        };
+        assert_eq!(eye(0.0), Vec3::new(1.0, 0.0, 5.0));
+        assert_eq!(eye(0.75), Vec3::new(-0.5, 0.0, 5.0));
+        // A camera on no node, or under no animation, stays where it was placed.
+        let free = crate::Camera {
+            node: None,
+            ..camera
+        };
+        assert!(!scene.is_camera_animated(&free, 0));
+        assert_eq!(scene.camera_transform_at(&camera, 1, 0.75), camera.to_world);
     }
 }

@@ -1397,7 +1397,7 @@ impl Loader<'_> {
             }
             if let Some(ci) = root.nodes[ni].camera.map(|c| c.value()) {
                 if let Some(cam) = self.camera(ci, global) {
-                    cameras.push((ni, cam));
+                    cameras.push((ni, cam.at_node(ni as u32)));
                 }
             }
             let light = root.nodes[ni]
@@ -1655,6 +1655,7 @@ impl Loader<'_> {
                     to_world,
                     yfov: p.yfov,
                     aspect: p.aspect_ratio.filter(|a| a.is_finite() && *a > 0.0),
+                    node: None,
                 })
             }
             _ => {

@@ -348,6 +348,9 @@ pub struct Camera {
     pub yfov: f32,
     /// The aspect ratio (width / height) the scene asks for, if any.
     pub aspect: Option<f32>,
+    /// The node the camera hangs on (glTF: the node that names it), through which the scene's
+    /// animations move it; `None` for a camera placed by `to_world` alone.
+    pub node: Option<u32>,
 }
 
 impl Camera {
@@ -363,7 +366,15 @@ impl Camera {
             to_world: Self::to_world_looking_at(eye, target, up),
             yfov,
             aspect: None,
+            node: None,
         }
+    }
+
+    /// The same camera hung on node `node` (see [`Camera::node`]).
+    #[must_use]
+    pub fn at_node(mut self, node: u32) -> Camera {
+        self.node = Some(node);
+        self
     }
 
     /// The camera-to-world transform of a camera at `eye` looking at `target` with `up` up,
