@@ -544,14 +544,7 @@ fn custom_primitive_gases_build_on_the_device() {
             "{name}"
         );
         let back = gas.to_data().unwrap();
-        let mut got: Vec<(u32, [u32; 6])> = back
-            .slot_prim
-            .iter()
-            .zip(&back.aabbs)
-            .filter(|(&g, _)| g != oxray_bvh::NO_PRIMITIVE)
-            .map(|(&g, b)| (g, bits(b)))
-            .collect();
-        got.sort_unstable();
+        let (got, _) = slotted_boxes(&gas);
         let mut want: Vec<(u32, [u32; 6])> = host
             .slot_prim
             .iter()
@@ -567,6 +560,21 @@ fn custom_primitive_gases_build_on_the_device() {
         let s = back.slot_prim.iter().position(|&g| g == 10_001).unwrap();
         assert_eq!(back.resolve(s as u32), (1001, 2, 1));
     }
+}
+
+/// The boxes of a custom-primitive GAS read back from the device, by primitive (slots that
+/// hold one), as bits, and the structure's bounds.
+fn slotted_boxes(gas: &CudaGas) -> (Vec<(u32, [u32; 6])>, oxray_core::Aabb) {
+    let back = gas.to_data().unwrap();
+    let mut got: Vec<(u32, [u32; 6])> = back
+        .slot_prim
+        .iter()
+        .zip(&back.aabbs)
+        .filter(|(&g, _)| g != oxray_bvh::NO_PRIMITIVE)
+        .map(|(&g, b)| (g, bits(b)))
+        .collect();
+    got.sort_unstable();
+    (got, back.bounds)
 }
 
 fn bits(b: &oxray_core::Aabb) -> [u32; 6] {
@@ -685,18 +693,7 @@ fn device_built_updatable_custom_primitives_take_new_boxes() {
     let config = DeviceBuildConfig::for_options(&BuildOptions::new(flags), 5000);
     let mut gas = device_gas(&ctx, &config, flags, &[box_input(&boxes)]);
     assert_eq!(gas.info().num_active_primitives, 5000 - 5000u32.div_ceil(7));
-    let slots_of = |gas: &CudaGas| {
-        let back = gas.to_data().unwrap();
-        let mut got: Vec<(u32, [u32; 6])> = back
-            .slot_prim
-            .iter()
-            .zip(&back.aabbs)
-            .filter(|(&g, _)| g != oxray_bvh::NO_PRIMITIVE)
-            .map(|(&g, b)| (g, bits(b)))
-            .collect();
-        got.sort_unstable();
-        (got, back.bounds)
-    };
+    let slots_of = slotted_boxes;
     let (got, _) = slots_of(&gas);
     assert_eq!(
         got.len(),
