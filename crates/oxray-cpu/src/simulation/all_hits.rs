@@ -160,6 +160,12 @@ impl GasVisitor for CountVisitor<'_> {
         // Custom primitives are not hit, as by `all_hits` (`NoCustomPrimitives`).
         (None, false)
     }
+
+    /// Every box the ray crosses is entered whatever the order (the interval never shrinks),
+    /// and a set of primitives does not depend on it: the children are not sorted.
+    fn nearest_first(&self) -> bool {
+        false
+    }
 }
 
 /// The number of distinct primitives `ray` (valid) crosses under `root`: [`CountVisitor`], or
