@@ -108,18 +108,7 @@ fn s5_10_an_open_shutter_blurs_a_sliding_strip_by_its_coverage_time() {
         |_| {},
     )
     .unwrap();
-    for x in 0..WIDTH {
-        let xp = looks_at(x);
-        // The strip covers xp for t in [(xp + 0.5) / 2, (xp + 1.5) / 2].
-        let lo = ((xp + 0.5) / 2.0).clamp(0.0, 1.0);
-        let hi = ((xp + 1.5) / 2.0).clamp(0.0, 1.0);
-        let want = 1.0 - (hi - lo);
-        let got = column_mean(&img, x);
-        assert!(
-            (got - want).abs() < 0.05,
-            "column {x} (x = {xp}): {got} where the strip leaves it uncovered {want} of the time"
-        );
-    }
+    assert_strip_blur(&img, "Rust programs");
     // Blur, not a still: some columns are neither black nor white.
     assert!((0..WIDTH).any(|x| (0.3..0.7).contains(&column_mean(&img, x))));
 }
@@ -199,18 +188,7 @@ fn s5_10_the_cuda_cpp_programs_blur_the_sliding_strip_on_every_device() {
         let mut r = Renderer::new(&device, &s, &env).unwrap();
         let o = options(1024, Some(Shutter::new(0.0, 1.0).unwrap()));
         let img = r.render(&o, |_| ControlFlow::Continue(())).unwrap().image;
-        for x in 0..WIDTH {
-            let xp = looks_at(x);
-            let lo = ((xp + 0.5) / 2.0).clamp(0.0, 1.0);
-            let hi = ((xp + 1.5) / 2.0).clamp(0.0, 1.0);
-            let want = 1.0 - (hi - lo);
-            let got = column_mean(&img, x);
-            assert!(
-                (got - want).abs() < 0.05,
-                "{}: column {x} (x = {xp}): {got}, uncovered {want} of the time",
-                device.describe()
-            );
-        }
+        assert_strip_blur(&img, &device.describe());
         // The same renderer without the shutter renders the still pose again (the tables are
         // posed anew), and a closed shutter the pose at its time.
         let still = r
@@ -390,6 +368,7 @@ fn panning_camera() -> SceneDesc {
 fn assert_strip_blur(img: &Image, what: &str) {
     for x in 0..WIDTH {
         let xp = looks_at(x);
+        // The strip covers xp for t in [(xp + 0.5) / 2, (xp + 1.5) / 2].
         let lo = ((xp + 0.5) / 2.0).clamp(0.0, 1.0);
         let hi = ((xp + 1.5) / 2.0).clamp(0.0, 1.0);
         let want = 1.0 - (hi - lo);

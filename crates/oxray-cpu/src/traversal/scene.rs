@@ -190,19 +190,51 @@ pub(crate) fn traverse_node<'s, V: SceneVisitor<'s>>(
             match gas.kind {
                 GasKind::Triangles => {
                     let leaves = TriangleLeaves(&gas.triangles);
-                    traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
+                    traverse_nodes(
+                        Nodes::of(gas),
+                        &leaves,
+                        &prepared,
+                        tmin,
+                        tmax,
+                        visitor,
+                        stack,
+                    )
                 }
                 GasKind::CustomPrimitives => {
                     let leaves = AabbLeaves(&gas.aabbs);
-                    traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
+                    traverse_nodes(
+                        Nodes::of(gas),
+                        &leaves,
+                        &prepared,
+                        tmin,
+                        tmax,
+                        visitor,
+                        stack,
+                    )
                 }
                 GasKind::Spheres => {
                     let leaves = SphereLeaves(&gas.spheres);
-                    traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
+                    traverse_nodes(
+                        Nodes::of(gas),
+                        &leaves,
+                        &prepared,
+                        tmin,
+                        tmax,
+                        visitor,
+                        stack,
+                    )
                 }
                 GasKind::Curves => {
                     let leaves = CurveLeaves(&gas.curves);
-                    traverse_gas(gas, &leaves, &prepared, tmin, tmax, visitor, stack)
+                    traverse_nodes(
+                        Nodes::of(gas),
+                        &leaves,
+                        &prepared,
+                        tmin,
+                        tmax,
+                        visitor,
+                        stack,
+                    )
                 }
             }
         }
@@ -284,22 +316,23 @@ fn traverse_motion_gas<V: GasVisitor>(
     // The nodes of the time part holding the ray's time, where the structure has parts.
     // Parts are kept for one layout: the 8-wide one where the structure has it (a 4-wide
     // kernel then walks the one tree), else the 4-wide one.
-    let one_tree = (&gas.bvh.nodes[..], gas.bvh8.as_ref().map(|b| &b.nodes[..]));
-    let (bvh, bvh8) = match gas.motion.as_ref().and_then(|m| m.segments.as_ref()) {
+    let one_tree = Nodes::of(gas);
+    let nodes = match gas.motion.as_ref().and_then(|m| m.segments.as_ref()) {
         Some(parts) => {
             let p = parts.part(s);
             match (parts.bvh.get(p), parts.bvh8.get(p)) {
-                (_, Some(b8)) => (one_tree.0, Some(&b8[..])),
-                (Some(b4), None) => (&b4[..], None),
+                (_, Some(b8)) => Nodes {
+                    bvh8: Some(&b8[..]),
+                    ..one_tree
+                },
+                (Some(b4), None) => Nodes {
+                    bvh: &b4[..],
+                    ..one_tree
+                },
                 (None, None) => one_tree,
             }
         }
         None => one_tree,
-    };
-    let nodes = Nodes {
-        isa: gas.isa(),
-        bvh,
-        bvh8,
     };
     match gas.kind {
         GasKind::Triangles => {
@@ -325,26 +358,6 @@ fn traverse_motion_gas<V: GasVisitor>(
     }
 }
 
-/// Traverses a GAS with the kernel it was given (once, when it was built or loaded: see
-/// [`Gas::isa`]).
-#[inline(always)]
-fn traverse_gas<L: LeafIntersector<V>, V: GasVisitor>(
-    gas: &Gas,
-    leaves: &L,
-    prepared: &PreparedRay,
-    tmin: f32,
-    tmax: f32,
-    visitor: &mut V,
-    stack: &mut [Entry],
-) -> (f32, bool) {
-    let nodes = Nodes {
-        isa: gas.isa(),
-        bvh: &gas.bvh.nodes,
-        bvh8: gas.bvh8.as_ref().map(|b| &b.nodes[..]),
-    };
-    traverse_nodes(nodes, leaves, prepared, tmin, tmax, visitor, stack)
-}
-
 /// A GAS's nodes (its own, or a motion structure's time part's) and the kernel that walks them
 /// (the structure's: see [`Gas::isa`]).
 #[derive(Clone, Copy)]
@@ -352,6 +365,18 @@ struct Nodes<'a> {
     isa: Isa,
     bvh: &'a [oxray_bvh::Bvh4Node],
     bvh8: Option<&'a [oxray_bvh::Bvh8Node]>,
+}
+
+impl<'a> Nodes<'a> {
+    /// The GAS's own nodes and the kernel it was given (once, when it was built or loaded).
+    #[inline(always)]
+    fn of(gas: &'a Gas) -> Nodes<'a> {
+        Nodes {
+            isa: gas.isa(),
+            bvh: &gas.bvh.nodes,
+            bvh8: gas.bvh8.as_ref().map(|b| &b.nodes[..]),
+        }
+    }
 }
 
 /// Traverses `nodes`: the 8-wide ones where there are some and the kernel is not the 4-wide
