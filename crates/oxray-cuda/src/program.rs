@@ -605,12 +605,19 @@ const CURVE_STACK: usize = 4096;
 
 /// The per-thread stack a pipeline needs (bytes): per trace level, the trace's frame and a
 /// walk frame per graph level, plus the programs' own.
-fn stack_bytes(max_trace_depth: u32, max_graph_depth: u32) -> usize {
+fn stack_bytes(max_trace_depth: u32, max_graph_depth: u32, curves: bool) -> usize {
     let walk = 4 * BVH2_STACK * 3 + 512;
     // The curve intersector's frames (its polynomials and their chains of derivatives, in
-    // double precision) sit below the deepest walk of each trace.
-    let trace = 4096 + CURVE_STACK + max_graph_depth.max(1) as usize * walk;
+    // double precision) sit below the deepest walk of each trace of a pipeline with curves.
+    let curve = if curves { CURVE_STACK } else { 0 };
+    let trace = 4096 + curve + max_graph_depth.max(1) as usize * walk;
     trace * max_trace_depth.max(1) as usize + 2048
+}
+
+/// Whether a pipeline with these primitive types may intersect curves.
+fn uses_curves(kinds: oxray_core::PrimitiveTypeFlags) -> bool {
+    use oxray_core::PrimitiveTypeFlags as F;
+    kinds.intersects(!(F::CUSTOM | F::SPHERE | F::TRIANGLE))
 }
 
 /// Checks a pipeline's options and groups (guide §12), as the CPU pipeline does.
@@ -869,6 +876,8 @@ pub struct CudaPipeline {
     params_name: Option<String>,
     max_trace_depth: u32,
     max_graph_depth: u32,
+    /// Whether the pipeline may intersect curves (whose intersector's frames its stack holds).
+    curves: bool,
     block: u32,
     context: DeviceContext,
     scratch: Mutex<Option<LaunchScratch>>,
@@ -933,6 +942,7 @@ impl CudaPipeline {
             params_name: params_variable.map(str::to_string),
             max_trace_depth: link.max_trace_depth,
             max_graph_depth: DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH,
+            curves: uses_curves(compile.uses_primitive_type_flags),
             block: pipeline_block(),
             context: DeviceContext::new(),
             scratch: Mutex::new(None),
@@ -966,9 +976,10 @@ impl CudaPipeline {
 
     /// Traces that nest (a closest-hit, miss or continuation callable that traces) and walks of
     /// nested structures recurse on the stack: raises the context's stack limit to what this
-    /// pipeline needs (never lowers it).
+    /// pipeline needs (never lowers it). The driver reserves that much for every thread the
+    /// device can hold at once: a stack it cannot hold is [`CudaError::TooLarge`].
     fn reserve_stack(&self) -> Result<(), CudaError> {
-        let stack = stack_bytes(self.max_trace_depth, self.max_graph_depth);
+        let stack = stack_bytes(self.max_trace_depth, self.max_graph_depth, self.curves);
         let current = guarded("reading the stack size", || {
             cudarc::driver::result::ctx::get_limit(
                 cudarc::driver::sys::CUlimit::CU_LIMIT_STACK_SIZE,
@@ -976,9 +987,26 @@ impl CudaPipeline {
         })?;
         if current < stack {
             let cu = self.ctx.stream.context();
-            guarded("setting the stack size", || {
+            let set = guarded("setting the stack size", || {
                 cu.set_limit(cudarc::driver::sys::CUlimit::CU_LIMIT_STACK_SIZE, stack)
-            })?;
+            });
+            if let Err(CudaError::Driver { message, .. }) = &set {
+                if message.contains("CUDA_ERROR_OUT_OF_MEMORY") {
+                    let d = self.ctx.device();
+                    return Err(CudaError::TooLarge(format!(
+                        "the pipeline's stack, {} KiB a thread for max_trace_depth {} and a \
+                         traversable graph depth of {}{}, over every thread {} can hold at once \
+                         does not fit its {} GiB; lower max_trace_depth or the graph depth",
+                        stack / 1024,
+                        self.max_trace_depth,
+                        self.max_graph_depth,
+                        if self.curves { " with curves" } else { "" },
+                        d.name,
+                        d.total_memory >> 30,
+                    )));
+                }
+            }
+            set?;
         }
         Ok(())
     }
@@ -1509,8 +1537,17 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(pack_sbt(&g, &none).unwrap().callables.count, 0);
-        assert!(stack_bytes(2, 31) > stack_bytes(2, 2));
-        assert!(stack_bytes(1, 2) >= 4096 + 2 * (BVH2_STACK * 12));
+        assert!(stack_bytes(2, 31, false) > stack_bytes(2, 2, false));
+        assert!(stack_bytes(1, 2, false) >= 4096 + 2 * (BVH2_STACK * 12));
+        assert_eq!(
+            stack_bytes(3, 2, true) - stack_bytes(3, 2, false),
+            3 * CURVE_STACK
+        );
+        use oxray_core::PrimitiveTypeFlags as F;
+        assert!(!uses_curves(F::empty()));
+        assert!(!uses_curves(F::TRIANGLE | F::CUSTOM | F::SPHERE));
+        assert!(uses_curves(F::ROUND_LINEAR));
+        assert!(uses_curves(F::TRIANGLE | F::ROUND_CUBIC_BEZIER_ROCAPS));
     }
 
     #[test]
