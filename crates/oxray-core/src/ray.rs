@@ -102,6 +102,7 @@ pub enum RayError {
 impl Ray {
     /// A ray over `[0, +inf]`.
     #[must_use]
+    #[inline]
     pub fn new(origin: Vec3, direction: Vec3) -> Self {
         Ray {
             origin,
@@ -114,6 +115,7 @@ impl Ray {
 
     /// A ray over `[tmin, tmax]`.
     #[must_use]
+    #[inline]
     pub fn with_interval(origin: Vec3, direction: Vec3, tmin: f32, tmax: f32) -> Self {
         Ray {
             origin,
@@ -126,6 +128,7 @@ impl Ray {
 
     /// The same ray at time `time`.
     #[must_use]
+    #[inline]
     pub fn with_time(mut self, time: f32) -> Self {
         self.time = time;
         self
@@ -133,6 +136,7 @@ impl Ray {
 
     /// The point at distance `t`.
     #[must_use]
+    #[inline]
     pub fn at(&self, t: f32) -> Vec3 {
         self.origin + self.direction * t
     }

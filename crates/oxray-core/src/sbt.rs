@@ -127,6 +127,7 @@ impl SbtRegion {
 
     /// Record `i` (header and data), if it exists.
     #[must_use]
+    #[inline]
     pub fn record(&self, i: usize) -> Option<&[u8]> {
         (i < self.count).then(|| &self.bytes[i * self.stride..(i + 1) * self.stride])
     }

@@ -10,7 +10,8 @@
 //! Arguments: DIR NAME SET (coherent, incoherent, shadow) QUERY (closest, any, single: closest
 //! hits ray by ray with `Gas::intersect`, no packets, or pipeline: closest hits through the
 //! programmable pipeline, a ray-generation program tracing one ray per launch index with a
-//! closest-hit program that returns t) RUNS THREADS.
+//! closest-hit program that returns t, or pipeline-ratio: single and pipeline passes in turn,
+//! the median of their rate ratios) RUNS THREADS.
 //! Prints the median and the best Mrays/s (on a shared machine the best is the steadier
 //! figure), the hit count (which must not change between kernels) and the
 //! kernel used. `OXRAY_CPU_ISA` picks the kernel as everywhere else.
@@ -85,7 +86,12 @@ fn main() {
     let mut hits = vec![None; rays.len()];
     let mut blocked = vec![false; rays.len()];
     let gas = Arc::new(gas);
-    let piped = (query == "pipeline").then(|| PipelineBench::new(&gas, &rays));
+    let ratio = query == "pipeline-ratio";
+    let piped = (query == "pipeline" || ratio).then(|| PipelineBench::new(&gas, &rays));
+    if let (true, Some(p)) = (ratio, &piped) {
+        pipeline_ratio(name, set, &pool, &gas, &rays, p, runs, threads);
+        return;
+    }
     let mut trace = || {
         let start = Instant::now();
         pool.install(|| {
@@ -121,6 +127,70 @@ fn main() {
         rays.len() as f64 / times[0] / 1e6,
         gas.isa(),
         rays.len()
+    );
+}
+
+/// The pipeline's rate over the single-ray queries' on the same rays (issue 14's rule: at least
+/// 0.75), from passes of each taken in turn (the order swapped every run), so that both see
+/// the same machine load: the median of the runs' ratios, and the best pass of each.
+#[allow(clippy::too_many_arguments)]
+fn pipeline_ratio(
+    name: &str,
+    set: &str,
+    pool: &rayon::ThreadPool,
+    gas: &Gas,
+    rays: &[Ray],
+    piped: &PipelineBench<'_>,
+    runs: usize,
+    threads: usize,
+) {
+    use rayon::prelude::*;
+    let mut hits = vec![None; rays.len()];
+    let mut single = || {
+        let start = Instant::now();
+        pool.install(|| {
+            rays.par_iter()
+                .zip(hits.par_iter_mut())
+                .with_min_len(256)
+                .for_each(|(r, h)| *h = gas.intersect(r));
+        });
+        start.elapsed().as_secs_f64()
+    };
+    let pipeline = || {
+        let start = Instant::now();
+        pool.install(|| piped.launch());
+        start.elapsed().as_secs_f64()
+    };
+    single();
+    pipeline();
+    let (mut ratios, mut best) = (Vec::new(), [f64::INFINITY; 2]);
+    for run in 0..runs.max(1) {
+        let (s, p) = if run % 2 == 0 {
+            let s = single();
+            (s, pipeline())
+        } else {
+            let p = pipeline();
+            (single(), p)
+        };
+        ratios.push(s / p);
+        best = [best[0].min(s), best[1].min(p)];
+    }
+    ratios.sort_by(f64::total_cmp);
+    let n = ratios.len();
+    println!(
+        "{name} {set} pipeline / single: {:.3} (median of {n}; quartiles {:.3}-{:.3}); best passes {:.3} / {:.3} Mrays/s; {threads} thread(s), kernel {:?}",
+        ratios[n / 2],
+        ratios[n / 4],
+        ratios[(3 * n) / 4],
+        rays.len() as f64 / best[1] / 1e6,
+        rays.len() as f64 / best[0] / 1e6,
+        gas.isa(),
+    );
+    let count = hits.iter().flatten().count();
+    assert_eq!(
+        count,
+        piped.hit_count(),
+        "the pipeline and the queries hit alike"
     );
 }
 

@@ -1,6 +1,7 @@
 //! Device context, pipelines (guide §4, §6.7) and launches (§10).
 
-use crate::program::{run_raygen, LaunchShared, ProgramGroup, ProgramGroupKind};
+use crate::program::{run_raygen, LaunchShared, ProgramGroup, ProgramGroupKind, Scratch};
+use crate::traversal::HeldStack;
 use oxray_core::sbt::{SbtHeader, SbtRegion, ShaderBindingTable};
 use oxray_core::{
     DeviceContext, Exception, LaunchError, LaunchReport, PipelineCompileOptions, PipelineError,
@@ -9,6 +10,10 @@ use oxray_core::{
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::Arc;
+
+/// Launch indices per parallel task: enough to make the task's set-up negligible, few enough
+/// that a launch of a few thousand indices still spreads over every core.
+const LAUNCH_CHUNK: usize = 64;
 
 pub(crate) struct PipelineShared<P> {
     pub compile: PipelineCompileOptions,
@@ -157,33 +162,44 @@ impl<P> Pipeline<P> {
             callable_groups: &callable_groups,
             dims: [width, height, depth],
         };
-        // `total` is at most 2^30, so indices fit 32 bits (whose division is the cheaper).
+        // `total` is at most 2^30, so indices fit 32 bits. Each task walks a run of consecutive
+        // indices, stepping the 3-D index instead of dividing for every one.
         let (w, h) = (width.max(1), height.max(1));
-        let index_of = |i: usize| {
-            let i = i as u32;
-            if w as u64 == total {
-                return [i, 0, 0];
-            }
-            [i % w, (i / w) % h, i / (w * h)]
-        };
+        let index_of = |i: u32| [i % w, (i / w) % h, i / (w * h)];
+        let chunks = (total as usize).div_ceil(LAUNCH_CHUNK);
         // Each chunk keeps its first five exceptions and counts its traces; chunks are
         // combined in index order.
         type Chunk = (u64, Vec<([u32; 3], Exception)>, u64);
-        let (count, first, traces): Chunk = (0..total as usize)
+        let (count, first, traces): Chunk = (0..chunks)
             .into_par_iter()
-            .with_min_len(64)
             .fold(
                 || (0u64, Vec::new(), 0u64),
-                |(mut n, mut first, traces), i| {
-                    let index = index_of(i);
-                    let (e, t) = run_raygen(&shared, index, raygen);
-                    if let Some(e) = e {
-                        n += 1;
-                        if first.len() < 5 {
-                            first.push((index, e));
+                |(mut n, mut first, t0), c| {
+                    let start = (c * LAUNCH_CHUNK) as u32;
+                    let end = (start as u64 + LAUNCH_CHUNK as u64).min(total) as u32;
+                    let scratch = Scratch {
+                        traces: std::cell::Cell::new(t0),
+                        stack: HeldStack::take(),
+                    };
+                    let mut index = index_of(start);
+                    for _ in start..end {
+                        if let Some(e) = run_raygen(&shared, index, raygen, &scratch) {
+                            n += 1;
+                            if first.len() < 5 {
+                                first.push((index, e));
+                            }
+                        }
+                        index[0] += 1;
+                        if index[0] == w {
+                            index[0] = 0;
+                            index[1] += 1;
+                            if index[1] == h {
+                                index[1] = 0;
+                                index[2] += 1;
+                            }
                         }
                     }
-                    (n, first, traces + t)
+                    (n, first, scratch.traces.get())
                 },
             )
             .reduce(

@@ -68,9 +68,16 @@ pub(crate) struct Frame<'a, P> {
     pub depth: u32,
     /// Callable nesting depth.
     pub calls: u32,
-    /// The launch index's count of traces (its `optixTrace` calls at every depth), for the
-    /// launch report.
-    pub traces: &'a std::cell::Cell<u64>,
+    /// What the thread running the index keeps for it.
+    pub scratch: &'a Scratch,
+}
+
+/// What a thread keeps for the launch indices it runs in a row.
+pub(crate) struct Scratch {
+    /// The count of traces (`optixTrace` calls at every depth), for the launch report.
+    pub traces: std::cell::Cell<u64>,
+    /// The thread's traversal stack.
+    pub stack: crate::traversal::HeldStack,
 }
 
 impl<P> Clone for Frame<'_, P> {

@@ -17,5 +17,5 @@ pub use group::{HitGroupDesc, ProgramGroup, ProgramGroupKind};
 pub use module::{Module, ProgramKind};
 pub use trace::TraceRay;
 
-pub(crate) use context::LaunchShared;
+pub(crate) use context::{LaunchShared, Scratch};
 pub(crate) use trace::run_raygen;

@@ -4,12 +4,10 @@
 use crate::interrupt::{Interrupt, InterruptKind, ProgramResult};
 use crate::program::context::{
     AnyHitCtx, ClosestHitCtx, ContinuationCallableCtx, DirectCallableCtx, ExceptionCtx, Frame,
-    IntersectionCtx, LaunchShared, MissCtx, NoReturn, RayGenCtx,
+    IntersectionCtx, LaunchShared, MissCtx, NoReturn, RayGenCtx, Scratch,
 };
 use crate::program::group::GroupPrograms;
-use crate::traversal::{
-    traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef, Path, SceneVisitor,
-};
+use crate::traversal::{traverse_node, Decision, Entry, GasVisitor, NodeRef, Path, SceneVisitor};
 use crate::Gas;
 use glam::Vec3;
 use oxray_bvh::triangle::TriangleHit;
@@ -204,9 +202,11 @@ struct PipelineVisitor<'a, 'p, 's, P> {
     best_path: Option<Path<'s>>,
     /// The GAS of the closest accepted hit.
     best_gas: Option<&'s Gas>,
-    /// Where the closest accepted hit's geometry sits.
-    best_place: Placement,
-    place: Placement,
+    /// Where the closest accepted hit's geometry sits; `None` for the world (a GAS root), which
+    /// leaves the placement to be made only for a program that runs.
+    best_place: Option<Placement>,
+    /// Where the current GAS sits; `None` for the world.
+    place: Option<Placement>,
     ray: RayState,
     sbt_offset: u32,
     sbt_stride: u32,
@@ -317,7 +317,7 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
                     payload: self.payload,
                     path: self.path.as_ref(),
                     gas: self.gas,
-                    place: &self.place,
+                    place: &self.place.unwrap_or_else(|| Placement::world(&self.ray)),
                     no_return: NoReturn::default(),
                 };
                 // What the program called first wins over what it returned (§13.13): an
@@ -351,6 +351,7 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
 }
 
 impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
+    #[inline]
     fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
         // The pipeline's primitive types (§6.3), wherever in the graph the GAS sits.
         let kinds = self.frame.launch.pipeline.compile.uses_primitive_type_flags;
@@ -372,32 +373,12 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
             return;
         }
         self.gas = Some(gas);
-        if path.len == 0 {
-            // The root GAS: entered once per trace, whose visitor starts with no path and the
-            // world placement.
-            (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
-            return;
-        }
         (self.instance_sbt_offset, self.instance) = (path.sbt_offset, path.instance);
-        self.path = Some(*path);
-        // One level (the common IAS over GASes) needs no composition.
-        let (mut o2w, mut w2o) = (crate::Transform::IDENTITY, crate::Transform::IDENTITY);
-        if let (1, Some(level)) = (path.len, path.levels().next()) {
-            (o2w, w2o) = (level.object_to_world(), level.world_to_object());
-        } else {
-            for level in path.levels() {
-                o2w = o2w.then_after(&level.object_to_world());
-                w2o = level.world_to_object().then_after(&w2o);
-            }
+        // The root GAS (entered once per trace, whose visitor starts with no path and the world
+        // placement) needs nothing more.
+        if path.len != 0 {
+            self.enter_transformed(path, object_ray);
         }
-        self.place = Placement {
-            instance_id: path.instance.map_or(!0, |i| i.instance_id),
-            instance_index: path.instance.map_or(0, |i| i.index),
-            levels: path.len as u32,
-            transforms: Some([o2w, w2o]),
-            object_origin: object_ray.origin,
-            object_direction: object_ray.direction,
-        };
     }
 
     fn ray_mask(&self) -> u8 {
@@ -409,6 +390,32 @@ impl<'s, P> SceneVisitor<'s> for PipelineVisitor<'_, '_, 's, P> {
             ExceptionCode::TRAVERSAL_DEPTH_EXCEEDED,
             &[],
         ));
+    }
+}
+
+impl<'s, P> PipelineVisitor<'_, '_, 's, P> {
+    /// Keeps the transform list and placement of a GAS entered below transforms.
+    #[inline(never)]
+    fn enter_transformed(&mut self, path: &Path<'s>, object_ray: &Ray) {
+        self.path = Some(*path);
+        // One level (the common IAS over GASes) needs no composition.
+        let (mut o2w, mut w2o) = (crate::Transform::IDENTITY, crate::Transform::IDENTITY);
+        if let (1, Some(level)) = (path.len, path.levels().next()) {
+            (o2w, w2o) = (level.object_to_world(), level.world_to_object());
+        } else {
+            for level in path.levels() {
+                o2w = o2w.then_after(&level.object_to_world());
+                w2o = level.world_to_object().then_after(&w2o);
+            }
+        }
+        self.place = Some(Placement {
+            instance_id: path.instance.map_or(!0, |i| i.instance_id),
+            instance_index: path.instance.map_or(0, |i| i.index),
+            levels: path.len as u32,
+            transforms: Some([o2w, w2o]),
+            object_origin: object_ray.origin,
+            object_direction: object_ray.direction,
+        });
     }
 }
 
@@ -563,7 +570,7 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             .unwrap_or(oxray_core::Aabb::EMPTY);
         // Copies: the context also borrows the visitor, to report to it.
         let path = self.path;
-        let place = self.place;
+        let place = self.place.unwrap_or_else(|| Placement::world(&self.ray));
         let mut ctx = IntersectionCtx {
             frame,
             ray,
@@ -677,7 +684,8 @@ pub(crate) fn trace<P>(
     args: &TraceRay<'_>,
     payload: &mut [u32],
 ) -> ProgramResult {
-    frame.traces.set(frame.traces.get() + 1);
+    let traces = &frame.scratch.traces;
+    traces.set(traces.get() + 1);
     let launch = frame.launch;
     let pipe = launch.pipeline;
     let n = payload.len();
@@ -761,8 +769,8 @@ fn trace_into<P>(
             path: None,
             best_path: None,
             best_gas: None,
-            best_place: Placement::world(state),
-            place: Placement::world(state),
+            best_place: None,
+            place: None,
             ray: *state,
             sbt_offset: args.sbt_offset,
             sbt_stride: args.sbt_stride,
@@ -770,7 +778,10 @@ fn trace_into<P>(
             best: None,
             pending: None,
         };
-        with_stack(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
+        frame
+            .scratch
+            .stack
+            .with(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
         if let Some(e) = v.pending {
             return Err(e);
         }
@@ -830,7 +841,7 @@ impl<P> PipelineVisitor<'_, '_, '_, P> {
             payload: self.payload,
             path: self.best_path.as_ref(),
             gas: self.best_gas,
-            place: &self.best_place,
+            place: &self.best_place.unwrap_or_else(|| Placement::world(state)),
             no_return: NoReturn::default(),
         };
         let r = ch(&mut ctx);
@@ -848,23 +859,14 @@ fn only_exceptions(r: ProgramResult) -> ProgramResult {
 }
 
 /// Runs the ray-generation program of one launch index, then the exception program if an
-/// exception ended it. Returns the exception, if any.
+/// exception ended it; counts the index's traces in `scratch`. Returns the exception, if any.
+/// Inlined into the launch loop, which keeps the index in registers.
+#[inline(always)]
 pub(crate) fn run_raygen<P>(
     launch: &LaunchShared<'_, P>,
     index: [u32; 3],
     raygen_group: usize,
-) -> (Option<Exception>, u64) {
-    let traces = std::cell::Cell::new(0);
-    let e = run_raygen_counted(launch, index, raygen_group, &traces);
-    (e, traces.get())
-}
-
-/// [`run_raygen`], counting the index's traces in `traces`.
-fn run_raygen_counted<P>(
-    launch: &LaunchShared<'_, P>,
-    index: [u32; 3],
-    raygen_group: usize,
-    traces: &std::cell::Cell<u64>,
+    scratch: &Scratch,
 ) -> Option<Exception> {
     let frame = Frame {
         launch,
@@ -872,7 +874,7 @@ fn run_raygen_counted<P>(
         record: launch.sbt.raygen.record(0).unwrap_or(&[]),
         depth: 0,
         calls: 0,
-        traces,
+        scratch,
     };
     let GroupPrograms::RayGen(rg) = &launch.pipeline.groups[raygen_group].inner.programs else {
         return None;
@@ -886,6 +888,15 @@ fn run_raygen_counted<P>(
     let Err(Interrupt(InterruptKind::Exception(e))) = ctx.no_return.outcome(r) else {
         return None;
     };
+    run_exception(frame, e);
+    Some(e)
+}
+
+/// Runs the exception program (if the SBT has one) for exception `e` of `frame`'s index.
+#[cold]
+#[inline(never)]
+fn run_exception<P>(frame: Frame<'_, P>, e: Exception) {
+    let launch = frame.launch;
     if let Some(region) = &launch.sbt.exception {
         if let Some(&g) = launch.exception_group.as_ref() {
             if let GroupPrograms::Exception(ex) = &launch.pipeline.groups[g].inner.programs {
@@ -900,7 +911,6 @@ fn run_raygen_counted<P>(
             }
         }
     }
-    Some(e)
 }
 
 /// Deepest nesting of callables before `STACK_OVERFLOW` is raised (so that runaway recursion

@@ -93,6 +93,54 @@ pub(crate) fn with_stack<R>(f: impl FnOnce(&mut [Entry]) -> R) -> R {
     })
 }
 
+/// This thread's traversal stack, held for a run of traversals (a launch's chunk of indices):
+/// taken from the thread's slot when made and given back when dropped, so that the traversals
+/// in between reach it without a thread-local lookup each.
+pub(crate) struct HeldStack(std::cell::RefCell<Vec<Entry>>);
+
+impl HeldStack {
+    /// Takes this thread's stack (an empty one if the thread's is in use, which `with` then
+    /// fills).
+    pub(crate) fn take() -> HeldStack {
+        let v = STACK
+            .try_with(|cell| cell.try_borrow_mut().map(|mut s| std::mem::take(&mut *s)))
+            .ok()
+            .and_then(Result::ok)
+            .unwrap_or_default();
+        HeldStack(std::cell::RefCell::new(v))
+    }
+
+    /// Runs `f` with the held stack; should it be in use (a traversal started inside another
+    /// on this thread), with [`with_stack`]'s.
+    #[inline]
+    pub(crate) fn with<R>(&self, f: impl FnOnce(&mut [Entry]) -> R) -> R {
+        match self.0.try_borrow_mut() {
+            Ok(mut stack) => {
+                if stack.len() < STACK_ENTRIES {
+                    stack.resize(STACK_ENTRIES, Entry::default());
+                }
+                f(&mut stack)
+            }
+            Err(_) => with_stack(f),
+        }
+    }
+}
+
+impl Drop for HeldStack {
+    fn drop(&mut self) {
+        let held = std::mem::take(self.0.get_mut());
+        // Given back unless the thread's slot meanwhile holds one as large (or is gone, at the
+        // thread's end).
+        let _ = STACK.try_with(|cell| {
+            if let Ok(mut s) = cell.try_borrow_mut() {
+                if s.len() < held.len() {
+                    *s = held;
+                }
+            }
+        });
+    }
+}
+
 /// Walks the BVH `nodes` (root first) nearest child first, handing the slot range of every leaf
 /// the ray enters to `leaves`, which offers candidates to `visitor`. The interval shrinks as
 /// candidates are accepted. Returns the final tmax and whether traversal was ended early.

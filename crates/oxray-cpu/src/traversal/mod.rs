@@ -12,6 +12,6 @@ mod prefetch;
 mod ray;
 mod scene;
 
-pub(crate) use kernel::{with_stack, Decision, Entry, GasVisitor};
+pub(crate) use kernel::{with_stack, Decision, Entry, GasVisitor, HeldStack};
 pub(crate) use packet::{coherent, traverse_gas_packet, PACKET};
 pub(crate) use scene::{traverse_node, Level, NodeRef, Path, SceneVisitor};
