@@ -130,6 +130,7 @@ impl<'s> From<&'s CpuNode> for NodeRef<'s> {
 impl<'s> NodeRef<'s> {
     /// The CPU structure behind a handle, borrowed; `None` for the null handle or a structure
     /// of another backend (which a CPU traversal cannot enter).
+    #[inline]
     pub fn of(handle: &'s oxray_core::TraversableHandle) -> Option<NodeRef<'s>> {
         // The CPU's own structures first (the common root, found without asking the backend).
         if let Some(g) = handle.downcast_ref::<Gas>() {
