@@ -619,8 +619,9 @@ impl<P> RayGenCtx<'_, P> {
 /// The context of a closest-hit program.
 pub struct ClosestHitCtx<'a, P> {
     pub(crate) frame: Frame<'a, P>,
-    pub(crate) ray: RayState,
-    pub(crate) hit: HitState,
+    // Borrowed from the trace (not copied): a closest-hit program runs once per trace.
+    pub(crate) ray: &'a RayState,
+    pub(crate) hit: &'a HitState,
     pub(crate) payload: &'a mut [u32],
     pub(crate) path: Option<&'a Path<'a>>,
     pub(crate) gas: Option<&'a crate::Gas>,
@@ -713,7 +714,7 @@ impl<P> AnyHitCtx<'_, P> {
 /// The context of a miss program.
 pub struct MissCtx<'a, P> {
     pub(crate) frame: Frame<'a, P>,
-    pub(crate) ray: RayState,
+    pub(crate) ray: &'a RayState,
     pub(crate) payload: &'a mut [u32],
     pub(crate) no_return: NoReturn,
 }

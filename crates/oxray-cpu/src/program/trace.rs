@@ -804,7 +804,7 @@ fn trace_into<P>(
                 record: launch.sbt.miss.record(idx).unwrap_or(&[]),
                 ..frame
             },
-            ray: *state,
+            ray: state,
             payload,
             no_return: NoReturn::default(),
         };
@@ -831,13 +831,14 @@ impl<P> PipelineVisitor<'_, '_, '_, P> {
         else {
             return Ok(());
         };
+        let hit = Self::resolved(self.best_gas, *hit);
         let mut ctx = ClosestHitCtx {
             frame: Frame {
                 record: launch.sbt.hitgroup.record(hit.record).unwrap_or(&[]),
                 ..self.frame
             },
-            ray: *state,
-            hit: Self::resolved(self.best_gas, *hit),
+            ray: state,
+            hit: &hit,
             payload: self.payload,
             path: self.best_path.as_ref(),
             gas: self.best_gas,
