@@ -325,8 +325,8 @@ pub(crate) fn program(kind: ProgramKind, module: u64, index: usize) -> Program<C
                     ctx,
                     KIND_CH,
                     |f: &mut CFrame, c: &mut ClosestHitCtx<'_, CxxLaunch>| {
-                        f.ray(&c.ray);
-                        f.hit(&c.hit, c.place);
+                        f.ray(c.ray);
+                        f.hit(c.hit, c.place);
                         f.payload(c.payload);
                     }
                 )
@@ -350,7 +350,7 @@ pub(crate) fn program(kind: ProgramKind, module: u64, index: usize) -> Program<C
                 ctx,
                 KIND_MS,
                 |f: &mut CFrame, c: &mut MissCtx<'_, CxxLaunch>| {
-                    f.ray(&c.ray);
+                    f.ray(c.ray);
                     f.payload(c.payload);
                 }
             )
