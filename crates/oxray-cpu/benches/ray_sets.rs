@@ -98,11 +98,7 @@ fn main() {
             if let Some(p) = &piped {
                 p.launch();
             } else if single {
-                use rayon::prelude::*;
-                rays.par_iter()
-                    .zip(hits.par_iter_mut())
-                    .with_min_len(256)
-                    .for_each(|(r, h)| *h = gas.intersect(r));
+                single_rays(&gas, &rays, &mut hits);
             } else if any {
                 gas.occluded_batch(&rays, &mut blocked).expect("batch");
             } else {
@@ -130,6 +126,15 @@ fn main() {
     );
 }
 
+/// Closest hits ray by ray (`Gas::intersect`, no packets), in parallel.
+fn single_rays(gas: &Gas, rays: &[Ray], hits: &mut [Option<oxray_core::Hit>]) {
+    use rayon::prelude::*;
+    rays.par_iter()
+        .zip(hits.par_iter_mut())
+        .with_min_len(256)
+        .for_each(|(r, h)| *h = gas.intersect(r));
+}
+
 /// The pipeline's rate over the single-ray queries' on the same rays (issue 14's rule: at least
 /// 0.75), from passes of each taken in turn (the order swapped every run), so that both see
 /// the same machine load: the median of the runs' ratios, and the best pass of each.
@@ -144,16 +149,10 @@ fn pipeline_ratio(
     runs: usize,
     threads: usize,
 ) {
-    use rayon::prelude::*;
     let mut hits = vec![None; rays.len()];
     let mut single = || {
         let start = Instant::now();
-        pool.install(|| {
-            rays.par_iter()
-                .zip(hits.par_iter_mut())
-                .with_min_len(256)
-                .for_each(|(r, h)| *h = gas.intersect(r));
-        });
+        pool.install(|| single_rays(gas, rays, &mut hits));
         start.elapsed().as_secs_f64()
     };
     let pipeline = || {

@@ -83,14 +83,18 @@ thread_local! {
 /// (a program running its own thread pool inside a traversal), a fresh stack is used.
 pub(crate) fn with_stack<R>(f: impl FnOnce(&mut [Entry]) -> R) -> R {
     STACK.with(|cell| match cell.try_borrow_mut() {
-        Ok(mut stack) => {
-            if stack.len() < STACK_ENTRIES {
-                stack.resize(STACK_ENTRIES, Entry::default());
-            }
-            f(&mut stack)
-        }
+        Ok(mut stack) => f(full(&mut stack)),
         Err(_) => f(&mut vec![Entry::default(); STACK_ENTRIES]),
     })
+}
+
+/// `stack`, grown to [`STACK_ENTRIES`] the first time a thread uses it.
+#[inline]
+fn full(stack: &mut Vec<Entry>) -> &mut [Entry] {
+    if stack.len() < STACK_ENTRIES {
+        stack.resize(STACK_ENTRIES, Entry::default());
+    }
+    stack
 }
 
 /// This thread's traversal stack, held for a run of traversals (a launch's chunk of indices):
@@ -115,12 +119,7 @@ impl HeldStack {
     #[inline]
     pub(crate) fn with<R>(&self, f: impl FnOnce(&mut [Entry]) -> R) -> R {
         match self.0.try_borrow_mut() {
-            Ok(mut stack) => {
-                if stack.len() < STACK_ENTRIES {
-                    stack.resize(STACK_ENTRIES, Entry::default());
-                }
-                f(&mut stack)
-            }
+            Ok(mut stack) => f(full(&mut stack)),
             Err(_) => with_stack(f),
         }
     }
