@@ -39,6 +39,7 @@ pub mod ias;
 pub mod memory;
 pub mod motion;
 mod poly;
+mod qbvh8;
 pub mod random_access;
 mod refit;
 mod ribbon;
@@ -64,6 +65,7 @@ pub use gas::{
 pub use ias::{IasData, InstanceData, PreparedIas, IAS_MAX_LEAF};
 pub use memory::{compute_memory_usage, AccelBufferSizes};
 pub use motion::GasMotion;
+pub use qbvh8::{QBvh8, QBvh8Node};
 pub use random_access::NO_SLOT;
 pub use sbvh::{build_sbvh2, SpatialSplits};
 pub use sphere::Sphere;

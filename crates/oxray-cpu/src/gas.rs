@@ -3,7 +3,7 @@
 
 use crate::Isa;
 use glam::Vec3;
-use oxray_bvh::{GasData, GasKind, NodeWidth};
+use oxray_bvh::{GasData, GasKind, NodeWidth, QBvh8};
 use oxray_core::{
     Aabb, BackendKind, BuildError, BuildInput, BuildOptions, PrimitiveTypeFlags, RandomAccessError,
     Traversable, TraversableKind,
@@ -41,6 +41,9 @@ pub struct Gas {
     /// The first leaf slot of every primitive, for random vertex access (guide §13.9): only
     /// with `ALLOW_RANDOM_VERTEX_ACCESS`. Updates keep the slots (§5.6).
     prim_slots: Option<Arc<Vec<u32>>>,
+    /// The quantised copy of the 8-wide nodes that a quantised kernel walks (derived from
+    /// `data`, never saved; made again after every update).
+    qbvh8: Option<QBvh8>,
 }
 
 impl Gas {
@@ -72,7 +75,7 @@ impl Gas {
     /// the data has no 8-wide layout.
     #[must_use]
     pub fn from_data_with_isa(data: GasData, isa: Isa) -> Gas {
-        let isa = Self::kernel_for(&data, isa);
+        let (isa, qbvh8) = Self::kernel_for(&data, isa);
         let curve_types = data
             .curves
             .iter()
@@ -88,6 +91,7 @@ impl Gas {
             isa,
             curve_types,
             prim_slots,
+            qbvh8,
         }
     }
 
@@ -105,14 +109,50 @@ impl Gas {
         self.isa
     }
 
-    /// A kernel this processor runs, whose layout `data` holds.
-    fn kernel_for(data: &GasData, isa: Isa) -> Isa {
+    /// A kernel this processor runs, whose layout `data` holds (with the quantised nodes such a
+    /// kernel walks). A quantised kernel takes the float 8-wide layout of its instruction set
+    /// for a structure with motion (its time parts are float nodes) or boxes that cannot be
+    /// quantised.
+    fn kernel_for(data: &GasData, isa: Isa) -> (Isa, Option<QBvh8>) {
         let isa = isa.clamp();
-        if isa.width() == NodeWidth::Eight && data.bvh8.is_none() {
-            Isa::Sse
-        } else {
-            isa
+        let Some(bvh8) = data
+            .bvh8
+            .as_ref()
+            .filter(|_| isa.width() == NodeWidth::Eight)
+        else {
+            return (Isa::Sse, None);
+        };
+        if !isa.is_quantized() || data.motion.is_some() {
+            return (isa.unquantized(), None);
         }
+        match QBvh8::quantize(bvh8) {
+            Some(q) => (isa, Some(q)),
+            None => (isa.unquantized(), None),
+        }
+    }
+
+    /// The quantised nodes its kernel walks, where it is a quantised one.
+    #[must_use]
+    pub fn quantized_nodes(&self) -> Option<&QBvh8> {
+        self.qbvh8.as_ref()
+    }
+
+    /// Bytes it holds: [`GasData::memory`] and the quantised nodes of a quantised kernel.
+    #[must_use]
+    pub fn memory(&self) -> oxray_bvh::GasMemory {
+        let mut m = self.data.memory();
+        let q = self.qbvh8.as_ref().map_or(0, QBvh8::memory);
+        m.node_bytes += q;
+        m.output_bytes += q;
+        m
+    }
+
+    /// [`GasData::compacted_size`] and the quantised nodes, which a compacted copy for this
+    /// kernel derives again.
+    #[must_use]
+    pub fn compacted_size(&self) -> Option<usize> {
+        let q = self.qbvh8.as_ref().map_or(0, QBvh8::memory);
+        self.data.compacted_size().map(|s| s + q)
     }
 
     /// The built data.
@@ -129,7 +169,13 @@ impl Gas {
         options: &BuildOptions,
         inputs: &[BuildInput<'_>],
     ) -> Result<(), BuildError> {
-        self.data.update(options, inputs)
+        self.data.update(options, inputs)?;
+        if self.qbvh8.is_some() {
+            // The refit moved the boxes: quantise them again (or fall back to the float nodes
+            // should one have become unquantisable).
+            (self.isa, self.qbvh8) = Self::kernel_for(&self.data, self.isa);
+        }
+        Ok(())
     }
 }
 

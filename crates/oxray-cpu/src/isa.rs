@@ -25,15 +25,29 @@ pub enum Isa {
     Avx2,
     /// 8-wide nodes tested with AVX-512 (F and VL: mask registers for the compares; x86-64).
     Avx512,
+    /// Quantised 8-wide nodes ([`oxray_bvh::QBvh8`]: 128 bytes instead of 256) tested with
+    /// AVX2 (x86-64). A structure whose boxes cannot be quantised is traversed by
+    /// [`Isa::Avx2`].
+    Avx2Quantized,
+    /// Quantised 8-wide nodes tested with AVX-512 (x86-64); falls back to [`Isa::Avx512`] as
+    /// [`Isa::Avx2Quantized`] does to [`Isa::Avx2`].
+    Avx512Quantized,
 }
 
 /// The environment variable that forces a kernel: `scalar`, `sse` (or `neon`), `avx2`,
-/// `avx512`; clamped to what the processor has (see [`Isa::clamp`]).
+/// `avx512`, `avx2q`, `avx512q`; clamped to what the processor has (see [`Isa::clamp`]).
 pub const ISA_ENV: &str = "OXRAY_CPU_ISA";
 
 impl Isa {
     /// Every kernel, from the narrowest.
-    pub const ALL: [Isa; 4] = [Isa::Scalar, Isa::Sse, Isa::Avx2, Isa::Avx512];
+    pub const ALL: [Isa; 6] = [
+        Isa::Scalar,
+        Isa::Sse,
+        Isa::Avx2,
+        Isa::Avx512,
+        Isa::Avx2Quantized,
+        Isa::Avx512Quantized,
+    ];
 
     /// The kernel's name, as [`ISA_ENV`] takes it.
     #[must_use]
@@ -44,10 +58,13 @@ impl Isa {
             Isa::Sse => "sse",
             Isa::Avx2 => "avx2",
             Isa::Avx512 => "avx512",
+            Isa::Avx2Quantized => "avx2q",
+            Isa::Avx512Quantized => "avx512q",
         }
     }
 
-    /// The kernel of a name (`scalar`, `sse`, `neon`, `avx2`, `avx512`, any case).
+    /// The kernel of a name (`scalar`, `sse`, `neon`, `avx2`, `avx512`, `avx2q`, `avx512q`, any
+    /// case).
     #[must_use]
     pub fn from_name(name: &str) -> Option<Isa> {
         match name.trim().to_ascii_lowercase().as_str() {
@@ -55,6 +72,8 @@ impl Isa {
             "sse" | "sse2" | "neon" | "4" => Some(Isa::Sse),
             "avx2" => Some(Isa::Avx2),
             "avx512" | "avx-512" => Some(Isa::Avx512),
+            "avx2q" => Some(Isa::Avx2Quantized),
+            "avx512q" | "avx-512q" => Some(Isa::Avx512Quantized),
             _ => None,
         }
     }
@@ -65,11 +84,11 @@ impl Isa {
         match self {
             Isa::Scalar | Isa::Sse => true,
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx2 => avx2_detected(),
+            Isa::Avx2 | Isa::Avx2Quantized => avx2_detected(),
             #[cfg(target_arch = "x86_64")]
-            Isa::Avx512 => avx2_detected() && avx512_detected(),
+            Isa::Avx512 | Isa::Avx512Quantized => avx2_detected() && avx512_detected(),
             #[cfg(not(target_arch = "x86_64"))]
-            Isa::Avx2 | Isa::Avx512 => false,
+            Isa::Avx2 | Isa::Avx512 | Isa::Avx2Quantized | Isa::Avx512Quantized => false,
         }
     }
 
@@ -91,13 +110,32 @@ impl Isa {
     }
 
     /// The kernel itself if the processor runs it, else the best one below it that it runs
-    /// (AVX-512 → AVX2 → SSE; the scalar kernel runs everywhere).
+    /// (AVX-512 → AVX2 → SSE, and the quantised kernels likewise: AVX-512 → AVX2 → SSE; the
+    /// scalar kernel runs everywhere).
     #[must_use]
     pub fn clamp(self) -> Isa {
         match self {
             i if i.is_available() => i,
             Isa::Avx512 => Isa::Avx2.clamp(),
+            Isa::Avx512Quantized => Isa::Avx2Quantized.clamp(),
             _ => Isa::Sse,
+        }
+    }
+
+    /// Whether the kernel walks the quantised layout.
+    #[must_use]
+    pub fn is_quantized(self) -> bool {
+        matches!(self, Isa::Avx2Quantized | Isa::Avx512Quantized)
+    }
+
+    /// The kernel of the same instruction set over the float 8-wide layout (itself for the
+    /// others): what a structure whose boxes cannot be quantised is traversed by.
+    #[must_use]
+    pub fn unquantized(self) -> Isa {
+        match self {
+            Isa::Avx2Quantized => Isa::Avx2,
+            Isa::Avx512Quantized => Isa::Avx512,
+            other => other,
         }
     }
 
@@ -118,7 +156,9 @@ impl Isa {
     pub fn width(self) -> NodeWidth {
         match self {
             Isa::Sse => NodeWidth::Four,
-            Isa::Scalar | Isa::Avx2 | Isa::Avx512 => NodeWidth::Eight,
+            Isa::Scalar | Isa::Avx2 | Isa::Avx512 | Isa::Avx2Quantized | Isa::Avx512Quantized => {
+                NodeWidth::Eight
+            }
         }
     }
 }

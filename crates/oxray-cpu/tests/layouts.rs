@@ -285,3 +285,76 @@ fn custom_primitives_and_updates_agree_across_kernels() {
         }
     }
 }
+
+/// The quantised kernels keep their derived nodes in step with the structure: made when it is
+/// built, loaded or compacted, made again by an update (the same as quantising the refit
+/// tree), counted in its memory and compacted size, and left out (the float kernel of the
+/// same instruction set instead) where the structure has motion.
+#[test]
+fn quantised_nodes_follow_the_structure_through_updates_and_are_counted() {
+    let quantised: Vec<Isa> = kernels().into_iter().filter(|i| i.is_quantized()).collect();
+    if quantised.is_empty() {
+        eprintln!("skipping: this processor runs no quantised kernel");
+        return;
+    }
+    let m = icosphere(3);
+    let moved: Vec<[f32; 3]> = m
+        .positions
+        .iter()
+        .map(|p| [p[0] * 1.5 + 0.25, p[1], p[2] * 0.5])
+        .collect();
+    let options = BuildOptions::new(BuildFlags::ALLOW_COMPACTION | BuildFlags::ALLOW_UPDATE);
+    for isa in quantised {
+        fn input<'a>(v: &'a [[f32; 3]], m: &'a Mesh) -> TriangleInput<'a> {
+            TriangleInput::new(VertexBuffer::f32x3(v)).indices(IndexBuffer::u32x3(&m.triangles))
+        }
+        let mut gas =
+            Gas::build_with_isa(isa, &options, &[input(&m.positions, &m).into()]).unwrap();
+        let q = |g: &Gas| g.quantized_nodes().expect("quantised nodes").nodes.clone();
+        let fresh = oxray_bvh::QBvh8::quantize(gas.bvh8.as_ref().unwrap()).unwrap();
+        assert_eq!(q(&gas), fresh.nodes, "{isa}");
+        let bytes = fresh.memory();
+        assert_eq!(
+            gas.memory().node_bytes,
+            gas.data().memory().node_bytes + bytes
+        );
+        assert_eq!(
+            gas.memory().output_bytes,
+            gas.data().memory().output_bytes + bytes
+        );
+        let compacted = Gas::from_data_with_isa(gas.compact().unwrap(), isa);
+        assert_eq!(compacted.isa(), isa);
+        assert_eq!(
+            Some(compacted.memory().output_bytes),
+            gas.compacted_size(),
+            "{isa}"
+        );
+
+        // An update quantises the refit boxes; the hits are those of a float kernel.
+        let mut update = options;
+        update.operation = oxray_core::BuildOperation::Update;
+        gas.update(&update, &[input(&moved, &m).into()]).unwrap();
+        let refit = oxray_bvh::QBvh8::quantize(gas.bvh8.as_ref().unwrap()).unwrap();
+        assert_eq!(q(&gas), refit.nodes, "{isa}");
+        let float = Gas::from_data_with_isa(gas.data().clone(), isa.unquantized());
+        // Ray by ray: batches of camera rays would go through the packet path.
+        let rays = camera_rays(&moved, 24, 24);
+        let a: Vec<Option<Hit>> = rays.iter().map(|r| gas.intersect(r)).collect();
+        let b: Vec<Option<Hit>> = rays.iter().map(|r| float.intersect(r)).collect();
+        let geo = |h: &[Option<Hit>]| h.iter().map(geometry_bits).collect::<Vec<_>>();
+        assert_eq!(geo(&a), geo(&b), "{isa}");
+        assert!(a.iter().filter(|h| h.is_some()).count() > 100);
+
+        // Motion: the float kernel of the same instruction set.
+        let later = [VertexBuffer::f32x3(&moved)];
+        let motion = input(&m.positions, &m).motion_vertices(&later);
+        let gas = Gas::build_with_isa(
+            isa,
+            &BuildOptions::default().with_motion(oxray_core::MotionOptions::new(2, 0.0, 1.0)),
+            &[motion.into()],
+        )
+        .unwrap();
+        assert_eq!(gas.isa(), isa.unquantized());
+        assert!(gas.quantized_nodes().is_none());
+    }
+}

@@ -303,3 +303,41 @@ pub(crate) unsafe fn traverse_avx512<L: LeafIntersector<V>, V: GasVisitor>(
 ) -> (f32, bool) {
     traverse::<super::node::Bvh8Avx512, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
 }
+
+/// [`traverse`] over quantised 8-wide nodes with AVX2.
+///
+/// # Safety
+///
+/// As [`traverse_avx2`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
+pub(crate) unsafe fn traverse_q_avx2<L: LeafIntersector<V>, V: GasVisitor>(
+    nodes: &[oxray_bvh::QBvh8Node],
+    leaves: &L,
+    ray: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    traverse::<super::node::QBvh8Avx2, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
+}
+
+/// [`traverse`] over quantised 8-wide nodes with AVX-512 (VL) compares.
+///
+/// # Safety
+///
+/// As [`traverse_avx512`].
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl")]
+pub(crate) unsafe fn traverse_q_avx512<L: LeafIntersector<V>, V: GasVisitor>(
+    nodes: &[oxray_bvh::QBvh8Node],
+    leaves: &L,
+    ray: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+    visitor: &mut V,
+    stack: &mut [Entry],
+) -> (f32, bool) {
+    traverse::<super::node::QBvh8Avx512, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
+}

@@ -7,16 +7,19 @@
 //! - `Bvh8Avx2`, `Bvh8Avx512` (x86-64): 8-wide nodes with AVX2, or AVX-512's mask compares.
 //!   Their tests are `#[target_feature]` functions: only the kernels of
 //!   [`super::kernel`] compiled with those features traverse them, and only once the processor
-//!   was found to have them ([`crate::Isa`]).
+//!   was found to have them ([`crate::Isa`]);
+//! - `QBvh8Avx2`, `QBvh8Avx512` (x86-64): the quantised 8-wide nodes ([`QBvh8Node`]), decoded
+//!   to boxes that contain the exact ones, then tested as the 8-wide layouts test theirs.
 //!
 //! Every layout computes the same slab distances with the same `f32` operations in the same
 //! order (no fused multiply-add: Rust never contracts), so a box is entered by one layout iff
 //! it is by another, and the conservative far-plane scaling (`ROBUST_FAR`, `TMAX_SLACK`) is
-//! the same everywhere.
+//! the same everywhere. The quantised layouts test larger boxes with those operations, so they
+//! enter every box the others enter, and some more.
 
 use super::kernel::Entry;
 use super::ray::PreparedRay;
-use oxray_bvh::{Bvh4Node, Bvh8Node};
+use oxray_bvh::{Bvh4Node, Bvh8Node, QBvh8Node};
 use oxray_core::ray::ROBUST_FAR;
 
 /// A node layout of the CPU kernel.
@@ -311,4 +314,128 @@ unsafe fn intersect8_avx512(
     // SAFETY: `dist` is 8 writable floats (unaligned store).
     unsafe { _mm256_storeu_ps(dist.as_mut_ptr(), tn) };
     (dist, mask)
+}
+
+/// The quantised 8-wide layout ([`QBvh8Node`]) tested with AVX2. Traversed only by
+/// [`traverse_q_avx2`](super::kernel::traverse_q_avx2).
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct QBvh8Avx2;
+
+#[cfg(target_arch = "x86_64")]
+impl NodeLayout for QBvh8Avx2 {
+    type Node = QBvh8Node;
+    type Dists = [f32; 8];
+
+    #[inline(always)]
+    fn intersect(node: &QBvh8Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 8], u32) {
+        // SAFETY: this layout is traversed only by `kernel::traverse_q_avx2`, which is called
+        // only for a structure whose kernel is `Isa::Avx2Quantized` or `Isa::Avx512Quantized`,
+        // given only after `Isa::is_available` detected AVX2 on this processor.
+        unsafe {
+            use std::arch::x86_64::*;
+            let (tn, tf) = qslabs8(node, ray, tmin, tmax);
+            let hit = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
+            (store8(tn), hit & u32::from(node.valid))
+        }
+    }
+
+    #[inline(always)]
+    fn entry(node: &QBvh8Node, lane: usize, dist: f32) -> Entry {
+        qentry8(node, lane, dist)
+    }
+}
+
+/// The quantised 8-wide layout tested with AVX-512 (VL) compares. Traversed only by
+/// [`traverse_q_avx512`](super::kernel::traverse_q_avx512).
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct QBvh8Avx512;
+
+#[cfg(target_arch = "x86_64")]
+impl NodeLayout for QBvh8Avx512 {
+    type Node = QBvh8Node;
+    type Dists = [f32; 8];
+
+    #[inline(always)]
+    fn intersect(node: &QBvh8Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 8], u32) {
+        // SAFETY: traversed only by `kernel::traverse_q_avx512`, called only for a structure
+        // whose kernel is `Isa::Avx512Quantized`, which `Isa::is_available` gives only after
+        // detecting AVX2, AVX-512F and AVX-512VL on this processor.
+        unsafe {
+            use std::arch::x86_64::*;
+            let (tn, tf) = qslabs8(node, ray, tmin, tmax);
+            let hit = _mm256_mask_cmp_ps_mask::<_CMP_LE_OQ>(node.valid, tn, tf) as u32;
+            (store8(tn), hit)
+        }
+    }
+
+    #[inline(always)]
+    fn entry(node: &QBvh8Node, lane: usize, dist: f32) -> Entry {
+        qentry8(node, lane, dist)
+    }
+}
+
+#[inline(always)]
+fn qentry8(node: &QBvh8Node, lane: usize, dist: f32) -> Entry {
+    Entry {
+        child: node.child[lane],
+        count: u32::from(node.count[lane]),
+        dist,
+    }
+}
+
+/// The eight lanes of an AVX register as an array.
+///
+/// # Safety
+///
+/// The processor must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn store8(v: std::arch::x86_64::__m256) -> [f32; 8] {
+    let mut out = [0.0f32; 8];
+    // SAFETY: `out` is 8 writable floats (unaligned store); the caller guarantees AVX.
+    unsafe { std::arch::x86_64::_mm256_storeu_ps(out.as_mut_ptr(), v) };
+    out
+}
+
+/// The slab distances of a quantised node's eight lanes: each bound row decoded (bytes to
+/// floats, times the axis's step, plus its origin: [`QBvh8Node::bound`]'s operations), then
+/// [`slabs8`]'s operations on the decoded boxes.
+///
+/// # Safety
+///
+/// The processor must have AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn qslabs8(
+    node: &QBvh8Node,
+    r: &PreparedRay,
+    tmin: f32,
+    tmax: f32,
+) -> (std::arch::x86_64::__m256, std::arch::x86_64::__m256) {
+    use std::arch::x86_64::*;
+    // SAFETY: each row of `node.q` is 8 in-bounds bytes (an unaligned 8-byte load).
+    let row = |k: usize, scale: __m256, origin: __m256| unsafe {
+        let bytes = _mm_loadl_epi64(node.q[k].as_ptr().cast());
+        let q = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(bytes));
+        _mm256_add_ps(_mm256_mul_ps(q, scale), origin)
+    };
+    let mut tn = _mm256_set1_ps(tmin);
+    let mut tf = _mm256_set1_ps(tmax);
+    let robust = _mm256_set1_ps(ROBUST_FAR);
+    for a in 0..3 {
+        let scale = _mm256_set1_ps(node.scale[a]);
+        let origin = _mm256_set1_ps(node.origin[a]);
+        let o = _mm256_set1_ps(r.org[a]);
+        let inv = _mm256_set1_ps(r.inv[a]);
+        let n = _mm256_mul_ps(_mm256_sub_ps(row(r.near[a], scale, origin), o), inv);
+        let f = _mm256_mul_ps(
+            _mm256_mul_ps(_mm256_sub_ps(row(r.far[a], scale, origin), o), inv),
+            robust,
+        );
+        tn = _mm256_max_ps(n, tn);
+        tf = _mm256_min_ps(f, tf);
+    }
+    (tn, tf)
 }

@@ -73,7 +73,7 @@ pub(crate) fn traverse_gas_packet<'s, V: SceneVisitor<'s>>(
             || visitors.len() != PACKET
             || gas.kind != GasKind::Triangles
             || gas.motion.is_some()
-            || !matches!(gas.isa(), Isa::Avx2 | Isa::Avx512)
+            || !matches!(gas.isa().unquantized(), Isa::Avx2 | Isa::Avx512)
         {
             return false;
         }
@@ -111,7 +111,7 @@ pub(crate) fn traverse_gas_packet<'s, V: SceneVisitor<'s>>(
             if stack.len() < STACK_ENTRIES {
                 stack.resize(STACK_ENTRIES, PacketEntry::default());
             }
-            // SAFETY: the GAS was given `Isa::Avx2` or `Isa::Avx512` only where
+            // SAFETY: the GAS was given `Isa::Avx2`, `Isa::Avx512` or their quantised kernels only where
             // `Isa::is_available` found AVX2 (and the other features the kernel is compiled
             // with) on this processor (`Gas::kernel_for`).
             unsafe {

@@ -324,10 +324,12 @@ fn traverse_motion_gas<V: GasVisitor>(
             match (parts.bvh.get(p), parts.bvh8.get(p)) {
                 (_, Some(b8)) => Nodes {
                     bvh8: Some(&b8[..]),
+                    qbvh8: None,
                     ..one_tree
                 },
                 (Some(b4), None) => Nodes {
                     bvh: &b4[..],
+                    qbvh8: None,
                     ..one_tree
                 },
                 (None, None) => one_tree,
@@ -366,6 +368,8 @@ struct Nodes<'a> {
     isa: Isa,
     bvh: &'a [oxray_bvh::Bvh4Node],
     bvh8: Option<&'a [oxray_bvh::Bvh8Node]>,
+    /// The quantised nodes, where the kernel is a quantised one.
+    qbvh8: Option<&'a [oxray_bvh::QBvh8Node]>,
 }
 
 impl<'a> Nodes<'a> {
@@ -376,6 +380,7 @@ impl<'a> Nodes<'a> {
             isa: gas.isa(),
             bvh: &gas.bvh.nodes,
             bvh8: gas.bvh8.as_ref().map(|b| &b.nodes[..]),
+            qbvh8: gas.quantized_nodes().map(|q| &q.nodes[..]),
         }
     }
 }
@@ -384,7 +389,12 @@ impl<'a> Nodes<'a> {
 /// one.
 #[inline(always)]
 fn traverse_nodes<L: LeafIntersector<V>, V: GasVisitor>(
-    Nodes { isa, bvh, bvh8 }: Nodes<'_>,
+    Nodes {
+        isa,
+        bvh,
+        bvh8,
+        qbvh8,
+    }: Nodes<'_>,
     leaves: &L,
     prepared: &PreparedRay,
     tmin: f32,
@@ -392,6 +402,22 @@ fn traverse_nodes<L: LeafIntersector<V>, V: GasVisitor>(
     visitor: &mut V,
     stack: &mut [Entry],
 ) -> (f32, bool) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(q) = qbvh8 {
+        return match isa {
+            // SAFETY: a `Gas` holds quantised nodes only for a quantised kernel, given only
+            // where `Isa::is_available` found that kernel's features (`Gas::kernel_for`).
+            Isa::Avx512Quantized => unsafe {
+                super::kernel::traverse_q_avx512(q, leaves, prepared, tmin, tmax, visitor, stack)
+            },
+            // SAFETY: likewise (`Isa::Avx2Quantized`).
+            _ => unsafe {
+                super::kernel::traverse_q_avx2(q, leaves, prepared, tmin, tmax, visitor, stack)
+            },
+        };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = qbvh8;
     let Some(nodes) = bvh8.filter(|_| isa != Isa::Sse) else {
         return traverse::<Bvh4, _, _>(bvh, leaves, prepared, tmin, tmax, visitor, stack);
     };
