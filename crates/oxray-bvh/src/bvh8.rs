@@ -78,7 +78,6 @@ impl From<&Bvh2> for Bvh8 {
 mod tests {
     use super::*;
     use crate::{build_bvh2, BuildConfig, Bvh4};
-    use glam::Vec3;
 
     fn leaves<N: WideNode>(nodes: &[N]) -> Vec<(u32, u32, [u32; 6])> {
         let mut out: Vec<_> = nodes
@@ -99,19 +98,7 @@ mod tests {
     }
 
     fn boxes(n: usize, seed: u64) -> Vec<Aabb> {
-        let mut s = seed;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
-        (0..n)
-            .map(|_| {
-                let p = Vec3::new(next(), next(), next()) * 100.0;
-                Aabb::new(p, p + Vec3::new(next(), next(), next()))
-            })
-            .collect()
+        crate::test_boxes::random_boxes(n, seed, 0.0, 100.0)
     }
 
     #[test]

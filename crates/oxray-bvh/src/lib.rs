@@ -96,3 +96,28 @@ pub fn next_lineage() -> u64 {
     static NEXT: AtomicU64 = AtomicU64::new(1);
     NEXT.fetch_add(1, Ordering::Relaxed)
 }
+
+/// Inputs shared by the unit tests of the layouts.
+#[cfg(test)]
+pub(crate) mod test_boxes {
+    use glam::Vec3;
+    use oxray_core::Aabb;
+
+    /// `n` boxes at `offset + [0, size)^3`, each up to `size / 100` a side, from a fixed
+    /// linear congruential sequence of `seed`.
+    pub(crate) fn random_boxes(n: usize, seed: u64, offset: f32, size: f32) -> Vec<Aabb> {
+        let mut s = seed;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32
+        };
+        (0..n)
+            .map(|_| {
+                let p = Vec3::splat(offset) + Vec3::new(next(), next(), next()) * size;
+                Aabb::new(p, p + Vec3::new(next(), next(), next()) * size * 0.01)
+            })
+            .collect()
+    }
+}

@@ -191,24 +191,8 @@ impl QBvh8 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::test_boxes::random_boxes;
     use crate::{build_bvh2, BuildConfig};
-    use glam::Vec3;
-
-    fn random_boxes(n: usize, seed: u64, offset: f32, size: f32) -> Vec<Aabb> {
-        let mut s = seed;
-        let mut next = || {
-            s = s
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (s >> 40) as f32 / (1u64 << 24) as f32
-        };
-        (0..n)
-            .map(|_| {
-                let p = Vec3::splat(offset) + Vec3::new(next(), next(), next()) * size;
-                Aabb::new(p, p + Vec3::new(next(), next(), next()) * size * 0.01)
-            })
-            .collect()
-    }
 
     #[test]
     fn decoded_boxes_hold_the_exact_ones_and_keep_the_tree() {

@@ -262,82 +262,58 @@ pub(crate) fn traverse<N: NodeLayout, L: LeafIntersector<V>, V: GasVisitor>(
     }
 }
 
-/// [`traverse`] over 8-wide nodes with AVX2, the whole kernel (leaf tests and visitor included)
-/// compiled for AVX2.
-///
-/// # Safety
-///
-/// The processor must have the features this function is compiled with (checked by
-/// [`crate::Isa::is_available`] for [`crate::Isa::Avx2`]).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
-pub(crate) unsafe fn traverse_avx2<L: LeafIntersector<V>, V: GasVisitor>(
-    nodes: &[oxray_bvh::Bvh8Node],
-    leaves: &L,
-    ray: &PreparedRay,
-    tmin: f32,
-    tmax: f32,
-    visitor: &mut V,
-    stack: &mut [Entry],
-) -> (f32, bool) {
-    traverse::<super::node::Bvh8Avx2, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
+/// Defines a [`traverse`] over one SIMD node layout, the whole kernel (leaf tests and visitor
+/// included) compiled with the layout's instruction set.
+macro_rules! simd_kernel {
+    ($(#[$doc:meta])* $name:ident, $node:ty, $layout:ty, $features:literal) => {
+        $(#[$doc])*
+        ///
+        /// # Safety
+        ///
+        /// The processor must have the features this function is compiled with (checked by
+        /// [`crate::Isa::is_available`] for the kernel that walks this layout).
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = $features)]
+        pub(crate) unsafe fn $name<L: LeafIntersector<V>, V: GasVisitor>(
+            nodes: &[$node],
+            leaves: &L,
+            ray: &PreparedRay,
+            tmin: f32,
+            tmax: f32,
+            visitor: &mut V,
+            stack: &mut [Entry],
+        ) -> (f32, bool) {
+            traverse::<$layout, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
+        }
+    };
 }
 
-/// [`traverse`] over 8-wide nodes with AVX-512 (VL) compares, the whole kernel compiled for
-/// AVX-512.
-///
-/// # Safety
-///
-/// The processor must have the features this function is compiled with (checked by
-/// [`crate::Isa::is_available`] for [`crate::Isa::Avx512`]).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl")]
-pub(crate) unsafe fn traverse_avx512<L: LeafIntersector<V>, V: GasVisitor>(
-    nodes: &[oxray_bvh::Bvh8Node],
-    leaves: &L,
-    ray: &PreparedRay,
-    tmin: f32,
-    tmax: f32,
-    visitor: &mut V,
-    stack: &mut [Entry],
-) -> (f32, bool) {
-    traverse::<super::node::Bvh8Avx512, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
-}
-
-/// [`traverse`] over quantised 8-wide nodes with AVX2.
-///
-/// # Safety
-///
-/// As [`traverse_avx2`].
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt")]
-pub(crate) unsafe fn traverse_q_avx2<L: LeafIntersector<V>, V: GasVisitor>(
-    nodes: &[oxray_bvh::QBvh8Node],
-    leaves: &L,
-    ray: &PreparedRay,
-    tmin: f32,
-    tmax: f32,
-    visitor: &mut V,
-    stack: &mut [Entry],
-) -> (f32, bool) {
-    traverse::<super::node::QBvh8Avx2, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
-}
-
-/// [`traverse`] over quantised 8-wide nodes with AVX-512 (VL) compares.
-///
-/// # Safety
-///
-/// As [`traverse_avx512`].
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl")]
-pub(crate) unsafe fn traverse_q_avx512<L: LeafIntersector<V>, V: GasVisitor>(
-    nodes: &[oxray_bvh::QBvh8Node],
-    leaves: &L,
-    ray: &PreparedRay,
-    tmin: f32,
-    tmax: f32,
-    visitor: &mut V,
-    stack: &mut [Entry],
-) -> (f32, bool) {
-    traverse::<super::node::QBvh8Avx512, L, V>(nodes, leaves, ray, tmin, tmax, visitor, stack)
-}
+simd_kernel!(
+    /// [`traverse`] over 8-wide nodes with AVX2 ([`crate::Isa::Avx2`]).
+    traverse_avx2,
+    oxray_bvh::Bvh8Node,
+    super::node::Bvh8Avx2,
+    "avx2,bmi1,bmi2,lzcnt,popcnt"
+);
+simd_kernel!(
+    /// [`traverse`] over 8-wide nodes with AVX-512 (VL) compares ([`crate::Isa::Avx512`]).
+    traverse_avx512,
+    oxray_bvh::Bvh8Node,
+    super::node::Bvh8Avx512,
+    "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl"
+);
+simd_kernel!(
+    /// [`traverse`] over quantised 8-wide nodes with AVX2 ([`crate::Isa::Avx2Quantized`]).
+    traverse_q_avx2,
+    oxray_bvh::QBvh8Node,
+    super::node::QBvh8Avx2,
+    "avx2,bmi1,bmi2,lzcnt,popcnt"
+);
+simd_kernel!(
+    /// [`traverse`] over quantised 8-wide nodes with AVX-512 (VL) compares
+    /// ([`crate::Isa::Avx512Quantized`]).
+    traverse_q_avx512,
+    oxray_bvh::QBvh8Node,
+    super::node::QBvh8Avx512,
+    "avx2,bmi1,bmi2,lzcnt,popcnt,avx512f,avx512vl"
+);
