@@ -687,8 +687,82 @@ const PARTITION_CHUNK: usize = PARALLEL_BINNING;
 /// `left` and `right` must be the two sides' counts.
 ///
 /// Without a branch on the side: a sorted or clustered mesh sends long, irregular runs of
-/// primitives to either side, which a branch predictor guesses badly.
+/// primitives to either side, which a branch predictor guesses badly. The side is one float
+/// comparison: `bin_of(c) >= bin` holds exactly when `(c - cmin) * scale >= bin` (for `bin` in
+/// `1..B`: the truncation of a value is at least an integer iff the value is, and a negative
+/// or NaN value bins to 0).
+#[cfg(target_arch = "x86_64")]
 fn scatter<const B: usize>(
+    src: &[PrimRef],
+    left: &mut [PrimRef],
+    right: &mut [PrimRef],
+    axis: usize,
+    bin: usize,
+    cmin: f32,
+    scale: f32,
+) -> [Box4; 2] {
+    use std::arch::x86_64::*;
+    debug_assert!((1..B).contains(&bin) && axis < 3);
+    let threshold = bin as f32;
+    let (mut at_left, mut at_right) = (0usize, 0usize);
+    // SAFETY: SSE2 is part of the x86_64 baseline. `Box4` rows are 16-byte aligned `[f32; 4]`
+    // (aligned loads and stores). Every write goes to `left[at_left]` or `right[at_right]`
+    // after checking that index against the slice's length.
+    unsafe {
+        let half = _mm_set_ps(0.0, 0.5, 0.5, 0.5);
+        let xyz = _mm_castsi128_ps(_mm_set_epi32(0, -1, -1, -1));
+        let inf = _mm_set1_ps(f32::INFINITY);
+        let ninf = _mm_set1_ps(f32::NEG_INFINITY);
+        let (mut l_lo, mut l_hi, mut r_lo, mut r_hi) = (inf, ninf, inf, ninf);
+        for r in src {
+            let lo = _mm_load_ps(r.0.lo.as_ptr());
+            let hi = _mm_load_ps(r.0.hi.as_ptr());
+            // `PrimRef::centroid`'s operations (the fourth lane masked to 0).
+            let c = _mm_add_ps(
+                _mm_mul_ps(_mm_and_ps(lo, xyz), half),
+                _mm_mul_ps(_mm_and_ps(hi, xyz), half),
+            );
+            let right_side = (r.centroid_on(axis) - cmin) * scale >= threshold;
+            if right_side {
+                if at_right >= right.len() {
+                    break;
+                }
+            } else if at_left >= left.len() {
+                break;
+            }
+            let dst = if right_side {
+                right.as_mut_ptr().add(at_right)
+            } else {
+                left.as_mut_ptr().add(at_left)
+            };
+            *dst = *r;
+            at_right += usize::from(right_side);
+            at_left += usize::from(!right_side);
+            // Each side's centroid box grows by the centroid or by an empty point (`minps` and
+            // `maxps` keep the accumulator for a NaN lane, as `Box4::grow_point` does).
+            let m = _mm_castsi128_ps(_mm_set1_epi32(-i32::from(right_side)));
+            let on_right_lo = _mm_or_ps(_mm_and_ps(m, c), _mm_andnot_ps(m, inf));
+            let on_right_hi = _mm_or_ps(_mm_and_ps(m, c), _mm_andnot_ps(m, ninf));
+            let on_left_lo = _mm_or_ps(_mm_andnot_ps(m, c), _mm_and_ps(m, inf));
+            let on_left_hi = _mm_or_ps(_mm_andnot_ps(m, c), _mm_and_ps(m, ninf));
+            r_lo = _mm_min_ps(on_right_lo, r_lo);
+            r_hi = _mm_max_ps(on_right_hi, r_hi);
+            l_lo = _mm_min_ps(on_left_lo, l_lo);
+            l_hi = _mm_max_ps(on_left_hi, l_hi);
+        }
+        debug_assert_eq!([at_left, at_right], [left.len(), right.len()]);
+        let mut cb = [Box4::EMPTY; 2];
+        _mm_store_ps(cb[0].lo.as_mut_ptr(), l_lo);
+        _mm_store_ps(cb[0].hi.as_mut_ptr(), l_hi);
+        _mm_store_ps(cb[1].lo.as_mut_ptr(), r_lo);
+        _mm_store_ps(cb[1].hi.as_mut_ptr(), r_hi);
+        cb
+    }
+}
+
+/// The portable form of the SIMD `scatter` (the reference its test compares with).
+#[cfg_attr(target_arch = "x86_64", allow(dead_code))]
+fn scatter_portable<const B: usize>(
     src: &[PrimRef],
     left: &mut [PrimRef],
     right: &mut [PrimRef],
@@ -710,6 +784,9 @@ fn scatter<const B: usize>(
     debug_assert_eq!([at[0], at[1]], [out[0].len(), out[1].len()]);
     cb
 }
+
+#[cfg(not(target_arch = "x86_64"))]
+use self::scatter_portable as scatter;
 
 /// Applies a binned split by moving `src` into `dst`, left side first, `left` primitives on it
 /// (as the bins counted); each side keeps `src`'s order, so the result is the same however
@@ -1017,6 +1094,82 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    /// The SIMD partition moves every primitive where the portable one does and gives the
+    /// same centroid boxes, bit for bit, for every bin count, axis and split bin.
+    type ScatterFn =
+        fn(&[PrimRef], &mut [PrimRef], &mut [PrimRef], usize, usize, f32, f32) -> [Box4; 2];
+
+    #[test]
+    fn the_simd_scatter_is_the_portable_one() {
+        fn check<const B: usize>(refs: &[PrimRef]) {
+            let (_, cb) = reduce(refs);
+            for axis in 0..3 {
+                let e = cb.hi[axis] - cb.lo[axis];
+                let scale = B as f32 * (1.0 - 1e-6) / e;
+                for bin in 1..B {
+                    let left = refs
+                        .iter()
+                        .filter(|r| bin_of::<B>(r.centroid_on(axis), cb.lo[axis], scale) < bin)
+                        .count();
+                    let run = |f: ScatterFn| {
+                        let mut dst = vec![PrimRef(Box4::EMPTY); refs.len()];
+                        let (l, r) = dst.split_at_mut(left);
+                        let boxes = f(refs, l, r, axis, bin, cb.lo[axis], scale);
+                        let ids: Vec<u32> = dst.iter().map(PrimRef::id).collect();
+                        let bits = boxes.map(|b| [b.lo, b.hi].map(|row| row.map(f32::to_bits)));
+                        (ids, bits)
+                    };
+                    assert_eq!(
+                        run(scatter::<B>),
+                        run(scatter_portable::<B>),
+                        "{B} bins, axis {axis}, bin {bin}"
+                    );
+                }
+            }
+        }
+        let refs: Vec<PrimRef> = clustered_boxes(3000)
+            .iter()
+            .enumerate()
+            .map(|(i, b)| PrimRef::new(b, i as u32))
+            .collect();
+        check::<8>(&refs);
+        check::<16>(&refs);
+        check::<32>(&refs);
+        // One side empty of centroids on an axis: a flat set.
+        let flat: Vec<PrimRef> = (0..100)
+            .map(|i| {
+                let p = Vec3::new(i as f32, 2.0, 3.0);
+                PrimRef::new(&Aabb::new(p, p + Vec3::new(0.5, 0.0, 0.0)), i)
+            })
+            .collect();
+        check::<8>(&flat[..]);
+        // Centroids exactly on bin boundaries (a grid of step 1 from 0), where `>=` and `>`
+        // part ways.
+        let grid: Vec<PrimRef> = (0..64u32)
+            .map(|i| {
+                let p = Vec3::splat((i % 32) as f32);
+                PrimRef::new(&Aabb::new(p, p), i)
+            })
+            .collect();
+        for bin in 1..32 {
+            let left = grid
+                .iter()
+                .filter(|r| r.centroid_on(0) < bin as f32)
+                .count();
+            let run = |f: ScatterFn| {
+                let mut dst = vec![PrimRef(Box4::EMPTY); grid.len()];
+                let (l, r) = dst.split_at_mut(left);
+                let boxes = f(&grid, l, r, 0, bin, 0.0, 1.0);
+                let ids: Vec<u32> = dst.iter().map(PrimRef::id).collect();
+                (
+                    ids,
+                    boxes.map(|b| [b.lo, b.hi].map(|row| row.map(f32::to_bits))),
+                )
+            };
+            assert_eq!(run(scatter::<32>), run(scatter_portable::<32>), "bin {bin}");
+        }
     }
 
     /// Checks that the tree holds every primitive once, that every box holds what is below it
