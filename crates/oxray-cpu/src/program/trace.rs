@@ -207,7 +207,9 @@ struct PipelineVisitor<'a, 'p, 's, P> {
     best_place: Option<Placement>,
     /// Where the current GAS sits; `None` for the world.
     place: Option<Placement>,
-    ray: RayState,
+    /// The trace's ray, borrowed: a copy would read back the fields `trace` just stored, in
+    /// wider loads than they were stored with (a store-forwarding stall on every trace).
+    ray: &'p RayState,
     sbt_offset: u32,
     sbt_stride: u32,
     payload: &'p mut [u32],
@@ -312,12 +314,12 @@ impl<'a, P> PipelineVisitor<'a, '_, '_, P> {
                         record: self.record_bytes(hit.record),
                         ..self.frame
                     },
-                    ray: self.ray,
+                    ray: *self.ray,
                     hit: Self::resolved(self.gas, hit),
                     payload: self.payload,
                     path: self.path.as_ref(),
                     gas: self.gas,
-                    place: &self.place.unwrap_or_else(|| Placement::world(&self.ray)),
+                    place: &self.place.unwrap_or_else(|| Placement::world(self.ray)),
                     no_return: NoReturn::default(),
                 };
                 // What the program called first wins over what it returned (§13.13): an
@@ -563,14 +565,14 @@ impl<P> GasVisitor for PipelineVisitor<'_, '_, '_, P> {
             record: self.record_bytes(record),
             ..self.frame
         };
-        let ray = RayState { tmin, ..self.ray };
+        let ray = RayState { tmin, ..*self.ray };
         // With motion, the box at the ray's time (guide §5.10.1).
         let aabb = gas
             .aabb_at(slot as usize, self.ray.time)
             .unwrap_or(oxray_core::Aabb::EMPTY);
         // Copies: the context also borrows the visitor, to report to it.
         let path = self.path;
-        let place = self.place.unwrap_or_else(|| Placement::world(&self.ray));
+        let place = self.place.unwrap_or_else(|| Placement::world(self.ray));
         let mut ctx = IntersectionCtx {
             frame,
             ray,
@@ -771,7 +773,7 @@ fn trace_into<P>(
             best_gas: None,
             best_place: None,
             place: None,
-            ray: *state,
+            ray: state,
             sbt_offset: args.sbt_offset,
             sbt_stride: args.sbt_stride,
             payload: &mut *payload,
