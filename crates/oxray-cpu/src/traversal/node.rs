@@ -66,7 +66,7 @@ impl NodeLayout for Bvh4 {
 }
 
 /// Tests a ray against the four boxes of a node; returns the entry distances and a hit mask.
-/// `tmax` is the interval's end with [`TMAX_SLACK`] applied.
+/// `tmax` is the interval's end with [`TMAX_SLACK`](oxray_core::ray::TMAX_SLACK) applied.
 ///
 /// The slab distances use NaN-ignoring min/max: a NaN (origin exactly on a slab plane of an axis
 /// the ray does not move along) leaves the accumulated interval unchanged, as it should for a
