@@ -66,30 +66,32 @@ impl QBvh8Node {
     fn quantize(node: &Bvh8Node) -> Option<QBvh8Node> {
         let mut out = QBvh8Node::zeroed();
         out.child = [u32::MAX; 8];
-        let used: Vec<usize> = (0..8).filter(|&l| node.is_used(l)).collect();
-        for &l in &used {
+        for l in (0..8).filter(|&l| node.is_used(l)) {
             out.valid |= 1 << l;
             out.child[l] = node.child[l];
             out.count[l] = u16::try_from(node.count[l]).ok()?;
         }
+        if out.valid == 0 {
+            // No child: any grid; `valid` keeps every lane out.
+            return Some(out);
+        }
+        let used = |l: &usize| out.valid & (1 << *l) != 0;
         for axis in 0..3 {
-            let lo = used.iter().map(|&l| node.bounds[axis][l]);
-            let hi = used.iter().map(|&l| node.bounds[3 + axis][l]);
-            let (origin, top) = (
-                lo.fold(f32::INFINITY, f32::min),
-                hi.fold(f32::NEG_INFINITY, f32::max),
-            );
-            if used.is_empty() {
-                // No child: any grid; `valid` keeps every lane out.
-                continue;
-            }
+            let origin = (0..8)
+                .filter(used)
+                .map(|l| node.bounds[axis][l])
+                .fold(f32::INFINITY, f32::min);
+            let top = (0..8)
+                .filter(used)
+                .map(|l| node.bounds[3 + axis][l])
+                .fold(f32::NEG_INFINITY, f32::max);
             if !origin.is_finite() || !top.is_finite() {
                 return None;
             }
             let scale = grid_step(origin, top)?;
             out.origin[axis] = origin;
             out.scale[axis] = scale;
-            for &l in &used {
+            for l in (0..8).filter(used) {
                 out.q[axis][l] = quantize_down(node.bounds[axis][l], scale, origin);
                 out.q[3 + axis][l] = quantize_up(node.bounds[3 + axis][l], scale, origin);
             }

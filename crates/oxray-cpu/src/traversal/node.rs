@@ -286,10 +286,8 @@ unsafe fn intersect8_avx2(
     // SAFETY: the caller guarantees AVX2.
     let (tn, tf) = unsafe { slabs8(node, r, tmin, tmax) };
     let mask = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(tn, tf)) as u32;
-    let mut dist = [0.0f32; 8];
-    // SAFETY: `dist` is 8 writable floats (unaligned store).
-    unsafe { _mm256_storeu_ps(dist.as_mut_ptr(), tn) };
-    (dist, mask)
+    // SAFETY: the caller guarantees AVX2.
+    (unsafe { store8(tn) }, mask)
 }
 
 /// [`intersect8_avx2`] with AVX-512VL's compare into a mask register.
@@ -310,10 +308,8 @@ unsafe fn intersect8_avx512(
     // SAFETY: the caller guarantees AVX2.
     let (tn, tf) = unsafe { slabs8(node, r, tmin, tmax) };
     let mask = _mm256_cmp_ps_mask::<_CMP_LE_OQ>(tn, tf) as u32;
-    let mut dist = [0.0f32; 8];
-    // SAFETY: `dist` is 8 writable floats (unaligned store).
-    unsafe { _mm256_storeu_ps(dist.as_mut_ptr(), tn) };
-    (dist, mask)
+    // SAFETY: the caller guarantees AVX2.
+    (unsafe { store8(tn) }, mask)
 }
 
 /// The quantised 8-wide layout ([`QBvh8Node`]) tested with AVX2. Traversed only by
