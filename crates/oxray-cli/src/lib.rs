@@ -8,3 +8,4 @@ pub mod bench;
 pub mod device;
 pub mod info;
 pub mod raycast;
+pub mod simulation;

@@ -128,6 +128,12 @@ enum Command {
         /// closest-hit Mrays/s through each tree.
         #[arg(long)]
         gas_builds: bool,
+        /// Time the simulation queries instead: closest points, signed distances, all hits, counts.
+        ///
+        /// SIDE x SIDE points and rays per mesh, on the CPU and (with --backend cuda) on the
+        /// device beside it, with the share of identical results.
+        #[arg(long)]
+        simulation: bool,
     },
     /// Print a shell completion script (bash, zsh, fish, elvish or powershell).
     ///
@@ -976,6 +982,7 @@ fn run(cli: Cli) -> Result<()> {
             subdivide,
             backend,
             gas_builds,
+            simulation,
         } => {
             let traced = bench::preset_index(&build).map_err(anyhow::Error::msg)?;
             if side == 0 || side > 16384 {
@@ -1030,6 +1037,27 @@ fn run(cli: Cli) -> Result<()> {
             ))?;
             if gas_builds && device.is_none() {
                 bail!("--gas-builds needs --backend cuda");
+            }
+            if simulation {
+                if let Some(device) = &device {
+                    say(format_args!("device: {}", device.describe()))?;
+                }
+                say(oxray_cli::simulation::HEADER)?;
+                for (name, mesh) in &sets {
+                    let rows = pool.install(|| {
+                        oxray_cli::simulation::bench(
+                            device.as_ref(),
+                            name,
+                            mesh,
+                            (side * side) as usize,
+                            runs,
+                        )
+                    })?;
+                    for row in rows {
+                        say(row)?;
+                    }
+                }
+                return Ok(());
             }
             if let Some(device) = &device {
                 say(format_args!("device: {}", device.describe()))?;

@@ -256,6 +256,66 @@ fn bench_instances_run_on_the_device_or_fail_with_one_error_line() {
 }
 
 #[test]
+fn bench_simulation_times_the_queries_on_the_cpu_and_the_device() {
+    let gpu = gpu_available();
+    let mesh = heightfield_obj("simulation");
+    let run = |backend: &str| {
+        oxray()
+            .args([
+                "bench",
+                &s(&mesh),
+                "--side",
+                "16",
+                "--runs",
+                "1",
+                "--simulation",
+                "--backend",
+                backend,
+            ])
+            .output()
+            .unwrap()
+    };
+    let rows = |out: &std::process::Output| -> Vec<String> {
+        String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .filter(|l| l.starts_with("| heightfield |"))
+            .map(str::to_string)
+            .collect()
+    };
+    let cpu = run("cpu");
+    assert!(
+        cpu.status.success(),
+        "{}",
+        String::from_utf8_lossy(&cpu.stderr)
+    );
+    let cpu_rows = rows(&cpu);
+    assert_eq!(cpu_rows.len(), 4, "{cpu_rows:?}");
+    for (row, query) in
+        cpu_rows
+            .iter()
+            .zip(["closest point", "signed distance", "all hits", "hit counts"])
+    {
+        assert!(row.contains(query) && row.contains("| 256 |"), "{row}");
+    }
+    let out = run("cuda");
+    if gpu {
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let rows = rows(&out);
+        assert_eq!(rows.len(), 4, "{rows:?}");
+        for row in &rows {
+            // The signs of points on the surface may differ (none of these is on it).
+            assert!(row.ends_with("| 100.00 % |"), "{row}");
+        }
+    } else {
+        assert_clean_cuda_failure(&out, "bench --simulation");
+    }
+}
+
+#[test]
 fn unknown_backends_are_rejected_by_the_argument_parser() {
     let (mesh, rays) = (heightfield_obj("bogus"), rays_file("bogus"));
     let out_path = tmp("bogus.bin");

@@ -38,6 +38,7 @@ pub mod options;
 pub mod pipeline;
 pub mod ray;
 pub mod sbt;
+pub mod simulation;
 pub mod source;
 pub mod transform;
 pub mod validate;
@@ -74,6 +75,7 @@ pub use pipeline::{
 };
 pub use ray::{Ray, RayError, RayRecord};
 pub use sbt::{SbtHeader, SbtRegion, ShaderBindingTable};
+pub use simulation::{AllHits, ClosestPoint, SurfaceQueryError};
 pub use transform::Transform;
 pub use validate::{MAX_PRIMITIVES_PER_GAS, MAX_SBT_RECORDS_PER_GAS};
 pub use vertex::{IndexFormat, VertexFormat};

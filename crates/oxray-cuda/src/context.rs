@@ -85,6 +85,8 @@ pub struct CudaContext {
     pub(crate) kernels: Arc<Kernels>,
     /// The GAS builder's kernels, compiled on the first device build.
     build: Arc<OnceLock<Result<crate::device_build::BuildKernels, CudaError>>>,
+    /// The simulation queries' kernels, compiled on first use.
+    simulation: Arc<OnceLock<Result<crate::simulation::SimulationKernels, CudaError>>>,
     info: DeviceInfo,
 }
 
@@ -198,6 +200,7 @@ impl CudaContext {
             stream,
             kernels: Arc::new(kernels),
             build: Arc::new(OnceLock::new()),
+            simulation: Arc::new(OnceLock::new()),
             info: DeviceInfo {
                 ordinal,
                 name,
@@ -255,6 +258,17 @@ impl CudaContext {
     pub(crate) fn build_kernels(&self) -> Result<&crate::device_build::BuildKernels, CudaError> {
         self.build
             .get_or_init(|| crate::device_build::BuildKernels::load(self))
+            .as_ref()
+            .map_err(Clone::clone)
+    }
+
+    /// The simulation queries' kernels, compiled by NVRTC on first use (a failure is kept and
+    /// returned again).
+    pub(crate) fn simulation_kernels(
+        &self,
+    ) -> Result<&crate::simulation::SimulationKernels, CudaError> {
+        self.simulation
+            .get_or_init(|| crate::simulation::SimulationKernels::load(self))
             .as_ref()
             .map_err(Clone::clone)
     }

@@ -281,6 +281,8 @@ pub struct CudaGas {
     pub(crate) refit: Option<crate::refit::RefitPlan>,
     /// Each primitive's first leaf slot, for random vertex access (made on first use).
     pub(crate) random_slots: std::sync::OnceLock<Vec<u32>>,
+    /// What the simulation queries read besides the tree (made on first use).
+    pub(crate) simulation: Mutex<Option<std::sync::Arc<crate::simulation::SimulationTables>>>,
     /// A GAS built with motion (guide §5.10.2): its `__oxray_Motion` table on the device (the
     /// options, then the primitives at keys 1, 2, … in the layout of `triangles`).
     pub(crate) motion: Option<DeviceMotion>,
@@ -820,6 +822,7 @@ impl CudaGas {
             meta: gas.skeleton(),
             refit,
             random_slots: Default::default(),
+            simulation: Default::default(),
             motion,
         })
     }
@@ -896,6 +899,7 @@ impl CudaGas {
             meta: gas.skeleton(),
             refit,
             random_slots: Default::default(),
+            simulation: Default::default(),
             motion,
         })
     }
@@ -935,6 +939,7 @@ impl CudaGas {
             meta,
             refit: None,
             random_slots: Default::default(),
+            simulation: Default::default(),
             motion: None,
         }
     }
@@ -1260,7 +1265,7 @@ impl CudaGas {
             });
     }
 
-    fn resolve_one(&self, r: &HitRecord) -> Option<Hit> {
+    pub(crate) fn resolve_one(&self, r: &HitRecord) -> Option<Hit> {
         if !r.is_hit() {
             return None;
         }

@@ -5,6 +5,7 @@
 use crate::context::CudaContext;
 use crate::device_build::GasBuilder;
 use crate::error::{driver, CudaError};
+use crate::gas::CudaGas;
 use crate::gas::{check_batch, grid, hit_of, HitRecord, ProgramView, Scratch};
 use crate::gas::{DESCRIPTOR_IAS, DESCRIPTOR_INSTANCE};
 use crate::layout::{ChildRef, IasLayout};
@@ -15,6 +16,7 @@ use oxray_core::{
     Aabb, BackendKind, BuildError, Hit, InstanceFlags, Ray, Traversable, TraversableKind,
 };
 use rayon::prelude::*;
+use std::sync::Arc;
 use std::sync::Mutex;
 
 /// An IAS in device memory: its top-level binary tree and an instance table holding the
@@ -270,6 +272,18 @@ impl CudaIas {
         }
     }
 
+    /// The top-level nodes and the instance slots the query kernels read.
+    pub(crate) fn device_tables(&self) -> (&CudaSlice<u32>, &CudaSlice<u32>) {
+        (&self.nodes, &self.instances)
+    }
+
+    /// The triangle GAS of every instance that has one.
+    pub(crate) fn triangle_children(&self) -> impl Iterator<Item = &Arc<CudaGas>> + '_ {
+        self.children
+            .iter()
+            .filter_map(|c| c.as_ref().and_then(CudaChild::triangle_gas))
+    }
+
     /// The built data: instances, world boxes, flags, BVH statistics.
     pub fn data(&self) -> &IasData {
         &self.data
@@ -429,7 +443,7 @@ impl CudaIas {
             });
     }
 
-    fn resolve_one(&self, r: &HitRecord, slot: u32) -> Option<Hit> {
+    pub(crate) fn resolve_one(&self, r: &HitRecord, slot: u32) -> Option<Hit> {
         if !r.is_hit() {
             return None;
         }

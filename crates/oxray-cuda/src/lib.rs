@@ -50,6 +50,7 @@ mod random_access;
 mod reference;
 mod refit;
 mod relocate;
+pub mod simulation;
 mod transform;
 
 pub use backend::{Cuda, CudaBatch};

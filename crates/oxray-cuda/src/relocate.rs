@@ -69,6 +69,7 @@ impl CudaGas {
             meta: self.meta.clone(),
             refit,
             random_slots: self.random_slots.clone(),
+            simulation: Default::default(),
             motion,
         };
         self.ctx.synchronize()?;

@@ -1,11 +1,12 @@
 //! Acceleration structures on any device: the facade's [`Gas`] and [`Ias`].
 
 use crate::device::Device;
+use glam::Vec3;
 use oxray_bvh::{BvhStats, GasMemory};
 use oxray_core::{
-    Aabb, AccelProperty, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind,
-    BuildOptions, EmittedProperty, GeometryFlags, Hit, LoadError, QueryError, RandomAccessError,
-    Ray, Traversable, TraversableHandle, TraversableKind,
+    Aabb, AccelProperty, AllHits, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind,
+    BuildOptions, ClosestPoint, EmittedProperty, GeometryFlags, Hit, LoadError, QueryError,
+    RandomAccessError, Ray, SurfaceQueryError, Traversable, TraversableHandle, TraversableKind,
 };
 use std::sync::Arc;
 
@@ -287,6 +288,121 @@ impl Gas {
             }
         )
     }
+
+    /// Every primitive each ray crosses in its `[tmin, tmax]`, on the structure's device, into
+    /// `out` (cleared first): sorted by `t` (then instance, build input and primitive), each
+    /// primitive once, at most `max_hits_per_ray` (the nearest), with whether each list is
+    /// complete. The same lists, bit for bit, on every device (multiple LiDAR returns, paths
+    /// through walls). An invalid ray is an error (the lowest index) and `out` is left empty.
+    ///
+    /// ```
+    /// use oxray::{AllHits, Device, Gas, Ray};
+    /// use glam::Vec3;
+    /// // Two parallel triangles at z = 1 and z = 2.
+    /// let v = [[-1.0f32, -1.0, 1.0], [1.0, -1.0, 1.0], [0.0, 1.0, 1.0],
+    ///          [-1.0, -1.0, 2.0], [1.0, -1.0, 2.0], [0.0, 1.0, 2.0]];
+    /// let gas = Gas::from(oxray::cpu::Gas::from_mesh(&v, &[[0, 1, 2], [3, 4, 5]])?);
+    /// let rays = [Ray::new(Vec3::ZERO, Vec3::Z), Ray::new(Vec3::ZERO, -Vec3::Z)];
+    /// let mut out = AllHits::new();
+    /// gas.all_hits_batch(&rays, 8, &mut out)?;
+    /// assert_eq!(out.hits(0).iter().map(|h| h.t).collect::<Vec<_>>(), [1.0, 2.0]);
+    /// assert!(out.hits(1).is_empty());
+    /// let mut counts = [0u32; 2];
+    /// gas.count_hits_batch(&rays, &mut counts)?;
+    /// assert_eq!(counts, [2, 0]);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn all_hits_batch(
+        &self,
+        rays: &[Ray],
+        max_hits_per_ray: usize,
+        out: &mut AllHits,
+    ) -> Result<(), SurfaceQueryError> {
+        on_gas!(
+            self,
+            g => g.all_hits_batch(rays, max_hits_per_ray, out),
+            g.all_hits_batch(rays, max_hits_per_ray, out)
+        )
+    }
+
+    /// The number of distinct primitives each ray crosses in its `[tmin, tmax]`, on the
+    /// structure's device. The first invalid ray (the lowest index) is the error; the counts
+    /// of the others are written.
+    pub fn count_hits_batch(
+        &self,
+        rays: &[Ray],
+        counts: &mut [u32],
+    ) -> Result<(), SurfaceQueryError> {
+        on_gas!(
+            self,
+            g => g.count_hits_batch(rays, counts),
+            g.count_hits_batch(rays, counts)
+        )
+    }
+
+    /// The closest point of this triangle GAS to every point, on the structure's device: the
+    /// point, its distance, triangle and barycentrics, the same on every device (`None` for an
+    /// empty GAS). The first non-finite point (the lowest index) is the error; the others'
+    /// results are written.
+    ///
+    /// ```
+    /// use oxray::{Gas, glam::Vec3};
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    /// // A tetrahedron, counter-clockwise seen from outside.
+    /// let gas = Gas::from(oxray::cpu::Gas::from_mesh(&v, &[[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])?);
+    /// let points = [Vec3::new(0.25, 0.25, -1.0), Vec3::splat(0.1)];
+    /// let mut closest = [None; 2];
+    /// gas.closest_point_batch(&points, &mut closest)?;
+    /// assert_eq!(closest[0].unwrap().point, Vec3::new(0.25, 0.25, 0.0));
+    /// let mut sdf = [0.0f32; 2];
+    /// gas.signed_distance_batch(&points, &mut sdf)?;
+    /// assert!(sdf[0] == 1.0 && sdf[1] < 0.0);
+    /// let mut inside = [false; 2];
+    /// gas.contains_batch(&points, &mut inside)?;
+    /// assert_eq!(inside, [false, true]);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn closest_point_batch(
+        &self,
+        points: &[Vec3],
+        out: &mut [Option<ClosestPoint>],
+    ) -> Result<(), SurfaceQueryError> {
+        on_gas!(
+            self,
+            g => g.closest_point_batch(points, out),
+            g.closest_point_batch(points, out)
+        )
+    }
+
+    /// The signed distance from every point to the surface, on the structure's device:
+    /// negative inside a closed, consistently oriented mesh (counter-clockwise seen from
+    /// outside), `+inf` for an empty GAS. Errors as
+    /// [`closest_point_batch`](Self::closest_point_batch).
+    pub fn signed_distance_batch(
+        &self,
+        points: &[Vec3],
+        out: &mut [f32],
+    ) -> Result<(), SurfaceQueryError> {
+        on_gas!(
+            self,
+            g => g.signed_distance_batch(points, out),
+            g.signed_distance_batch(points, out)
+        )
+    }
+
+    /// Whether every point lies strictly inside the closed mesh (a negative signed distance),
+    /// on the structure's device.
+    pub fn contains_batch(
+        &self,
+        points: &[Vec3],
+        out: &mut [bool],
+    ) -> Result<(), SurfaceQueryError> {
+        on_gas!(
+            self,
+            g => g.contains_batch(points, out),
+            g.contains_batch(points, out)
+        )
+    }
 }
 
 /// The CUDA backend of the context a structure lives in.
@@ -525,6 +641,36 @@ impl Ias {
                 let handle = TraversableHandle::from(i.clone());
                 oxray_core::AccelBackend::intersect_any(&cuda_of(i.context()), &handle, rays, occluded)
             }
+        )
+    }
+
+    /// Every primitive of every instance each ray crosses, on the structure's device (see
+    /// [`Gas::all_hits_batch`]): each primitive of each instance once. On CUDA, over one level
+    /// of instances of triangle GASes.
+    pub fn all_hits_batch(
+        &self,
+        rays: &[Ray],
+        max_hits_per_ray: usize,
+        out: &mut AllHits,
+    ) -> Result<(), SurfaceQueryError> {
+        on_ias!(
+            self,
+            i => i.all_hits_batch(rays, max_hits_per_ray, out),
+            i.all_hits_batch(rays, max_hits_per_ray, out)
+        )
+    }
+
+    /// The number of distinct primitives of every instance each ray crosses, on the
+    /// structure's device (see [`Gas::count_hits_batch`]).
+    pub fn count_hits_batch(
+        &self,
+        rays: &[Ray],
+        counts: &mut [u32],
+    ) -> Result<(), SurfaceQueryError> {
+        on_ias!(
+            self,
+            i => i.count_hits_batch(rays, counts),
+            i.count_hits_batch(rays, counts)
         )
     }
 }

@@ -16,7 +16,7 @@
 //!   `COUNT_KEYS` primitives is counted again with the sorted list (a thread's scratch list,
 //!   allocated once).
 
-use super::{check_ray, par_try_batch, SurfaceQueryError, CHUNK};
+use super::{check_ray, par_try_batch, AllHits, SurfaceQueryError, CHUNK};
 use crate::traversal::{
     traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef, Path, SceneVisitor,
 };
@@ -25,18 +25,8 @@ use oxray_bvh::InstanceData;
 use oxray_core::{CandidateAction, Hit, Ray};
 use rayon::prelude::*;
 use std::cell::RefCell;
-use std::cmp::Ordering;
 
-/// The order of the all-hits list: by `t`, then by instance, build input and primitive, so that
-/// which hits a full list keeps among equal distances does not depend on traversal order.
-/// Two offers of one primitive compare equal.
-fn order(a: &Hit, b: &Hit) -> Ordering {
-    a.t.total_cmp(&b.t)
-        .then(a.instance_index.cmp(&b.instance_index))
-        .then(a.instance_id.cmp(&b.instance_id))
-        .then(a.build_input.cmp(&b.build_input))
-        .then(a.primitive_index.cmp(&b.primitive_index))
-}
+use oxray_core::simulation::hit_order as order;
 
 /// Offers a candidate to the list `out` (sorted by [`order`], at most `max` long). Clears
 /// `*complete` where a hit is left out.
@@ -177,75 +167,6 @@ fn count_under(root: NodeRef<'_>, ray: &Ray, list_count: impl FnOnce() -> u32) -
         list_count()
     } else {
         v.count as u32
-    }
-}
-
-/// The results of [`Gas::all_hits_batch`] and [`Ias::all_hits_batch`]: every ray's hits, one
-/// ray after the other. Reuse it across batches to keep its allocations.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct AllHits {
-    hits: Vec<Hit>,
-    /// Ray `i`'s hits are `hits[offsets[i] .. offsets[i + 1]]`.
-    offsets: Vec<usize>,
-    complete: Vec<bool>,
-}
-
-impl AllHits {
-    /// An empty result.
-    #[must_use]
-    pub fn new() -> Self {
-        Self::default()
-    }
-
-    /// Rays in the batch.
-    #[must_use]
-    pub fn len(&self) -> usize {
-        self.complete.len()
-    }
-
-    /// Whether the batch had no ray.
-    #[must_use]
-    pub fn is_empty(&self) -> bool {
-        self.complete.is_empty()
-    }
-
-    /// The hits of ray `ray`, sorted by `t`, each primitive once.
-    ///
-    /// # Panics
-    ///
-    /// If `ray >= self.len()`.
-    #[must_use]
-    pub fn hits(&self, ray: usize) -> &[Hit] {
-        &self.hits[self.offsets[ray]..self.offsets[ray + 1]]
-    }
-
-    /// Whether ray `ray` has no hit beyond those kept (false where the bound left some out).
-    ///
-    /// # Panics
-    ///
-    /// If `ray >= self.len()`.
-    #[must_use]
-    pub fn is_complete(&self, ray: usize) -> bool {
-        self.complete[ray]
-    }
-
-    /// Every hit of every ray, ray after ray.
-    #[must_use]
-    pub fn all(&self) -> &[Hit] {
-        &self.hits
-    }
-
-    /// Where each ray's hits start in [`all`](Self::all), and the end (`len() + 1` entries).
-    #[must_use]
-    pub fn offsets(&self) -> &[usize] {
-        &self.offsets
-    }
-
-    fn clear(&mut self) {
-        self.hits.clear();
-        self.offsets.clear();
-        self.offsets.push(0);
-        self.complete.clear();
     }
 }
 
@@ -393,10 +314,11 @@ macro_rules! all_hits_api {
                     })
                     .collect::<Result<_, SurfaceQueryError>>()?;
                 for (hits, ends, complete) in chunks {
-                    let base = out.hits.len();
-                    out.hits.extend_from_slice(&hits);
-                    out.offsets.extend(ends.iter().map(|e| base + e));
-                    out.complete.extend_from_slice(&complete);
+                    let mut start = 0;
+                    for (&end, &complete) in ends.iter().zip(&complete) {
+                        out.push_ray(&hits[start..end], complete);
+                        start = end;
+                    }
                 }
                 Ok(())
             }

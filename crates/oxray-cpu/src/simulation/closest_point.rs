@@ -24,29 +24,10 @@
 //! on which side of the nearest part of the surface the point lies (positive on its front),
 //! which is no inside test: use [`Gas::count_hits`] parity along several rays there.
 
-use super::{check_point, par_try_batch, SurfaceQueryError};
+use super::{check_point, par_try_batch, ClosestPoint, SurfaceQueryError};
 use crate::Gas;
 use glam::Vec3;
 use oxray_bvh::{GasKind, Triangle4, NO_PRIMITIVE, TRAVERSAL_STACK_SIZE};
-
-/// The closest point of a triangle GAS to a query point.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ClosestPoint {
-    /// The closest point, on the surface.
-    pub point: Vec3,
-    /// Its (unsigned) distance to the query point.
-    pub distance: f32,
-    /// The triangle it lies on: the index within its build input plus the input's primitive
-    /// index offset, as [`Hit::primitive_index`](oxray_core::Hit::primitive_index).
-    pub primitive_index: u32,
-    /// The build input of that triangle.
-    pub build_input: u32,
-    /// Barycentrics of the point in its triangle, as a hit's:
-    /// `point = (1 - u - v) v0 + u v1 + v v2`.
-    pub u: f32,
-    /// The second barycentric.
-    pub v: f32,
-}
 
 /// The closest point of triangle `[a, b, c]` to `p`, and its barycentrics `(u, v)` (weights of
 /// `b` and `c`). Exact at the vertices (the vertex itself is returned) and on the edges' lines.

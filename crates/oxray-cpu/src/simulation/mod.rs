@@ -48,90 +48,13 @@ pub mod surface;
 #[allow(unused_imports)] // Named by the docs above.
 use crate::{Gas, Ias};
 use glam::Vec3;
-use oxray_core::{BuildInputKind, Ray, RayError};
+use oxray_core::Ray;
 use rayon::prelude::*;
-use thiserror::Error;
 
-pub use all_hits::AllHits;
-pub use closest_point::ClosestPoint;
 pub use instanced::InstanceClosestPoint;
 pub use mesh::MeshError;
+pub use oxray_core::{AllHits, ClosestPoint, SurfaceQueryError};
 pub use surface::{NoShadingNormals, ShadingNormals, SurfaceHit, VertexNormals};
-
-/// Why a simulation query could not run.
-#[derive(Clone, Debug, Error, PartialEq)]
-#[non_exhaustive]
-pub enum SurfaceQueryError {
-    /// A query point has a NaN or infinite coordinate.
-    #[error("query point {index} is not finite: {point}")]
-    NonFinitePoint {
-        /// Position of the point in its batch (0 for a single query).
-        index: usize,
-        /// The point.
-        point: Vec3,
-    },
-    /// A ray is invalid (see [`Ray::validate`]).
-    #[error("ray {index} is invalid: {error}")]
-    InvalidRay {
-        /// Position of the ray in its batch (0 for a single query).
-        index: usize,
-        /// What is wrong with it.
-        error: RayError,
-    },
-    /// An output (or a second input) does not have one element per query.
-    #[error("{queries} queries but {outputs} results or inputs beside them")]
-    LengthMismatch {
-        /// Queries given.
-        queries: usize,
-        /// Elements of the other slice.
-        outputs: usize,
-    },
-    /// The query needs a structure of triangles.
-    #[error("this query needs a GAS of triangles, not of {0:?}")]
-    NotTriangles(BuildInputKind),
-    /// The primitive type of the hit, or the structure, is not supported by this query.
-    #[error("{0} is not supported by this query")]
-    Unsupported(&'static str),
-    /// The hit is not a hit of this ray on this structure (a hit of another ray or structure,
-    /// or one whose fields were changed).
-    #[error("hit {index} (primitive {primitive_index} of build input {build_input}, instance {instance_index}) is not on its ray in this structure")]
-    HitNotFound {
-        /// Position of the hit in its batch (0 for a single query).
-        index: usize,
-        /// The hit's primitive index.
-        primitive_index: u32,
-        /// The hit's build input.
-        build_input: u32,
-        /// The hit's instance index.
-        instance_index: u32,
-    },
-}
-
-impl SurfaceQueryError {
-    /// The same error, for query `index` of a batch.
-    fn at(self, index: usize) -> Self {
-        match self {
-            SurfaceQueryError::NonFinitePoint { point, .. } => {
-                SurfaceQueryError::NonFinitePoint { index, point }
-            }
-            SurfaceQueryError::InvalidRay { error, .. } => {
-                SurfaceQueryError::InvalidRay { index, error }
-            }
-            SurfaceQueryError::HitNotFound {
-                primitive_index,
-                build_input,
-                instance_index,
-                ..
-            } => SurfaceQueryError::HitNotFound {
-                index,
-                primitive_index,
-                build_input,
-                instance_index,
-            },
-            e => e,
-        }
-    }
-}
 
 /// Checks a ray of a single query.
 fn check_ray(ray: &Ray) -> Result<(), SurfaceQueryError> {

@@ -3,7 +3,7 @@
 //! use (the testkit generates the rays; they are bit-identical to the command-line tool's, so
 //! numbers are comparable).
 
-#![allow(dead_code)]
+#![allow(dead_code, unused_imports)]
 
 use oxray_bvh::{Bvh2, GasData};
 use oxray_core::{

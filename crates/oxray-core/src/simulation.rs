@@ -1,0 +1,230 @@
+//! The results and errors of the simulation queries (every primitive along a ray, hit counts,
+//! the closest point of a surface, signed distances), shared by every backend: the CPU's
+//! (`oxray_cpu::simulation`) and the CUDA backend's batched kernels give the same values in
+//! these types.
+
+use crate::{BuildInputKind, Hit, RayError};
+use glam::Vec3;
+use std::cmp::Ordering;
+use thiserror::Error;
+
+/// The order of an all-hits list: by `t`, then by instance index, instance id, build input and
+/// primitive, so that which hits a bounded list keeps among equal distances does not depend on
+/// traversal order. Two offers of one primitive (spatial splits reference a triangle from
+/// several leaves) compare equal.
+///
+/// ```
+/// use oxray_core::simulation::hit_order;
+/// use oxray_core::{Hit, HitKind};
+/// let hit = |t, primitive_index| Hit {
+///     t, u: 0.0, v: 0.0, primitive_index, sbt_gas_index: 0, build_input: 0,
+///     hit_kind: HitKind::TRIANGLE_FRONT_FACE, instance_id: !0, instance_index: 0,
+/// };
+/// assert!(hit_order(&hit(1.0, 5), &hit(2.0, 0)).is_lt());
+/// assert!(hit_order(&hit(1.0, 5), &hit(1.0, 4)).is_gt());
+/// assert!(hit_order(&hit(1.0, 5), &hit(1.0, 5)).is_eq());
+/// ```
+#[must_use]
+pub fn hit_order(a: &Hit, b: &Hit) -> Ordering {
+    a.t.total_cmp(&b.t)
+        .then(a.instance_index.cmp(&b.instance_index))
+        .then(a.instance_id.cmp(&b.instance_id))
+        .then(a.build_input.cmp(&b.build_input))
+        .then(a.primitive_index.cmp(&b.primitive_index))
+}
+
+/// The results of an all-hits batch (`all_hits_batch` of a GAS or an IAS, on any device):
+/// every ray's hits, one ray after the other. Reuse it across batches to keep its allocations.
+///
+/// ```
+/// use oxray_core::AllHits;
+/// let mut out = AllHits::new();
+/// out.push_ray(&[], true);
+/// out.push_ray(&[], false);
+/// assert_eq!((out.len(), out.hits(0).len(), out.all().len()), (2, 0, 0));
+/// assert!(out.is_complete(0) && !out.is_complete(1));
+/// assert_eq!(out.offsets(), [0, 0, 0]);
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+pub struct AllHits {
+    hits: Vec<Hit>,
+    /// Ray `i`'s hits are `hits[offsets[i] .. offsets[i + 1]]`.
+    offsets: Vec<usize>,
+    complete: Vec<bool>,
+}
+
+impl Default for AllHits {
+    fn default() -> Self {
+        AllHits {
+            hits: Vec::new(),
+            offsets: vec![0],
+            complete: Vec::new(),
+        }
+    }
+}
+
+impl AllHits {
+    /// An empty result.
+    #[must_use]
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Rays in the batch.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.complete.len()
+    }
+
+    /// Whether the batch had no ray.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.complete.is_empty()
+    }
+
+    /// The hits of ray `ray`, sorted by `t`, each primitive once.
+    ///
+    /// # Panics
+    ///
+    /// If `ray >= self.len()`.
+    #[must_use]
+    pub fn hits(&self, ray: usize) -> &[Hit] {
+        &self.hits[self.offsets[ray]..self.offsets[ray + 1]]
+    }
+
+    /// Whether ray `ray` has no hit beyond those kept (false where the bound left some out).
+    ///
+    /// # Panics
+    ///
+    /// If `ray >= self.len()`.
+    #[must_use]
+    pub fn is_complete(&self, ray: usize) -> bool {
+        self.complete[ray]
+    }
+
+    /// Every hit of every ray, ray after ray.
+    #[must_use]
+    pub fn all(&self) -> &[Hit] {
+        &self.hits
+    }
+
+    /// Where each ray's hits start in [`all`](Self::all), and the end (`len() + 1` entries).
+    #[must_use]
+    pub fn offsets(&self) -> &[usize] {
+        &self.offsets
+    }
+
+    /// Empties the result, keeping its allocations.
+    pub fn clear(&mut self) {
+        self.hits.clear();
+        self.offsets.clear();
+        self.offsets.push(0);
+        self.complete.clear();
+    }
+
+    /// Appends the next ray's hits (already sorted and without repeats) and whether its list
+    /// is complete.
+    pub fn push_ray(&mut self, hits: &[Hit], complete: bool) {
+        self.hits.extend_from_slice(hits);
+        self.offsets.push(self.hits.len());
+        self.complete.push(complete);
+    }
+}
+
+/// The closest point of a triangle GAS to a query point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ClosestPoint {
+    /// The closest point, on the surface.
+    pub point: Vec3,
+    /// Its (unsigned) distance to the query point.
+    pub distance: f32,
+    /// The triangle it lies on: the index within its build input plus the input's primitive
+    /// index offset, as [`Hit::primitive_index`].
+    pub primitive_index: u32,
+    /// The build input of that triangle.
+    pub build_input: u32,
+    /// Barycentrics of the point in its triangle, as a hit's:
+    /// `point = (1 - u - v) v0 + u v1 + v v2`.
+    pub u: f32,
+    /// The second barycentric.
+    pub v: f32,
+}
+
+/// Why a simulation query could not run.
+#[derive(Clone, Debug, Error, PartialEq)]
+#[non_exhaustive]
+pub enum SurfaceQueryError {
+    /// A query point has a NaN or infinite coordinate.
+    #[error("query point {index} is not finite: {point}")]
+    NonFinitePoint {
+        /// Position of the point in its batch (0 for a single query).
+        index: usize,
+        /// The point.
+        point: Vec3,
+    },
+    /// A ray is invalid (see [`Ray::validate`](crate::Ray::validate)).
+    #[error("ray {index} is invalid: {error}")]
+    InvalidRay {
+        /// Position of the ray in its batch (0 for a single query).
+        index: usize,
+        /// What is wrong with it.
+        error: RayError,
+    },
+    /// An output (or a second input) does not have one element per query.
+    #[error("{queries} queries but {outputs} results or inputs beside them")]
+    LengthMismatch {
+        /// Queries given.
+        queries: usize,
+        /// Elements of the other slice.
+        outputs: usize,
+    },
+    /// The query needs a structure of triangles.
+    #[error("this query needs a GAS of triangles, not of {0:?}")]
+    NotTriangles(BuildInputKind),
+    /// The primitive type of the hit, or the structure, is not supported by this query.
+    #[error("{0} is not supported by this query")]
+    Unsupported(&'static str),
+    /// The device failed (out of memory, a driver error).
+    #[error("device error: {0}")]
+    Device(String),
+    /// The hit is not a hit of this ray on this structure (a hit of another ray or structure,
+    /// or one whose fields were changed).
+    #[error("hit {index} (primitive {primitive_index} of build input {build_input}, instance {instance_index}) is not on its ray in this structure")]
+    HitNotFound {
+        /// Position of the hit in its batch (0 for a single query).
+        index: usize,
+        /// The hit's primitive index.
+        primitive_index: u32,
+        /// The hit's build input.
+        build_input: u32,
+        /// The hit's instance index.
+        instance_index: u32,
+    },
+}
+
+impl SurfaceQueryError {
+    /// The same error, for query `index` of a batch.
+    #[must_use]
+    pub fn at(self, index: usize) -> Self {
+        match self {
+            SurfaceQueryError::NonFinitePoint { point, .. } => {
+                SurfaceQueryError::NonFinitePoint { index, point }
+            }
+            SurfaceQueryError::InvalidRay { error, .. } => {
+                SurfaceQueryError::InvalidRay { index, error }
+            }
+            SurfaceQueryError::HitNotFound {
+                primitive_index,
+                build_input,
+                instance_index,
+                ..
+            } => SurfaceQueryError::HitNotFound {
+                index,
+                primitive_index,
+                build_input,
+                instance_index,
+            },
+            e => e,
+        }
+    }
+}

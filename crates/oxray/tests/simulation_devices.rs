@@ -1,0 +1,427 @@
+//! The simulation queries through the device-neutral API, on every device present: the CPU
+//! always, and a CUDA device where there is one (skipped without a GPU; `OXRAY_REQUIRE_GPU=1`
+//! makes a missing GPU a failure). Every primitive along a ray, hit counts, closest points and
+//! signed distances depend on the surface, not on the tree: every device and every build
+//! preset must give the CPU's default build's results bit for bit (the signs of signed
+//! distances wherever the point is not on the surface), spatial splits (a triangle in several
+//! leaves) and device-built trees included. Bad input gets the same typed error everywhere.
+
+mod common;
+
+use common::{devices, grid_cube, icosphere, name, random_soup, Mesh, Rng};
+use glam::Vec3;
+use oxray::{
+    AabbBuffer, AllHits, BuildFlags, BuildOptions, ClosestPoint, CustomPrimitiveInput, Device, Gas,
+    IndexBuffer, Instance, InstanceFlags, Ray, SphereInput, SurfaceQueryError, Transform,
+    TriangleInput, VertexBuffer,
+};
+use oxray_testkit::rays::rays_around;
+
+/// The presets whose trees differ: the binned SAH, the fast builder, spatial splits, and the
+/// updatable tree (inactive slots kept on the device).
+const PRESETS: [BuildFlags; 4] = [
+    BuildFlags::empty(),
+    BuildFlags::PREFER_FAST_BUILD,
+    BuildFlags::PREFER_FAST_TRACE,
+    BuildFlags::ALLOW_UPDATE,
+];
+
+/// Every device, and every CUDA device again with the host's builder (uploaded trees: spatial
+/// splits reach the device only that way).
+fn all_devices() -> Vec<(String, Device)> {
+    let mut out = Vec::new();
+    for d in devices() {
+        let n = name(&d).to_string();
+        if d.kind() == oxray::BackendKind::Cuda {
+            out.push((format!("{n} (host builds)"), d.clone().with_host_builds()));
+        }
+        out.push((n, d));
+    }
+    out
+}
+
+fn build(device: &Device, mesh: &Mesh, flags: BuildFlags) -> Gas {
+    let input = TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles));
+    device
+        .build_gas(&BuildOptions::new(flags), &[input.into()])
+        .unwrap_or_else(|e| panic!("{}: {e}", name(device)))
+}
+
+/// The test meshes: a closed sphere, a closed cube of grid faces (axis-aligned, shared edges
+/// and vertices on the rays' paths) and an open soup of large overlapping triangles (where
+/// spatial splits reference one triangle from several leaves).
+fn meshes() -> Vec<(&'static str, Mesh)> {
+    let mut rng = Rng::new(0x51a1);
+    let soup = random_soup(&mut rng, 80, 4.0, 2.5);
+    let positions: Vec<[f32; 3]> = soup.iter().flatten().copied().collect();
+    let triangles = (0..soup.len() as u32)
+        .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+        .collect();
+    vec![
+        ("icosphere", icosphere(3)),
+        ("grid cube", grid_cube(6)),
+        (
+            "soup",
+            Mesh {
+                positions,
+                triangles,
+            },
+        ),
+    ]
+}
+
+/// Rays around the mesh, and rays aimed exactly at its vertices and edge midpoints (through
+/// primitives that share them).
+fn rays_for(mesh: &Mesh, seed: u64) -> Vec<Ray> {
+    let mut rng = Rng::new(seed);
+    let mut rays = rays_around(&mut rng, mesh, 400);
+    let (lo, hi) = mesh.bounds();
+    let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
+    let r = (Vec3::from(hi) - Vec3::from(lo)).length();
+    for _ in 0..200 {
+        let t = mesh.triangles[rng.below(mesh.triangles.len())];
+        let a = Vec3::from(mesh.positions[t[0] as usize]);
+        let b = Vec3::from(mesh.positions[t[1] as usize]);
+        let target = if rng.below(2) == 0 { a } else { (a + b) * 0.5 };
+        let o = c + rng.unit() * r * 1.5;
+        rays.push(Ray::new(o, target - o));
+    }
+    rays
+}
+
+fn all_hits(gas: &Gas, rays: &[Ray], max: usize) -> AllHits {
+    let mut out = AllHits::new();
+    gas.all_hits_batch(rays, max, &mut out)
+        .unwrap_or_else(|e| panic!("{e}"));
+    out
+}
+
+#[test]
+fn all_hits_and_counts_are_the_same_on_every_device_and_tree() {
+    for (mesh_name, mesh) in meshes() {
+        let rays = rays_for(&mesh, 7);
+        let reference = build(&Device::cpu(), &mesh, BuildFlags::empty());
+        let full = all_hits(&reference, &rays, usize::MAX);
+        let bounded = all_hits(&reference, &rays, 2);
+        assert!(
+            (0..rays.len()).any(|i| full.hits(i).len() > 2),
+            "{mesh_name}: some ray should cross more than two primitives"
+        );
+        for (dev_name, device) in all_devices() {
+            for flags in PRESETS {
+                let gas = build(&device, &mesh, flags);
+                let at = format!("{mesh_name}, {dev_name}, {flags:?}");
+                assert_eq!(all_hits(&gas, &rays, usize::MAX), full, "{at}: all hits");
+                assert_eq!(all_hits(&gas, &rays, 2), bounded, "{at}: two nearest");
+                let none = all_hits(&gas, &rays, 0);
+                for i in 0..rays.len() {
+                    assert!(none.hits(i).is_empty(), "{at}");
+                    assert_eq!(none.is_complete(i), full.hits(i).is_empty(), "{at}");
+                }
+                let mut counts = vec![u32::MAX; rays.len()];
+                gas.count_hits_batch(&rays, &mut counts)
+                    .unwrap_or_else(|e| panic!("{at}: {e}"));
+                for (i, &c) in counts.iter().enumerate() {
+                    assert_eq!(c as usize, full.hits(i).len(), "{at}: count of ray {i}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn all_hits_through_instances_are_the_same_on_every_device() {
+    let sphere = icosphere(2);
+    let cube = grid_cube(3);
+    let placements = [
+        Transform::IDENTITY,
+        Transform::from_translation(Vec3::new(2.5, 0.0, 0.0)),
+        Transform::from_affine(&glam::Affine3A::from_scale_rotation_translation(
+            Vec3::new(1.0, 2.0, 0.5),
+            glam::Quat::from_rotation_y(0.7),
+            Vec3::new(-2.0, 1.0, 0.5),
+        )),
+        // Mirrored: the instance's triangles face the other way.
+        Transform::from_affine(&glam::Affine3A::from_scale(Vec3::new(-1.0, 1.0, 1.0))),
+    ];
+    let mut rng = Rng::new(11);
+    let scene = Mesh {
+        positions: vec![[-4.0, -3.0, -3.0], [5.0, 4.0, 3.0]],
+        triangles: vec![],
+    };
+    let rays = rays_around(&mut rng, &scene, 600);
+    let mut reference: Option<(AllHits, Vec<u32>)> = None;
+    for (dev_name, device) in all_devices() {
+        let children = [
+            build(&device, &sphere, BuildFlags::PREFER_FAST_TRACE),
+            build(&device, &cube, BuildFlags::empty()),
+        ];
+        let instances: Vec<Instance> = placements
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                let mut inst = Instance::new(children[k % 2].handle())
+                    .transform(*t)
+                    .instance_id(100 + k as u32);
+                if k == 2 {
+                    inst = inst.flags(InstanceFlags::FLIP_TRIANGLE_FACING);
+                }
+                inst
+            })
+            .collect();
+        let ias = device
+            .build_ias(&BuildOptions::default(), &[(&instances[..]).into()])
+            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        let mut lists = AllHits::new();
+        ias.all_hits_batch(&rays, usize::MAX, &mut lists)
+            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        let mut counts = vec![0u32; rays.len()];
+        ias.count_hits_batch(&rays, &mut counts)
+            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        for (i, &c) in counts.iter().enumerate() {
+            assert_eq!(c as usize, lists.hits(i).len(), "{dev_name}: ray {i}");
+        }
+        match &reference {
+            None => {
+                let instanced: std::collections::HashSet<u32> =
+                    lists.all().iter().map(|h| h.instance_index).collect();
+                assert_eq!(instanced.len(), placements.len(), "every instance is hit");
+                reference = Some((lists, counts));
+            }
+            Some((l, c)) => {
+                assert_eq!(&lists, l, "{dev_name}: lists");
+                assert_eq!(&counts, c, "{dev_name}: counts");
+            }
+        }
+    }
+}
+
+#[test]
+fn spheres_and_custom_primitives_list_as_on_the_cpu() {
+    let mut rng = Rng::new(5);
+    let centres: Vec<[f32; 3]> = (0..60).map(|_| rng.vec3(-3.0, 3.0).to_array()).collect();
+    let radii: Vec<f32> = (0..60).map(|_| rng.range(0.2, 0.9)).collect();
+    let boxes: Vec<oxray::Aabb> = centres
+        .iter()
+        .zip(&radii)
+        .map(|(c, r)| oxray::Aabb::new(Vec3::from(*c) - *r, Vec3::from(*c) + *r))
+        .collect();
+    let scene = Mesh {
+        positions: vec![[-3.0; 3], [3.0; 3]],
+        triangles: vec![],
+    };
+    let rays = rays_around(&mut rng, &scene, 500);
+    let mut reference: Option<AllHits> = None;
+    for (dev_name, device) in all_devices() {
+        let (c, r) = (
+            [bytemuck::cast_slice::<_, u8>(&centres)],
+            [bytemuck::cast_slice::<_, u8>(&radii)],
+        );
+        let spheres = device
+            .build_gas(
+                &BuildOptions::default(),
+                &[SphereInput::new(&c, centres.len() as u32, &r).into()],
+            )
+            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        let lists = all_hits(&spheres, &rays, usize::MAX);
+        let mut counts = vec![0u32; rays.len()];
+        spheres.count_hits_batch(&rays, &mut counts).unwrap();
+        for (i, &c) in counts.iter().enumerate() {
+            assert_eq!(c as usize, lists.hits(i).len(), "{dev_name}: ray {i}");
+        }
+        match &reference {
+            None => {
+                assert!(lists.all().len() > rays.len(), "the cloud is crossed");
+                reference = Some(lists);
+            }
+            Some(l) => assert_eq!(&lists, l, "{dev_name}: spheres"),
+        }
+        // Custom primitives are never hit by these queries (no intersection program runs).
+        let custom = device
+            .build_gas(
+                &BuildOptions::default(),
+                &[CustomPrimitiveInput::new(AabbBuffer::new(&boxes)).into()],
+            )
+            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        let lists = all_hits(&custom, &rays, 4);
+        assert!(lists.all().is_empty() && (0..rays.len()).all(|i| lists.is_complete(i)));
+        let mut counts = vec![7u32; rays.len()];
+        custom.count_hits_batch(&rays, &mut counts).unwrap();
+        assert!(counts.iter().all(|&c| c == 0), "{dev_name}");
+    }
+}
+
+/// Points around the mesh, at its vertices and edge midpoints, and just off its vertices.
+fn points_for(mesh: &Mesh, seed: u64) -> Vec<Vec3> {
+    let mut rng = Rng::new(seed);
+    let (lo, hi) = mesh.bounds();
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    let c = (lo + hi) * 0.5;
+    let e = (hi - lo) * 0.75;
+    let mut p: Vec<Vec3> = (0..500)
+        .map(|_| {
+            c + e * Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            )
+        })
+        .collect();
+    for _ in 0..150 {
+        let t = mesh.triangles[rng.below(mesh.triangles.len())];
+        let a = Vec3::from(mesh.positions[t[0] as usize]);
+        let b = Vec3::from(mesh.positions[t[1] as usize]);
+        p.push(a);
+        p.push((a + b) * 0.5);
+        p.push(a + rng.unit() * 1e-3);
+    }
+    p
+}
+
+#[test]
+fn closest_points_and_signed_distances_are_the_same_on_every_device_and_tree() {
+    for (mesh_name, mesh) in meshes() {
+        let points = points_for(&mesh, 3);
+        let reference = build(&Device::cpu(), &mesh, BuildFlags::empty());
+        let mut want = vec![None; points.len()];
+        reference.closest_point_batch(&points, &mut want).unwrap();
+        let mut want_sd = vec![0.0f32; points.len()];
+        reference
+            .signed_distance_batch(&points, &mut want_sd)
+            .unwrap();
+        let closed = mesh_name != "soup";
+        if closed {
+            assert!(want_sd.iter().any(|&d| d < 0.0) && want_sd.iter().any(|&d| d > 0.0));
+        }
+        for (dev_name, device) in all_devices() {
+            for flags in PRESETS {
+                let gas = build(&device, &mesh, flags);
+                let at = format!("{mesh_name}, {dev_name}, {flags:?}");
+                let mut got: Vec<Option<ClosestPoint>> = vec![None; points.len()];
+                gas.closest_point_batch(&points, &mut got)
+                    .unwrap_or_else(|e| panic!("{at}: {e}"));
+                for (i, (g, w)) in got.iter().zip(&want).enumerate() {
+                    assert_eq!(g, w, "{at}: point {i} {}", points[i]);
+                }
+                let mut sd = vec![0.0f32; points.len()];
+                gas.signed_distance_batch(&points, &mut sd)
+                    .unwrap_or_else(|e| panic!("{at}: {e}"));
+                let mut inside = vec![false; points.len()];
+                gas.contains_batch(&points, &mut inside)
+                    .unwrap_or_else(|e| panic!("{at}: {e}"));
+                for (i, (&g, &w)) in sd.iter().zip(&want_sd).enumerate() {
+                    assert_eq!(g.abs(), w.abs(), "{at}: |signed distance| of point {i}");
+                    // The pseudo-normal's angles may differ in the last bit between devices:
+                    // a sign can only differ where the point is on the surface, within
+                    // rounding of it.
+                    if w.abs() > 1e-5 {
+                        assert_eq!(g, w, "{at}: signed distance of point {i} {}", points[i]);
+                        assert_eq!(inside[i], w < 0.0, "{at}: inside, point {i}");
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn the_sign_is_the_inside_of_a_sphere_on_every_device() {
+    // Points well away from the unit icosphere's surface: inside below 0.9, outside past 1.1
+    // (the icosphere lies between the inscribed and the unit sphere).
+    let mesh = icosphere(3);
+    let mut rng = Rng::new(9);
+    let points: Vec<Vec3> = (0..2000)
+        .map(|_| rng.unit() * rng.range(0.0, 2.0))
+        .filter(|p| (p.length() - 1.0).abs() > 0.1)
+        .collect();
+    for (dev_name, device) in all_devices() {
+        let gas = build(&device, &mesh, BuildFlags::empty());
+        let mut inside = vec![false; points.len()];
+        gas.contains_batch(&points, &mut inside).unwrap();
+        for (p, &i) in points.iter().zip(&inside) {
+            assert_eq!(i, p.length() < 1.0, "{dev_name}: {p}");
+        }
+    }
+}
+
+#[test]
+fn bad_input_gets_the_same_error_on_every_device() {
+    let mesh = icosphere(1);
+    let mut rays = vec![Ray::new(Vec3::new(0.1, 0.13, -3.0), Vec3::Z); 6];
+    rays[4] = Ray::new(Vec3::new(0.0, 0.0, -3.0), Vec3::ZERO);
+    rays[5] = Ray::new(Vec3::NAN, Vec3::Z);
+    let points = [Vec3::ZERO, Vec3::new(0.0, f32::INFINITY, 0.0), Vec3::NAN];
+    for (dev_name, device) in all_devices() {
+        let gas = build(&device, &mesh, BuildFlags::empty());
+        let mut counts = vec![99u32; rays.len()];
+        let e = gas.count_hits_batch(&rays, &mut counts).unwrap_err();
+        assert!(
+            matches!(e, SurfaceQueryError::InvalidRay { index: 4, .. }),
+            "{dev_name}: {e}"
+        );
+        assert_eq!(
+            counts,
+            [2, 2, 2, 2, 99, 99],
+            "{dev_name}: the valid rays are counted"
+        );
+        let mut lists = AllHits::new();
+        lists.push_ray(&[], true);
+        let e = gas.all_hits_batch(&rays, 4, &mut lists).unwrap_err();
+        assert!(
+            matches!(e, SurfaceQueryError::InvalidRay { index: 4, .. }),
+            "{dev_name}: {e}"
+        );
+        assert!(lists.is_empty(), "{dev_name}: nothing listed");
+        let e = gas.count_hits_batch(&rays, &mut [0; 2]).unwrap_err();
+        assert!(
+            matches!(
+                e,
+                SurfaceQueryError::LengthMismatch {
+                    queries: 6,
+                    outputs: 2
+                }
+            ),
+            "{dev_name}: {e}"
+        );
+
+        let mut closest = [None; 3];
+        let e = gas.closest_point_batch(&points, &mut closest).unwrap_err();
+        assert!(
+            matches!(e, SurfaceQueryError::NonFinitePoint { index: 1, .. }),
+            "{dev_name}: {e}"
+        );
+        assert!(closest[0].is_some_and(|c| c.distance > 0.9), "{dev_name}");
+        let mut sd = [5.0f32; 3];
+        let e = gas.signed_distance_batch(&points, &mut sd).unwrap_err();
+        assert!(
+            matches!(e, SurfaceQueryError::NonFinitePoint { index: 1, .. }),
+            "{dev_name}: {e}"
+        );
+        assert!(
+            sd[0] < -0.9 && sd[1] == 5.0 && sd[2] == 5.0,
+            "{dev_name}: {sd:?}"
+        );
+
+        // Point queries need triangles.
+        let centre = [[0.0f32; 3]];
+        let radius = [1.0f32];
+        let (c, r) = (
+            [bytemuck::cast_slice::<_, u8>(&centre)],
+            [bytemuck::cast_slice::<_, u8>(&radius)],
+        );
+        let spheres = device
+            .build_gas(
+                &BuildOptions::default(),
+                &[SphereInput::new(&c, 1, &r).into()],
+            )
+            .unwrap();
+        let e = spheres
+            .closest_point_batch(&[Vec3::ZERO], &mut [None])
+            .unwrap_err();
+        assert!(
+            matches!(e, SurfaceQueryError::NotTriangles(_)),
+            "{dev_name}: {e}"
+        );
+    }
+}
