@@ -87,8 +87,9 @@ impl std::str::FromStr for GasBuilder {
 /// How the device builds one GAS.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct DeviceBuildConfig {
-    /// Bits of the Morton codes: 30 (32-bit keys, four sort passes) or 60 (64-bit keys, eight
-    /// passes, finer cells for large meshes).
+    /// Bits of the Morton codes: 30 or 32 (32-bit keys, four sort passes; 32 takes the first
+    /// 32 bits of the 60-bit code, so its cells are split once more in x and y), or 60 (64-bit
+    /// keys, eight passes, finer cells for large meshes). Other values build as 60.
     pub morton_bits: u32,
     /// The deepest tree accepted (root's children at depth 1); a deeper one is refused with
     /// [`CudaError::TreeTooDeep`] (and [`Cuda`](crate::Cuda) builds on the host instead). The
@@ -105,10 +106,10 @@ pub struct DeviceBuildConfig {
 }
 
 impl DeviceBuildConfig {
-    /// `PREFER_FAST_BUILD`: 30-bit codes. With 32-bit keys whose ties are broken by position, no
-    /// tree is deeper than 31 + 30 levels, within the traversal's bound.
+    /// `PREFER_FAST_BUILD`: 32-bit codes (four sort passes). With 32-bit keys whose ties are
+    /// broken by position, no tree is deeper than 32 + 31 levels, within the traversal's bound.
     pub const FAST_BUILD: DeviceBuildConfig = DeviceBuildConfig {
-        morton_bits: 30,
+        morton_bits: 32,
         max_depth: MAX_BVH2_DEPTH as u32,
         keep_inactive: false,
         max_leaf: MAX_LEAF,
@@ -121,14 +122,14 @@ impl DeviceBuildConfig {
         max_leaf: MAX_LEAF,
     };
 
-    /// Above this many triangles, `PREFER_FAST_BUILD` uses 60-bit codes too: 30-bit cells grow
-    /// too coarse (a 66 M-triangle mesh traced at 63 % of the host-built tree's speed with
+    /// Above this many triangles, `PREFER_FAST_BUILD` uses 60-bit codes too: 30- and 32-bit
+    /// cells grow too coarse (a 66 M-triangle mesh traced at 63 % of the host-built tree's speed with
     /// 30-bit codes, 104 % with 60-bit ones; 7.9 M triangles at 92 % with 30-bit codes:
     /// `docs/BENCHMARKS.md`).
-    pub const FAST_BUILD_30_BIT_MAX: u32 = 1 << 24;
+    pub const FAST_BUILD_32_BIT_MAX: u32 = 1 << 24;
 
     /// The configuration for a build of `num_primitives` primitives with these options:
-    /// `PREFER_FAST_BUILD` takes 30-bit codes (up to [`Self::FAST_BUILD_30_BIT_MAX`]
+    /// `PREFER_FAST_BUILD` takes 32-bit codes (up to [`Self::FAST_BUILD_32_BIT_MAX`]
     /// primitives), every other preset 60-bit ones, and `ALLOW_UPDATE` keeps inactive
     /// primitives. `PREFER_FAST_TRACE` builds as the default preset: the SAH collapse into
     /// leaves of about two triangles, which suits the device's one-triangle-at-a-time leaf
@@ -138,7 +139,7 @@ impl DeviceBuildConfig {
     pub fn for_options(options: &BuildOptions, num_primitives: u32) -> DeviceBuildConfig {
         let f = options.flags;
         let base = if f.contains(BuildFlags::PREFER_FAST_BUILD)
-            && num_primitives <= Self::FAST_BUILD_30_BIT_MAX
+            && num_primitives <= Self::FAST_BUILD_32_BIT_MAX
         {
             Self::FAST_BUILD
         } else {
@@ -151,7 +152,7 @@ impl DeviceBuildConfig {
     }
 
     fn key_bytes(&self) -> usize {
-        if self.morton_bits <= 30 {
+        if self.morton_bits == 30 || self.morton_bits == 32 {
             4
         } else {
             8
@@ -930,10 +931,11 @@ fn run_kernels(
                 b.arg(&boxes)
                     .arg(&n32)
                     .arg(&counters)
+                    .arg(&config.morton_bits)
                     .arg(&mut keys)
                     .arg(&mut values);
                 // SAFETY: oxray_build_morton(const float4* boxes, u32 n, const u32* counters,
-                // K* keys, u32* values): n boxes written above, n keys and values.
+                // u32 bits, K* keys, u32* values): n boxes written above, n keys and values.
                 unsafe { b.launch(grid(n)) }.map_err(launch("launching the Morton kernel"))?;
             }
             for pass in 0..passes {
@@ -1217,7 +1219,7 @@ mod tests {
             DeviceBuildConfig::FAST_BUILD
         );
         // Large meshes get the finer codes whatever the preset.
-        let big = DeviceBuildConfig::FAST_BUILD_30_BIT_MAX + 1;
+        let big = DeviceBuildConfig::FAST_BUILD_32_BIT_MAX + 1;
         let fast = BuildOptions::new(BuildFlags::PREFER_FAST_BUILD);
         assert_eq!(
             DeviceBuildConfig::for_options(&fast, big),
@@ -1239,8 +1241,8 @@ mod tests {
         );
         assert!(with(BuildFlags::ALLOW_UPDATE | BuildFlags::PREFER_FAST_BUILD).keep_inactive);
         const { assert!(!DeviceBuildConfig::FAST_BUILD.keep_inactive) };
-        // 30-bit keys with position tie-breaks: at most 30 + 31 levels, within the traversal's.
-        const { assert!(30 + 31 <= MAX_BVH2_DEPTH) };
+        // 32-bit keys with position tie-breaks: at most 32 + 31 levels, within the traversal's.
+        const { assert!(32 + 31 <= MAX_BVH2_DEPTH) };
     }
 
     #[test]

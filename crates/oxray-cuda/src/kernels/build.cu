@@ -5,7 +5,7 @@
 //                             bounds, the count of active triangles and of the tree's
 //                             triangles (atomics): the active ones, or with `keep_inactive`
 //                             (ALLOW_UPDATE: an update may make them active) all of them.
-//   2. oxray_build_morton32/64  Morton code of each active centroid (30 or 60 bits); inactive
+//   2. oxray_build_morton32/64  Morton code of each active centroid (30, 32 or 60 bits); inactive
 //                             triangles get the key 1 << bits, which sorts after every code.
 //   3. oxray_sort_hist32/64, oxray_sort_scan, oxray_sort_scatter32/64
 //                             a stable LSD radix sort of (key, triangle) pairs, 8 bits a pass.
@@ -284,21 +284,35 @@ __device__ __forceinline__ bool cell(const float4* boxes, const u32* counters, u
     return true;
 }
 
+// 32-bit keys of `bits` bits: 30, the Morton code of a grid of 2^10 cells per axis; 32, the
+// first 32 bits of the 60-bit code (those ten levels of cells, then each cell's halves in x and
+// y): four sort passes either way, the finer cells for free. Inactive triangles get a key past
+// every active one.
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     oxray_build_morton32(const float4* __restrict__ boxes, u32 n, const u32* __restrict__ counters,
-                         u32* __restrict__ keys, u32* __restrict__ values) {
+                         u32 bits, u32* __restrict__ keys, u32* __restrict__ values) {
     const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
     if (i >= n) return;
     u32 q[3];
-    keys[i] = cell(boxes, counters, i, 1024.0f, q)
-                  ? (expand10(q[0]) << 2) | (expand10(q[1]) << 1) | expand10(q[2])
-                  : (1u << 30);
+    if (bits == 30) {
+        keys[i] = cell(boxes, counters, i, 1024.0f, q)
+                      ? (expand10(q[0]) << 2) | (expand10(q[1]) << 1) | expand10(q[2])
+                      : (1u << 30);
+    } else if (cell(boxes, counters, i, 1048576.0f, q)) {
+        u64 code = (expand20(q[0]) << 2) | (expand20(q[1]) << 1) | expand20(q[2]);
+        // The last cell shares its key with the one before, so that no active key is the
+        // inactive ones'.
+        keys[i] = min((u32)(code >> 28), 0xFFFFFFFEu);
+    } else {
+        keys[i] = 0xFFFFFFFFu;
+    }
     values[i] = i;
 }
 
 extern "C" __global__ void __launch_bounds__(BUILD_BLOCK)
     oxray_build_morton64(const float4* __restrict__ boxes, u32 n, const u32* __restrict__ counters,
-                         u64* __restrict__ keys, u32* __restrict__ values) {
+                         u32 bits, u64* __restrict__ keys, u32* __restrict__ values) {
+    (void)bits;  // always 60
     const u32 i = blockIdx.x * BUILD_BLOCK + threadIdx.x;
     if (i >= n) return;
     u32 q[3];
