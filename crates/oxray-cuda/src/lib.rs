@@ -73,6 +73,9 @@ pub use transform::{CudaMotionTransform, CudaStaticTransform, MotionTransform};
 mod common;
 
 #[cfg(test)]
+mod host_kernels;
+
+#[cfg(test)]
 mod tests {
     use super::common::{
         bench_rays, build_gas_with_tree, find_mesh, icosphere_f32, load_obj, tricky_rays, Mesh,

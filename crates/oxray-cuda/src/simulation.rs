@@ -366,10 +366,11 @@ fn sort_distinct(hits: &mut [Hit]) -> usize {
     kept
 }
 
-/// The resolved hits of one part's offers, ray by ray: `(hits, ends)` with ray `r`'s hits at
-/// `hits[ends[r - 1] .. ends[r]]`, sorted and without repeats, all of them.
-fn distinct_lists(
-    target: Target<'_>,
+/// The resolved hits of one part's offers, ray by ray: `(hits, lists)` with ray `r`'s hits at
+/// `hits[lists[r].0 .. lists[r].1]`, sorted and without repeats, all of them. `resolve` turns
+/// an offer and its instance slot into its hit.
+pub(crate) fn distinct_lists(
+    resolve: impl Fn(&HitRecord, u32) -> Option<Hit> + Sync,
     counts: &[u32],
     offers: &[HitRecord],
     insts: &[u32],
@@ -383,7 +384,7 @@ fn distinct_lists(
     let mut hits: Vec<Option<Hit>> = offers
         .par_iter()
         .zip(insts.par_iter())
-        .map(|(r, &i)| target.resolve(r, i))
+        .map(|(r, &i)| resolve(r, i))
         .collect();
     let mut flat: Vec<Hit> = Vec::with_capacity(hits.len());
     let mut ranges = Vec::with_capacity(spans.len());
@@ -425,7 +426,7 @@ fn all_hits(
     }
     let mut counts = vec![0u32; rays.len()];
     let mut each = |_: usize, counts: &[u32], offers: &[HitRecord], insts: &[u32]| {
-        let (hits, lists) = distinct_lists(target, counts, offers, insts);
+        let (hits, lists) = distinct_lists(|r, i| target.resolve(r, i), counts, offers, insts);
         for &(a, b) in &lists {
             let keep = (b - a).min(max_hits_per_ray);
             out.push_ray(&hits[a..a + keep], b - a <= max_hits_per_ray);
@@ -447,7 +448,7 @@ fn count_hits(
     if repeats {
         let mut distinct = Vec::with_capacity(rays.len());
         let mut each = |_: usize, counts: &[u32], offers: &[HitRecord], insts: &[u32]| {
-            let (_, lists) = distinct_lists(target, counts, offers, insts);
+            let (_, lists) = distinct_lists(|r, i| target.resolve(r, i), counts, offers, insts);
             distinct.extend(lists.iter().map(|&(a, b)| (b - a) as u32));
         };
         trace_offers(target, rays, &mut found, Some(&mut each)).map_err(query_error)?;

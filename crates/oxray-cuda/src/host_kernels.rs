@@ -1,0 +1,546 @@
+//! The simulation kernels' own CUDA C++ (`kernels/simulation.cu` after `trace.cu` and
+//! `curve.cu`) compiled by the host's C++ compiler over `kernels/host.h` and run one thread at
+//! a time on the CPU, against the CPU backend: so that a machine without a GPU (CI) checks what
+//! the kernels compute, bit for bit, and the host code that turns their offers into lists. The
+//! driver's launches, device memory and the GPU's own compiler are left to the GPU tests.
+
+use crate::context::compile_options;
+use crate::gas::{hit_of, sphere_words, HitRecord};
+use crate::layout::{ChildRef, DeviceLayout, IasLayout, NodeLayout};
+use crate::simulation::distinct_lists;
+use glam::Vec3;
+use oxray_bvh::{Bvh2, GasData, IasData, NO_PRIMITIVE};
+use oxray_core::{
+    AllHits, BuildFlags, BuildInput, BuildOptions, Hit, IndexBuffer, Instance, InstanceFlags, Ray,
+    RayRecord, SphereInput, Transform, TriangleInput, VertexBuffer,
+};
+use oxray_cpu::Gas;
+use oxray_testkit::mesh::{grid_cube, icosphere, random_soup, Mesh};
+use oxray_testkit::rays::rays_around;
+use oxray_testkit::rng::Rng;
+use std::sync::OnceLock;
+
+/// The drivers: each runs one kernel over threads `0 .. n`.
+const DRIVERS: &str = r#"
+extern "C" void host_offers_triangles(const float4* nodes, const float4* tris, const float4* rays,
+                                      u32* counts, const unsigned long long* offsets, uint4* out,
+                                      u32 n) {
+    HOST_LAUNCH(n, oxray_offers_triangles(nodes, tris, rays, counts, offsets, out, n));
+}
+extern "C" void host_offers_spheres(const float4* nodes, const float4* spheres, const float4* rays,
+                                    u32* counts, const unsigned long long* offsets, uint4* out,
+                                    u32 n) {
+    HOST_LAUNCH(n, oxray_offers_spheres(nodes, spheres, rays, counts, offsets, out, n));
+}
+extern "C" void host_offers_ias(const float4* top, const float4* insts, const float4* rays,
+                                u32* counts, const unsigned long long* offsets, uint4* out,
+                                u32* out_inst, u32 n) {
+    HOST_LAUNCH(n, oxray_offers_ias(top, insts, rays, counts, offsets, out, out_inst, n));
+}
+extern "C" void host_closest_points(const float4* nodes, const float4* tris, const u32* ids,
+                                    const float4* points, uint4* out, float extent, u32 n) {
+    HOST_LAUNCH(n, oxray_closest_points(nodes, tris, ids, points, out, extent, n));
+}
+extern "C" void host_signed_distances(const float4* nodes, const float4* tris, const u32* ids,
+                                      const float4* points, float* out, float extent, u32 n) {
+    HOST_LAUNCH(n, oxray_signed_distances(nodes, tris, ids, points, out, extent, n));
+}
+"#;
+
+type Offers =
+    unsafe extern "C" fn(*const u32, *const u32, *const u32, *mut u32, *const u64, *mut u32, u32);
+type OffersIas = unsafe extern "C" fn(
+    *const u32,
+    *const u32,
+    *const u32,
+    *mut u32,
+    *const u64,
+    *mut u32,
+    *mut u32,
+    u32,
+);
+type Points<T> =
+    unsafe extern "C" fn(*const u32, *const u32, *const u32, *const f32, *mut T, f32, u32);
+
+/// The kernels compiled for the host, loaded once.
+struct HostKernels {
+    _lib: libloading::Library,
+    offers_triangles: Offers,
+    offers_spheres: Offers,
+    offers_ias: OffersIas,
+    closest_points: Points<u32>,
+    signed_distances: Points<f32>,
+}
+
+fn kernels() -> &'static HostKernels {
+    static K: OnceLock<HostKernels> = OnceLock::new();
+    K.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("oxray-host-kernels-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let src = dir.join("kernels.cpp");
+        let lib = dir.join("kernels.so");
+        let source = format!(
+            "{}\n{}\n{}",
+            include_str!("kernels/host.h"),
+            crate::simulation::SIMULATION_SOURCE,
+            DRIVERS
+        );
+        std::fs::write(&src, source).unwrap();
+        let cxx = std::env::var("CXX").unwrap_or_else(|_| "c++".into());
+        // The kernels' defines (their numeric contract), without the NVRTC-only options.
+        let defines: Vec<String> = compile_options((9, 0))
+            .into_iter()
+            .filter(|o| o.starts_with("-D"))
+            .chain(["-DOXRAY_NO_QUERY_KERNELS".to_string()])
+            .collect();
+        let out = std::process::Command::new(&cxx)
+            .args(["-std=c++17", "-O2", "-fPIC", "-shared", "-ffp-contract=off"])
+            .args(&defines)
+            .arg("-o")
+            .arg(&lib)
+            .arg(&src)
+            .output()
+            .unwrap_or_else(|e| panic!("the C++ compiler {cxx} cannot run: {e}"));
+        assert!(
+            out.status.success(),
+            "the kernels do not compile for the host:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        // SAFETY: a library this test just compiled from the kernels and the drivers above; its
+        // initialisers only set the host.h globals.
+        let lib = unsafe { libloading::Library::new(&lib) }.unwrap();
+        // SAFETY: each symbol is one of the drivers above, with the signature of its type; the
+        // library stays loaded with the functions (`_lib`).
+        unsafe {
+            let offers_triangles = *lib.get::<Offers>(b"host_offers_triangles").unwrap();
+            let offers_spheres = *lib.get::<Offers>(b"host_offers_spheres").unwrap();
+            let offers_ias = *lib.get::<OffersIas>(b"host_offers_ias").unwrap();
+            let closest_points = *lib.get::<Points<u32>>(b"host_closest_points").unwrap();
+            let signed_distances = *lib.get::<Points<f32>>(b"host_signed_distances").unwrap();
+            let _ = std::fs::remove_dir_all(&dir);
+            HostKernels {
+                _lib: lib,
+                offers_triangles,
+                offers_spheres,
+                offers_ias,
+                closest_points,
+                signed_distances,
+            }
+        }
+    })
+}
+
+/// Rays as the kernels read them.
+fn ray_words(rays: &[Ray]) -> Vec<u32> {
+    let records: Vec<RayRecord> = rays.iter().map(|&r| RayRecord::from(r)).collect();
+    bytemuck::cast_slice(&records).to_vec()
+}
+
+/// The count pass and the write pass of an offer kernel, as `trace_offers` runs them (one part):
+/// each ray's count, its offers and their instance slots.
+fn offers(
+    run: impl Fn(*const u32, *mut u32, *const u64, *mut u32, *mut u32, u32),
+    rays: &[Ray],
+) -> (Vec<u32>, Vec<HitRecord>, Vec<u32>) {
+    let words = ray_words(rays);
+    let n = rays.len() as u32;
+    let mut counts = vec![u32::MAX; rays.len()];
+    run(
+        words.as_ptr(),
+        counts.as_mut_ptr(),
+        std::ptr::null(),
+        std::ptr::null_mut(),
+        std::ptr::null_mut(),
+        n,
+    );
+    let mut offsets = Vec::with_capacity(rays.len());
+    let mut at = 0u64;
+    for &c in &counts {
+        offsets.push(at);
+        at += u64::from(c);
+    }
+    let total = at as usize;
+    let mut out = vec![0u32; 4 * total.max(1)];
+    let mut insts = vec![u32::MAX; total.max(1)];
+    let mut unused = vec![0u32; rays.len()];
+    run(
+        words.as_ptr(),
+        unused.as_mut_ptr(),
+        offsets.as_ptr(),
+        out.as_mut_ptr(),
+        insts.as_mut_ptr(),
+        n,
+    );
+    let records = bytemuck::cast_slice::<u32, HitRecord>(&out[..4 * total]).to_vec();
+    insts.truncate(total);
+    (counts, records, insts)
+}
+
+/// The lists the host makes from offers, as `all_hits` does with no bound.
+fn lists(
+    resolve: impl Fn(&HitRecord, u32) -> Option<Hit> + Sync,
+    counts: &[u32],
+    records: &[HitRecord],
+    insts: &[u32],
+) -> AllHits {
+    let (hits, lists) = distinct_lists(resolve, counts, records, insts);
+    let mut out = AllHits::new();
+    for &(a, b) in &lists {
+        out.push_ray(&hits[a..b], true);
+    }
+    out
+}
+
+fn mesh_input(mesh: &Mesh) -> BuildInput<'_> {
+    TriangleInput::new(VertexBuffer::f32x3(&mesh.positions))
+        .indices(IndexBuffer::u32x3(&mesh.triangles))
+        .into()
+}
+
+/// A triangle GAS built on the host, in the CPU backend and in the device's binary layout.
+fn triangle_gas(mesh: &Mesh, flags: BuildFlags) -> (Gas, DeviceLayout) {
+    let (data, tree): (GasData, Bvh2) =
+        GasData::build_with_tree(&BuildOptions::new(flags), &[mesh_input(mesh)]).unwrap();
+    let layout =
+        DeviceLayout::new(&data.export_triangles().unwrap(), &tree, NodeLayout::Bvh2).unwrap();
+    (Gas::from(data), layout)
+}
+
+fn test_meshes() -> Vec<(&'static str, Mesh)> {
+    let mut rng = Rng::new(0x51a1);
+    let soup = random_soup(&mut rng, 60, 4.0, 2.5);
+    vec![
+        ("icosphere", icosphere(2)),
+        ("grid cube", grid_cube(4)),
+        (
+            "soup",
+            Mesh {
+                positions: soup.iter().flatten().copied().collect(),
+                triangles: (0..soup.len() as u32)
+                    .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
+                    .collect(),
+            },
+        ),
+    ]
+}
+
+/// Rays around the mesh and rays through its vertices and edge midpoints.
+fn test_rays(mesh: &Mesh, seed: u64) -> Vec<Ray> {
+    let mut rng = Rng::new(seed);
+    let mut rays = rays_around(&mut rng, mesh, 300);
+    let (lo, hi) = mesh.bounds();
+    let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
+    let r = (Vec3::from(hi) - Vec3::from(lo)).length();
+    for _ in 0..100 {
+        let t = mesh.triangles[rng.below(mesh.triangles.len())];
+        let a = Vec3::from(mesh.positions[t[0] as usize]);
+        let b = Vec3::from(mesh.positions[t[1] as usize]);
+        let target = if rng.below(2) == 0 { a } else { (a + b) * 0.5 };
+        let o = c + rng.unit() * r * 1.5;
+        rays.push(Ray::new(o, target - o));
+    }
+    // An invalid ray has no offer.
+    rays.push(Ray::new(Vec3::NAN, Vec3::Z));
+    rays
+}
+
+#[test]
+fn offers_make_the_cpus_lists_and_counts() {
+    let k = kernels();
+    for (name, mesh) in test_meshes() {
+        let rays = test_rays(&mesh, 3);
+        for flags in [BuildFlags::empty(), BuildFlags::PREFER_FAST_TRACE] {
+            let (gas, layout) = triangle_gas(&mesh, flags);
+            let (counts, records, insts) = offers(
+                |r, c, o, out, _, n| {
+                    // SAFETY: the layout's nodes and triangles, `n` rays of 8 words, `n` counts,
+                    // and in the write pass offsets with room for every offer (the counts').
+                    unsafe {
+                        (k.offers_triangles)(
+                            layout.nodes.as_ptr(),
+                            layout.triangles.as_ptr().cast(),
+                            r,
+                            c,
+                            o,
+                            out,
+                            n,
+                        )
+                    }
+                },
+                &rays,
+            );
+            let got = lists(
+                |r, _| {
+                    let s = layout.slots.get(r.slot_index() as usize)?;
+                    Some(hit_of(r, s, false, !0, 0))
+                },
+                &counts,
+                &records,
+                &insts,
+            );
+            let mut want = AllHits::new();
+            gas.all_hits_batch(&rays[..rays.len() - 1], usize::MAX, &mut want)
+                .unwrap();
+            want.push_ray(&[], true);
+            assert_eq!(got, want, "{name}, {flags:?}");
+            let mut want_counts = vec![0u32; rays.len() - 1];
+            gas.count_hits_batch(&rays[..rays.len() - 1], &mut want_counts)
+                .unwrap();
+            let repeats = records.len() > want.all().len();
+            if flags.is_empty() {
+                // No primitive has two leaves: the count pass is the count.
+                assert!(!repeats, "{name}");
+                assert_eq!(counts[..rays.len() - 1], want_counts[..], "{name}");
+            }
+            assert_eq!(counts[rays.len() - 1], 0, "{name}: the invalid ray");
+        }
+    }
+}
+
+#[test]
+fn sphere_offers_make_the_cpus_lists() {
+    let k = kernels();
+    let mut rng = Rng::new(5);
+    let centres: Vec<[f32; 3]> = (0..50).map(|_| rng.vec3(-3.0, 3.0).to_array()).collect();
+    let radii: Vec<f32> = (0..50).map(|_| rng.range(0.2, 0.9)).collect();
+    let (c, r) = (
+        [bytemuck::cast_slice::<_, u8>(&centres)],
+        [bytemuck::cast_slice::<_, u8>(&radii)],
+    );
+    let input: BuildInput<'_> = SphereInput::new(&c, centres.len() as u32, &r).into();
+    let (data, tree) = GasData::build_with_tree(&BuildOptions::default(), &[input]).unwrap();
+    let nodes = crate::layout::bvh2_words(&tree).unwrap();
+    let (words, slots) = sphere_words(&data);
+    let gas = Gas::from(data);
+    let scene = Mesh {
+        positions: vec![[-3.0; 3], [3.0; 3]],
+        triangles: vec![],
+    };
+    let rays = rays_around(&mut rng, &scene, 400);
+    let (counts, records, insts) = offers(
+        |r, c, o, out, _, n| {
+            // SAFETY: the tree's binary nodes and one float4 per sphere slot, as above.
+            unsafe { (k.offers_spheres)(nodes.as_ptr(), words.as_ptr(), r, c, o, out, n) }
+        },
+        &rays,
+    );
+    let got = lists(
+        |r, _| {
+            let s = slots.get(r.slot_index() as usize)?;
+            let mut h = hit_of(r, s, false, !0, 0);
+            h.hit_kind = oxray_core::HitKind::SPHERE_FRONT_FACE;
+            Some(h)
+        },
+        &counts,
+        &records,
+        &insts,
+    );
+    let mut want = AllHits::new();
+    gas.all_hits_batch(&rays, usize::MAX, &mut want).unwrap();
+    assert_eq!(got, want);
+    assert!(want.all().len() > rays.len());
+}
+
+#[test]
+fn instance_offers_make_the_cpus_lists() {
+    let k = kernels();
+    let children = [
+        triangle_gas(&icosphere(2), BuildFlags::PREFER_FAST_TRACE),
+        triangle_gas(&grid_cube(3), BuildFlags::empty()),
+    ];
+    let placements = [
+        Transform::IDENTITY,
+        Transform::from_translation(Vec3::new(2.5, 0.0, 0.0)),
+        Transform::from_affine(&glam::Affine3A::from_scale_rotation_translation(
+            Vec3::new(1.0, 2.0, 0.5),
+            glam::Quat::from_rotation_y(0.7),
+            Vec3::new(-2.0, 1.0, 0.5),
+        )),
+        Transform::from_affine(&glam::Affine3A::from_scale(Vec3::new(-1.0, 1.0, 1.0))),
+    ];
+    let cpu_children: Vec<std::sync::Arc<Gas>> = children
+        .iter()
+        .map(|(g, _)| std::sync::Arc::new(g.clone()))
+        .collect();
+    let instances: Vec<Instance> = placements
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let mut inst = Instance::new(cpu_children[i % 2].clone().into())
+                .transform(*t)
+                .instance_id(100 + i as u32);
+            if i == 2 {
+                inst = inst.flags(InstanceFlags::FLIP_TRIANGLE_FACING);
+            }
+            inst
+        })
+        .collect();
+    let (data, tree): (IasData, Bvh2) =
+        IasData::build_with_tree(&BuildOptions::default(), &[(&instances[..]).into()]).unwrap();
+    let refs: Vec<Option<ChildRef>> = data
+        .instances
+        .iter()
+        .enumerate()
+        .map(|(slot, inst)| {
+            let l = &children[inst.index as usize % 2].1;
+            Some(ChildRef {
+                index: slot as u32,
+                nodes_addr: l.nodes.as_ptr() as u64,
+                triangles_addr: l.triangles.as_ptr() as u64,
+            })
+        })
+        .collect();
+    let layout = IasLayout::new(&data, &tree, &refs).unwrap();
+    let scene = Mesh {
+        positions: vec![[-4.0, -3.0, -3.0], [5.0, 4.0, 3.0]],
+        triangles: vec![],
+    };
+    let rays = rays_around(&mut Rng::new(11), &scene, 500);
+    let (counts, records, insts) = offers(
+        |r, c, o, out, oi, n| {
+            // SAFETY: the top-level nodes and instance slots, whose child addresses are the
+            // children's layouts above (alive for the call), as the device's.
+            unsafe {
+                (k.offers_ias)(
+                    layout.nodes.as_ptr(),
+                    layout.instances.as_ptr(),
+                    r,
+                    c,
+                    o,
+                    out,
+                    oi,
+                    n,
+                )
+            }
+        },
+        &rays,
+    );
+    let got = lists(
+        |r, slot| {
+            let inst = data.instances.get(slot as usize)?;
+            let child = &children[inst.index as usize % 2].1;
+            let s = child.slots.get(r.slot_index() as usize)?;
+            let flip = inst.flags.contains(InstanceFlags::FLIP_TRIANGLE_FACING);
+            Some(hit_of(r, s, flip, inst.instance_id, inst.index))
+        },
+        &counts,
+        &records,
+        &insts,
+    );
+    let cpu = oxray_cpu::Ias::from_data(data.clone()).unwrap();
+    let mut want = AllHits::new();
+    cpu.all_hits_batch(&rays, usize::MAX, &mut want).unwrap();
+    assert_eq!(got, want);
+    let hit: std::collections::HashSet<u32> = want.all().iter().map(|h| h.instance_index).collect();
+    assert_eq!(hit.len(), placements.len(), "every instance is crossed");
+}
+
+/// Points around the mesh, at its vertices and edge midpoints, and just off its vertices.
+fn test_points(mesh: &Mesh, seed: u64) -> Vec<Vec3> {
+    let mut rng = Rng::new(seed);
+    let (lo, hi) = mesh.bounds();
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    let (c, e) = ((lo + hi) * 0.5, (hi - lo) * 0.75);
+    let mut p: Vec<Vec3> = (0..300)
+        .map(|_| {
+            c + e * Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            )
+        })
+        .collect();
+    for _ in 0..100 {
+        let t = mesh.triangles[rng.below(mesh.triangles.len())];
+        let a = Vec3::from(mesh.positions[t[0] as usize]);
+        let b = Vec3::from(mesh.positions[t[1] as usize]);
+        p.extend([a, (a + b) * 0.5, a + rng.unit() * 1e-3]);
+    }
+    p
+}
+
+#[test]
+fn point_kernels_find_the_cpus_closest_points_and_signs() {
+    let k = kernels();
+    for (name, mesh) in test_meshes() {
+        let points = test_points(&mesh, 4);
+        let words: Vec<f32> = points
+            .iter()
+            .flat_map(|p| [p.x, p.y, p.z, f32::INFINITY])
+            .collect();
+        for flags in [BuildFlags::empty(), BuildFlags::PREFER_FAST_TRACE] {
+            let (gas, layout) = triangle_gas(&mesh, flags);
+            // One input: a slot's global id is its primitive index.
+            let ids: Vec<u32> = layout
+                .slots
+                .iter()
+                .map(|s| {
+                    if s.primitive_index == u32::MAX {
+                        NO_PRIMITIVE
+                    } else {
+                        s.primitive_index
+                    }
+                })
+                .collect();
+            let b = gas.data().bounds;
+            let extent = b.min.abs().max(b.max.abs()).max_element();
+            let n = points.len() as u32;
+            let mut out = vec![0u32; 8 * points.len()];
+            let mut sd = vec![0.0f32; points.len()];
+            // SAFETY: the layout's nodes and triangles, an id per slot, `n` points of 4 floats
+            // and 8 words (closest points) or one float (signed distances) per point.
+            unsafe {
+                (k.closest_points)(
+                    layout.nodes.as_ptr(),
+                    layout.triangles.as_ptr().cast(),
+                    ids.as_ptr(),
+                    words.as_ptr(),
+                    out.as_mut_ptr(),
+                    extent,
+                    n,
+                );
+                (k.signed_distances)(
+                    layout.nodes.as_ptr(),
+                    layout.triangles.as_ptr().cast(),
+                    ids.as_ptr(),
+                    words.as_ptr(),
+                    sd.as_mut_ptr(),
+                    extent,
+                    n,
+                );
+            }
+            for (i, p) in points.iter().enumerate() {
+                let at = format!("{name}, {flags:?}, point {i} {p}");
+                let want = gas.closest_point(*p).unwrap().unwrap();
+                let w = &out[8 * i..8 * i + 8];
+                let slot = layout.slots[w[6] as usize];
+                assert_eq!(
+                    (
+                        Vec3::new(
+                            f32::from_bits(w[0]),
+                            f32::from_bits(w[1]),
+                            f32::from_bits(w[2])
+                        ),
+                        f32::from_bits(w[3]).sqrt(),
+                        slot.primitive_index,
+                        f32::from_bits(w[4]),
+                        f32::from_bits(w[5]),
+                    ),
+                    (
+                        want.point,
+                        want.distance,
+                        want.primitive_index,
+                        want.u,
+                        want.v
+                    ),
+                    "{at}"
+                );
+                assert_eq!(
+                    sd[i].to_bits(),
+                    gas.signed_distance(*p).unwrap().to_bits(),
+                    "{at}: signed distance"
+                );
+            }
+        }
+    }
+}
