@@ -530,9 +530,9 @@ pub fn bench_builds(
     for (preset, flags, forced) in [
         ("fast-build", BuildFlags::PREFER_FAST_BUILD, None),
         (
-            "fast-build, 30-bit codes",
+            "fast-build, 32-bit codes",
             BuildFlags::PREFER_FAST_BUILD,
-            Some(coarse),
+            Some(finer),
         ),
         ("default", BuildFlags::empty(), None),
         ("fast-trace", BuildFlags::PREFER_FAST_TRACE, None),
