@@ -75,7 +75,9 @@ pub use pipeline::{
 };
 pub use ray::{Ray, RayError, RayRecord};
 pub use sbt::{SbtHeader, SbtRegion, ShaderBindingTable};
-pub use simulation::{AllHits, ClosestPoint, SurfaceQueryError};
+pub use simulation::{
+    AllHits, ClosestPoint, NoShadingNormals, ShadingNormals, SurfaceHit, SurfaceQueryError,
+};
 pub use transform::Transform;
 pub use validate::{MAX_PRIMITIVES_PER_GAS, MAX_SBT_RECORDS_PER_GAS};
 pub use vertex::{IndexFormat, VertexFormat};

@@ -3,7 +3,7 @@
 //! (`oxray_cpu::simulation`) and the CUDA backend's batched kernels give the same values in
 //! these types.
 
-use crate::{BuildInputKind, Hit, RayError};
+use crate::{BuildInputKind, Hit, Ray, RayError, Transform};
 use glam::Vec3;
 use std::cmp::Ordering;
 use thiserror::Error;
@@ -128,6 +128,122 @@ impl AllHits {
         self.hits.extend_from_slice(hits);
         self.offsets.push(self.hits.len());
         self.complete.push(complete);
+    }
+}
+
+/// Where a hit lies, in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceHit {
+    /// The hit point. On a triangle it is interpolated from the vertices with the hit's
+    /// barycentrics and carried to world space (so it lies on the triangle to rounding, which
+    /// `ray.at(hit.t)` need not); on a sphere it is the point of the ray at the hit's `t`
+    /// projected onto the sphere.
+    pub point: Vec3,
+    /// The unit geometric normal. A triangle's is `(v1 - v0) × (v2 - v0)` in object space, the
+    /// side its counter-clockwise winding faces, carried to world space by the inverse
+    /// transpose of the object-to-world transform; so the hit is a front face
+    /// (`optixIsFrontFaceHit`) exactly when the ray's direction points against it (a negative
+    /// dot product), mirrored instances included. An instance's `FLIP_TRIANGLE_FACING` swaps
+    /// [`front_face`](Self::front_face) but not this normal. A sphere's points outwards.
+    pub geometric_normal: Vec3,
+    /// The unit shading normal: the caller's vertex normals (see [`ShadingNormals`])
+    /// interpolated with the barycentrics in object space and carried to world space as the
+    /// geometric normal is; the geometric normal where there are none (spheres, triangles
+    /// without normals, normals that interpolate to zero or NaN).
+    pub shading_normal: Vec3,
+    /// Whether the hit is on the primitive's front face (the hit kind's).
+    pub front_face: bool,
+}
+
+/// Per-vertex normals of the triangles hit: the source of [`SurfaceHit::shading_normal`].
+///
+/// Implemented by `VertexNormals` of the CPU backend (one indexed mesh), by [`NoShadingNormals`], and by any
+/// `Fn(&Hit) -> Option<[Vec3; 3]>` (say, one mesh per instance id).
+pub trait ShadingNormals {
+    /// The object-space normals of the hit triangle's three vertices, in its vertex order;
+    /// `None` for none.
+    fn vertex_normals(&self, hit: &Hit) -> Option<[Vec3; 3]>;
+}
+
+impl<F: Fn(&Hit) -> Option<[Vec3; 3]>> ShadingNormals for F {
+    fn vertex_normals(&self, hit: &Hit) -> Option<[Vec3; 3]> {
+        self(hit)
+    }
+}
+
+/// No vertex normals: the shading normal is the geometric normal.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoShadingNormals;
+
+impl ShadingNormals for NoShadingNormals {
+    fn vertex_normals(&self, _: &Hit) -> Option<[Vec3; 3]> {
+        None
+    }
+}
+
+/// The object-space parts of a triangle hit's surface: the point interpolated from the vertices
+/// `v` with the hit's barycentrics, the (unnormalised) geometric normal of the winding,
+/// `(v1 - v0) × (v2 - v0)`, and the vertex normals `normals` interpolated the same way.
+#[must_use]
+pub fn triangle_surface_parts(
+    v: [Vec3; 3],
+    hit: &Hit,
+    normals: Option<[Vec3; 3]>,
+) -> (Vec3, Vec3, Option<Vec3>) {
+    let [p0, p1, p2] = v;
+    let w = 1.0 - hit.u - hit.v;
+    let point = p0 * w + p1 * hit.u + p2 * hit.v;
+    let normal = (p1 - p0).cross(p2 - p0);
+    let shading = normals.map(|[n0, n1, n2]| n0 * w + n1 * hit.u + n2 * hit.v);
+    (point, normal, shading)
+}
+
+/// The object-space point and unit outward normal of a sphere hit at `t` of `object_ray` (the
+/// ray carried into the sphere's space): the ray's point projected onto the sphere.
+#[must_use]
+pub fn sphere_surface_parts(center: Vec3, radius: f32, object_ray: &Ray, t: f32) -> (Vec3, Vec3) {
+    let normal = (object_ray.at(t) - center).normalize_or_zero();
+    (center + normal * radius, normal)
+}
+
+/// A hit's [`SurfaceHit`] from its object-space point, normal and shading normal, carried to
+/// world space through `levels`, the transforms above the primitive innermost first, each as
+/// (object-to-world, world-to-object): points by the first, normals by the inverse transpose
+/// (the second's transpose); then normalised. Every backend finishes its surfaces here.
+///
+/// ```
+/// use oxray_core::simulation::surface_in_world;
+/// use oxray_core::Transform;
+/// use glam::Vec3;
+/// let t = Transform::from_translation(Vec3::X);
+/// let inverse = Transform::from_translation(-Vec3::X);
+/// let s = surface_in_world(Vec3::ZERO, Vec3::new(0.0, 0.0, 2.0), None, [(t, inverse)], true);
+/// assert_eq!((s.point, s.geometric_normal, s.shading_normal), (Vec3::X, Vec3::Z, Vec3::Z));
+/// ```
+#[must_use]
+pub fn surface_in_world(
+    point: Vec3,
+    normal: Vec3,
+    shading: Option<Vec3>,
+    levels: impl IntoIterator<Item = (Transform, Transform)>,
+    front_face: bool,
+) -> SurfaceHit {
+    let (mut point, mut normal, mut shading) = (point, normal, shading);
+    for (object_to_world, world_to_object) in levels {
+        point = object_to_world.transform_point(point);
+        normal = Transform::transform_normal_with_inverse(&world_to_object, normal);
+        shading = shading.map(|n| Transform::transform_normal_with_inverse(&world_to_object, n));
+    }
+    let geometric_normal = normal.normalize_or_zero();
+    let shading_normal = shading
+        .map(Vec3::normalize_or_zero)
+        .filter(|n| *n != Vec3::ZERO)
+        .unwrap_or(geometric_normal);
+    SurfaceHit {
+        point,
+        geometric_normal,
+        shading_normal,
+        front_face,
     }
 }
 

@@ -41,6 +41,10 @@ extern "C" void host_closest_points(const float4* nodes, const float4* tris, con
                                     const float4* points, uint4* out, float extent, u32 n) {
     HOST_LAUNCH(n, oxray_closest_points(nodes, tris, ids, points, out, extent, n));
 }
+extern "C" void host_gather_records(const unsigned long long* addrs, const u32* words, u32* out,
+                                    u32 n) {
+    HOST_LAUNCH(n, oxray_gather_records(addrs, words, out, n));
+}
 extern "C" void host_signed_distances(const float4* nodes, const float4* tris, const u32* ids,
                                       const float4* points, float* out, float extent, u32 n) {
     HOST_LAUNCH(n, oxray_signed_distances(nodes, tris, ids, points, out, extent, n));
@@ -59,6 +63,7 @@ type OffersIas = unsafe extern "C" fn(
     *mut u32,
     u32,
 );
+type Gather = unsafe extern "C" fn(*const u64, *const u32, *mut u32, u32);
 type Points<T> =
     unsafe extern "C" fn(*const u32, *const u32, *const u32, *const f32, *mut T, f32, u32);
 
@@ -70,6 +75,7 @@ struct HostKernels {
     offers_ias: OffersIas,
     closest_points: Points<u32>,
     signed_distances: Points<f32>,
+    gather_records: Gather,
 }
 
 fn kernels() -> &'static HostKernels {
@@ -117,6 +123,7 @@ fn kernels() -> &'static HostKernels {
             let offers_ias = *lib.get::<OffersIas>(b"host_offers_ias").unwrap();
             let closest_points = *lib.get::<Points<u32>>(b"host_closest_points").unwrap();
             let signed_distances = *lib.get::<Points<f32>>(b"host_signed_distances").unwrap();
+            let gather_records = *lib.get::<Gather>(b"host_gather_records").unwrap();
             let _ = std::fs::remove_dir_all(&dir);
             HostKernels {
                 _lib: lib,
@@ -125,6 +132,7 @@ fn kernels() -> &'static HostKernels {
                 offers_ias,
                 closest_points,
                 signed_distances,
+                gather_records,
             }
         }
     })
@@ -543,4 +551,28 @@ fn point_kernels_find_the_cpus_closest_points_and_signs() {
             }
         }
     }
+}
+
+#[test]
+fn the_gather_reads_each_record_at_its_address_up_to_its_size() {
+    let k = kernels();
+    let triangles: Vec<u32> = (0..120).collect();
+    let spheres: Vec<u32> = (1000..1040).collect();
+    let addrs = [
+        triangles.as_ptr() as u64 + 4 * 12 * 3,
+        spheres.as_ptr() as u64 + 4 * 4 * 9,
+        triangles.as_ptr() as u64,
+    ];
+    let words = [12u32, 4, 12];
+    let mut out = vec![u32::MAX; 12 * addrs.len()];
+    // SAFETY: each address starts a record of its size within `triangles` or `spheres` (slot 3
+    // of ten 12-word slots, slot 9 of ten 4-word slots, slot 0), and 12 output words each.
+    unsafe { (k.gather_records)(addrs.as_ptr(), words.as_ptr(), out.as_mut_ptr(), 3) };
+    assert_eq!(out[..12], triangles[36..48]);
+    assert_eq!(out[12..16], spheres[36..40]);
+    assert!(
+        out[16..24].iter().all(|&w| w == u32::MAX),
+        "a sphere's record is 4 words"
+    );
+    assert_eq!(out[24..], triangles[..12]);
 }

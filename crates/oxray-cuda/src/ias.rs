@@ -277,6 +277,14 @@ impl CudaIas {
         (&self.nodes, &self.instances)
     }
 
+    /// The triangle GAS of the instance in slot `slot`, if it has one.
+    pub(crate) fn triangle_child(&self, slot: usize) -> Option<&Arc<CudaGas>> {
+        self.children
+            .get(slot)?
+            .as_ref()
+            .and_then(CudaChild::triangle_gas)
+    }
+
     /// The triangle GAS of every instance that has one.
     pub(crate) fn triangle_children(&self) -> impl Iterator<Item = &Arc<CudaGas>> + '_ {
         self.children

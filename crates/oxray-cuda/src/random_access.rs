@@ -9,7 +9,7 @@ use oxray_core::{BuildFlags, RandomAccessError};
 impl CudaGas {
     /// The first leaf slot of every primitive by global id ([`NO_SLOT`] where the builder left
     /// it out), made on first use.
-    fn primitive_slots(&self) -> &[u32] {
+    pub(crate) fn primitive_slots(&self) -> &[u32] {
         self.random_slots.get_or_init(|| {
             let mut slots = vec![NO_SLOT; self.meta.num_primitives as usize];
             for (slot, g) in self.slot_globals().into_iter().enumerate() {

@@ -47,11 +47,16 @@ use crate::gas::{check_batch, grid, CudaGas, HitRecord};
 use crate::ias::CudaIas;
 use crate::layout::NodeLayout;
 use bytemuck::Zeroable;
-use cudarc::driver::{CudaFunction, CudaSlice, CudaView, PushKernelArg};
+use cudarc::driver::{CudaFunction, CudaSlice, CudaView, DevicePtr, PushKernelArg};
 use glam::Vec3;
+use oxray_bvh::triangle::WatertightRay;
 use oxray_bvh::{GasKind, NO_PRIMITIVE};
 use oxray_core::simulation::hit_order;
-use oxray_core::{AllHits, ClosestPoint, Hit, Ray, RayRecord, SurfaceQueryError};
+use oxray_core::simulation::{sphere_surface_parts, surface_in_world, triangle_surface_parts};
+use oxray_core::{
+    AllHits, ClosestPoint, Hit, NoShadingNormals, PrimitiveType, Ray, RayRecord, ShadingNormals,
+    SurfaceHit, SurfaceQueryError, Transform,
+};
 use rayon::prelude::*;
 use std::cmp::Ordering;
 use std::sync::Arc;
@@ -89,15 +94,17 @@ pub(crate) struct SimulationKernels {
     offers_ias: CudaFunction,
     closest_points: CudaFunction,
     signed_distances: CudaFunction,
+    gather_records: CudaFunction,
 }
 
 /// The entry points of [`SIMULATION_SOURCE`].
-pub(crate) const SIMULATION_ENTRIES: [&str; 5] = [
+pub(crate) const SIMULATION_ENTRIES: [&str; 6] = [
     "oxray_offers_triangles",
     "oxray_offers_spheres",
     "oxray_offers_ias",
     "oxray_closest_points",
     "oxray_signed_distances",
+    "oxray_gather_records",
 ];
 
 /// Compiles the simulation kernels to PTX with NVRTC, for compute capability `cc`.
@@ -119,6 +126,7 @@ impl SimulationKernels {
             offers_ias: f(SIMULATION_ENTRIES[2])?,
             closest_points: f(SIMULATION_ENTRIES[3])?,
             signed_distances: f(SIMULATION_ENTRIES[4])?,
+            gather_records: f(SIMULATION_ENTRIES[5])?,
         })
     }
 }
@@ -771,6 +779,317 @@ impl CudaIas {
                 "all hits through instances of IASes, transforms, custom primitives or structures with motion on the CUDA device",
             ))
         }
+    }
+}
+
+/// A hit's primitive found in device memory: the address of its record, the ray in its
+/// object space, and the instance above it.
+#[derive(Clone, Copy)]
+struct Located {
+    address: u64,
+    /// Words of the record: [`TRIANGLE_WORDS`] or [`SPHERE_WORDS`].
+    words: u32,
+    sphere: bool,
+    object_ray: Ray,
+    /// (object-to-world, world-to-object) of the instance, if any.
+    instance: Option<(Transform, Transform)>,
+}
+
+/// Record words of a triangle slot (three `float4`) and of a sphere slot (one).
+const TRIANGLE_WORDS: usize = 12;
+const SPHERE_WORDS: usize = 4;
+
+/// The interval around a hit's `t` in which the CPU's surface query finds the hit again.
+fn around(t: f32) -> (f32, f32) {
+    let slack = t * 1e-6 + f32::MIN_POSITIVE;
+    ((t - slack).max(0.0), t + slack)
+}
+
+/// The surfaces of a batch of hits on either structure, as the CPU's `hit_surface_batch`:
+/// `locate` finds each hit's primitive (an error, or `None` where it is not in the structure),
+/// the primitives' records are read from device memory in one launch, each hit is checked to
+/// lie on its ray there, and the surface is finished as on the CPU.
+fn surfaces<N: ShadingNormals + Sync + ?Sized>(
+    ctx: &CudaContext,
+    rays: &[Ray],
+    hits: &[Option<Hit>],
+    normals: &N,
+    out: &mut [Option<SurfaceHit>],
+    locate: impl Fn(&Ray, &Hit) -> Result<Option<Located>, SurfaceQueryError> + Sync,
+) -> Result<(), SurfaceQueryError> {
+    length_check(rays.len(), hits.len())?;
+    length_check(rays.len(), out.len())?;
+    check_batch(rays.len()).map_err(query_error)?;
+    let not_found = |i: usize, h: &Hit| SurfaceQueryError::HitNotFound {
+        index: i,
+        primitive_index: h.primitive_index,
+        build_input: h.build_input,
+        instance_index: h.instance_index,
+    };
+    // Each query: Ok(None) for a miss, else where its primitive lies.
+    let found: Vec<Result<Option<Located>, SurfaceQueryError>> = rays
+        .par_iter()
+        .zip(hits.par_iter())
+        .enumerate()
+        .map(|(i, (ray, hit))| {
+            let Some(h) = hit else { return Ok(None) };
+            ray.validate()
+                .map_err(|error| SurfaceQueryError::InvalidRay { index: i, error })?;
+            match h.hit_kind.primitive_type() {
+                PrimitiveType::Triangle | PrimitiveType::Sphere => {}
+                PrimitiveType::Custom => {
+                    return Err(SurfaceQueryError::Unsupported("a custom primitive"))
+                }
+                PrimitiveType::Curve(_) => return Err(SurfaceQueryError::Unsupported("a curve")),
+            }
+            if !(h.t >= 0.0 && h.t.is_finite()) {
+                return Err(not_found(i, h));
+            }
+            match locate(ray, h).map_err(|e| e.at(i))? {
+                Some(l) => Ok(Some(l)),
+                None => Err(not_found(i, h)),
+            }
+        })
+        .collect();
+    // Every record in one launch, in query order.
+    let located: Vec<(usize, Located)> = found
+        .iter()
+        .enumerate()
+        .filter_map(|(i, f)| f.as_ref().ok().copied().flatten().map(|l| (i, l)))
+        .collect();
+    let words = TRIANGLE_WORDS;
+    let mut records = vec![0u32; words * located.len()];
+    if !located.is_empty() {
+        let k = ctx.simulation_kernels().map_err(query_error)?;
+        let s = &ctx.stream;
+        let addrs: Vec<u64> = located.iter().map(|(_, l)| l.address).collect();
+        let lens: Vec<u32> = located.iter().map(|(_, l)| l.words).collect();
+        let mut run = || -> Result<(), CudaError> {
+            let d_addrs = s
+                .clone_htod(&addrs)
+                .map_err(driver("copying record addresses to the device"))?;
+            let d_lens = s
+                .clone_htod(&lens)
+                .map_err(driver("copying record sizes to the device"))?;
+            let mut d_out = s
+                .alloc_zeros::<u32>(records.len())
+                .map_err(driver("allocating records"))?;
+            let n = located.len() as u32;
+            let mut launch = s.launch_builder(&k.gather_records);
+            launch.arg(&d_addrs).arg(&d_lens).arg(&mut d_out).arg(&n);
+            // SAFETY: oxray_gather_records(const u64* addrs, const u32* words, u32* out,
+            // u32 n): `n` addresses, each the start of a slot's record in a live GAS of this
+            // context (the caller's structures, borrowed for the whole call), holding the
+            // `words[i]` words read from it (12 for a triangle slot, 4 for a sphere's: `locate`
+            // sets both from the GAS's kind), and 12 output words per address.
+            unsafe { launch.launch(grid(n)) }.map_err(driver("launching the record gather"))?;
+            s.memcpy_dtoh(&d_out, &mut records)
+                .map_err(driver("copying records to the host"))?;
+            ctx.synchronize()
+        };
+        run().map_err(query_error)?;
+    }
+    let mut record_of = vec![usize::MAX; rays.len()];
+    for (k, (i, _)) in located.iter().enumerate() {
+        record_of[*i] = k;
+    }
+    let results: Vec<Result<Option<SurfaceHit>, SurfaceQueryError>> = found
+        .into_par_iter()
+        .enumerate()
+        .map(|(i, f)| {
+            let Some(l) = f? else { return Ok(None) };
+            let h = hits[i].as_ref().expect("located hits are hits");
+            let w = &records[words * record_of[i]..words * record_of[i] + words];
+            let f = |k: usize| f32::from_bits(w[k]);
+            let (tmin, tmax) = around(h.t);
+            let (o, d) = (l.object_ray.origin, l.object_ray.direction);
+            let (point, normal, shading) = if l.sphere {
+                let sphere = oxray_bvh::Sphere::new(Vec3::new(f(0), f(1), f(2)), f(3));
+                if sphere.intersect(o, d, tmin, tmax).is_none() {
+                    return Err(not_found(i, h));
+                }
+                let (p, n) =
+                    sphere_surface_parts(Vec3::new(f(0), f(1), f(2)), f(3), &l.object_ray, h.t);
+                (p, n, None)
+            } else {
+                let v = [0, 4, 8].map(|k| [f(k), f(k + 1), f(k + 2)]);
+                let hit = WatertightRay::new(o, d).intersect(&v[0], &v[1], &v[2], tmin, tmax);
+                if hit.is_none() {
+                    return Err(not_found(i, h));
+                }
+                triangle_surface_parts(v.map(Vec3::from), h, normals.vertex_normals(h))
+            };
+            Ok(Some(surface_in_world(
+                point,
+                normal,
+                shading,
+                l.instance,
+                h.hit_kind.is_front_face(),
+            )))
+        })
+        .collect();
+    let mut first = None;
+    for (i, (o, r)) in out.iter_mut().zip(results).enumerate() {
+        match r {
+            Ok(v) => *o = v,
+            Err(e) => {
+                first.get_or_insert(e.at(i));
+            }
+        }
+    }
+    first.map_or(Ok(()), Err)
+}
+
+impl CudaGas {
+    /// The device address of the slot table (read once per batch: each lookup records a
+    /// stream event).
+    fn records_address(&self) -> u64 {
+        let (base, _guard) = self.triangles.device_ptr(&self.ctx.stream);
+        base
+    }
+
+    /// Where hit `h` of `ray` (in this GAS's space) lies, the slot table being at `base`:
+    /// `None` where it is not one of this GAS's primitives; the instance above it is the
+    /// caller's.
+    fn locate(
+        &self,
+        base: u64,
+        ray: &Ray,
+        h: &Hit,
+        instance: Option<(Transform, Transform)>,
+    ) -> Option<Located> {
+        let global = self
+            .meta
+            .global_primitive(h.primitive_index, h.sbt_gas_index)?;
+        let slot = *self.primitive_slots().get(global as usize)?;
+        let info = self.slots.get(slot as usize)?;
+        if info.primitive_index != h.primitive_index || info.build_input != h.build_input {
+            return None;
+        }
+        let (sphere, words) = match self.kind {
+            GasKind::Spheres => (true, SPHERE_WORDS),
+            _ => (false, TRIANGLE_WORDS),
+        };
+        Some(Located {
+            address: base + 4 * (words as u64) * u64::from(slot),
+            words: words as u32,
+            sphere,
+            object_ray: *ray,
+            instance,
+        })
+    }
+
+    /// Refuses the surface queries this GAS cannot answer on the device.
+    fn check_surfaces(&self) -> Result<(), SurfaceQueryError> {
+        if self.motion.is_some() {
+            return Err(SurfaceQueryError::Unsupported(
+                "a GAS with motion on the CUDA device",
+            ));
+        }
+        match self.kind {
+            GasKind::Triangles | GasKind::Spheres => Ok(()),
+            GasKind::CustomPrimitives => Err(SurfaceQueryError::Unsupported("a custom primitive")),
+            GasKind::Curves => Err(SurfaceQueryError::Unsupported("a curve")),
+        }
+    }
+
+    /// The world-space point, unit geometric normal and face of every hit (`hits[i]` of
+    /// `rays[i]`, `None` for a miss; `out[i]` `None` then), as the CPU's `hit_surface_batch`:
+    /// the same values bit for bit, and the same errors (a hit that is not on its ray in this
+    /// structure is [`SurfaceQueryError::HitNotFound`]). The primitives are read from device
+    /// memory; the surfaces are finished on the host. The first failing query (the lowest
+    /// index) is the error; every other output is written.
+    pub fn hit_surface_batch(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        out: &mut [Option<SurfaceHit>],
+    ) -> Result<(), SurfaceQueryError> {
+        self.hit_surface_batch_shaded(rays, hits, &NoShadingNormals, out)
+    }
+
+    /// [`hit_surface_batch`](Self::hit_surface_batch) with the shading normal interpolated
+    /// from vertex normals.
+    pub fn hit_surface_batch_shaded<N: ShadingNormals + Sync + ?Sized>(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        normals: &N,
+        out: &mut [Option<SurfaceHit>],
+    ) -> Result<(), SurfaceQueryError> {
+        self.check_surfaces()?;
+        let base = self.records_address();
+        surfaces(&self.ctx, rays, hits, normals, out, |ray, h| {
+            if (h.instance_id, h.instance_index) != (!0, 0) {
+                return Ok(None);
+            }
+            Ok(self.locate(base, ray, h, None))
+        })
+    }
+}
+
+impl CudaIas {
+    /// [`CudaGas::hit_surface_batch`] for hits through this IAS's instances (one level over
+    /// triangle GASes: [`is_queryable`](Self::is_queryable)).
+    pub fn hit_surface_batch(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        out: &mut [Option<SurfaceHit>],
+    ) -> Result<(), SurfaceQueryError> {
+        self.hit_surface_batch_shaded(rays, hits, &NoShadingNormals, out)
+    }
+
+    /// [`hit_surface_batch`](Self::hit_surface_batch) with vertex normals.
+    pub fn hit_surface_batch_shaded<N: ShadingNormals + Sync + ?Sized>(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        normals: &N,
+        out: &mut [Option<SurfaceHit>],
+    ) -> Result<(), SurfaceQueryError> {
+        self.check_simulation()?;
+        let data = self.data();
+        let slot_of: std::collections::HashMap<u32, usize> = data
+            .instances
+            .iter()
+            .enumerate()
+            .map(|(slot, inst)| (inst.index, slot))
+            .collect();
+        // The slot table of each instance's child, looked up once per child.
+        let mut bases: std::collections::HashMap<usize, u64> = Default::default();
+        let base_of: Vec<u64> = (0..data.instances.len())
+            .map(|slot| {
+                self.triangle_child(slot).map_or(0, |g| {
+                    *bases
+                        .entry(Arc::as_ptr(g) as usize)
+                        .or_insert_with(|| g.records_address())
+                })
+            })
+            .collect();
+        surfaces(self.context(), rays, hits, normals, out, |ray, h| {
+            let Some(&slot) = slot_of.get(&h.instance_index) else {
+                return Ok(None);
+            };
+            let inst = &data.instances[slot];
+            if inst.instance_id != h.instance_id {
+                return Ok(None);
+            }
+            let Some(gas) = self.triangle_child(slot) else {
+                return Ok(None);
+            };
+            let object_ray = Ray {
+                origin: inst.world_to_object.transform_point(ray.origin),
+                direction: inst.world_to_object.transform_vector(ray.direction),
+                ..*ray
+            };
+            Ok(gas.locate(
+                base_of[slot],
+                &object_ray,
+                h,
+                Some((inst.object_to_world, inst.world_to_object)),
+            ))
+        })
     }
 }
 

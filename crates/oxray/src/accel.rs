@@ -6,7 +6,8 @@ use oxray_bvh::{BvhStats, GasMemory};
 use oxray_core::{
     Aabb, AccelProperty, AllHits, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind,
     BuildOptions, ClosestPoint, EmittedProperty, GeometryFlags, Hit, LoadError, QueryError,
-    RandomAccessError, Ray, SurfaceQueryError, Traversable, TraversableHandle, TraversableKind,
+    RandomAccessError, Ray, ShadingNormals, SurfaceHit, SurfaceQueryError, Traversable,
+    TraversableHandle, TraversableKind,
 };
 use std::sync::Arc;
 
@@ -403,6 +404,54 @@ impl Gas {
             g.contains_batch(points, out)
         )
     }
+
+    /// The world-space point, unit geometric and shading normals and face of every hit
+    /// (`hits[i]` of `rays[i]`, `None` for a miss), on the structure's device: the same values
+    /// on every device. A hit that is not on its ray in this structure is
+    /// [`SurfaceQueryError::HitNotFound`]; the first failing query (the lowest index) is the
+    /// error and every other output is written.
+    ///
+    /// ```
+    /// use oxray::{Gas, Ray, glam::Vec3};
+    /// let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    /// let gas = Gas::from(oxray::cpu::Gas::from_mesh(&v, &[[0, 1, 2]])?);
+    /// let rays = [Ray::new(Vec3::new(0.25, 0.25, 1.0), -Vec3::Z)];
+    /// let mut hits = [None];
+    /// gas.intersect_batch(&rays, &mut hits)?;
+    /// let mut surfaces = [None];
+    /// gas.hit_surface_batch(&rays, &hits, &mut surfaces)?;
+    /// let s = surfaces[0].unwrap();
+    /// assert_eq!((s.point, s.geometric_normal), (Vec3::new(0.25, 0.25, 0.0), Vec3::Z));
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    pub fn hit_surface_batch(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        out: &mut [Option<SurfaceHit>],
+    ) -> Result<(), SurfaceQueryError> {
+        on_gas!(
+            self,
+            g => g.hit_surface_batch(rays, hits, out),
+            g.hit_surface_batch(rays, hits, out)
+        )
+    }
+
+    /// [`hit_surface_batch`](Self::hit_surface_batch) with the shading normal interpolated from
+    /// vertex normals.
+    pub fn hit_surface_batch_shaded<N: ShadingNormals + Sync + ?Sized>(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        normals: &N,
+        out: &mut [Option<SurfaceHit>],
+    ) -> Result<(), SurfaceQueryError> {
+        on_gas!(
+            self,
+            g => g.hit_surface_batch_shaded(rays, hits, normals, out),
+            g.hit_surface_batch_shaded(rays, hits, normals, out)
+        )
+    }
 }
 
 /// The CUDA backend of the context a structure lives in.
@@ -671,6 +720,36 @@ impl Ias {
             self,
             i => i.count_hits_batch(rays, counts),
             i.count_hits_batch(rays, counts)
+        )
+    }
+
+    /// The surfaces of hits through the instances, on the structure's device (see
+    /// [`Gas::hit_surface_batch`]). On CUDA, over one level of instances of triangle GASes.
+    pub fn hit_surface_batch(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        out: &mut [Option<SurfaceHit>],
+    ) -> Result<(), SurfaceQueryError> {
+        on_ias!(
+            self,
+            i => i.hit_surface_batch(rays, hits, out),
+            i.hit_surface_batch(rays, hits, out)
+        )
+    }
+
+    /// [`hit_surface_batch`](Self::hit_surface_batch) with vertex normals.
+    pub fn hit_surface_batch_shaded<N: ShadingNormals + Sync + ?Sized>(
+        &self,
+        rays: &[Ray],
+        hits: &[Option<Hit>],
+        normals: &N,
+        out: &mut [Option<SurfaceHit>],
+    ) -> Result<(), SurfaceQueryError> {
+        on_ias!(
+            self,
+            i => i.hit_surface_batch_shaded(rays, hits, normals, out),
+            i.hit_surface_batch_shaded(rays, hits, normals, out)
         )
     }
 }

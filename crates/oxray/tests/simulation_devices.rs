@@ -12,8 +12,8 @@ use common::{devices, grid_cube, icosphere, name, random_soup, Mesh, Rng};
 use glam::Vec3;
 use oxray::{
     AabbBuffer, AllHits, BuildFlags, BuildOptions, ClosestPoint, CustomPrimitiveInput, Device, Gas,
-    IndexBuffer, Instance, InstanceFlags, Ray, SphereInput, SurfaceQueryError, Transform,
-    TriangleInput, VertexBuffer,
+    IndexBuffer, Instance, InstanceFlags, Ray, SphereInput, SurfaceHit, SurfaceQueryError,
+    Transform, TriangleInput, VertexBuffer, VertexNormals,
 };
 use oxray_testkit::rays::rays_around;
 
@@ -421,6 +421,173 @@ fn bad_input_gets_the_same_error_on_every_device() {
             .unwrap_err();
         assert!(
             matches!(e, SurfaceQueryError::NotTriangles(_)),
+            "{dev_name}: {e}"
+        );
+    }
+}
+
+#[test]
+fn hit_surfaces_are_the_same_on_every_device() {
+    let mesh = icosphere(3);
+    // Vertex normals of the sphere (its positions), for the shading normal.
+    let normals = mesh.positions.clone();
+    let rays = rays_for(&mesh, 13);
+    let mut reference: Option<Vec<Option<SurfaceHit>>> = None;
+    for (dev_name, device) in all_devices() {
+        for flags in [BuildFlags::empty(), BuildFlags::PREFER_FAST_TRACE] {
+            let gas = build(&device, &mesh, flags);
+            let mut hits = vec![None; rays.len()];
+            gas.intersect_batch(&rays, &mut hits).unwrap();
+            let shading = VertexNormals::new(&normals, &mesh.triangles).unwrap();
+            let mut got = vec![None; rays.len()];
+            gas.hit_surface_batch_shaded(&rays, &hits, &shading, &mut got)
+                .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+            for (i, (s, h)) in got.iter().zip(&hits).enumerate() {
+                assert_eq!(s.is_some(), h.is_some(), "{dev_name}: ray {i}");
+                if let (Some(s), Some(h)) = (s, h) {
+                    assert!((s.point.length() - 1.0).abs() < 1e-2, "{dev_name}: {s:?}");
+                    assert_eq!(
+                        s.front_face,
+                        s.geometric_normal.dot(rays[i].direction) < 0.0
+                    );
+                    assert_eq!(s.front_face, h.hit_kind.is_triangle_front_face());
+                }
+            }
+            // Which of two primitives at one distance a tree reports differs (rays through
+            // shared edges): compare where the hits are the same.
+            match &reference {
+                None => reference = Some(got),
+                Some(want) => {
+                    let mut cpu_hits = vec![None; rays.len()];
+                    build(&Device::cpu(), &mesh, BuildFlags::empty())
+                        .intersect_batch(&rays, &mut cpu_hits)
+                        .unwrap();
+                    for i in 0..rays.len() {
+                        if hits[i] == cpu_hits[i] {
+                            assert_eq!(got[i], want[i], "{dev_name}, {flags:?}: ray {i}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn hit_surfaces_through_instances_and_on_spheres_are_the_same_on_every_device() {
+    let mesh = icosphere(2);
+    let placements = [
+        Transform::from_translation(Vec3::new(-1.5, 0.0, 0.0)),
+        Transform::from_affine(&glam::Affine3A::from_scale_rotation_translation(
+            Vec3::new(0.5, 1.5, 1.0),
+            glam::Quat::from_rotation_z(0.4),
+            Vec3::new(1.5, 0.0, 0.0),
+        )),
+    ];
+    let scene = Mesh {
+        positions: vec![[-3.0, -2.0, -2.0], [3.0, 2.0, 2.0]],
+        triangles: vec![],
+    };
+    let rays = rays_around(&mut Rng::new(17), &scene, 400);
+    let centres: Vec<[f32; 3]> = vec![[0.0, 0.0, 0.0], [1.0, 0.5, 0.0], [-1.0, 0.0, 0.5]];
+    let radii = vec![0.6f32, 0.4, 0.5];
+    type Surfaces = Vec<Option<SurfaceHit>>;
+    let mut reference: Option<(Surfaces, Surfaces)> = None;
+    for (dev_name, device) in all_devices() {
+        let gas = build(&device, &mesh, BuildFlags::empty());
+        let instances: Vec<Instance> = placements
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                Instance::new(gas.handle())
+                    .transform(*t)
+                    .instance_id(7 + k as u32)
+            })
+            .collect();
+        let ias = device
+            .build_ias(&BuildOptions::default(), &[(&instances[..]).into()])
+            .unwrap();
+        let mut hits = vec![None; rays.len()];
+        ias.intersect_batch(&rays, &mut hits).unwrap();
+        let mut through = vec![None; rays.len()];
+        ias.hit_surface_batch(&rays, &hits, &mut through)
+            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        assert!(through.iter().flatten().count() > 50, "{dev_name}");
+
+        let (c, r) = (
+            [bytemuck::cast_slice::<_, u8>(&centres)],
+            [bytemuck::cast_slice::<_, u8>(&radii)],
+        );
+        let spheres = device
+            .build_gas(
+                &BuildOptions::default(),
+                &[SphereInput::new(&c, 3, &r).into()],
+            )
+            .unwrap();
+        let mut sphere_hits = vec![None; rays.len()];
+        spheres.intersect_batch(&rays, &mut sphere_hits).unwrap();
+        let mut on_spheres = vec![None; rays.len()];
+        spheres
+            .hit_surface_batch(&rays, &sphere_hits, &mut on_spheres)
+            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        for s in on_spheres.iter().flatten() {
+            let d = centres
+                .iter()
+                .zip(&radii)
+                .map(|(c, r)| ((s.point - Vec3::from(*c)).length() - r).abs())
+                .fold(f32::INFINITY, f32::min);
+            assert!(d < 1e-5, "{dev_name}: {s:?} is on no sphere");
+        }
+        match &reference {
+            None => reference = Some((through, on_spheres)),
+            Some((t, s)) => {
+                assert_eq!(&through, t, "{dev_name}: through instances");
+                assert_eq!(&on_spheres, s, "{dev_name}: on spheres");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_hit_that_is_not_on_its_ray_is_not_found_on_every_device() {
+    let mesh = icosphere(1);
+    let ray = Ray::new(Vec3::new(0.1, 0.13, -3.0), Vec3::Z);
+    for (dev_name, device) in all_devices() {
+        let gas = build(&device, &mesh, BuildFlags::empty());
+        let mut hits = vec![None; 3];
+        let rays = [ray; 3];
+        gas.intersect_batch(&rays, &mut hits).unwrap();
+        let real = hits[0].unwrap();
+        // Another primitive, and the right one at another distance.
+        hits[1] = Some(oxray::Hit {
+            primitive_index: (real.primitive_index + 1) % 80,
+            ..real
+        });
+        hits[2] = Some(oxray::Hit {
+            t: real.t * 0.5,
+            ..real
+        });
+        let mut out = vec![None; 3];
+        let e = gas.hit_surface_batch(&rays, &hits, &mut out).unwrap_err();
+        assert!(
+            matches!(e, SurfaceQueryError::HitNotFound { index: 1, .. }),
+            "{dev_name}: {e}"
+        );
+        assert!(
+            out[0].is_some() && out[1].is_none() && out[2].is_none(),
+            "{dev_name}"
+        );
+        let e = gas
+            .hit_surface_batch(&rays[..2], &hits, &mut out)
+            .unwrap_err();
+        assert!(
+            matches!(
+                e,
+                SurfaceQueryError::LengthMismatch {
+                    queries: 2,
+                    outputs: 3
+                }
+            ),
             "{dev_name}: {e}"
         );
     }

@@ -54,7 +54,8 @@ use rayon::prelude::*;
 pub use instanced::InstanceClosestPoint;
 pub use mesh::MeshError;
 pub use oxray_core::{AllHits, ClosestPoint, SurfaceQueryError};
-pub use surface::{NoShadingNormals, ShadingNormals, SurfaceHit, VertexNormals};
+pub use oxray_core::{NoShadingNormals, ShadingNormals, SurfaceHit};
+pub use surface::VertexNormals;
 
 /// Checks a ray of a single query.
 fn check_ray(ray: &Ray) -> Result<(), SurfaceQueryError> {

@@ -17,57 +17,9 @@ use glam::Vec3;
 use oxray_bvh::motion::{lerp_sphere, lerp_triangle4};
 use oxray_bvh::triangle::TriangleHit;
 use oxray_bvh::GasKind;
-use oxray_core::{Hit, PrimitiveType, Ray, Transform};
-
-/// Where a hit lies, in world space.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SurfaceHit {
-    /// The hit point. On a triangle it is interpolated from the vertices with the hit's
-    /// barycentrics and carried to world space (so it lies on the triangle to rounding, which
-    /// `ray.at(hit.t)` need not); on a sphere it is the point of the ray at the hit's `t`
-    /// projected onto the sphere.
-    pub point: Vec3,
-    /// The unit geometric normal. A triangle's is `(v1 - v0) × (v2 - v0)` in object space, the
-    /// side its counter-clockwise winding faces, carried to world space by the inverse
-    /// transpose of the object-to-world transform; so the hit is a front face
-    /// (`optixIsFrontFaceHit`) exactly when the ray's direction points against it (a negative
-    /// dot product), mirrored instances included. An instance's `FLIP_TRIANGLE_FACING` swaps
-    /// [`front_face`](Self::front_face) but not this normal. A sphere's points outwards.
-    pub geometric_normal: Vec3,
-    /// The unit shading normal: the caller's vertex normals (see [`ShadingNormals`])
-    /// interpolated with the barycentrics in object space and carried to world space as the
-    /// geometric normal is; the geometric normal where there are none (spheres, triangles
-    /// without normals, normals that interpolate to zero or NaN).
-    pub shading_normal: Vec3,
-    /// Whether the hit is on the primitive's front face (the hit kind's).
-    pub front_face: bool,
-}
-
-/// Per-vertex normals of the triangles hit: the source of [`SurfaceHit::shading_normal`].
-///
-/// Implemented by [`VertexNormals`] (one indexed mesh), by [`NoShadingNormals`], and by any
-/// `Fn(&Hit) -> Option<[Vec3; 3]>` (say, one mesh per instance id).
-pub trait ShadingNormals {
-    /// The object-space normals of the hit triangle's three vertices, in its vertex order;
-    /// `None` for none.
-    fn vertex_normals(&self, hit: &Hit) -> Option<[Vec3; 3]>;
-}
-
-impl<F: Fn(&Hit) -> Option<[Vec3; 3]>> ShadingNormals for F {
-    fn vertex_normals(&self, hit: &Hit) -> Option<[Vec3; 3]> {
-        self(hit)
-    }
-}
-
-/// No vertex normals: the shading normal is the geometric normal.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct NoShadingNormals;
-
-impl ShadingNormals for NoShadingNormals {
-    fn vertex_normals(&self, _: &Hit) -> Option<[Vec3; 3]> {
-        None
-    }
-}
+use oxray_core::simulation::{sphere_surface_parts, surface_in_world, triangle_surface_parts};
+use oxray_core::{Hit, PrimitiveType, Ray};
+pub use oxray_core::{NoShadingNormals, ShadingNormals, SurfaceHit};
 
 /// The vertex normals of one indexed mesh, looked up by the hit's primitive index (the
 /// triangle's position in `indices`, as [`Gas::from_mesh`] numbers them); a primitive index
@@ -212,21 +164,15 @@ fn hit_surface<N: ShadingNormals + ?Sized>(
         GasKind::Triangles => {
             let (a, b) = gas.triangle_keys(sample);
             let block = lerp_triangle4(&a[slot / 4], &b[slot / 4], sample.fraction);
-            let [p0, p1, p2] = block.get(slot % 4).map(Vec3::from);
-            let w = 1.0 - hit.u - hit.v;
-            let point = p0 * w + p1 * hit.u + p2 * hit.v;
-            let normal = (p1 - p0).cross(p2 - p0);
-            let shading = normals
-                .vertex_normals(hit)
-                .map(|[n0, n1, n2]| n0 * w + n1 * hit.u + n2 * hit.v);
-            (point, normal, shading)
+            let v = block.get(slot % 4).map(Vec3::from);
+            triangle_surface_parts(v, hit, normals.vertex_normals(hit))
         }
         GasKind::Spheres => {
             let (a, b) = gas.sphere_keys(sample);
             let s = lerp_sphere(&a[slot], &b[slot], sample.fraction);
-            let c = Vec3::from(s.center);
-            let normal = (found.object_ray.at(hit.t) - c).normalize_or_zero();
-            (c + normal * s.radius, normal, None)
+            let (point, normal) =
+                sphere_surface_parts(Vec3::from(s.center), s.radius, &found.object_ray, hit.t);
+            (point, normal, None)
         }
         GasKind::CustomPrimitives | GasKind::Curves => {
             return Err(SurfaceQueryError::Unsupported(
@@ -234,25 +180,17 @@ fn hit_surface<N: ShadingNormals + ?Sized>(
             ));
         }
     };
-    // Carry everything to world space, innermost transform first.
-    let (mut point, mut normal, mut shading) = (point, normal, shading);
-    for level in found.path.levels().rev() {
-        point = level.object_to_world().transform_point(point);
-        let inverse = level.world_to_object();
-        normal = Transform::transform_normal_with_inverse(&inverse, normal);
-        shading = shading.map(|n| Transform::transform_normal_with_inverse(&inverse, n));
-    }
-    let geometric_normal = normal.normalize_or_zero();
-    let shading_normal = shading
-        .map(Vec3::normalize_or_zero)
-        .filter(|n| *n != Vec3::ZERO)
-        .unwrap_or(geometric_normal);
-    Ok(SurfaceHit {
+    Ok(surface_in_world(
         point,
-        geometric_normal,
-        shading_normal,
-        front_face: hit.hit_kind.is_front_face(),
-    })
+        normal,
+        shading,
+        found
+            .path
+            .levels()
+            .rev()
+            .map(|l| (l.object_to_world(), l.world_to_object())),
+        hit.hit_kind.is_front_face(),
+    ))
 }
 
 /// The surface queries every traversable offers.

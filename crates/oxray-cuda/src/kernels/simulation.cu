@@ -514,3 +514,17 @@ extern "C" __global__ void __launch_bounds__(128)
     }
     out[i] = dot3(sub3(p, b.q), nrm) < 0.0f ? -d : d;
 }
+
+// Copies words[i] 32-bit words (at most RECORD_WORDS) from each address addrs[i] (a
+// primitive's record in the slot table of a GAS in this context) into out[i * RECORD_WORDS ..]:
+// the primitives of the host's surface queries.
+#define RECORD_WORDS 12
+extern "C" __global__ void __launch_bounds__(128)
+    oxray_gather_records(const unsigned long long* __restrict__ addrs,
+                         const u32* __restrict__ words, u32* __restrict__ out, u32 n) {
+    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    const u32* p = reinterpret_cast<const u32*>(addrs[i]);
+    u32 w = words[i] < RECORD_WORDS ? words[i] : RECORD_WORDS;
+    for (u32 k = 0; k < w; ++k) out[(size_t)i * RECORD_WORDS + k] = p[k];
+}
