@@ -16,7 +16,7 @@ use oxray_core::{
 };
 use oxray_cpu::Gas;
 use oxray_testkit::mesh::{grid_cube, icosphere, random_soup, Mesh};
-use oxray_testkit::rays::rays_around;
+use oxray_testkit::rays::{points_near, rays_around, rays_at_features};
 use oxray_testkit::rng::Rng;
 use std::sync::OnceLock;
 
@@ -236,17 +236,7 @@ fn test_meshes() -> Vec<(&'static str, Mesh)> {
 fn test_rays(mesh: &Mesh, seed: u64) -> Vec<Ray> {
     let mut rng = Rng::new(seed);
     let mut rays = rays_around(&mut rng, mesh, 300);
-    let (lo, hi) = mesh.bounds();
-    let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
-    let r = (Vec3::from(hi) - Vec3::from(lo)).length();
-    for _ in 0..100 {
-        let t = mesh.triangles[rng.below(mesh.triangles.len())];
-        let a = Vec3::from(mesh.positions[t[0] as usize]);
-        let b = Vec3::from(mesh.positions[t[1] as usize]);
-        let target = if rng.below(2) == 0 { a } else { (a + b) * 0.5 };
-        let o = c + rng.unit() * r * 1.5;
-        rays.push(Ray::new(o, target - o));
-    }
+    rays.extend(rays_at_features(&mut rng, mesh, 100));
     // An invalid ray has no offer.
     rays.push(Ray::new(Vec3::NAN, Vec3::Z));
     rays
@@ -443,35 +433,11 @@ fn instance_offers_make_the_cpus_lists() {
     assert_eq!(hit.len(), placements.len(), "every instance is crossed");
 }
 
-/// Points around the mesh, at its vertices and edge midpoints, and just off its vertices.
-fn test_points(mesh: &Mesh, seed: u64) -> Vec<Vec3> {
-    let mut rng = Rng::new(seed);
-    let (lo, hi) = mesh.bounds();
-    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
-    let (c, e) = ((lo + hi) * 0.5, (hi - lo) * 0.75);
-    let mut p: Vec<Vec3> = (0..300)
-        .map(|_| {
-            c + e * Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            )
-        })
-        .collect();
-    for _ in 0..100 {
-        let t = mesh.triangles[rng.below(mesh.triangles.len())];
-        let a = Vec3::from(mesh.positions[t[0] as usize]);
-        let b = Vec3::from(mesh.positions[t[1] as usize]);
-        p.extend([a, (a + b) * 0.5, a + rng.unit() * 1e-3]);
-    }
-    p
-}
-
 #[test]
 fn point_kernels_find_the_cpus_closest_points_and_signs() {
     let k = kernels();
     for (name, mesh) in test_meshes() {
-        let points = test_points(&mesh, 4);
+        let points = points_near(&mut Rng::new(4), &mesh, 300, 100);
         let words: Vec<f32> = points
             .iter()
             .flat_map(|p| [p.x, p.y, p.z, f32::INFINITY])

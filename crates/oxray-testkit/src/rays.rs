@@ -305,6 +305,57 @@ pub fn rays_around(rng: &mut Rng, mesh: &crate::mesh::Mesh, n: usize) -> Vec<Ray
         .collect()
 }
 
+/// `n` rays from a sphere around `mesh` (1.5 of its diagonal from its centre) aimed exactly at
+/// its vertices and edge midpoints, half each: rays through primitives that share them, where
+/// which primitive a query reports and how many it lists are decided by the rules for ties.
+pub fn rays_at_features(rng: &mut Rng, mesh: &crate::mesh::Mesh, n: usize) -> Vec<Ray> {
+    let (lo, hi) = mesh.bounds();
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    let c = (lo + hi) * 0.5;
+    let r = (hi - lo).length();
+    (0..n)
+        .map(|_| {
+            let t = mesh.triangles[rng.below(mesh.triangles.len())];
+            let a = Vec3::from(mesh.positions[t[0] as usize]);
+            let b = Vec3::from(mesh.positions[t[1] as usize]);
+            let target = if rng.below(2) == 0 { a } else { (a + b) * 0.5 };
+            let o = c + rng.unit() * r * 1.5;
+            Ray::new(o, target - o)
+        })
+        .collect()
+}
+
+/// Query points for closest-point and signed-distance tests: `random` points uniform in
+/// `mesh`'s box grown by half, then `features` times a vertex, an edge midpoint and a point
+/// 1e-3 off a vertex (points on the surface and just off it, where signs and ties are
+/// decided).
+pub fn points_near(
+    rng: &mut Rng,
+    mesh: &crate::mesh::Mesh,
+    random: usize,
+    features: usize,
+) -> Vec<Vec3> {
+    let (lo, hi) = mesh.bounds();
+    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+    let (c, e) = ((lo + hi) * 0.5, (hi - lo) * 0.75);
+    let mut p: Vec<Vec3> = (0..random)
+        .map(|_| {
+            c + e * Vec3::new(
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            )
+        })
+        .collect();
+    for _ in 0..features {
+        let t = mesh.triangles[rng.below(mesh.triangles.len())];
+        let a = Vec3::from(mesh.positions[t[0] as usize]);
+        let b = Vec3::from(mesh.positions[t[1] as usize]);
+        p.extend([a, (a + b) * 0.5, a + rng.unit() * 1e-3]);
+    }
+    p
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

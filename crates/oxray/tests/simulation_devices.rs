@@ -15,7 +15,7 @@ use oxray::{
     IndexBuffer, Instance, InstanceFlags, Ray, SphereInput, SurfaceHit, SurfaceQueryError,
     Transform, TriangleInput, VertexBuffer, VertexNormals,
 };
-use oxray_testkit::rays::rays_around;
+use oxray_testkit::rays::{points_near, rays_around, rays_at_features};
 
 /// The presets whose trees differ: the binned SAH, the fast builder, spatial splits, and the
 /// updatable tree (inactive slots kept on the device).
@@ -76,18 +76,22 @@ fn meshes() -> Vec<(&'static str, Mesh)> {
 fn rays_for(mesh: &Mesh, seed: u64) -> Vec<Ray> {
     let mut rng = Rng::new(seed);
     let mut rays = rays_around(&mut rng, mesh, 400);
-    let (lo, hi) = mesh.bounds();
-    let c = (Vec3::from(lo) + Vec3::from(hi)) * 0.5;
-    let r = (Vec3::from(hi) - Vec3::from(lo)).length();
-    for _ in 0..200 {
-        let t = mesh.triangles[rng.below(mesh.triangles.len())];
-        let a = Vec3::from(mesh.positions[t[0] as usize]);
-        let b = Vec3::from(mesh.positions[t[1] as usize]);
-        let target = if rng.below(2) == 0 { a } else { (a + b) * 0.5 };
-        let o = c + rng.unit() * r * 1.5;
-        rays.push(Ray::new(o, target - o));
-    }
+    rays.extend(rays_at_features(&mut rng, mesh, 200));
     rays
+}
+
+/// A GAS of spheres on `device`.
+fn spheres(device: &Device, centres: &[[f32; 3]], radii: &[f32]) -> Gas {
+    let (c, r) = (
+        [bytemuck::cast_slice::<_, u8>(centres)],
+        [bytemuck::cast_slice::<_, u8>(radii)],
+    );
+    device
+        .build_gas(
+            &BuildOptions::default(),
+            &[SphereInput::new(&c, centres.len() as u32, &r).into()],
+        )
+        .unwrap_or_else(|e| panic!("{}: {e}", name(device)))
 }
 
 fn all_hits(gas: &Gas, rays: &[Ray], max: usize) -> AllHits {
@@ -214,16 +218,7 @@ fn spheres_and_custom_primitives_list_as_on_the_cpu() {
     let rays = rays_around(&mut rng, &scene, 500);
     let mut reference: Option<AllHits> = None;
     for (dev_name, device) in all_devices() {
-        let (c, r) = (
-            [bytemuck::cast_slice::<_, u8>(&centres)],
-            [bytemuck::cast_slice::<_, u8>(&radii)],
-        );
-        let spheres = device
-            .build_gas(
-                &BuildOptions::default(),
-                &[SphereInput::new(&c, centres.len() as u32, &r).into()],
-            )
-            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        let spheres = spheres(&device, &centres, &radii);
         let lists = all_hits(&spheres, &rays, usize::MAX);
         let mut counts = vec![0u32; rays.len()];
         spheres.count_hits_batch(&rays, &mut counts).unwrap();
@@ -252,37 +247,10 @@ fn spheres_and_custom_primitives_list_as_on_the_cpu() {
     }
 }
 
-/// Points around the mesh, at its vertices and edge midpoints, and just off its vertices.
-fn points_for(mesh: &Mesh, seed: u64) -> Vec<Vec3> {
-    let mut rng = Rng::new(seed);
-    let (lo, hi) = mesh.bounds();
-    let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
-    let c = (lo + hi) * 0.5;
-    let e = (hi - lo) * 0.75;
-    let mut p: Vec<Vec3> = (0..500)
-        .map(|_| {
-            c + e * Vec3::new(
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            )
-        })
-        .collect();
-    for _ in 0..150 {
-        let t = mesh.triangles[rng.below(mesh.triangles.len())];
-        let a = Vec3::from(mesh.positions[t[0] as usize]);
-        let b = Vec3::from(mesh.positions[t[1] as usize]);
-        p.push(a);
-        p.push((a + b) * 0.5);
-        p.push(a + rng.unit() * 1e-3);
-    }
-    p
-}
-
 #[test]
 fn closest_points_and_signed_distances_are_the_same_on_every_device_and_tree() {
     for (mesh_name, mesh) in meshes() {
-        let points = points_for(&mesh, 3);
+        let points = points_near(&mut Rng::new(3), &mesh, 500, 150);
         let reference = build(&Device::cpu(), &mesh, BuildFlags::empty());
         let mut want = vec![None; points.len()];
         reference.closest_point_batch(&points, &mut want).unwrap();
@@ -404,19 +372,7 @@ fn bad_input_gets_the_same_error_on_every_device() {
         );
 
         // Point queries need triangles.
-        let centre = [[0.0f32; 3]];
-        let radius = [1.0f32];
-        let (c, r) = (
-            [bytemuck::cast_slice::<_, u8>(&centre)],
-            [bytemuck::cast_slice::<_, u8>(&radius)],
-        );
-        let spheres = device
-            .build_gas(
-                &BuildOptions::default(),
-                &[SphereInput::new(&c, 1, &r).into()],
-            )
-            .unwrap();
-        let e = spheres
+        let e = spheres(&device, &[[0.0; 3]], &[1.0])
             .closest_point_batch(&[Vec3::ZERO], &mut [None])
             .unwrap_err();
         assert!(
@@ -514,16 +470,7 @@ fn hit_surfaces_through_instances_and_on_spheres_are_the_same_on_every_device() 
             .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
         assert!(through.iter().flatten().count() > 50, "{dev_name}");
 
-        let (c, r) = (
-            [bytemuck::cast_slice::<_, u8>(&centres)],
-            [bytemuck::cast_slice::<_, u8>(&radii)],
-        );
-        let spheres = device
-            .build_gas(
-                &BuildOptions::default(),
-                &[SphereInput::new(&c, 3, &r).into()],
-            )
-            .unwrap();
+        let spheres = spheres(&device, &centres, &radii);
         let mut sphere_hits = vec![None; rays.len()];
         spheres.intersect_batch(&rays, &mut sphere_hits).unwrap();
         let mut on_spheres = vec![None; rays.len()];

@@ -118,26 +118,11 @@ extern "C" __global__ void __launch_bounds__(128)
         const float tmin = r.tmin;
         walk_bvh2(r, top, tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
             for (u32 s = start; s < start + count; ++s) {
-                const float4* inst = insts + 6 * (size_t)s;
-                if (!hits_box(r, inst[3], inst[4], tmin, tmax)) continue;
-                uint4 ptrs = reinterpret_cast<const uint4*>(inst)[5];
-                const float4* nodes = reinterpret_cast<const float4*>(
-                    ((unsigned long long)ptrs.y << 32) | (unsigned long long)ptrs.x);
-                const float4* tris = reinterpret_cast<const float4*>(
-                    ((unsigned long long)ptrs.w << 32) | (unsigned long long)ptrs.z);
-                if (nodes == nullptr) continue;
-                float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
                 TraceRay ob;
-                // Transform::transform_point and transform_vector, in the CPU's order.
-                ob.org = make_float3(m0.x * r.org.x + m0.y * r.org.y + m0.z * r.org.z + m0.w,
-                                     m1.x * r.org.x + m1.y * r.org.y + m1.z * r.org.z + m1.w,
-                                     m2.x * r.org.x + m2.y * r.org.y + m2.z * r.org.z + m2.w);
-                ob.dir = make_float3(m0.x * r.dir.x + m0.y * r.dir.y + m0.z * r.dir.z,
-                                     m1.x * r.dir.x + m1.y * r.dir.y + m1.z * r.dir.z,
-                                     m2.x * r.dir.x + m2.y * r.dir.y + m2.z * r.dir.z);
-                ob.tmin = tmin;
-                ob.tmax = tmax;
-                if (!prepare_ray(ob)) continue;
+                const float4 *nodes, *tris;
+                if (!enter_instance(r, insts + 6 * (size_t)s, tmin, tmax, ob, nodes, tris)) {
+                    continue;
+                }
                 k = offers_gas<TriangleLeaf>(ob, nodes, tris, k, o, oi, s);
             }
             return false;

@@ -507,6 +507,33 @@ __device__ __forceinline__ bool hits_box(const TraceRay& r, float4 lo, float4 hi
     return t0 <= min_keep(t1 * ROBUST_FAR, tmax * TMAX_SLACK);
 }
 
+// Carries `r` into the instance whose slot is `inst` (the layout above) with the interval
+// [tmin, tmax]: false where the ray misses the instance's world box, the instance has no child
+// or the carried ray is invalid; else the object-space ray `o` and the child's nodes and
+// triangles.
+__device__ __forceinline__ bool enter_instance(const TraceRay& r, const float4* __restrict__ inst,
+                                               float tmin, float tmax, TraceRay& o,
+                                               const float4*& nodes, const float4*& tris) {
+    if (!hits_box(r, inst[3], inst[4], tmin, tmax)) return false;
+    uint4 ptrs = reinterpret_cast<const uint4*>(inst)[5];
+    nodes = reinterpret_cast<const float4*>(((unsigned long long)ptrs.y << 32) |
+                                            (unsigned long long)ptrs.x);
+    tris = reinterpret_cast<const float4*>(((unsigned long long)ptrs.w << 32) |
+                                           (unsigned long long)ptrs.z);
+    if (nodes == nullptr) return false;
+    float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
+    // Transform::transform_point and transform_vector, in the CPU's order.
+    o.org = make_float3(m0.x * r.org.x + m0.y * r.org.y + m0.z * r.org.z + m0.w,
+                        m1.x * r.org.x + m1.y * r.org.y + m1.z * r.org.z + m1.w,
+                        m2.x * r.org.x + m2.y * r.org.y + m2.z * r.org.z + m2.w);
+    o.dir = make_float3(m0.x * r.dir.x + m0.y * r.dir.y + m0.z * r.dir.z,
+                        m1.x * r.dir.x + m1.y * r.dir.y + m1.z * r.dir.z,
+                        m2.x * r.dir.x + m2.y * r.dir.y + m2.z * r.dir.z);
+    o.tmin = tmin;
+    o.tmax = tmax;
+    return prepare_ray(o);
+}
+
 struct IasBest {
     Best hit;
     u32 inst;  // instance slot of the hit; MISS_SLOT for none
@@ -524,26 +551,9 @@ __device__ __forceinline__ IasBest trace_ias(const TraceRay& r, const float4* __
     const float tmin = r.tmin;
     walk_bvh2(r, top, tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
         for (u32 s = start; s < start + count; ++s) {
-            const float4* inst = insts + 6 * (size_t)s;
-            if (!hits_box(r, inst[3], inst[4], tmin, tmax)) continue;
-            uint4 ptrs = reinterpret_cast<const uint4*>(inst)[5];
-            const float4* nodes = reinterpret_cast<const float4*>(
-                ((unsigned long long)ptrs.y << 32) | (unsigned long long)ptrs.x);
-            const float4* tris = reinterpret_cast<const float4*>(
-                ((unsigned long long)ptrs.w << 32) | (unsigned long long)ptrs.z);
-            if (nodes == nullptr) continue;
-            float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
             TraceRay o;
-            // Transform::transform_point and transform_vector, in the CPU's order.
-            o.org = make_float3(m0.x * r.org.x + m0.y * r.org.y + m0.z * r.org.z + m0.w,
-                                m1.x * r.org.x + m1.y * r.org.y + m1.z * r.org.z + m1.w,
-                                m2.x * r.org.x + m2.y * r.org.y + m2.z * r.org.z + m2.w);
-            o.dir = make_float3(m0.x * r.dir.x + m0.y * r.dir.y + m0.z * r.dir.z,
-                                m1.x * r.dir.x + m1.y * r.dir.y + m1.z * r.dir.z,
-                                m2.x * r.dir.x + m2.y * r.dir.y + m2.z * r.dir.z);
-            o.tmin = tmin;
-            o.tmax = tmax;
-            if (!prepare_ray(o)) continue;
+            const float4 *nodes, *tris;
+            if (!enter_instance(r, insts + 6 * (size_t)s, tmin, tmax, o, nodes, tris)) continue;
             Best h = trace_bvh2<ANY>(o, nodes, tris);
             if (h.slot != MISS_SLOT) {
                 // A hit at the current tmax replaces the one found before, as on the CPU.
