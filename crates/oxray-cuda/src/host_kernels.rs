@@ -1,8 +1,8 @@
-//! The simulation kernels' own CUDA C++ (`kernels/simulation.cu` after `trace.cu` and
-//! `curve.cu`) compiled by the host's C++ compiler over `kernels/host.h` and run one thread at
-//! a time on the CPU, against the CPU backend: so that a machine without a GPU (CI) checks what
-//! the kernels compute, bit for bit, and the host code that turns their offers into lists. The
-//! driver's launches, device memory and the GPU's own compiler are left to the GPU tests.
+//! The trace and simulation kernels' own CUDA C++ (`kernels/trace.cu`, `curve.cu`,
+//! `simulation.cu`) compiled by the host's C++ compiler over `kernels/host.h` and run one thread
+//! at a time on the CPU, against the CPU backend: so that a machine without a GPU (CI) checks
+//! what the kernels compute, bit for bit, and the host code that turns their offers into lists.
+//! The driver's launches, device memory and the GPU's own compiler are left to the GPU tests.
 
 use crate::context::compile_options;
 use crate::gas::{hit_of, sphere_words, HitRecord};
@@ -45,6 +45,34 @@ extern "C" void host_gather_records(const unsigned long long* addrs, const u32* 
                                     u32 n) {
     HOST_LAUNCH(n, oxray_gather_records(addrs, words, out, n));
 }
+extern "C" void host_closest_bvh2(const float4* nodes, const float4* tris, const float4* rays,
+                                  uint4* hits, u32 n) {
+    HOST_LAUNCH(n, oxray_closest_bvh2(nodes, tris, rays, hits, n));
+}
+extern "C" void host_occluded_bvh2(const float4* nodes, const float4* tris, const float4* rays,
+                                   unsigned char* occluded, u32 n) {
+    HOST_LAUNCH(n, oxray_occluded_bvh2(nodes, tris, rays, occluded, n));
+}
+extern "C" void host_closest_bvh4(const float4* nodes, const float4* tris, const float4* rays,
+                                  uint4* hits, u32 n) {
+    HOST_LAUNCH(n, oxray_closest_bvh4(nodes, tris, rays, hits, n));
+}
+extern "C" void host_occluded_bvh4(const float4* nodes, const float4* tris, const float4* rays,
+                                   unsigned char* occluded, u32 n) {
+    HOST_LAUNCH(n, oxray_occluded_bvh4(nodes, tris, rays, occluded, n));
+}
+extern "C" void host_closest_ias(const float4* top, const float4* insts, const float4* rays,
+                                 uint4* hits, u32* inst_out, u32 n) {
+    HOST_LAUNCH(n, oxray_closest_ias(top, insts, rays, hits, inst_out, n));
+}
+extern "C" void host_occluded_ias(const float4* top, const float4* insts, const float4* rays,
+                                  unsigned char* occluded, u32 n) {
+    HOST_LAUNCH(n, oxray_occluded_ias(top, insts, rays, occluded, n));
+}
+extern "C" void host_closest_spheres(const float4* nodes, const float4* spheres,
+                                     const float4* rays, uint4* hits, u32 n) {
+    HOST_LAUNCH(n, oxray_closest_spheres(nodes, spheres, rays, hits, n));
+}
 extern "C" void host_signed_distances(const float4* nodes, const float4* tris, const u32* ids,
                                       const float4* points, float* out, float extent, u32 n) {
     HOST_LAUNCH(n, oxray_signed_distances(nodes, tris, ids, points, out, extent, n));
@@ -63,6 +91,9 @@ type OffersIas = unsafe extern "C" fn(
     *mut u32,
     u32,
 );
+type Closest = unsafe extern "C" fn(*const u32, *const u32, *const u32, *mut u32, u32);
+type Occluded = unsafe extern "C" fn(*const u32, *const u32, *const u32, *mut u8, u32);
+type ClosestIas = unsafe extern "C" fn(*const u32, *const u32, *const u32, *mut u32, *mut u32, u32);
 type Gather = unsafe extern "C" fn(*const u64, *const u32, *mut u32, u32);
 type Points<T> =
     unsafe extern "C" fn(*const u32, *const u32, *const u32, *const f32, *mut T, f32, u32);
@@ -76,6 +107,13 @@ struct HostKernels {
     closest_points: Points<u32>,
     signed_distances: Points<f32>,
     gather_records: Gather,
+    closest_bvh2: Closest,
+    occluded_bvh2: Occluded,
+    closest_bvh4: Closest,
+    occluded_bvh4: Occluded,
+    closest_ias: ClosestIas,
+    occluded_ias: Occluded,
+    closest_spheres: Closest,
 }
 
 fn kernels() -> &'static HostKernels {
@@ -93,11 +131,11 @@ fn kernels() -> &'static HostKernels {
         );
         std::fs::write(&src, source).unwrap();
         let cxx = std::env::var("CXX").unwrap_or_else(|_| "c++".into());
-        // The kernels' defines (their numeric contract), without the NVRTC-only options.
+        // The kernels' defines (their numeric contract), without the NVRTC-only options; the
+        // query kernels' entry points are compiled too.
         let defines: Vec<String> = compile_options((9, 0))
             .into_iter()
             .filter(|o| o.starts_with("-D"))
-            .chain(["-DOXRAY_NO_QUERY_KERNELS".to_string()])
             .collect();
         let out = std::process::Command::new(&cxx)
             .args(["-std=c++17", "-O2", "-fPIC", "-shared", "-ffp-contract=off"])
@@ -124,6 +162,13 @@ fn kernels() -> &'static HostKernels {
             let closest_points = *lib.get::<Points<u32>>(b"host_closest_points").unwrap();
             let signed_distances = *lib.get::<Points<f32>>(b"host_signed_distances").unwrap();
             let gather_records = *lib.get::<Gather>(b"host_gather_records").unwrap();
+            let closest_bvh2 = *lib.get::<Closest>(b"host_closest_bvh2").unwrap();
+            let occluded_bvh2 = *lib.get::<Occluded>(b"host_occluded_bvh2").unwrap();
+            let closest_bvh4 = *lib.get::<Closest>(b"host_closest_bvh4").unwrap();
+            let occluded_bvh4 = *lib.get::<Occluded>(b"host_occluded_bvh4").unwrap();
+            let closest_ias = *lib.get::<ClosestIas>(b"host_closest_ias").unwrap();
+            let occluded_ias = *lib.get::<Occluded>(b"host_occluded_ias").unwrap();
+            let closest_spheres = *lib.get::<Closest>(b"host_closest_spheres").unwrap();
             let _ = std::fs::remove_dir_all(&dir);
             HostKernels {
                 _lib: lib,
@@ -133,6 +178,13 @@ fn kernels() -> &'static HostKernels {
                 closest_points,
                 signed_distances,
                 gather_records,
+                closest_bvh2,
+                occluded_bvh2,
+                closest_bvh4,
+                occluded_bvh4,
+                closest_ias,
+                occluded_ias,
+                closest_spheres,
             }
         }
     })
@@ -541,4 +593,234 @@ fn the_gather_reads_each_record_at_its_address_up_to_its_size() {
         "a sphere's record is 4 words"
     );
     assert_eq!(out[24..], triangles[..12]);
+}
+
+/// Closest-hit records and occlusion bytes of a query kernel pair over `rays`.
+fn trace_records(
+    closest: impl Fn(*const u32, *mut u32, u32),
+    occluded: impl Fn(*const u32, *mut u8, u32),
+    rays: &[Ray],
+) -> (Vec<HitRecord>, Vec<bool>) {
+    let words = ray_words(rays);
+    let n = rays.len() as u32;
+    let mut hits = vec![0u32; 4 * rays.len()];
+    let mut occ = vec![7u8; rays.len()];
+    closest(words.as_ptr(), hits.as_mut_ptr(), n);
+    occluded(words.as_ptr(), occ.as_mut_ptr(), n);
+    (
+        bytemuck::cast_slice::<u32, HitRecord>(&hits).to_vec(),
+        occ.iter().map(|&o| o == 1).collect(),
+    )
+}
+
+/// Compares the kernels' hits (resolved) with the CPU's: distances, barycentrics and facing bit
+/// for bit; with `exact` the primitive too, else a different primitive only at the same
+/// distance (a tie that another tree breaks otherwise: rays aimed at shared vertices and
+/// edges), in at most a quarter of the rays.
+fn compare_hits(got: &[Option<Hit>], want: &[Option<Hit>], occ: &[bool], at: &str, exact: bool) {
+    let mut ties = 0;
+    for (i, (g, w)) in got.iter().zip(want).enumerate() {
+        assert_eq!(occ[i], w.is_some(), "{at}: occlusion of ray {i}");
+        match (g, w) {
+            (None, None) => {}
+            (Some(g), Some(w))
+                if g.t == w.t && !exact && g.primitive_index != w.primitive_index =>
+            {
+                ties += 1;
+            }
+            (g, w) => assert_eq!(g, w, "{at}: ray {i}"),
+        }
+    }
+    assert!(ties * 4 <= got.len(), "{at}: {ties} ties");
+}
+
+#[test]
+fn query_kernels_trace_the_cpus_hits_in_both_layouts() {
+    let k = kernels();
+    for (name, mesh) in test_meshes() {
+        let mut rays = test_rays(&mesh, 8);
+        // Bounded and shortened rays: the interval's rules.
+        let mut rng = Rng::new(81);
+        for r in rays.iter_mut().step_by(5) {
+            r.tmin = rng.range(0.0, 1.0);
+        }
+        for flags in [BuildFlags::empty(), BuildFlags::PREFER_FAST_TRACE] {
+            let (gas, _) = triangle_gas(&mesh, flags);
+            let (data, tree) =
+                GasData::build_with_tree(&BuildOptions::new(flags), &[mesh_input(&mesh)]).unwrap();
+            let export = data.export_triangles().unwrap();
+            let mut want = vec![None; rays.len()];
+            gas.intersect_batch(&rays, &mut want).unwrap();
+            for layout in [NodeLayout::Bvh2, NodeLayout::Bvh4] {
+                let dl = DeviceLayout::new(&export, &tree, layout).unwrap();
+                let (nodes, tris) = (dl.nodes.as_ptr(), dl.triangles.as_ptr().cast::<u32>());
+                let (closest, occluded) = match layout {
+                    NodeLayout::Bvh2 => (k.closest_bvh2, k.occluded_bvh2),
+                    NodeLayout::Bvh4 => (k.closest_bvh4, k.occluded_bvh4),
+                };
+                let (records, occ) = trace_records(
+                    // SAFETY: the layout's nodes and triangles, `n` rays of 8 words and 4
+                    // words (or one byte) of results per ray.
+                    |r, h, n| unsafe { closest(nodes, tris, r, h, n) },
+                    |r, o, n| unsafe { occluded(nodes, tris, r, o, n) },
+                    &rays,
+                );
+                let got: Vec<Option<Hit>> = records
+                    .iter()
+                    .map(|r| {
+                        r.is_hit()
+                            .then(|| hit_of(r, &dl.slots[r.slot_index() as usize], false, !0, 0))
+                    })
+                    .collect();
+                let at = format!("{name}, {flags:?}, {layout:?}");
+                compare_hits(&got, &want, &occ, &at, layout == NodeLayout::Bvh4);
+            }
+        }
+    }
+}
+
+#[test]
+fn instance_and_sphere_query_kernels_trace_the_cpus_hits() {
+    let k = kernels();
+    // One level of instances, with the placements of the offer test.
+    let children = [
+        triangle_gas(&icosphere(2), BuildFlags::empty()),
+        triangle_gas(&grid_cube(3), BuildFlags::empty()),
+    ];
+    let cpu_children: Vec<std::sync::Arc<Gas>> = children
+        .iter()
+        .map(|(g, _)| std::sync::Arc::new(g.clone()))
+        .collect();
+    let instances: Vec<Instance> = (0..6)
+        .map(|i| {
+            let t = Transform::from_affine(&glam::Affine3A::from_scale_rotation_translation(
+                Vec3::splat(0.5 + 0.2 * i as f32),
+                glam::Quat::from_rotation_y(0.5 * i as f32),
+                Vec3::new(2.0 * i as f32 - 5.0, 0.3 * i as f32, 0.0),
+            ));
+            let inst = Instance::new(cpu_children[i % 2].clone().into())
+                .transform(t)
+                .instance_id(10 + i as u32);
+            if i == 3 {
+                inst.flags(InstanceFlags::FLIP_TRIANGLE_FACING)
+            } else {
+                inst
+            }
+        })
+        .collect();
+    let (data, tree) =
+        IasData::build_with_tree(&BuildOptions::default(), &[(&instances[..]).into()]).unwrap();
+    let refs: Vec<Option<ChildRef>> = data
+        .instances
+        .iter()
+        .enumerate()
+        .map(|(slot, inst)| {
+            let l = &children[inst.index as usize % 2].1;
+            Some(ChildRef {
+                index: slot as u32,
+                nodes_addr: l.nodes.as_ptr() as u64,
+                triangles_addr: l.triangles.as_ptr() as u64,
+            })
+        })
+        .collect();
+    let layout = IasLayout::new(&data, &tree, &refs).unwrap();
+    let scene = Mesh {
+        positions: vec![[-7.0, -2.0, -2.0], [7.0, 3.0, 2.0]],
+        triangles: vec![],
+    };
+    let rays = rays_around(&mut Rng::new(12), &scene, 600);
+    let words = ray_words(&rays);
+    let n = rays.len() as u32;
+    let mut hits = vec![0u32; 4 * rays.len()];
+    let mut slots = vec![0u32; rays.len()];
+    let mut occ = vec![7u8; rays.len()];
+    // SAFETY: the top-level nodes and instance slots (child addresses of the layouts above,
+    // alive for the calls), `n` rays and their results.
+    unsafe {
+        (k.closest_ias)(
+            layout.nodes.as_ptr(),
+            layout.instances.as_ptr(),
+            words.as_ptr(),
+            hits.as_mut_ptr(),
+            slots.as_mut_ptr(),
+            n,
+        );
+        (k.occluded_ias)(
+            layout.nodes.as_ptr(),
+            layout.instances.as_ptr(),
+            words.as_ptr(),
+            occ.as_mut_ptr(),
+            n,
+        );
+    }
+    let records = bytemuck::cast_slice::<u32, HitRecord>(&hits);
+    let got: Vec<Option<Hit>> = records
+        .iter()
+        .zip(&slots)
+        .map(|(r, &slot)| {
+            r.is_hit().then(|| {
+                let inst = &data.instances[slot as usize];
+                let child = &children[inst.index as usize % 2].1;
+                let flip = inst.flags.contains(InstanceFlags::FLIP_TRIANGLE_FACING);
+                hit_of(
+                    r,
+                    &child.slots[r.slot_index() as usize],
+                    flip,
+                    inst.instance_id,
+                    inst.index,
+                )
+            })
+        })
+        .collect();
+    let cpu = oxray_cpu::Ias::from_data(data.clone()).unwrap();
+    let mut want = vec![None; rays.len()];
+    cpu.intersect_batch(&rays, &mut want).unwrap();
+    let occ: Vec<bool> = occ.iter().map(|&o| o == 1).collect();
+    compare_hits(&got, &want, &occ, "instances", false);
+    assert!(want.iter().flatten().count() > 100, "the instances are hit");
+
+    // Spheres.
+    let mut rng = Rng::new(6);
+    let centres: Vec<[f32; 3]> = (0..80).map(|_| rng.vec3(-3.0, 3.0).to_array()).collect();
+    let radii: Vec<f32> = (0..80).map(|_| rng.range(0.1, 0.6)).collect();
+    let (c, r) = (
+        [bytemuck::cast_slice::<_, u8>(&centres)],
+        [bytemuck::cast_slice::<_, u8>(&radii)],
+    );
+    let input: BuildInput<'_> = SphereInput::new(&c, centres.len() as u32, &r).into();
+    let (data, tree) = GasData::build_with_tree(&BuildOptions::default(), &[input]).unwrap();
+    let nodes = crate::layout::bvh2_words(&tree).unwrap();
+    let (sphere_words, sphere_slots) = sphere_words(&data);
+    let gas = Gas::from(data);
+    let scene = Mesh {
+        positions: vec![[-3.0; 3], [3.0; 3]],
+        triangles: vec![],
+    };
+    let rays = rays_around(&mut rng, &scene, 500);
+    let words = ray_words(&rays);
+    let mut hits = vec![0u32; 4 * rays.len()];
+    // SAFETY: the binary nodes and one float4 per sphere slot, `n` rays and 4 words each.
+    unsafe {
+        (k.closest_spheres)(
+            nodes.as_ptr(),
+            sphere_words.as_ptr(),
+            words.as_ptr(),
+            hits.as_mut_ptr(),
+            rays.len() as u32,
+        )
+    };
+    let got: Vec<Option<Hit>> = bytemuck::cast_slice::<u32, HitRecord>(&hits)
+        .iter()
+        .map(|r| {
+            r.is_hit().then(|| {
+                let mut h = hit_of(r, &sphere_slots[r.slot_index() as usize], false, !0, 0);
+                h.hit_kind = oxray_core::HitKind::SPHERE_FRONT_FACE;
+                h
+            })
+        })
+        .collect();
+    let mut want = vec![None; rays.len()];
+    gas.intersect_batch(&rays, &mut want).unwrap();
+    let occ: Vec<bool> = want.iter().map(Option::is_some).collect();
+    compare_hits(&got, &want, &occ, "spheres", true);
 }
