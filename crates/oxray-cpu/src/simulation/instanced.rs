@@ -17,7 +17,11 @@ use crate::traversal::NodeRef;
 use crate::Gas;
 use crate::Ias;
 use glam::Vec3;
+use oxray_bvh::{Bvh4Node, IasData};
 use oxray_core::{Aabb, Transform, MAX_TRAVERSABLE_GRAPH_DEPTH};
+use std::cell::RefCell;
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
 
 /// The closest point of the triangles under an IAS, and the instance it lies under.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -92,6 +96,59 @@ fn box_distance2(b: &Aabb, p: Vec3) -> f32 {
     (b.min - p).max(p - b.max).max(Vec3::ZERO).length_squared()
 }
 
+/// What the best-first walk of an IAS's tree orders: the squared distance's bits (the
+/// distances are not negative, so their bits order as they do), [`INNER`] before [`INSTANCE`]
+/// at one distance (an inner box may hold an instance box at that distance with a lower
+/// slot), and the node index or instance slot.
+type Key = (u32, u8, u32);
+const INNER: u8 = 0;
+const INSTANCE: u8 = 1;
+
+type Heap = BinaryHeap<Reverse<Key>>;
+
+/// Pushes the children of `node`: inner nodes by their box, the instances of leaves by their
+/// own world boxes (the CPU's order key: [`box_distance2`] of `data.boxes[slot]`).
+fn push_children(heap: &mut Heap, data: &IasData, node: &Bvh4Node, p: Vec3) {
+    for lane in 0..4 {
+        let b = node.child_bounds(lane);
+        if !(b.min.x <= b.max.x) {
+            // An unused lane.
+            continue;
+        }
+        let (child, count) = (node.child[lane], node.count[lane]);
+        if count == 0 {
+            heap.push(Reverse((box_distance2(&b, p).to_bits(), INNER, child)));
+        } else {
+            for slot in child..child + count {
+                let d2 = box_distance2(&data.boxes[slot as usize], p);
+                heap.push(Reverse((d2.to_bits(), INSTANCE, slot)));
+            }
+        }
+    }
+}
+
+thread_local! {
+    /// The heaps of the best-first walks, one per level of the graph (a walk of an IAS under
+    /// another's instance runs inside its parent's), kept so that queries allocate nothing
+    /// once warm.
+    static HEAPS: RefCell<Vec<Heap>> = const { RefCell::new(Vec::new()) };
+}
+
+/// Runs `f` with this thread's heap for graph level `depth`.
+fn with_heap<R>(depth: u32, f: impl FnOnce(&mut Heap) -> R) -> R {
+    let d = depth as usize;
+    let mut heap = HEAPS.with(|h| {
+        let mut h = h.borrow_mut();
+        if h.len() <= d {
+            h.resize_with(d + 1, Heap::new);
+        }
+        std::mem::take(&mut h[d])
+    });
+    let r = f(&mut heap);
+    HEAPS.with(|h| h.borrow_mut()[d] = heap);
+    r
+}
+
 /// Searches the graph under `node` for a point closer to `world` than `best` (a world
 /// distance; `found` holds the point that gave it).
 fn search(
@@ -128,23 +185,27 @@ fn search(
             }
             Ok(())
         }
-        NodeRef::Ias(ias) => {
+        NodeRef::Ias(ias) => with_heap(frame.depth, |heap| {
             // Nearest world box first (the slot breaks ties, so the order is fixed), stopping
-            // at the first box farther than the best point.
+            // at the first box farther than the best point: a best-first walk of the top-level
+            // tree, whose inner boxes bound the instance boxes below them, gives the instances
+            // in that order without measuring them all.
             let data = ias.data();
-            let mut order: Vec<(f32, usize)> = data
-                .boxes
-                .iter()
-                .enumerate()
-                .filter(|&(slot, _)| ias.nodes.get(slot).is_some_and(Option::is_some))
-                .map(|(slot, b)| (box_distance2(b, here), slot))
-                .collect();
-            order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            for (d2, slot) in order {
-                if d2.sqrt() * frame.scale > *best {
+            let Some(root) = data.bvh.nodes.first() else {
+                return Ok(());
+            };
+            heap.clear();
+            push_children(heap, data, root, here);
+            while let Some(Reverse((bits, kind, index))) = heap.pop() {
+                if f32::from_bits(bits).sqrt() * frame.scale > *best {
                     break;
                 }
-                let Some(child) = ias.nodes[slot].as_ref() else {
+                if kind == INNER {
+                    push_children(heap, data, &data.bvh.nodes[index as usize], here);
+                    continue;
+                }
+                let slot = index as usize;
+                let Some(child) = ias.nodes.get(slot).and_then(Option::as_ref) else {
                     continue;
                 };
                 let inst = &data.instances[slot];
@@ -156,7 +217,7 @@ fn search(
                 search(NodeRef::from(child), &next, world, best, found)?;
             }
             Ok(())
-        }
+        }),
         NodeRef::Static(st) => {
             let Some(child) = NodeRef::of(st.child()) else {
                 return Ok(());
@@ -232,6 +293,65 @@ impl Ias {
 mod tests {
     use super::*;
     use glam::{Affine3A, Quat};
+
+    #[test]
+    fn equally_close_instances_go_to_the_nearer_box_then_the_lower_slot() {
+        let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let gas = std::sync::Arc::new(Gas::from_mesh(&v, &[[0, 1, 2]]).unwrap());
+        // Five copies on one spot: equal boxes, every one at distance 1 from the point.
+        let mut instances: Vec<oxray_core::Instance> = (0..5)
+            .map(|i| oxray_core::Instance::new(gas.clone().into()).instance_id(10 + i))
+            .collect();
+        let p = Vec3::new(0.25, 0.25, 1.0);
+        let ias = Ias::build(
+            &oxray_core::BuildOptions::default(),
+            &[(&instances[..]).into()],
+        )
+        .unwrap();
+        let c = ias.closest_point(p).unwrap().unwrap();
+        let first = ias.data().instances[0].instance_id;
+        assert_eq!((c.instance_id, c.closest.distance), (first, 1.0));
+        // A mirrored copy: the same triangle and box, in whichever slot the builder gives it:
+        // the lowest slot still wins.
+        instances.push(
+            oxray_core::Instance::new(gas.clone().into())
+                .instance_id(99)
+                .transform(Transform::from_affine(&Affine3A::from_scale(Vec3::new(
+                    1.0, 1.0, -1.0,
+                )))),
+        );
+        let ias = Ias::build(
+            &oxray_core::BuildOptions::default(),
+            &[(&instances[..]).into()],
+        )
+        .unwrap();
+        let c = ias.closest_point(p).unwrap().unwrap();
+        assert_eq!(c.instance_id, ias.data().instances[0].instance_id);
+        // Many instances: the same answers as searching them one by one.
+        let many: Vec<oxray_core::Instance> = (0..300)
+            .map(|i| {
+                let t = Vec3::new((i % 10) as f32, ((i / 10) % 10) as f32, (i / 100) as f32);
+                oxray_core::Instance::new(gas.clone().into())
+                    .instance_id(i)
+                    .transform(Transform::from_translation(t * 1.5))
+            })
+            .collect();
+        let ias = Ias::build(&oxray_core::BuildOptions::default(), &[(&many[..]).into()]).unwrap();
+        for k in 0..50 {
+            let q = Vec3::new(k as f32 * 0.31, (k * 7 % 13) as f32, (k % 5) as f32 - 1.0);
+            let got = ias.closest_point(q).unwrap().unwrap();
+            let best = ias
+                .data()
+                .instances
+                .iter()
+                .map(|inst| {
+                    let local = inst.world_to_object.transform_point(q);
+                    gas.closest_point(local).unwrap().unwrap().distance
+                })
+                .fold(f32::INFINITY, f32::min);
+            assert_eq!(got.closest.distance, best, "point {q}");
+        }
+    }
 
     #[test]
     fn similarities_are_told_from_other_transforms() {
