@@ -111,8 +111,8 @@ type Heap = BinaryHeap<Reverse<Key>>;
 fn push_children(heap: &mut Heap, data: &IasData, node: &Bvh4Node, p: Vec3) {
     for lane in 0..4 {
         let b = node.child_bounds(lane);
-        if !(b.min.x <= b.max.x) {
-            // An unused lane.
+        if b.min.x.partial_cmp(&b.max.x).is_none_or(|o| o.is_gt()) {
+            // An unused lane (an empty box).
             continue;
         }
         let (child, count) = (node.child[lane], node.count[lane]);
