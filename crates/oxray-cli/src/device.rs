@@ -5,9 +5,10 @@
 
 use crate::bench::{build_gas_on, median, BenchRays};
 use crate::raycast::{
-    check_rays, encode_hits, encode_occlusion, load_inputs, write_results, RayCheck, RaycastError,
+    check_rays, encode_all_hits, encode_counts, encode_hits, encode_occlusion, load_inputs,
+    result_bytes, write_results, RayCheck, RaycastError, RaycastQuery,
 };
-use oxray::{BatchKind, BuildFlags, Device, DeviceError, Hit, QueryError, Ray};
+use oxray::{AllHits, BatchKind, BuildFlags, Device, DeviceError, Hit, QueryError, Ray};
 use oxray_scene::mesh::Mesh;
 use std::fmt;
 use std::path::Path;
@@ -105,7 +106,7 @@ pub fn raycast(
     mesh_path: &Path,
     rays_path: &Path,
     out_path: &Path,
-    occlusion: bool,
+    query: RaycastQuery,
 ) -> Result<RaycastReport, DeviceCommandError> {
     oxray_scene::files::check_output(out_path, &[mesh_path, rays_path])
         .map_err(RaycastError::Output)?;
@@ -113,39 +114,72 @@ pub fn raycast(
     // A glTF's buffer files are inputs too: refused before anything is written.
     let sources: Vec<&Path> = sources.iter().map(|p| p.as_path()).collect();
     oxray_scene::files::check_output(out_path, &sources).map_err(RaycastError::Output)?;
+    // The results' size is known from the ray count: refused before anything is traced.
+    result_bytes(query, all_rays.len())?;
     let (index, rays, check) = check_rays(&all_rays);
     let device = &device.clone().with_host_builds();
     let gas = build_gas_on(device, &mesh, BuildFlags::PREFER_FAST_TRACE)?;
     let root = gas.handle();
     let n = rays.len();
-    let kind = if occlusion {
-        BatchKind::Any
-    } else {
-        BatchKind::Closest
-    };
-    let traced = {
-        let mut batch = device.upload_rays(&rays, kind)?;
-        time(1, || device.trace_batch(&root, &mut batch))?
-    };
+    let refused = |e: oxray::SurfaceQueryError| RaycastError::Results(e.to_string());
     // Results of the traced rays scattered back to file order; invalid rays stay misses.
-    let (out, hits, with_transfers) = if occlusion {
-        let mut occ = vec![false; n];
-        let with = time(1, || device.intersect_any(&root, &rays, &mut occ))?;
-        let count = occ.iter().filter(|&&o| o).count();
-        let mut all = vec![false; all_rays.len()];
-        for (&i, o) in index.iter().zip(occ) {
-            all[i] = o;
+    let (out, hits, traced, with_transfers) = match query {
+        RaycastQuery::Occlusion | RaycastQuery::Closest => {
+            let occlusion = query == RaycastQuery::Occlusion;
+            let kind = if occlusion {
+                BatchKind::Any
+            } else {
+                BatchKind::Closest
+            };
+            let traced = {
+                let mut batch = device.upload_rays(&rays, kind)?;
+                time(1, || device.trace_batch(&root, &mut batch))?
+            };
+            if occlusion {
+                let mut occ = vec![false; n];
+                let with = time(1, || device.intersect_any(&root, &rays, &mut occ))?;
+                let count = occ.iter().filter(|&&o| o).count();
+                let mut all = vec![false; all_rays.len()];
+                for (&i, o) in index.iter().zip(occ) {
+                    all[i] = o;
+                }
+                (encode_occlusion(&all), count, traced, with)
+            } else {
+                let mut hits = vec![None; n];
+                let with = time(1, || device.intersect_closest(&root, &rays, &mut hits))?;
+                let count = hits.iter().filter(|h| h.is_some()).count();
+                let mut all = vec![None; all_rays.len()];
+                for (&i, h) in index.iter().zip(hits) {
+                    all[i] = h;
+                }
+                (encode_hits(&all), count, traced, with)
+            }
         }
-        (encode_occlusion(&all), count, with)
-    } else {
-        let mut hits = vec![None; n];
-        let with = time(1, || device.intersect_closest(&root, &rays, &mut hits))?;
-        let count = hits.iter().filter(|h| h.is_some()).count();
-        let mut all = vec![None; all_rays.len()];
-        for (&i, h) in index.iter().zip(hits) {
-            all[i] = h;
+        RaycastQuery::Count => {
+            let mut counts = vec![0u32; n];
+            let t = Instant::now();
+            gas.count_hits_batch(&rays, &mut counts).map_err(refused)?;
+            let with = t.elapsed().as_secs_f64();
+            let count = counts.iter().filter(|&&c| c > 0).count();
+            let mut all = vec![0u32; all_rays.len()];
+            for (&i, c) in index.iter().zip(counts) {
+                all[i] = c;
+            }
+            (encode_counts(&all), count, with, with)
         }
-        (encode_hits(&all), count, with)
+        RaycastQuery::AllHits { max } => {
+            let mut lists = AllHits::new();
+            let t = Instant::now();
+            gas.all_hits_batch(&rays, max, &mut lists)
+                .map_err(refused)?;
+            let with = t.elapsed().as_secs_f64();
+            let count = (0..n).filter(|&k| !lists.hits(k).is_empty()).count();
+            let mut all: Vec<Option<(&[Hit], bool)>> = vec![None; all_rays.len()];
+            for (k, &i) in index.iter().enumerate() {
+                all[i] = Some((lists.hits(k), lists.is_complete(k)));
+            }
+            (encode_all_hits(&all, max), count, with, with)
+        }
     };
     write_results(out_path, &out)?;
     Ok(RaycastReport {

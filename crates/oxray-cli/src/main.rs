@@ -57,8 +57,17 @@ enum Command {
         #[arg(long, short)]
         out: PathBuf,
         /// Any hit instead of closest hit.
-        #[arg(long)]
+        #[arg(long, conflicts_with_all = ["count", "all_hits"])]
         occlusion: bool,
+        /// How many primitives each ray crosses: one u32 per ray.
+        #[arg(long, conflicts_with = "all_hits")]
+        count: bool,
+        /// Every primitive each ray crosses (LiDAR returns), the nearest N of them.
+        ///
+        /// One record of 8 + 16 N bytes per ray: u32 hits listed, u32 1 if no hit was left out,
+        /// then N hit records (t, primitive, u, v, nearest first; misses after the last).
+        #[arg(long, value_name = "N")]
+        all_hits: Option<usize>,
         /// Worker threads (default: all cores).
         #[arg(short = 't', long)]
         threads: Option<usize>,
@@ -935,21 +944,34 @@ fn run(cli: Cli) -> Result<()> {
             rays,
             out,
             occlusion,
+            count,
+            all_hits,
             threads,
             backend,
         } => {
+            use oxray_cli::raycast::RaycastQuery;
+            let query = match (occlusion, count, all_hits) {
+                (true, _, _) => RaycastQuery::Occlusion,
+                (_, true, _) => RaycastQuery::Count,
+                (_, _, Some(max)) => RaycastQuery::AllHits { max },
+                _ => RaycastQuery::Closest,
+            };
             let pool = rayon::ThreadPoolBuilder::new()
                 .num_threads(threads.unwrap_or(0))
                 .build()
                 .context("cannot start the worker threads")?;
             let device = oxray_cli::device::open(&backend)?;
-            let r = pool
-                .install(|| oxray_cli::device::raycast(&device, &mesh, &rays, &out, occlusion))?;
+            let r =
+                pool.install(|| oxray_cli::device::raycast(&device, &mesh, &rays, &out, query))?;
             say(format_args!(
                 "{} rays, {} {}, {} invalid ({:.2} Mrays/s traced, {:.2} Mrays/s with transfers on {})",
                 r.rays,
                 r.hits,
-                if occlusion { "occluded" } else { "hits" },
+                match query {
+                    RaycastQuery::Occlusion => "occluded",
+                    RaycastQuery::Closest => "hits",
+                    _ => "rays with hits",
+                },
                 r.check.invalid(),
                 r.traced_mrays_per_s,
                 r.transfer_mrays_per_s,

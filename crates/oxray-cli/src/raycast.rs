@@ -51,6 +51,9 @@ pub enum RaycastError {
     /// The acceleration structure could not be built.
     #[error(transparent)]
     Build(#[from] oxray::BuildError),
+    /// The results asked for cannot be made (too large, or a query the device refused).
+    #[error("{0}")]
+    Results(String),
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> RaycastError + '_ {
@@ -222,6 +225,75 @@ pub fn encode_hits(hits: &[Option<Hit>]) -> Vec<u8> {
         out.extend_from_slice(&p.to_le_bytes());
         out.extend_from_slice(&u.to_le_bytes());
         out.extend_from_slice(&v.to_le_bytes());
+    }
+    out
+}
+
+/// What `oxray raycast` asks of every ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RaycastQuery {
+    /// The closest hit ([`encode_hits`]).
+    Closest,
+    /// Whether anything is hit ([`encode_occlusion`]).
+    Occlusion,
+    /// How many primitives the ray crosses ([`encode_counts`]).
+    Count,
+    /// Every primitive the ray crosses, the nearest `max` of them ([`encode_all_hits`]).
+    AllHits {
+        /// Hits kept per ray.
+        max: usize,
+    },
+}
+
+/// Most hits `--all-hits` keeps per ray: the records are fixed-size, so that a file is an
+/// array (numpy's `fromfile` reads it with one dtype).
+pub const MAX_ALL_HITS: usize = 4096;
+
+/// Largest result file `oxray raycast` writes (checked before anything is allocated).
+pub const MAX_RESULT_BYTES: u64 = 1 << 36;
+
+/// Bytes of one ray's result of `query`, and of `rays` rays: an error where the file would
+/// pass [`MAX_RESULT_BYTES`] or `max` passes [`MAX_ALL_HITS`].
+pub fn result_bytes(query: RaycastQuery, rays: usize) -> Result<(usize, u64), RaycastError> {
+    let per_ray = match query {
+        RaycastQuery::Closest => HIT_BYTES,
+        RaycastQuery::Occlusion | RaycastQuery::Count => 4,
+        RaycastQuery::AllHits { max } => {
+            if max == 0 || max > MAX_ALL_HITS {
+                return Err(RaycastError::Results(format!(
+                    "--all-hits takes 1 to {MAX_ALL_HITS} hits per ray, not {max}"
+                )));
+            }
+            8 + HIT_BYTES * max
+        }
+    };
+    let total = (per_ray as u64).saturating_mul(rays as u64);
+    if total > MAX_RESULT_BYTES {
+        return Err(RaycastError::Results(format!(
+            "{rays} rays of {per_ray} result bytes each would write {total} bytes; at most {MAX_RESULT_BYTES}"
+        )));
+    }
+    Ok((per_ray, total))
+}
+
+/// Encodes hit counts: one little-endian u32 per ray.
+pub fn encode_counts(counts: &[u32]) -> Vec<u8> {
+    counts.iter().flat_map(|c| c.to_le_bytes()).collect()
+}
+
+/// Encodes all-hits lists as fixed-size records of `8 + 16 * max` bytes per ray: `u32` hits
+/// listed, `u32` 1 if the list is complete (no hit beyond the `max` kept), then `max` hit
+/// records as [`encode_hits`] writes them, nearest first, misses after the last hit. `lists`
+/// has `None` for the rays that were not traced (invalid: no hit, complete).
+pub fn encode_all_hits(lists: &[Option<(&[Hit], bool)>], max: usize) -> Vec<u8> {
+    let mut out = Vec::with_capacity(lists.len() * (8 + HIT_BYTES * max));
+    for l in lists {
+        let (hits, complete) = l.unwrap_or((&[], true));
+        let hits = &hits[..hits.len().min(max)];
+        out.extend_from_slice(&(hits.len() as u32).to_le_bytes());
+        out.extend_from_slice(&(complete as u32).to_le_bytes());
+        let padded: Vec<Option<Hit>> = (0..max).map(|k| hits.get(k).copied()).collect();
+        out.extend_from_slice(&encode_hits(&padded));
     }
     out
 }

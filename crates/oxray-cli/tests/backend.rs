@@ -315,6 +315,131 @@ fn bench_simulation_times_the_queries_on_the_cpu_and_the_device() {
     }
 }
 
+/// Three stacked squares over [-1, 1]^2 at z = 0, 0.5 and 1, as OBJ (6 triangles): a ray going
+/// down crosses three.
+fn stacked_obj(test: &str) -> PathBuf {
+    let mut text = String::new();
+    for z in [0.0f32, 0.5, 1.0] {
+        for (x, y) in [(-1.0f32, -1.0f32), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            text += &format!("v {x} {y} {z}\n");
+        }
+    }
+    for k in 0..3 {
+        let b = 4 * k + 1;
+        text += &format!("f {} {} {}\nf {} {} {}\n", b, b + 1, b + 2, b, b + 2, b + 3);
+    }
+    let p = tmp(&format!("{test}-stacked.obj"));
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+fn u32s(bytes: &[u8]) -> Vec<u32> {
+    bytes
+        .chunks_exact(4)
+        .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect()
+}
+
+#[test]
+fn raycast_counts_and_lists_every_crossing_on_every_device() {
+    let gpu = gpu_available();
+    let (mesh, rays) = (stacked_obj("lists"), rays_file("lists"));
+    let run = |backend: &str, flag: &[&str], out: &Path| {
+        oxray()
+            .args([
+                "raycast",
+                &s(&mesh),
+                "--rays",
+                &s(&rays),
+                "--out",
+                &s(out),
+                "--backend",
+                backend,
+            ])
+            .args(flag)
+            .output()
+            .unwrap()
+    };
+    let mut results = Vec::new();
+    for backend in ["cpu", "cuda"] {
+        let (counts, lists, closest) = (
+            tmp(&format!("{backend}-counts.bin")),
+            tmp(&format!("{backend}-lists.bin")),
+            tmp(&format!("{backend}-closest.bin")),
+        );
+        let outs = [
+            run(backend, &["--count"], &counts),
+            run(backend, &["--all-hits", "2"], &lists),
+            run(backend, &[], &closest),
+        ];
+        if backend == "cuda" && !gpu {
+            for o in &outs {
+                assert_clean_cuda_failure(o, "raycast --count / --all-hits");
+            }
+            continue;
+        }
+        for o in &outs {
+            assert!(
+                o.status.success(),
+                "{backend}: {}",
+                String::from_utf8_lossy(&o.stderr)
+            );
+        }
+        let counts = std::fs::read(&counts).unwrap();
+        let lists = std::fs::read(&lists).unwrap();
+        let closest = std::fs::read(&closest).unwrap();
+        let n = closest.len() / 16;
+        assert_eq!(
+            (counts.len(), lists.len()),
+            (4 * n, (8 + 32) * n),
+            "{backend}"
+        );
+        let counts = u32s(&counts);
+        let mut crossing_all = 0;
+        for i in 0..n {
+            let rec = u32s(&lists[40 * i..40 * i + 40]);
+            let (listed, complete) = (rec[0] as usize, rec[1] == 1);
+            let c = counts[i] as usize;
+            assert_eq!(listed, c.min(2), "{backend}: ray {i}");
+            assert_eq!(complete, c <= 2, "{backend}: ray {i}");
+            if c == 3 {
+                crossing_all += 1;
+            }
+            // The first listed hit is the closest hit; the listed ones go nearest first.
+            let first_t = f32::from_bits(rec[2]);
+            let closest_t = f32::from_le_bytes(closest[16 * i..16 * i + 4].try_into().unwrap());
+            if listed > 0 {
+                assert_eq!(first_t, closest_t, "{backend}: ray {i}");
+            } else {
+                assert_eq!(
+                    (first_t, rec[3]),
+                    (f32::INFINITY, u32::MAX),
+                    "{backend}: ray {i}"
+                );
+            }
+            if listed == 2 {
+                assert!(f32::from_bits(rec[6]) > first_t, "{backend}: ray {i}");
+            }
+        }
+        assert!(
+            crossing_all > n / 4,
+            "{backend}: {crossing_all} of {n} rays cross all three"
+        );
+        results.push((counts, lists));
+    }
+    if let [a, b] = &results[..] {
+        assert_eq!(a, b, "the devices list the same hits");
+    }
+    // Bad sizes are refused before anything is written.
+    let out = tmp("refused.bin");
+    let o = run("cpu", &["--all-hits", "0"], &out);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--all-hits takes 1 to"));
+    assert!(!out.exists());
+    let o = run("cpu", &["--count", "--occlusion"], &out);
+    assert_eq!(o.status.code(), Some(2), "the flags exclude each other");
+}
+
 #[test]
 fn unknown_backends_are_rejected_by_the_argument_parser() {
     let (mesh, rays) = (heightfield_obj("bogus"), rays_file("bogus"));
