@@ -770,7 +770,14 @@ mod tests {
         let rays_path = dir.join("rays.bin");
         std::fs::write(&rays_path, rays).unwrap();
         let out = dir.join("hits.bin");
-        let r = raycast(&Device::cpu(), &mesh, &rays_path, &out, false).unwrap();
+        let r = raycast(
+            &Device::cpu(),
+            &mesh,
+            &rays_path,
+            &out,
+            crate::raycast::RaycastQuery::Closest,
+        )
+        .unwrap();
         assert_eq!((r.rays, r.hits), (2, 1));
         let bytes = std::fs::read(&out).unwrap();
         assert_eq!(f32::from_le_bytes(bytes[0..4].try_into().unwrap()), 1.0);
