@@ -350,3 +350,61 @@ pub fn info(mesh_path: &Path) -> Result<String, RaycastError> {
         build_ms,
     ))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use oxray::HitKind;
+
+    fn hit(t: f32, primitive_index: u32) -> Hit {
+        Hit {
+            t,
+            u: 0.25,
+            v: 0.5,
+            primitive_index,
+            sbt_gas_index: 0,
+            build_input: 0,
+            hit_kind: HitKind::TRIANGLE_FRONT_FACE,
+            instance_id: !0,
+            instance_index: 0,
+        }
+    }
+
+    #[test]
+    fn all_hits_records_are_fixed_size_and_padded_with_misses() {
+        let hits = [hit(1.0, 3), hit(2.0, 7)];
+        let lists = [Some((&hits[..], false)), None, Some((&hits[..1], true))];
+        let bytes = encode_all_hits(&lists, 2);
+        assert_eq!(bytes.len(), 3 * (8 + 32));
+        let w: Vec<u32> = bytes
+            .chunks_exact(4)
+            .map(|c| u32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+            .collect();
+        assert_eq!(&w[..2], &[2, 0]);
+        assert_eq!((f32::from_bits(w[2]), w[3]), (1.0, 3));
+        assert_eq!((f32::from_bits(w[6]), w[7]), (2.0, 7));
+        // A ray not traced: nothing listed, complete, misses.
+        assert_eq!(&w[10..12], &[0, 1]);
+        assert_eq!((f32::from_bits(w[12]), w[13]), (f32::INFINITY, u32::MAX));
+        assert_eq!(&w[20..22], &[1, 1]);
+        assert_eq!((f32::from_bits(w[26]), w[27]), (f32::INFINITY, u32::MAX));
+        assert_eq!(encode_counts(&[3, 0]), [3, 0, 0, 0, 0, 0, 0, 0]);
+    }
+
+    #[test]
+    fn result_sizes_are_checked_before_anything_is_traced() {
+        assert_eq!(result_bytes(RaycastQuery::Closest, 10).unwrap(), (16, 160));
+        assert_eq!(result_bytes(RaycastQuery::Count, 10).unwrap(), (4, 40));
+        assert_eq!(
+            result_bytes(RaycastQuery::AllHits { max: 3 }, 10).unwrap(),
+            (56, 560)
+        );
+        for max in [0, MAX_ALL_HITS + 1] {
+            assert!(result_bytes(RaycastQuery::AllHits { max }, 1).is_err());
+        }
+        assert!(matches!(
+            result_bytes(RaycastQuery::AllHits { max: MAX_ALL_HITS }, 1 << 30),
+            Err(RaycastError::Results(_))
+        ));
+    }
+}
