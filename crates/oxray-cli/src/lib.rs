@@ -5,6 +5,7 @@
 #![warn(missing_docs)]
 
 pub mod bench;
+pub mod closest;
 pub mod device;
 pub mod info;
 pub mod raycast;

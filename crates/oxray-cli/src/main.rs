@@ -78,6 +78,30 @@ enum Command {
         #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
         backend: String,
     },
+    /// The closest point of a mesh's surface to every point of a file, and its distance.
+    ///
+    /// Points are little-endian `f32[3]`. Each result is 20 bytes: f32 distance (signed with
+    /// --signed: negative inside a closed mesh), f32 x, y, z of the closest point, u32
+    /// triangle; none (a non-finite point, an empty mesh) is +inf, NaN and 0xFFFFFFFF.
+    Closest {
+        /// The mesh or scene (.obj, .ply, .gltf, .glb).
+        mesh: PathBuf,
+        /// The point file.
+        #[arg(long)]
+        points: PathBuf,
+        /// Where to write the results (replaced atomically; never an input).
+        #[arg(long, short)]
+        out: PathBuf,
+        /// Signed distances: negative inside a closed, consistently wound mesh.
+        #[arg(long)]
+        signed: bool,
+        /// Worker threads (default: all cores).
+        #[arg(short = 't', long)]
+        threads: Option<usize>,
+        /// The device that builds and answers: cpu, cuda, cuda:N or auto.
+        #[arg(long, default_value = "cpu", value_parser = oxray_cli::device::parse_backend)]
+        backend: String,
+    },
     /// Triangle and instance counts and BVH statistics of a mesh or scene.
     ///
     /// For glTF, one GAS per mesh and an IAS over the node placements, as the renderer builds
@@ -980,6 +1004,30 @@ fn run(cli: Cli) -> Result<()> {
             if let Some(summary) = r.check.summary() {
                 eprintln!("warning: {}: {summary}", rays.display());
             }
+            Ok(())
+        }
+        Command::Closest {
+            mesh,
+            points,
+            out,
+            signed,
+            threads,
+            backend,
+        } => {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads.unwrap_or(0))
+                .build()
+                .context("cannot start the worker threads")?;
+            let device = oxray_cli::device::open(&backend)?;
+            let r = pool
+                .install(|| oxray_cli::closest::closest(&device, &mesh, &points, &out, signed))?;
+            say(format_args!(
+                "{} points, {} not finite ({:.2} Mpoints/s on {})",
+                r.points,
+                r.non_finite,
+                r.mpoints_per_s,
+                pool.install(|| device.describe())
+            ))?;
             Ok(())
         }
         Command::Info { mesh } => {

@@ -441,6 +441,77 @@ fn raycast_counts_and_lists_every_crossing_on_every_device() {
 }
 
 #[test]
+fn closest_points_are_the_same_on_every_device() {
+    let gpu = gpu_available();
+    let mesh = stacked_obj("closest");
+    // A grid of points over and between the squares, and one that is not finite.
+    let mut bytes = Vec::new();
+    let mut points = Vec::new();
+    for k in 0..400u32 {
+        let p = [
+            -1.5 + 3.0 * (k % 20) as f32 / 19.0,
+            -1.5 + 3.0 * (k / 20) as f32 / 19.0,
+            -0.3 + 1.6 * ((k * 7) % 11) as f32 / 10.0,
+        ];
+        points.push(p);
+    }
+    points.push([f32::NAN, 0.0, 0.0]);
+    for p in &points {
+        for x in p {
+            bytes.extend_from_slice(&x.to_le_bytes());
+        }
+    }
+    let points_path = tmp("closest-points.bin");
+    std::fs::write(&points_path, &bytes).unwrap();
+    let mut results = Vec::new();
+    for backend in ["cpu", "cuda"] {
+        let out = tmp(&format!("closest-{backend}.bin"));
+        let o = oxray()
+            .args([
+                "closest",
+                &s(&mesh),
+                "--points",
+                &s(&points_path),
+                "--out",
+                &s(&out),
+            ])
+            .args(["--backend", backend])
+            .output()
+            .unwrap();
+        if backend == "cuda" && !gpu {
+            assert_clean_cuda_failure(&o, "closest");
+            continue;
+        }
+        assert!(
+            o.status.success(),
+            "{backend}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(String::from_utf8_lossy(&o.stdout).contains("401 points, 1 not finite"));
+        let r = std::fs::read(&out).unwrap();
+        assert_eq!(r.len(), 20 * points.len());
+        let f = |k: usize| f32::from_le_bytes(r[4 * k..4 * k + 4].try_into().unwrap());
+        for (i, p) in points[..400].iter().enumerate() {
+            // The nearest square: the nearest of z = 0, 0.5, 1, and the distance to its edge
+            // outside [-1, 1]^2.
+            let dz = [0.0f32, 0.5, 1.0]
+                .iter()
+                .map(|z| (p[2] - z).abs())
+                .fold(f32::INFINITY, f32::min);
+            let dx = (p[0].abs() - 1.0).max(0.0);
+            let dy = (p[1].abs() - 1.0).max(0.0);
+            let want = (dx * dx + dy * dy + dz * dz).sqrt();
+            assert!((f(5 * i) - want).abs() < 1e-5, "{backend}: point {i} {p:?}");
+        }
+        assert_eq!(f(5 * 400), f32::INFINITY);
+        results.push(r);
+    }
+    if let [a, b] = &results[..] {
+        assert_eq!(a, b, "the devices find the same points");
+    }
+}
+
+#[test]
 fn unknown_backends_are_rejected_by_the_argument_parser() {
     let (mesh, rays) = (heightfield_obj("bogus"), rays_file("bogus"));
     let out_path = tmp("bogus.bin");
