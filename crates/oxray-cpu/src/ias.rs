@@ -33,6 +33,9 @@ pub struct Ias {
     data: IasData,
     /// The child of every instance slot resolved to a CPU object; `None` for the null handle.
     pub(crate) nodes: Vec<Option<CpuNode>>,
+    /// Whether closest points can be answered under it (checked on first use, again after an
+    /// update): `simulation::instanced`.
+    pub(crate) closest_support: std::sync::OnceLock<Result<(), crate::SurfaceQueryError>>,
 }
 
 impl Ias {
@@ -48,7 +51,11 @@ impl Ias {
     /// another device is refused.
     pub fn from_data(data: IasData) -> Result<Ias, BuildError> {
         let nodes = resolve_children(&data)?;
-        Ok(Ias { data, nodes })
+        Ok(Ias {
+            data,
+            nodes,
+            closest_support: Default::default(),
+        })
     }
 
     /// Updates (refits) the IAS in place (guide §5.6); see [`IasData::update`]. The children
@@ -61,6 +68,7 @@ impl Ias {
         self.data.update(options, inputs)?;
         // The children are the same structures or updates of them: of this backend.
         self.nodes = resolve_children(&self.data)?;
+        self.closest_support = Default::default();
         Ok(())
     }
 

@@ -240,7 +240,7 @@ fn triangle(gas: &Gas, slot: u32) -> [Vec3; 3] {
 }
 
 /// Checks that the GAS holds static triangles.
-fn check_gas(gas: &Gas) -> Result<(), SurfaceQueryError> {
+pub(super) fn check_gas(gas: &Gas) -> Result<(), SurfaceQueryError> {
     if gas.kind != GasKind::Triangles {
         return Err(SurfaceQueryError::NotTriangles(gas.data().kind()));
     }

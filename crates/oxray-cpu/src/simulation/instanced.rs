@@ -91,6 +91,47 @@ impl Frame {
     }
 }
 
+/// Checks, before any search, that the closest point can be answered under `node`: every
+/// transform on the way a similarity, no motion transform, every GAS of triangles without
+/// motion; so that a refusal does not depend on the query point. An IAS's answer is kept with
+/// it (until an update), so a graph is checked once however many instances share a child.
+fn check_graph(node: NodeRef<'_>, depth: u32) -> Result<(), SurfaceQueryError> {
+    if depth > MAX_TRAVERSABLE_GRAPH_DEPTH {
+        return Err(SurfaceQueryError::Unsupported(
+            "a graph deeper than the traversable graph depth limit",
+        ));
+    }
+    let similar = |t: &Transform| {
+        similarity_scale(t).map(|_| ()).ok_or(SurfaceQueryError::Unsupported(
+            "the closest point through a transform that is not a similarity (a non-uniform scale or a shear)",
+        ))
+    };
+    match node {
+        NodeRef::Gas(gas) => super::closest_point::check_gas(gas),
+        NodeRef::Ias(ias) => ias
+            .closest_support
+            .get_or_init(|| {
+                for (slot, child) in ias.nodes.iter().enumerate() {
+                    let Some(child) = child else { continue };
+                    similar(&ias.data().instances[slot].object_to_world)?;
+                    check_graph(NodeRef::from(child), depth + 1)?;
+                }
+                Ok(())
+            })
+            .clone(),
+        NodeRef::Static(st) => match NodeRef::of(st.child()) {
+            Some(child) => {
+                similar(st.transform())?;
+                check_graph(child, depth + 1)
+            }
+            None => Ok(()),
+        },
+        NodeRef::MatrixMotion(_) | NodeRef::SrtMotion(_) => Err(SurfaceQueryError::Unsupported(
+            "the closest point through a motion transform (a point query has no time)",
+        )),
+    }
+}
+
 /// The squared distance from `p` to box `b` (0 inside).
 fn box_distance2(b: &Aabb, p: Vec3) -> f32 {
     (b.min - p).max(p - b.max).max(Vec3::ZERO).length_squared()
@@ -239,8 +280,9 @@ impl Ias {
     /// searched first (nearer, then the lower slot) wins.
     ///
     /// Errors: a non-finite point; an instance under a transform that is not a similarity, a
-    /// motion transform, or a GAS of other primitives or with motion
-    /// ([`SurfaceQueryError::Unsupported`], [`SurfaceQueryError::NotTriangles`]).
+    /// motion transform, or a GAS of other primitives or with motion anywhere under the IAS
+    /// ([`SurfaceQueryError::Unsupported`], [`SurfaceQueryError::NotTriangles`]), whatever the
+    /// point (the graph is checked once, before any search).
     ///
     /// ```
     /// use oxray_cpu::{Gas, Ias};
@@ -264,6 +306,7 @@ impl Ias {
         point: Vec3,
     ) -> Result<Option<InstanceClosestPoint>, SurfaceQueryError> {
         check_point(point)?;
+        check_graph(NodeRef::Ias(self), 1)?;
         let frame = Frame {
             world_to_here: Transform::IDENTITY,
             here_to_world: Transform::IDENTITY,
@@ -351,6 +394,63 @@ mod tests {
                 .fold(f32::INFINITY, f32::min);
             assert_eq!(got.closest.distance, best, "point {q}");
         }
+    }
+
+    #[test]
+    fn what_cannot_be_answered_is_refused_whatever_the_point() {
+        let v = [[0.0f32, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let gas = std::sync::Arc::new(Gas::from_mesh(&v, &[[0, 1, 2]]).unwrap());
+        // A stretched instance far away: a point next to the plain one never reaches it, yet
+        // the answer would depend on the point if it were checked only when reached.
+        let stretched = Transform::from_affine(&Affine3A::from_scale_rotation_translation(
+            Vec3::new(1.0, 3.0, 1.0),
+            Quat::IDENTITY,
+            Vec3::new(100.0, 0.0, 0.0),
+        ));
+        let instances = [
+            oxray_core::Instance::new(gas.clone().into()),
+            oxray_core::Instance::new(gas.clone().into()).transform(stretched),
+        ];
+        let mut ias = Ias::build(
+            &oxray_core::BuildOptions::default(),
+            &[(&instances[..]).into()],
+        )
+        .unwrap();
+        for p in [Vec3::new(0.25, 0.25, 0.5), Vec3::new(100.0, 0.0, 1.0)] {
+            assert!(matches!(
+                ias.closest_point(p),
+                Err(SurfaceQueryError::Unsupported(_))
+            ));
+        }
+        // An update to similar placements is answered (the check is made again).
+        let moved = [
+            oxray_core::Instance::new(gas.clone().into()),
+            oxray_core::Instance::new(gas.clone().into())
+                .transform(Transform::from_translation(Vec3::new(100.0, 0.0, 0.0))),
+        ];
+        let mut rebuilt = Ias::build(
+            &oxray_core::BuildOptions::new(oxray_core::BuildFlags::ALLOW_UPDATE),
+            &[(&instances[..]).into()],
+        )
+        .unwrap();
+        assert!(rebuilt.closest_point(Vec3::ZERO).is_err());
+        rebuilt
+            .update(
+                &oxray_core::BuildOptions {
+                    flags: oxray_core::BuildFlags::ALLOW_UPDATE,
+                    operation: oxray_core::BuildOperation::Update,
+                    ..Default::default()
+                },
+                &[(&moved[..]).into()],
+            )
+            .unwrap();
+        let c = rebuilt
+            .closest_point(Vec3::new(0.25, 0.25, 0.5))
+            .unwrap()
+            .unwrap();
+        assert_eq!(c.closest.distance, 0.5);
+        ias = rebuilt;
+        assert!(ias.closest_point(Vec3::new(100.25, 0.25, 2.0)).is_ok());
     }
 
     #[test]
