@@ -76,7 +76,8 @@ pub use pipeline::{
 pub use ray::{Ray, RayError, RayRecord};
 pub use sbt::{SbtHeader, SbtRegion, ShaderBindingTable};
 pub use simulation::{
-    AllHits, ClosestPoint, NoShadingNormals, ShadingNormals, SurfaceHit, SurfaceQueryError,
+    AllHits, ClosestPoint, InstanceClosestPoint, NoShadingNormals, ShadingNormals, SurfaceHit,
+    SurfaceQueryError,
 };
 pub use transform::Transform;
 pub use validate::{MAX_PRIMITIVES_PER_GAS, MAX_SBT_RECORDS_PER_GAS};

@@ -266,6 +266,18 @@ pub struct ClosestPoint {
     pub v: f32,
 }
 
+/// The closest point of the triangles under an IAS, and the instance it lies under.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InstanceClosestPoint {
+    /// The closest point in world space, its distance from the query point, its triangle
+    /// (primitive index and build input of its GAS) and barycentrics in that triangle.
+    pub closest: ClosestPoint,
+    /// The id of the instance nearest the GAS on the way (as a hit's `instance_id`).
+    pub instance_id: u32,
+    /// The index of that instance in its IAS's build input (as a hit's `instance_index`).
+    pub instance_index: u32,
+}
+
 /// Why a simulation query could not run.
 #[derive(Clone, Debug, Error, PartialEq)]
 #[non_exhaustive]

@@ -100,6 +100,40 @@ impl Transform {
         )
     }
 
+    /// The factor by which the transform scales every distance, if it is a similarity (its
+    /// linear part's columns orthogonal and of one length, within `f32` rounding: rotations,
+    /// reflections, uniform scales and translations); `None` otherwise.
+    ///
+    /// ```
+    /// use oxray_core::Transform;
+    /// use glam::{Affine3A, Vec3};
+    /// let t = Transform::from_affine(&Affine3A::from_scale(Vec3::splat(2.0)));
+    /// assert_eq!(t.similarity_scale(), Some(2.0));
+    /// let s = Transform::from_affine(&Affine3A::from_scale(Vec3::new(1.0, 2.0, 1.0)));
+    /// assert_eq!(s.similarity_scale(), None);
+    /// ```
+    #[must_use]
+    pub fn similarity_scale(&self) -> Option<f32> {
+        let m = &self.0;
+        let c = [
+            Vec3::new(m[0], m[4], m[8]),
+            Vec3::new(m[1], m[5], m[9]),
+            Vec3::new(m[2], m[6], m[10]),
+        ];
+        let s2 = c[0].length_squared();
+        let tol = 1e-5 * s2;
+        let same = |x: f32| (x - s2).abs() <= tol;
+        let orthogonal = |a: Vec3, b: Vec3| a.dot(b).abs() <= tol;
+        (s2 > 0.0
+            && s2.is_finite()
+            && same(c[1].length_squared())
+            && same(c[2].length_squared())
+            && orthogonal(c[0], c[1])
+            && orthogonal(c[0], c[2])
+            && orthogonal(c[1], c[2]))
+        .then(|| s2.sqrt())
+    }
+
     /// `self * other`: applies `other`, then `self`.
     #[must_use]
     pub fn then_after(&self, other: &Transform) -> Transform {

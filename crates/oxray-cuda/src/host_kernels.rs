@@ -73,6 +73,11 @@ extern "C" void host_closest_spheres(const float4* nodes, const float4* spheres,
                                      const float4* rays, uint4* hits, u32 n) {
     HOST_LAUNCH(n, oxray_closest_spheres(nodes, spheres, rays, hits, n));
 }
+extern "C" void host_instance_closest_points(const float4* top, const float4* insts,
+                                            const float4* extras, const float4* points,
+                                            uint4* out, float extent, u32 n) {
+    HOST_LAUNCH(n, oxray_instance_closest_points(top, insts, extras, points, out, extent, n));
+}
 extern "C" void host_signed_distances(const float4* nodes, const float4* tris, const u32* ids,
                                       const float4* points, float* out, float extent, u32 n) {
     HOST_LAUNCH(n, oxray_signed_distances(nodes, tris, ids, points, out, extent, n));
@@ -94,6 +99,8 @@ type OffersIas = unsafe extern "C" fn(
 type Closest = unsafe extern "C" fn(*const u32, *const u32, *const u32, *mut u32, u32);
 type Occluded = unsafe extern "C" fn(*const u32, *const u32, *const u32, *mut u8, u32);
 type ClosestIas = unsafe extern "C" fn(*const u32, *const u32, *const u32, *mut u32, *mut u32, u32);
+type InstancePoints =
+    unsafe extern "C" fn(*const u32, *const u32, *const u32, *const f32, *mut u32, f32, u32);
 type Gather = unsafe extern "C" fn(*const u64, *const u32, *mut u32, u32);
 type Points<T> =
     unsafe extern "C" fn(*const u32, *const u32, *const u32, *const f32, *mut T, f32, u32);
@@ -114,6 +121,7 @@ struct HostKernels {
     closest_ias: ClosestIas,
     occluded_ias: Occluded,
     closest_spheres: Closest,
+    instance_closest_points: InstancePoints,
 }
 
 fn kernels() -> &'static HostKernels {
@@ -169,6 +177,9 @@ fn kernels() -> &'static HostKernels {
             let closest_ias = *lib.get::<ClosestIas>(b"host_closest_ias").unwrap();
             let occluded_ias = *lib.get::<Occluded>(b"host_occluded_ias").unwrap();
             let closest_spheres = *lib.get::<Closest>(b"host_closest_spheres").unwrap();
+            let instance_closest_points = *lib
+                .get::<InstancePoints>(b"host_instance_closest_points")
+                .unwrap();
             let _ = std::fs::remove_dir_all(&dir);
             HostKernels {
                 _lib: lib,
@@ -185,6 +196,7 @@ fn kernels() -> &'static HostKernels {
                 closest_ias,
                 occluded_ias,
                 closest_spheres,
+                instance_closest_points,
             }
         }
     })
@@ -823,4 +835,150 @@ fn instance_and_sphere_query_kernels_trace_the_cpus_hits() {
     gas.intersect_batch(&rays, &mut want).unwrap();
     let occ: Vec<bool> = want.iter().map(Option::is_some).collect();
     compare_hits(&got, &want, &occ, "spheres", true);
+}
+
+#[test]
+fn the_instance_closest_point_kernel_finds_the_cpus_points_and_instances() {
+    let k = kernels();
+    let children = [
+        triangle_gas(&icosphere(2), BuildFlags::empty()),
+        triangle_gas(&grid_cube(3), BuildFlags::PREFER_FAST_TRACE),
+    ];
+    let cpu_children: Vec<std::sync::Arc<Gas>> = children
+        .iter()
+        .map(|(g, _)| std::sync::Arc::new(g.clone()))
+        .collect();
+    // Similarities: translations, rotations, uniform scales, a mirror; and three copies of one
+    // placement (ties between instances: the lower slot wins).
+    let mut placements: Vec<Transform> = (0..8)
+        .map(|i| {
+            Transform::from_affine(&glam::Affine3A::from_scale_rotation_translation(
+                Vec3::splat(0.5 + 0.25 * i as f32),
+                glam::Quat::from_rotation_y(0.4 * i as f32) * glam::Quat::from_rotation_x(0.3),
+                Vec3::new(3.0 * i as f32 - 10.0, (i % 3) as f32, 0.5 * i as f32),
+            ))
+        })
+        .collect();
+    placements.push(Transform::from_affine(&glam::Affine3A::from_scale(
+        Vec3::new(-1.0, 1.0, 1.0),
+    )));
+    placements.extend([Transform::from_translation(Vec3::new(0.0, 5.0, 0.0)); 3]);
+    let instances: Vec<Instance> = placements
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            Instance::new(cpu_children[if i >= 9 { 0 } else { i % 2 }].clone().into())
+                .transform(*t)
+                .instance_id(50 + i as u32)
+        })
+        .collect();
+    let (data, tree) =
+        IasData::build_with_tree(&BuildOptions::default(), &[(&instances[..]).into()]).unwrap();
+    let child_of = |inst: &oxray_bvh::InstanceData| {
+        if inst.index >= 9 {
+            0
+        } else {
+            inst.index as usize % 2
+        }
+    };
+    let refs: Vec<Option<ChildRef>> = data
+        .instances
+        .iter()
+        .enumerate()
+        .map(|(slot, inst)| {
+            let l = &children[child_of(inst)].1;
+            Some(ChildRef {
+                index: slot as u32,
+                nodes_addr: l.nodes.as_ptr() as u64,
+                triangles_addr: l.triangles.as_ptr() as u64,
+            })
+        })
+        .collect();
+    let layout = IasLayout::new(&data, &tree, &refs).unwrap();
+    // Slot ids (one input each: the primitive index) and the extras, as the host makes them.
+    let ids: Vec<Vec<u32>> = children
+        .iter()
+        .map(|(_, l)| {
+            l.slots
+                .iter()
+                .map(|s| {
+                    if s.primitive_index == u32::MAX {
+                        NO_PRIMITIVE
+                    } else {
+                        s.primitive_index
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    let mut extras = vec![0u32; 16 * data.instances.len()];
+    for (slot, inst) in data.instances.iter().enumerate() {
+        let c = child_of(inst);
+        let b = children[c].0.data().bounds;
+        let e = &mut extras[16 * slot..16 * slot + 16];
+        for (k, f) in inst.object_to_world.0.iter().enumerate() {
+            e[k] = f.to_bits();
+        }
+        let addr = ids[c].as_ptr() as u64;
+        e[12] = addr as u32;
+        e[13] = (addr >> 32) as u32;
+        e[14] = inst.object_to_world.similarity_scale().unwrap().to_bits();
+        e[15] = b.min.abs().max(b.max.abs()).max_element().to_bits();
+    }
+    let cpu = oxray_cpu::Ias::from_data(data.clone()).unwrap();
+    let mut rng = Rng::new(31);
+    let mut points: Vec<Vec3> = (0..400).map(|_| rng.vec3(-12.0, 12.0)).collect();
+    // Points equally far from the three copies, and on their surface.
+    points.extend([
+        Vec3::new(0.0, 5.0, 0.0),
+        Vec3::new(0.0, 6.0, 0.0),
+        Vec3::new(0.3, 7.5, -0.2),
+    ]);
+    let words: Vec<f32> = points.iter().flat_map(|p| [p.x, p.y, p.z, 0.0]).collect();
+    let b = data.bounds;
+    let top_extent = b.min.abs().max(b.max.abs()).max_element();
+    let mut out = vec![0u32; 8 * points.len()];
+    // SAFETY: the top-level nodes and instance slots (child addresses of the layouts above),
+    // 16 extra words per slot whose id address is a table above, 4 floats per point and 8
+    // output words per point; everything alive through the call.
+    unsafe {
+        (k.instance_closest_points)(
+            layout.nodes.as_ptr(),
+            layout.instances.as_ptr(),
+            extras.as_ptr(),
+            words.as_ptr(),
+            out.as_mut_ptr(),
+            top_extent,
+            points.len() as u32,
+        )
+    };
+    for (i, p) in points.iter().enumerate() {
+        let want = cpu.closest_point(*p).unwrap().unwrap();
+        let w = &out[8 * i..8 * i + 8];
+        let inst = &data.instances[w[7] as usize];
+        let slot = children[child_of(inst)].1.slots[w[6] as usize];
+        assert_eq!(
+            (
+                Vec3::new(
+                    f32::from_bits(w[0]),
+                    f32::from_bits(w[1]),
+                    f32::from_bits(w[2])
+                ),
+                f32::from_bits(w[3]),
+                slot.primitive_index,
+                f32::from_bits(w[4]),
+                f32::from_bits(w[5]),
+                inst.instance_id,
+            ),
+            (
+                want.closest.point,
+                want.closest.distance,
+                want.closest.primitive_index,
+                want.closest.u,
+                want.closest.v,
+                want.instance_id,
+            ),
+            "point {i} {p}"
+        );
+    }
 }

@@ -277,6 +277,11 @@ impl CudaIas {
         (&self.nodes, &self.instances)
     }
 
+    /// The child of the instance in slot `slot` (`None`: null or masked out).
+    pub(crate) fn child(&self, slot: usize) -> Option<&CudaChild> {
+        self.children.get(slot)?.as_ref()
+    }
+
     /// The triangle GAS of the instance in slot `slot`, if it has one.
     pub(crate) fn triangle_child(&self, slot: usize) -> Option<&Arc<CudaGas>> {
         self.children

@@ -46,6 +46,7 @@ use crate::error::{driver, CudaError};
 use crate::gas::{check_batch, grid, CudaGas, HitRecord};
 use crate::ias::CudaIas;
 use crate::layout::NodeLayout;
+use crate::transform::CudaChild;
 use bytemuck::Zeroable;
 use cudarc::driver::{CudaFunction, CudaSlice, CudaView, DevicePtr, PushKernelArg};
 use glam::Vec3;
@@ -54,8 +55,8 @@ use oxray_bvh::{GasKind, NO_PRIMITIVE};
 use oxray_core::simulation::hit_order;
 use oxray_core::simulation::{sphere_surface_parts, surface_in_world, triangle_surface_parts};
 use oxray_core::{
-    AllHits, ClosestPoint, Hit, NoShadingNormals, PrimitiveType, Ray, RayRecord, ShadingNormals,
-    SurfaceHit, SurfaceQueryError, Transform,
+    AllHits, ClosestPoint, Hit, InstanceClosestPoint, NoShadingNormals, PrimitiveType, Ray,
+    RayRecord, ShadingNormals, SurfaceHit, SurfaceQueryError, Transform,
 };
 use rayon::prelude::*;
 use std::cmp::Ordering;
@@ -95,16 +96,18 @@ pub(crate) struct SimulationKernels {
     closest_points: CudaFunction,
     signed_distances: CudaFunction,
     gather_records: CudaFunction,
+    instance_closest_points: CudaFunction,
 }
 
 /// The entry points of [`SIMULATION_SOURCE`].
-pub(crate) const SIMULATION_ENTRIES: [&str; 6] = [
+pub(crate) const SIMULATION_ENTRIES: [&str; 7] = [
     "oxray_offers_triangles",
     "oxray_offers_spheres",
     "oxray_offers_ias",
     "oxray_closest_points",
     "oxray_signed_distances",
     "oxray_gather_records",
+    "oxray_instance_closest_points",
 ];
 
 /// Compiles the simulation kernels to PTX with NVRTC, for compute capability `cc`.
@@ -127,6 +130,7 @@ impl SimulationKernels {
             closest_points: f(SIMULATION_ENTRIES[3])?,
             signed_distances: f(SIMULATION_ENTRIES[4])?,
             gather_records: f(SIMULATION_ENTRIES[5])?,
+            instance_closest_points: f(SIMULATION_ENTRIES[6])?,
         })
     }
 }
@@ -1090,6 +1094,196 @@ impl CudaIas {
                 Some((inst.object_to_world, inst.world_to_object)),
             ))
         })
+    }
+}
+
+impl CudaIas {
+    /// Refuses, before any search, what the instance closest-point kernel cannot answer (as
+    /// the CPU's `Ias::closest_point` refuses it, whatever the point): a child that is not a
+    /// triangle GAS without motion (nested instances and transforms are the CPU's), or an
+    /// instance that is not placed by a similarity. Else each instance slot's scale.
+    fn closest_point_scales(&self) -> Result<Vec<f32>, SurfaceQueryError> {
+        let data = self.data();
+        let mut scales = vec![0.0f32; data.instances.len()];
+        for (slot, inst) in data.instances.iter().enumerate() {
+            let Some(child) = self.child(slot) else {
+                if inst.mask == 0 && !inst.child.is_null() {
+                    // The device keeps no child for an instance no ray can hit; the CPU's
+                    // point query still searches it.
+                    return Err(SurfaceQueryError::Unsupported(
+                        "closest points under an instance of visibility mask 0 on the CUDA device",
+                    ));
+                }
+                continue;
+            };
+            match child {
+                CudaChild::Gas(g) if g.kind != GasKind::Triangles => {
+                    return Err(SurfaceQueryError::NotTriangles(g.info.kind));
+                }
+                CudaChild::Gas(g) if g.motion.is_some() => {
+                    return Err(SurfaceQueryError::Unsupported(
+                        "a GAS with motion on the CUDA device",
+                    ));
+                }
+                CudaChild::Gas(_) => {}
+                CudaChild::Motion(_) => {
+                    return Err(SurfaceQueryError::Unsupported(
+                        "the closest point through a motion transform (a point query has no time)",
+                    ));
+                }
+                CudaChild::Ias(_) | CudaChild::Static(_) => {
+                    return Err(SurfaceQueryError::Unsupported(
+                        "closest points through nested instances or static transforms on the CUDA device (the CPU answers them)",
+                    ));
+                }
+            }
+            scales[slot] = inst.object_to_world.similarity_scale().ok_or(
+                SurfaceQueryError::Unsupported(
+                    "the closest point through a transform that is not a similarity (a non-uniform scale or a shear)",
+                ),
+            )?;
+        }
+        Ok(scales)
+    }
+
+    /// The closest point of the triangles under this IAS (one level of instances of triangle
+    /// GASes, placed by similarities) to every point, with the instance it lies under, as the
+    /// CPU's `Ias::closest_point_batch`: the same point, distance, triangle, barycentrics and
+    /// instance, ties between instances included (the nearer box, then the lower slot). What
+    /// cannot be answered is refused before any search, whatever the points; then the first
+    /// non-finite point (the lowest index) is the error and the others' results are written.
+    pub fn closest_point_batch(
+        &self,
+        points: &[Vec3],
+        out: &mut [Option<InstanceClosestPoint>],
+    ) -> Result<(), SurfaceQueryError> {
+        length_check(points.len(), out.len())?;
+        let scales = self.closest_point_scales()?;
+        let first = first_non_finite(points);
+        check_batch(points.len()).map_err(query_error)?;
+        let data = self.data();
+        // Four float4 per instance slot: the object-to-world rows, then the child's slot-id
+        // table address, the scale and the child's extent.
+        let mut extras = vec![0u32; 16 * data.instances.len()];
+        // Each child's slot-id table, address and extent, looked up once per child (an address
+        // lookup records a stream event).
+        let mut tables: std::collections::HashMap<usize, (Arc<SimulationTables>, u64, f32)> =
+            Default::default();
+        for (slot, inst) in data.instances.iter().enumerate() {
+            let Some(gas) = self.triangle_child(slot) else {
+                continue;
+            };
+            let key = Arc::as_ptr(gas) as usize;
+            if let std::collections::hash_map::Entry::Vacant(v) = tables.entry(key) {
+                let t = gas.simulation_tables().map_err(query_error)?;
+                let ids = {
+                    let (ids, _guard) = t.ids.device_ptr(&gas.ctx.stream);
+                    ids
+                };
+                let b = gas.info.bounds;
+                let extent = b.min.abs().max(b.max.abs()).max_element();
+                v.insert((t, ids, if extent.is_finite() { extent } else { 0.0 }));
+            }
+            let (_, ids, extent) = &tables[&key];
+            let e = &mut extras[16 * slot..16 * slot + 16];
+            for (k, f) in inst.object_to_world.0.iter().enumerate() {
+                e[k] = f.to_bits();
+            }
+            e[12] = *ids as u32;
+            e[13] = (*ids >> 32) as u32;
+            e[14] = scales[slot].to_bits();
+            e[15] = extent.to_bits();
+        }
+        let n = points.len();
+        let mut words = vec![0u32; 8 * n];
+        if n > 0 && !data.instances.is_empty() {
+            let ctx = self.context();
+            let k = ctx.simulation_kernels().map_err(query_error)?;
+            let s = &ctx.stream;
+            let staged: Vec<[f32; 4]> = points
+                .iter()
+                .map(|p| {
+                    if p.is_finite() {
+                        [p.x, p.y, p.z, 0.0]
+                    } else {
+                        [0.0; 4]
+                    }
+                })
+                .collect();
+            let b = data.bounds;
+            let top_extent = b.min.abs().max(b.max.abs()).max_element();
+            let top_extent = if top_extent.is_finite() {
+                top_extent
+            } else {
+                0.0
+            };
+            let n32 = n as u32;
+            let mut run = || -> Result<(), CudaError> {
+                let d_points = s
+                    .clone_htod(bytemuck::cast_slice::<[f32; 4], f32>(&staged))
+                    .map_err(driver("copying points to the device"))?;
+                let d_extras = s
+                    .clone_htod(&extras)
+                    .map_err(driver("copying instance tables to the device"))?;
+                let mut d_out = s
+                    .alloc_zeros::<u32>(8 * n)
+                    .map_err(driver("allocating point results"))?;
+                let (nodes, instances) = self.device_tables();
+                let mut launch = s.launch_builder(&k.instance_closest_points);
+                launch
+                    .arg(nodes)
+                    .arg(instances)
+                    .arg(&d_extras)
+                    .arg(&d_points)
+                    .arg(&mut d_out)
+                    .arg(&top_extent)
+                    .arg(&n32);
+                // SAFETY: oxray_instance_closest_points(const float4* top, const float4* insts,
+                // const float4* extras, const float4* points, uint4* out, float top_extent,
+                // u32 n): this IAS's top-level nodes and instance slots (every child address a
+                // live triangle GAS it keeps), 16 extra words per slot whose slot-id address is
+                // that child's table (kept alive by `tables` through the call), `n` points of 4
+                // words and 8 output words per point.
+                unsafe { launch.launch(grid(n32)) }
+                    .map_err(driver("launching the instance closest-point kernel"))?;
+                s.memcpy_dtoh(&d_out, &mut words)
+                    .map_err(driver("copying point results to the host"))?;
+                ctx.synchronize()
+            };
+            run().map_err(query_error)?;
+        }
+        drop(tables);
+        out.par_iter_mut()
+            .zip(points.par_iter())
+            .enumerate()
+            .for_each(|(i, (o, p))| {
+                if !p.is_finite() {
+                    return;
+                }
+                let w = &words[8 * i..8 * i + 8];
+                *o = (|| {
+                    let inst = data.instances.get(w[7] as usize)?;
+                    let gas = self.triangle_child(w[7] as usize)?;
+                    let s = gas.slots.get(w[6] as usize)?;
+                    Some(InstanceClosestPoint {
+                        closest: ClosestPoint {
+                            point: Vec3::new(
+                                f32::from_bits(w[0]),
+                                f32::from_bits(w[1]),
+                                f32::from_bits(w[2]),
+                            ),
+                            distance: f32::from_bits(w[3]),
+                            primitive_index: s.primitive_index,
+                            build_input: s.build_input,
+                            u: f32::from_bits(w[4]),
+                            v: f32::from_bits(w[5]),
+                        },
+                        instance_id: inst.instance_id,
+                        instance_index: inst.index,
+                    })
+                })();
+            });
+        first.map_or(Ok(()), Err)
     }
 }
 

@@ -5,9 +5,9 @@ use glam::Vec3;
 use oxray_bvh::{BvhStats, GasMemory};
 use oxray_core::{
     Aabb, AccelProperty, AllHits, BackendKind, BuildError, BuildFlags, BuildInput, BuildInputKind,
-    BuildOptions, ClosestPoint, EmittedProperty, GeometryFlags, Hit, LoadError, QueryError,
-    RandomAccessError, Ray, ShadingNormals, SurfaceHit, SurfaceQueryError, Traversable,
-    TraversableHandle, TraversableKind,
+    BuildOptions, ClosestPoint, EmittedProperty, GeometryFlags, Hit, InstanceClosestPoint,
+    LoadError, QueryError, RandomAccessError, Ray, ShadingNormals, SurfaceHit, SurfaceQueryError,
+    Traversable, TraversableHandle, TraversableKind,
 };
 use std::sync::Arc;
 
@@ -720,6 +720,23 @@ impl Ias {
             self,
             i => i.count_hits_batch(rays, counts),
             i.count_hits_batch(rays, counts)
+        )
+    }
+
+    /// The closest point of the triangles under the instances to every point, with the
+    /// instance it lies under, on the structure's device: the same point, distance, triangle
+    /// and instance on every device (among equally close instances, the nearer box, then the
+    /// lower slot). Instances must be placed by similarities; on CUDA, over one level of
+    /// instances of triangle GASes. What cannot be answered is refused before any search.
+    pub fn closest_point_batch(
+        &self,
+        points: &[Vec3],
+        out: &mut [Option<InstanceClosestPoint>],
+    ) -> Result<(), SurfaceQueryError> {
+        on_ias!(
+            self,
+            i => i.closest_point_batch(points, out),
+            i.closest_point_batch(points, out)
         )
     }
 

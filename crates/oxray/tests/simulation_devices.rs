@@ -539,3 +539,71 @@ fn a_hit_that_is_not_on_its_ray_is_not_found_on_every_device() {
         );
     }
 }
+
+#[test]
+fn closest_points_through_instances_are_the_same_on_every_device() {
+    let sphere = icosphere(2);
+    let cube = grid_cube(3);
+    let mut placements: Vec<Transform> = (0..6)
+        .map(|i| {
+            Transform::from_affine(&glam::Affine3A::from_scale_rotation_translation(
+                Vec3::splat(0.5 + 0.3 * i as f32),
+                glam::Quat::from_rotation_z(0.5 * i as f32),
+                Vec3::new(3.0 * i as f32 - 7.0, (i % 2) as f32, 0.0),
+            ))
+        })
+        .collect();
+    // Two copies of one placement: equally close, the lower slot wins on every device.
+    placements.extend([Transform::from_translation(Vec3::new(0.0, 4.0, 0.0)); 2]);
+    let mut rng = Rng::new(23);
+    let mut points: Vec<Vec3> = (0..300).map(|_| rng.vec3(-9.0, 9.0)).collect();
+    points.push(Vec3::new(0.0, 4.0, 0.0));
+    let mut reference: Option<Vec<Option<oxray::InstanceClosestPoint>>> = None;
+    for (dev_name, device) in all_devices() {
+        let children = [
+            build(&device, &sphere, BuildFlags::empty()),
+            build(&device, &cube, BuildFlags::PREFER_FAST_TRACE),
+        ];
+        let instances: Vec<Instance> = placements
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                Instance::new(children[if k >= 6 { 0 } else { k % 2 }].handle())
+                    .transform(*t)
+                    .instance_id(30 + k as u32)
+            })
+            .collect();
+        let ias = device
+            .build_ias(&BuildOptions::default(), &[(&instances[..]).into()])
+            .unwrap();
+        let mut got = vec![None; points.len()];
+        ias.closest_point_batch(&points, &mut got)
+            .unwrap_or_else(|e| panic!("{dev_name}: {e}"));
+        assert!(got.iter().all(Option::is_some), "{dev_name}");
+        match &reference {
+            None => reference = Some(got),
+            Some(want) => {
+                for (i, (g, w)) in got.iter().zip(want).enumerate() {
+                    assert_eq!(g, w, "{dev_name}: point {i} {}", points[i]);
+                }
+            }
+        }
+        // A stretched instance anywhere: refused whatever the point, on every device.
+        let mut stretched = instances.clone();
+        stretched.push(
+            Instance::new(children[0].handle()).transform(Transform::from_affine(
+                &glam::Affine3A::from_scale(Vec3::new(1.0, 3.0, 1.0)),
+            )),
+        );
+        let ias = device
+            .build_ias(&BuildOptions::default(), &[(&stretched[..]).into()])
+            .unwrap();
+        let e = ias
+            .closest_point_batch(&points[..1], &mut [None])
+            .unwrap_err();
+        assert!(
+            matches!(e, SurfaceQueryError::Unsupported(_)),
+            "{dev_name}: {e}"
+        );
+    }
+}

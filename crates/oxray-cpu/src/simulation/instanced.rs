@@ -18,45 +18,11 @@ use crate::Gas;
 use crate::Ias;
 use glam::Vec3;
 use oxray_bvh::{Bvh4Node, IasData};
+pub use oxray_core::InstanceClosestPoint;
 use oxray_core::{Aabb, Transform, MAX_TRAVERSABLE_GRAPH_DEPTH};
 use std::cell::RefCell;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
-
-/// The closest point of the triangles under an IAS, and the instance it lies under.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct InstanceClosestPoint {
-    /// The closest point in world space, its distance from the query point, its triangle
-    /// (primitive index and build input of its GAS) and barycentrics in that triangle.
-    pub closest: ClosestPoint,
-    /// The id of the instance nearest the GAS on the way (as a hit's `instance_id`).
-    pub instance_id: u32,
-    /// The index of that instance in its IAS's build input (as a hit's `instance_index`).
-    pub instance_index: u32,
-}
-
-/// The factor by which `t` scales every distance, if it is a similarity (its linear part's
-/// columns orthogonal and of one length, within `f32` rounding); `None` otherwise.
-fn similarity_scale(t: &Transform) -> Option<f32> {
-    let m = &t.0;
-    let c = [
-        Vec3::new(m[0], m[4], m[8]),
-        Vec3::new(m[1], m[5], m[9]),
-        Vec3::new(m[2], m[6], m[10]),
-    ];
-    let s2 = c[0].length_squared();
-    let tol = 1e-5 * s2;
-    let same = |x: f32| (x - s2).abs() <= tol;
-    let orthogonal = |a: Vec3, b: Vec3| a.dot(b).abs() <= tol;
-    (s2 > 0.0
-        && s2.is_finite()
-        && same(c[1].length_squared())
-        && same(c[2].length_squared())
-        && orthogonal(c[0], c[1])
-        && orthogonal(c[0], c[2])
-        && orthogonal(c[1], c[2]))
-    .then(|| s2.sqrt())
-}
 
 /// Where the search is: the world-to-here and here-to-world transforms, the factor from here to
 /// world distances, and the instance nearest below.
@@ -78,7 +44,7 @@ impl Frame {
         from_parent: &Transform,
         instance: Option<(u32, u32)>,
     ) -> Result<Frame, SurfaceQueryError> {
-        let s = similarity_scale(to_parent).ok_or(SurfaceQueryError::Unsupported(
+        let s = to_parent.similarity_scale().ok_or(SurfaceQueryError::Unsupported(
             "the closest point through a transform that is not a similarity (a non-uniform scale or a shear)",
         ))?;
         Ok(Frame {
@@ -102,7 +68,7 @@ fn check_graph(node: NodeRef<'_>, depth: u32) -> Result<(), SurfaceQueryError> {
         ));
     }
     let similar = |t: &Transform| {
-        similarity_scale(t).map(|_| ()).ok_or(SurfaceQueryError::Unsupported(
+        t.similarity_scale().map(|_| ()).ok_or(SurfaceQueryError::Unsupported(
             "the closest point through a transform that is not a similarity (a non-uniform scale or a shear)",
         ))
     };
@@ -460,15 +426,15 @@ mod tests {
             Quat::from_rotation_y(0.7) * Quat::from_rotation_x(0.3),
             Vec3::new(1.0, -2.0, 3.0),
         );
-        let s = similarity_scale(&Transform::from_affine(&r)).unwrap();
+        let s = Transform::from_affine(&r).similarity_scale().unwrap();
         assert!((s - 2.5).abs() < 1e-5, "{s}");
         let mirror = Transform::from_affine(&Affine3A::from_scale(Vec3::new(-1.0, 1.0, 1.0)));
-        assert_eq!(similarity_scale(&mirror), Some(1.0));
+        assert_eq!(mirror.similarity_scale(), Some(1.0));
         let stretched = Transform::from_affine(&Affine3A::from_scale(Vec3::new(1.0, 2.0, 1.0)));
-        assert_eq!(similarity_scale(&stretched), None);
+        assert_eq!(stretched.similarity_scale(), None);
         let mut sheared = Transform::IDENTITY;
         sheared.0[1] = 0.5;
-        assert_eq!(similarity_scale(&sheared), None);
-        assert_eq!(similarity_scale(&Transform([0.0; 12])), None);
+        assert_eq!(sheared.similarity_scale(), None);
+        assert_eq!(Transform([0.0; 12]).similarity_scale(), None);
     }
 }

@@ -513,3 +513,87 @@ extern "C" __global__ void __launch_bounds__(128)
     u32 w = words[i] < RECORD_WORDS ? words[i] : RECORD_WORDS;
     for (u32 k = 0; k < w; ++k) out[(size_t)i * RECORD_WORDS + k] = p[k];
 }
+
+// The closest point of the triangles under one level of instances (the layout of trace_ias)
+// to every point (x, y, z, unused): the instance slots' world boxes walked through the top-level
+// tree nearest first; an instance is searched where its box is within the best distance so far
+// (the CPU's rule), with the point carried into its space and the best distance over its
+// similarity scale as the radius. Among equal distances the instance whose box is nearer, then
+// the lower slot, wins: the instance the CPU's best-first search finds first, whatever the walk
+// order. `extras` holds four float4 per instance slot: the object-to-world rows, then (the
+// child's slot-id table address as two words, the scale, the child's extent). A result is two
+// uint4: (world q.x, q.y, q.z, distance) and (u, v, child slot, instance slot), instance slot
+// MISS_SLOT for none.
+extern "C" __global__ void __launch_bounds__(128)
+    oxray_instance_closest_points(const float4* __restrict__ top, const float4* __restrict__ insts,
+                                  const float4* __restrict__ extras,
+                                  const float4* __restrict__ points, uint4* __restrict__ out,
+                                  float top_extent, u32 n) {
+    u32 i = blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    float4 pt = points[i];
+    float3 p = make_float3(pt.x, pt.y, pt.z);
+    float scale_top = fmaxf(fmaxf(fabsf(p.x), fabsf(p.y)), fabsf(p.z)) + top_extent;
+    float top_margin =
+        256.0f * __int_as_float(0x34000000) * fmaxf(scale_top, __int_as_float(0x00800000));
+    float best = F32_INF;
+    u32 best_bits = 0xffffffffu, best_slot = MISS_SLOT;
+    Nearest found;
+    found.slot = MISS_SLOT;
+    found.u = 0.0f;
+    found.v = 0.0f;
+    float3 world_q = make_float3(0.0f, 0.0f, 0.0f);
+    float radius2 = F32_INF;
+    walk_point(top, p, &radius2, top_margin, [&](u32 start, u32 count) {
+        for (u32 s = start; s < start + count; ++s) {
+            const float4* inst = insts + 6 * (size_t)s;
+            float4 lo = inst[3], hi = inst[4];
+            float d2box = box_dist2(p, make_float3(lo.x, lo.y, lo.z), make_float3(hi.x, hi.y, hi.z));
+            if (!(sqrtf(d2box) <= best)) continue;
+            uint4 ptrs = reinterpret_cast<const uint4*>(inst)[5];
+            const float4* nodes = reinterpret_cast<const float4*>(
+                ((unsigned long long)ptrs.y << 32) | (unsigned long long)ptrs.x);
+            const float4* tris = reinterpret_cast<const float4*>(
+                ((unsigned long long)ptrs.w << 32) | (unsigned long long)ptrs.z);
+            if (nodes == nullptr) continue;
+            const float4* e = extras + 4 * (size_t)s;
+            float4 e3 = e[3];
+            const u32* ids = reinterpret_cast<const u32*>(
+                ((unsigned long long)__float_as_uint(e3.y) << 32) |
+                (unsigned long long)__float_as_uint(e3.x));
+            float scale = e3.z;
+            float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
+            // Transform::transform_point of the world-to-object rows.
+            float3 here = make_float3(m0.x * p.x + m0.y * p.y + m0.z * p.z + m0.w,
+                                      m1.x * p.x + m1.y * p.y + m1.z * p.z + m1.w,
+                                      m2.x * p.x + m2.y * p.y + m2.z * p.z + m2.w);
+            // The radius grown by a few ulps: an instance as close as the best (a tie that the
+            // nearer box or lower slot may win) is still found.
+            float radius = best / scale;
+            radius = radius + radius * 1e-6f;
+            float s_here = fmaxf(fmaxf(fabsf(here.x), fabsf(here.y)), fabsf(here.z)) + e3.w;
+            float margin =
+                256.0f * __int_as_float(0x34000000) * fmaxf(s_here, __int_as_float(0x00800000));
+            Nearest nb = nearest(nodes, tris, ids, here, radius * radius, margin);
+            if (nb.slot == MISS_SLOT) continue;
+            float dist = sqrtf(nb.d2) * scale;
+            u32 bits = __float_as_uint(d2box);
+            bool better = dist < best ||
+                          (dist == best && (bits < best_bits || (bits == best_bits && s < best_slot)));
+            if (!better) continue;
+            best = dist;
+            best_bits = bits;
+            best_slot = s;
+            found = nb;
+            float4 w0 = e[0], w1 = e[1], w2 = e[2];
+            world_q = make_float3(w0.x * nb.q.x + w0.y * nb.q.y + w0.z * nb.q.z + w0.w,
+                                  w1.x * nb.q.x + w1.y * nb.q.y + w1.z * nb.q.z + w1.w,
+                                  w2.x * nb.q.x + w2.y * nb.q.y + w2.z * nb.q.z + w2.w);
+            radius2 = best * best;
+        }
+    });
+    out[2 * i] = make_uint4(__float_as_uint(world_q.x), __float_as_uint(world_q.y),
+                            __float_as_uint(world_q.z), __float_as_uint(best));
+    out[2 * i + 1] = make_uint4(__float_as_uint(found.u), __float_as_uint(found.v), found.slot,
+                                best_slot);
+}
