@@ -1,6 +1,7 @@
 //! The simulation queries on the device: every primitive along a ray and hit counts (on a GAS
-//! of triangles or spheres, or one level of instances over triangle GASes), closest points,
-//! signed distances and inside tests (on a triangle GAS), in batches. The results are the CPU
+//! of triangles or spheres, or one level of instances over triangle GASes), hit surfaces,
+//! closest points (on a triangle GAS, and through one level of instances placed by
+//! similarities), signed distances and inside tests (on a triangle GAS), in batches. The results are the CPU
 //! backend's (`oxray_cpu::simulation`), in the same types ([`AllHits`], [`ClosestPoint`]) with
 //! the same errors ([`SurfaceQueryError`]).
 //!
