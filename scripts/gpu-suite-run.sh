@@ -2,7 +2,8 @@
 # Runs the binaries scripts/gpu-suite-pack.sh packed, with OXRAY_REQUIRE_GPU=1 (a missing or
 # unusable GPU fails instead of skipping), then the GPU benchmarks of docs/BENCHMARKS.md that
 # the last sessions left to measure. From the repository root; the log goes to $OUT/log.txt
-# (or ./gpu-log.txt). BENCH=0 skips the benchmarks.
+# (or ./log.txt). BENCH=0 skips the benchmarks, TESTS=0 the test binaries (each fits a device
+# call of at most ten minutes).
 set -u
 export OXRAY_REQUIRE_GPU=1
 root=$(pwd)
@@ -13,7 +14,7 @@ log=$out/log.txt
 mkdir -p "$root/target/debug" && cp "$root/.gpu/bin/oxray-debug" "$root/target/debug/oxray"
 export OXRAY_MESH_DIR=$root/.gpu/meshes
 nvidia-smi --query-gpu=name,driver_version --format=csv >> "$log" 2>&1
-while read -r crate exe name; do
+[ "${TESTS:-1}" = 0 ] || while read -r crate exe name; do
   echo "=== $crate $name" >> "$log"
   (cd "$root/crates/$crate" && timeout "${TEST_TIMEOUT:-240}" "$root/.gpu/bin/$exe" --test-threads 4 > "$out/t.txt" 2>&1)
   rc=$?
