@@ -403,6 +403,33 @@ fn sphere_offers_make_the_cpus_lists() {
     assert!(want.all().len() > rays.len());
 }
 
+/// One level of `instances` over host-laid-out triangle GASes, the child of the instance of
+/// index `i` being `layouts[child_of(i)]`: the IAS data (in slot order) and the kernels' layout
+/// of it, the children's host addresses standing for the device's.
+fn instance_layout(
+    instances: &[Instance],
+    layouts: &[&DeviceLayout],
+    child_of: impl Fn(u32) -> usize,
+) -> (IasData, IasLayout) {
+    let (data, tree): (IasData, Bvh2) =
+        IasData::build_with_tree(&BuildOptions::default(), &[instances.into()]).unwrap();
+    let refs: Vec<Option<ChildRef>> = data
+        .instances
+        .iter()
+        .enumerate()
+        .map(|(slot, inst)| {
+            let l = layouts[child_of(inst.index)];
+            Some(ChildRef {
+                index: slot as u32,
+                nodes_addr: l.nodes.as_ptr() as u64,
+                triangles_addr: l.triangles.as_ptr() as u64,
+            })
+        })
+        .collect();
+    let layout = IasLayout::new(&data, &tree, &refs).unwrap();
+    (data, layout)
+}
+
 #[test]
 fn instance_offers_make_the_cpus_lists() {
     let k = kernels();
@@ -437,22 +464,9 @@ fn instance_offers_make_the_cpus_lists() {
             inst
         })
         .collect();
-    let (data, tree): (IasData, Bvh2) =
-        IasData::build_with_tree(&BuildOptions::default(), &[(&instances[..]).into()]).unwrap();
-    let refs: Vec<Option<ChildRef>> = data
-        .instances
-        .iter()
-        .enumerate()
-        .map(|(slot, inst)| {
-            let l = &children[inst.index as usize % 2].1;
-            Some(ChildRef {
-                index: slot as u32,
-                nodes_addr: l.nodes.as_ptr() as u64,
-                triangles_addr: l.triangles.as_ptr() as u64,
-            })
-        })
-        .collect();
-    let layout = IasLayout::new(&data, &tree, &refs).unwrap();
+    let (data, layout) = instance_layout(&instances, &[&children[0].1, &children[1].1], |i| {
+        i as usize % 2
+    });
     let scene = Mesh {
         positions: vec![[-4.0, -3.0, -3.0], [5.0, 4.0, 3.0]],
         triangles: vec![],
@@ -720,22 +734,9 @@ fn instance_and_sphere_query_kernels_trace_the_cpus_hits() {
             }
         })
         .collect();
-    let (data, tree) =
-        IasData::build_with_tree(&BuildOptions::default(), &[(&instances[..]).into()]).unwrap();
-    let refs: Vec<Option<ChildRef>> = data
-        .instances
-        .iter()
-        .enumerate()
-        .map(|(slot, inst)| {
-            let l = &children[inst.index as usize % 2].1;
-            Some(ChildRef {
-                index: slot as u32,
-                nodes_addr: l.nodes.as_ptr() as u64,
-                triangles_addr: l.triangles.as_ptr() as u64,
-            })
-        })
-        .collect();
-    let layout = IasLayout::new(&data, &tree, &refs).unwrap();
+    let (data, layout) = instance_layout(&instances, &[&children[0].1, &children[1].1], |i| {
+        i as usize % 2
+    });
     let scene = Mesh {
         positions: vec![[-7.0, -2.0, -2.0], [7.0, 3.0, 2.0]],
         triangles: vec![],
@@ -863,38 +864,18 @@ fn the_instance_closest_point_kernel_finds_the_cpus_points_and_instances() {
         Vec3::new(-1.0, 1.0, 1.0),
     )));
     placements.extend([Transform::from_translation(Vec3::new(0.0, 5.0, 0.0)); 3]);
+    // The instance of index `i`'s child: the last three are copies of the sphere.
+    let child_of = |i: u32| if i >= 9 { 0 } else { i as usize % 2 };
     let instances: Vec<Instance> = placements
         .iter()
         .enumerate()
         .map(|(i, t)| {
-            Instance::new(cpu_children[if i >= 9 { 0 } else { i % 2 }].clone().into())
+            Instance::new(cpu_children[child_of(i as u32)].clone().into())
                 .transform(*t)
                 .instance_id(50 + i as u32)
         })
         .collect();
-    let (data, tree) =
-        IasData::build_with_tree(&BuildOptions::default(), &[(&instances[..]).into()]).unwrap();
-    let child_of = |inst: &oxray_bvh::InstanceData| {
-        if inst.index >= 9 {
-            0
-        } else {
-            inst.index as usize % 2
-        }
-    };
-    let refs: Vec<Option<ChildRef>> = data
-        .instances
-        .iter()
-        .enumerate()
-        .map(|(slot, inst)| {
-            let l = &children[child_of(inst)].1;
-            Some(ChildRef {
-                index: slot as u32,
-                nodes_addr: l.nodes.as_ptr() as u64,
-                triangles_addr: l.triangles.as_ptr() as u64,
-            })
-        })
-        .collect();
-    let layout = IasLayout::new(&data, &tree, &refs).unwrap();
+    let (data, layout) = instance_layout(&instances, &[&children[0].1, &children[1].1], child_of);
     // Slot ids (one input each: the primitive index) and the extras, as the host makes them.
     let ids: Vec<Vec<u32>> = children
         .iter()
@@ -913,7 +894,7 @@ fn the_instance_closest_point_kernel_finds_the_cpus_points_and_instances() {
         .collect();
     let mut extras = vec![0u32; 16 * data.instances.len()];
     for (slot, inst) in data.instances.iter().enumerate() {
-        let c = child_of(inst);
+        let c = child_of(inst.index);
         let b = children[c].0.data().bounds;
         let e = &mut extras[16 * slot..16 * slot + 16];
         for (k, f) in inst.object_to_world.0.iter().enumerate() {
@@ -956,7 +937,7 @@ fn the_instance_closest_point_kernel_finds_the_cpus_points_and_instances() {
         let want = cpu.closest_point(*p).unwrap().unwrap();
         let w = &out[8 * i..8 * i + 8];
         let inst = &data.instances[w[7] as usize];
-        let slot = children[child_of(inst)].1.slots[w[6] as usize];
+        let slot = children[child_of(inst.index)].1.slots[w[6] as usize];
         assert_eq!(
             (
                 Vec3::new(

@@ -21,9 +21,8 @@ mod common;
 use common::{code_after_runs, name, on_every_device, HitSpec, LabelledPipeline, PipelineSpec};
 use glam::Vec3;
 use oxray::{
-    Aabb, AabbBuffer, BuildInput, BuildOptions, CustomPrimitiveInput, Device, GeometryFlags,
-    LaunchReport, PipelineCompileOptions, SbtIndexOffsets, SbtRegion, ShaderBindingTable,
-    TriangleInput, VertexBuffer,
+    Aabb, AabbBuffer, BuildOptions, CustomPrimitiveInput, Device, GeometryFlags, LaunchReport,
+    PipelineCompileOptions, SbtRegion, ShaderBindingTable, TriangleInput, VertexBuffer,
 };
 use oxray_testkit::mesh::{soup, tri_at, Tri};
 
@@ -581,33 +580,7 @@ fn attributes_reach_any_hit_and_closest_hit_13_4() {
 /// empty spot `(27, 0)` with 6 hit records (data 1000 + i) and a miss record (data 500), and
 /// returns the payloads and the expected `(sbtGASIndex, primitive index)` of each triangle.
 fn three_input_scene(device: &Device) -> (Vec<[u32; 8]>, Vec<(u32, u32)>) {
-    let tris: Vec<Tri> = (0..9)
-        .map(|k| tri_at(3.0 * k as f32, 0.0, 0.0, 1.0))
-        .collect();
-    let v0 = soup(&tris[0..4]);
-    let v1 = soup(&tris[4..6]);
-    let v2 = soup(&tris[6..9]);
-    let f2 = [GeometryFlags::empty(); 2];
-    let f1 = [GeometryFlags::empty(); 1];
-    let f3 = [GeometryFlags::empty(); 3];
-    let o0 = [1u8, 0, 1, 0];
-    let o2 = [2u16, 0, 1];
-    let inputs: [BuildInput; 3] = [
-        TriangleInput::new(VertexBuffer::f32x3(&v0))
-            .flags(&f2)
-            .sbt_index_offsets(SbtIndexOffsets::u8(&o0))
-            .primitive_index_offset(100)
-            .into(),
-        TriangleInput::new(VertexBuffer::f32x3(&v1))
-            .flags(&f1)
-            .primitive_index_offset(7)
-            .into(),
-        TriangleInput::new(VertexBuffer::f32x3(&v2))
-            .flags(&f3)
-            .sbt_index_offsets(SbtIndexOffsets::u16(&o2))
-            .into(),
-    ];
-    let gas = device.build_gas(&BuildOptions::default(), &inputs).unwrap();
+    let (gas, expected) = common::three_input_gas(device);
     let t = Twins::new(device);
     let hits: Vec<(&str, u32)> = (0..6).map(|i| ("record", 1000 + i)).collect();
     let sbt = t.sbt(&hits, &[("ms_record", 500)]);
@@ -616,19 +589,6 @@ fn three_input_scene(device: &Device) -> (Vec<[u32; 8]>, Vec<(u32, u32)>) {
         .collect();
     let (out, report) = t.run(&sbt, handle(&gas), &rays, &[]);
     assert_eq!(report.exceptions, 0, "{report:?}");
-    // Input 0: records 0..2 (offsets 1, 0, 1, 0); input 1: record 2; input 2: records 3..6
-    // (offsets 2, 0, 1).
-    let expected = vec![
-        (1, 100),
-        (0, 101),
-        (1, 102),
-        (0, 103),
-        (2, 7),
-        (2, 8),
-        (5, 0),
-        (3, 1),
-        (4, 2),
-    ];
     let payloads: Vec<[u32; 8]> = out.iter().map(Rec::payload).collect();
     assert_eq!(
         payloads[9],

@@ -1297,47 +1297,10 @@ fn instance_queries_with_gas_root_13_7() {
 /// empty spot `(27, 0)` (4 payload words, all `!0`), and the expected `(sbtGASIndex, primitive
 /// index)` of each triangle.
 fn three_input_scene(device: &Device) -> (oxray::Gas, Vec<RayIn>, Vec<(u32, u32)>) {
-    let tris: Vec<Tri> = (0..9)
-        .map(|k| tri_at(3.0 * k as f32, 0.0, 0.0, 1.0))
-        .collect();
-    let v0 = soup(&tris[0..4]);
-    let v1 = soup(&tris[4..6]);
-    let v2 = soup(&tris[6..9]);
-    let f2 = [GeometryFlags::empty(); 2];
-    let f1 = [GeometryFlags::empty(); 1];
-    let f3 = [GeometryFlags::empty(); 3];
-    let o0 = [1u8, 0, 1, 0];
-    let o2 = [2u16, 0, 1];
-    let inputs: [BuildInput; 3] = [
-        TriangleInput::new(VertexBuffer::f32x3(&v0))
-            .flags(&f2)
-            .sbt_index_offsets(SbtIndexOffsets::u8(&o0))
-            .primitive_index_offset(100)
-            .into(),
-        TriangleInput::new(VertexBuffer::f32x3(&v1))
-            .flags(&f1)
-            .primitive_index_offset(7)
-            .into(),
-        TriangleInput::new(VertexBuffer::f32x3(&v2))
-            .flags(&f3)
-            .sbt_index_offsets(SbtIndexOffsets::u16(&o2))
-            .into(),
-    ];
-    let gas = device.build_gas(&BuildOptions::default(), &inputs).unwrap();
+    let (gas, expected) = common::three_input_gas(device);
     let rays = (0..10)
         .map(|k| RayIn::down(3.0 * k as f32, 0.0).payload(&[!0; 4]))
         .collect();
-    let expected = vec![
-        (1, 100),
-        (0, 101),
-        (1, 102),
-        (0, 103),
-        (2, 7),
-        (2, 8),
-        (5, 0),
-        (3, 1),
-        (4, 2),
-    ];
     (gas, rays, expected)
 }
 

@@ -120,7 +120,8 @@ extern "C" __global__ void __launch_bounds__(128)
             for (u32 s = start; s < start + count; ++s) {
                 TraceRay ob;
                 const float4 *nodes, *tris;
-                if (!enter_instance(r, insts + 6 * (size_t)s, tmin, tmax, ob, nodes, tris)) {
+                if (!__oxray_enter_instance(r, insts + 6 * (size_t)s, tmin, tmax, ob, nodes,
+                                            tris)) {
                     continue;
                 }
                 k = offers_gas<TriangleLeaf>(ob, nodes, tris, k, o, oi, s);
@@ -563,10 +564,7 @@ extern "C" __global__ void __launch_bounds__(128)
                 (unsigned long long)__float_as_uint(e3.x));
             float scale = e3.z;
             float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
-            // Transform::transform_point of the world-to-object rows.
-            float3 here = make_float3(m0.x * p.x + m0.y * p.y + m0.z * p.z + m0.w,
-                                      m1.x * p.x + m1.y * p.y + m1.z * p.z + m1.w,
-                                      m2.x * p.x + m2.y * p.y + m2.z * p.z + m2.w);
+            float3 here = __oxray_point(m0, m1, m2, p);
             // The radius grown by a few ulps: an instance as close as the best (a tie that the
             // nearer box or lower slot may win) is still found.
             float radius = best / scale;
@@ -586,9 +584,7 @@ extern "C" __global__ void __launch_bounds__(128)
             best_slot = s;
             found = nb;
             float4 w0 = e[0], w1 = e[1], w2 = e[2];
-            world_q = make_float3(w0.x * nb.q.x + w0.y * nb.q.y + w0.z * nb.q.z + w0.w,
-                                  w1.x * nb.q.x + w1.y * nb.q.y + w1.z * nb.q.z + w1.w,
-                                  w2.x * nb.q.x + w2.y * nb.q.y + w2.z * nb.q.z + w2.w);
+            world_q = __oxray_point(w0, w1, w2, nb.q);
             radius2 = best * best;
         }
     });

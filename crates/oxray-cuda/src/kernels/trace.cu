@@ -507,13 +507,22 @@ __device__ __forceinline__ bool hits_box(const TraceRay& r, float4 lo, float4 hi
     return t0 <= min_keep(t1 * ROBUST_FAR, tmax * TMAX_SLACK);
 }
 
+// Transform::transform_point of the rows m0, m1, m2 (3x4), in the CPU's order.
+__device__ __forceinline__ float3 __oxray_point(float4 m0, float4 m1, float4 m2, float3 p) {
+    return make_float3(m0.x * p.x + m0.y * p.y + m0.z * p.z + m0.w,
+                       m1.x * p.x + m1.y * p.y + m1.z * p.z + m1.w,
+                       m2.x * p.x + m2.y * p.y + m2.z * p.z + m2.w);
+}
+
 // Carries `r` into the instance whose slot is `inst` (the layout above) with the interval
 // [tmin, tmax]: false where the ray misses the instance's world box, the instance has no child
 // or the carried ray is invalid; else the object-space ray `o` and the child's nodes and
 // triangles.
-__device__ __forceinline__ bool enter_instance(const TraceRay& r, const float4* __restrict__ inst,
-                                               float tmin, float tmax, TraceRay& o,
-                                               const float4*& nodes, const float4*& tris) {
+__device__ __forceinline__ bool __oxray_enter_instance(const TraceRay& r,
+                                                       const float4* __restrict__ inst,
+                                                       float tmin, float tmax, TraceRay& o,
+                                                       const float4*& nodes,
+                                                       const float4*& tris) {
     if (!hits_box(r, inst[3], inst[4], tmin, tmax)) return false;
     uint4 ptrs = reinterpret_cast<const uint4*>(inst)[5];
     nodes = reinterpret_cast<const float4*>(((unsigned long long)ptrs.y << 32) |
@@ -523,9 +532,7 @@ __device__ __forceinline__ bool enter_instance(const TraceRay& r, const float4* 
     if (nodes == nullptr) return false;
     float4 m0 = inst[0], m1 = inst[1], m2 = inst[2];
     // Transform::transform_point and transform_vector, in the CPU's order.
-    o.org = make_float3(m0.x * r.org.x + m0.y * r.org.y + m0.z * r.org.z + m0.w,
-                        m1.x * r.org.x + m1.y * r.org.y + m1.z * r.org.z + m1.w,
-                        m2.x * r.org.x + m2.y * r.org.y + m2.z * r.org.z + m2.w);
+    o.org = __oxray_point(m0, m1, m2, r.org);
     o.dir = make_float3(m0.x * r.dir.x + m0.y * r.dir.y + m0.z * r.dir.z,
                         m1.x * r.dir.x + m1.y * r.dir.y + m1.z * r.dir.z,
                         m2.x * r.dir.x + m2.y * r.dir.y + m2.z * r.dir.z);
@@ -553,7 +560,9 @@ __device__ __forceinline__ IasBest trace_ias(const TraceRay& r, const float4* __
         for (u32 s = start; s < start + count; ++s) {
             TraceRay o;
             const float4 *nodes, *tris;
-            if (!enter_instance(r, insts + 6 * (size_t)s, tmin, tmax, o, nodes, tris)) continue;
+            if (!__oxray_enter_instance(r, insts + 6 * (size_t)s, tmin, tmax, o, nodes, tris)) {
+                continue;
+            }
             Best h = trace_bvh2<ANY>(o, nodes, tris);
             if (h.slot != MISS_SLOT) {
                 // A hit at the current tmax replaces the one found before, as on the CPU.

@@ -325,3 +325,54 @@ impl LabelledPipeline {
             .pack_header()
     }
 }
+
+/// The SBT scene of pipeline_sbt.rs and its CUDA C++ twins: three triangle inputs with 2, 1 and
+/// 3 SBT records, per-primitive SBT index offsets (1, 0, 1, 0 and 2, 0, 1) and primitive index
+/// offsets 100, 7 and 0; triangle `k` (over all inputs) lies around `(3k, 0, 0)`, nothing
+/// around `(27, 0, 0)`. The GAS on `device`, and the `(sbtGASIndex, primitive index)` a hit on
+/// each triangle reports (input 0: records 0..2; input 1: record 2; input 2: records 3..6).
+pub fn three_input_gas(device: &Device) -> (oxray::Gas, Vec<(u32, u32)>) {
+    use oxray::{BuildInput, BuildOptions, GeometryFlags, SbtIndexOffsets, TriangleInput};
+    use oxray_testkit::mesh::{soup, tri_at};
+    let tris: Vec<Tri> = (0..9)
+        .map(|k| tri_at(3.0 * k as f32, 0.0, 0.0, 1.0))
+        .collect();
+    let v0 = soup(&tris[0..4]);
+    let v1 = soup(&tris[4..6]);
+    let v2 = soup(&tris[6..9]);
+    let f2 = [GeometryFlags::empty(); 2];
+    let f1 = [GeometryFlags::empty(); 1];
+    let f3 = [GeometryFlags::empty(); 3];
+    let o0 = [1u8, 0, 1, 0];
+    let o2 = [2u16, 0, 1];
+    let inputs: [BuildInput; 3] = [
+        TriangleInput::new(oxray::VertexBuffer::f32x3(&v0))
+            .flags(&f2)
+            .sbt_index_offsets(SbtIndexOffsets::u8(&o0))
+            .primitive_index_offset(100)
+            .into(),
+        TriangleInput::new(oxray::VertexBuffer::f32x3(&v1))
+            .flags(&f1)
+            .primitive_index_offset(7)
+            .into(),
+        TriangleInput::new(oxray::VertexBuffer::f32x3(&v2))
+            .flags(&f3)
+            .sbt_index_offsets(SbtIndexOffsets::u16(&o2))
+            .into(),
+    ];
+    let gas = device
+        .build_gas(&BuildOptions::default(), &inputs)
+        .unwrap_or_else(|e| panic!("{}: {e}", name(device)));
+    let expected = vec![
+        (1, 100),
+        (0, 101),
+        (1, 102),
+        (0, 103),
+        (2, 7),
+        (2, 8),
+        (5, 0),
+        (3, 1),
+        (4, 2),
+    ];
+    (gas, expected)
+}
