@@ -129,6 +129,63 @@ impl AllHits {
         self.offsets.push(self.hits.len());
         self.complete.push(complete);
     }
+
+    /// Appends the rays of `parts`, one part after the other, copying their hits in parallel:
+    /// how a batch made chunk by chunk on several threads becomes one result without copying
+    /// every ray's list on one thread.
+    ///
+    /// ```
+    /// use oxray_core::{AllHits, Hit, HitKind};
+    /// let hit = |t| Hit {
+    ///     t,
+    ///     u: 0.0,
+    ///     v: 0.0,
+    ///     primitive_index: 0,
+    ///     sbt_gas_index: 0,
+    ///     build_input: 0,
+    ///     hit_kind: HitKind::TRIANGLE_FRONT_FACE,
+    ///     instance_id: !0,
+    ///     instance_index: 0,
+    /// };
+    /// let (mut a, mut b) = (AllHits::new(), AllHits::new());
+    /// a.push_ray(&[hit(1.0)], true);
+    /// b.push_ray(&[], true);
+    /// b.push_ray(&[hit(2.0), hit(3.0)], false);
+    /// let mut out = AllHits::new();
+    /// out.append_parts(vec![a, b]);
+    /// assert_eq!(out.offsets(), [0, 1, 1, 3]);
+    /// assert_eq!(out.hits(2)[1].t, 3.0);
+    /// assert!(!out.is_complete(2));
+    /// ```
+    pub fn append_parts(&mut self, parts: Vec<AllHits>) {
+        use rayon::prelude::*;
+        let start = self.hits.len();
+        let rays: usize = parts.iter().map(AllHits::len).sum();
+        self.offsets.reserve(rays);
+        self.complete.reserve(rays);
+        let mut base = start;
+        for p in &parts {
+            self.offsets
+                .extend(p.offsets[1..].iter().map(|&o| base + o));
+            self.complete.extend_from_slice(&p.complete);
+            base += p.hits.len();
+        }
+        // Any hit of the parts fills the new room before the copies overwrite it.
+        let Some(&fill) = parts.iter().find_map(|p| p.hits.first()) else {
+            return;
+        };
+        self.hits.resize(base, fill);
+        let mut dest: Vec<&mut [Hit]> = Vec::with_capacity(parts.len());
+        let mut rest = &mut self.hits[start..];
+        for p in &parts {
+            let (d, tail) = std::mem::take(&mut rest).split_at_mut(p.hits.len());
+            dest.push(d);
+            rest = tail;
+        }
+        dest.into_par_iter()
+            .zip(parts.par_iter())
+            .for_each(|(d, p)| d.copy_from_slice(&p.hits));
+    }
 }
 
 /// Where a hit lies, in world space.

@@ -255,11 +255,8 @@ fn lists(
     records: &[HitRecord],
     insts: &[u32],
 ) -> AllHits {
-    let (hits, lists) = distinct_lists(resolve, counts, records, insts);
     let mut out = AllHits::new();
-    for &(a, b) in &lists {
-        out.push_ray(&hits[a..b], true);
-    }
+    out.append_parts(distinct_lists(resolve, counts, records, insts, usize::MAX));
     out
 }
 

@@ -379,51 +379,54 @@ fn sort_distinct(hits: &mut [Hit]) -> usize {
     kept
 }
 
-/// The resolved hits of one part's offers, ray by ray: `(hits, lists)` with ray `r`'s hits at
-/// `hits[lists[r].0 .. lists[r].1]`, sorted and without repeats, all of them. `resolve` turns
-/// an offer and its instance slot into its hit.
+/// Rays a thread turns into lists at a time.
+const LIST_CHUNK: usize = 1024;
+
+/// The hits of one part's offers, ray by ray, sorted, without repeats and at most
+/// `max_hits_per_ray` each, as consecutive results of [`LIST_CHUNK`] rays made in parallel
+/// (for [`AllHits::append_parts`]). `resolve` turns an offer and its instance slot into its hit.
 pub(crate) fn distinct_lists(
     resolve: impl Fn(&HitRecord, u32) -> Option<Hit> + Sync,
     counts: &[u32],
     offers: &[HitRecord],
     insts: &[u32],
-) -> (Vec<Hit>, Vec<(usize, usize)>) {
-    let mut spans = Vec::with_capacity(counts.len());
+    max_hits_per_ray: usize,
+) -> Vec<AllHits> {
+    // Where each chunk's offers start.
+    let mut starts = Vec::with_capacity(counts.len().div_ceil(LIST_CHUNK));
     let mut at = 0usize;
-    for &c in counts {
-        spans.push((at, at + c as usize));
+    for (i, &c) in counts.iter().enumerate() {
+        if i % LIST_CHUNK == 0 {
+            starts.push(at);
+        }
         at += c as usize;
     }
-    let mut hits: Vec<Option<Hit>> = offers
-        .par_iter()
-        .zip(insts.par_iter())
-        .map(|(r, &i)| resolve(r, i))
-        .collect();
-    let mut flat: Vec<Hit> = Vec::with_capacity(hits.len());
-    let mut ranges = Vec::with_capacity(spans.len());
-    for &(a, b) in &spans {
-        let from = flat.len();
-        flat.extend(hits[a..b].iter_mut().filter_map(Option::take));
-        ranges.push((from, flat.len()));
-    }
-    // Sorted ray by ray in parallel: split the flat list into each ray's part.
-    let mut parts: Vec<&mut [Hit]> = Vec::with_capacity(ranges.len());
-    let mut rest: &mut [Hit] = &mut flat;
-    let mut consumed = 0;
-    for &(a, b) in &ranges {
-        let (_, tail) = std::mem::take(&mut rest).split_at_mut(a - consumed);
-        let (part, tail) = tail.split_at_mut(b - a);
-        parts.push(part);
-        rest = tail;
-        consumed = b;
-    }
-    let kept: Vec<usize> = parts.into_par_iter().map(sort_distinct).collect();
-    let lists = ranges
-        .iter()
-        .zip(&kept)
-        .map(|(&(a, _), &k)| (a, a + k))
-        .collect();
-    (flat, lists)
+    counts
+        .par_chunks(LIST_CHUNK)
+        .zip(starts.par_iter())
+        .map(|(counts, &first)| {
+            let mut part = AllHits::new();
+            let mut list = Vec::new();
+            let mut at = first;
+            for &c in counts {
+                let end = at + c as usize;
+                list.clear();
+                list.extend(
+                    offers[at..end]
+                        .iter()
+                        .zip(&insts[at..end])
+                        .filter_map(|(r, &i)| resolve(r, i)),
+                );
+                let kept = sort_distinct(&mut list);
+                part.push_ray(
+                    &list[..kept.min(max_hits_per_ray)],
+                    kept <= max_hits_per_ray,
+                );
+                at = end;
+            }
+            part
+        })
+        .collect()
 }
 
 /// [`all_hits_batch`](CudaGas::all_hits_batch) of either structure.
@@ -439,11 +442,14 @@ fn all_hits(
     }
     let mut counts = vec![0u32; rays.len()];
     let mut each = |_: usize, counts: &[u32], offers: &[HitRecord], insts: &[u32]| {
-        let (hits, lists) = distinct_lists(|r, i| target.resolve(r, i), counts, offers, insts);
-        for &(a, b) in &lists {
-            let keep = (b - a).min(max_hits_per_ray);
-            out.push_ray(&hits[a..a + keep], b - a <= max_hits_per_ray);
-        }
+        let resolve = |r: &HitRecord, i| target.resolve(r, i);
+        out.append_parts(distinct_lists(
+            resolve,
+            counts,
+            offers,
+            insts,
+            max_hits_per_ray,
+        ));
     };
     trace_offers(target, rays, &mut counts, Some(&mut each)).map_err(query_error)
 }
@@ -461,8 +467,10 @@ fn count_hits(
     if repeats {
         let mut distinct = Vec::with_capacity(rays.len());
         let mut each = |_: usize, counts: &[u32], offers: &[HitRecord], insts: &[u32]| {
-            let (_, lists) = distinct_lists(|r, i| target.resolve(r, i), counts, offers, insts);
-            distinct.extend(lists.iter().map(|&(a, b)| (b - a) as u32));
+            let resolve = |r: &HitRecord, i| target.resolve(r, i);
+            for part in distinct_lists(resolve, counts, offers, insts, usize::MAX) {
+                distinct.extend(part.offsets().windows(2).map(|w| (w[1] - w[0]) as u32));
+            }
         };
         trace_offers(target, rays, &mut found, Some(&mut each)).map_err(query_error)?;
         found = distinct;

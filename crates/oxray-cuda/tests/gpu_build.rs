@@ -31,11 +31,19 @@ fn gpu() -> Option<(CudaContext, MutexGuard<'static, ()>)> {
     }
 }
 
-const PRESETS: [(&str, BuildFlags, DeviceBuildConfig); 3] = [
+const PRESETS: [(&str, BuildFlags, DeviceBuildConfig); 4] = [
     (
         "fast build",
         BuildFlags::PREFER_FAST_BUILD,
         DeviceBuildConfig::FAST_BUILD,
+    ),
+    (
+        "fast build, 30-bit codes",
+        BuildFlags::PREFER_FAST_BUILD,
+        DeviceBuildConfig {
+            morton_bits: 30,
+            ..DeviceBuildConfig::FAST_BUILD
+        },
     ),
     ("default", BuildFlags::empty(), DeviceBuildConfig::DEFAULT),
     (

@@ -297,29 +297,20 @@ macro_rules! all_hits_api {
                 {
                     return Err(SurfaceQueryError::InvalidRay { index, error });
                 }
-                let chunks: Vec<(Vec<Hit>, Vec<usize>, Vec<bool>)> = rays
+                let parts: Vec<AllHits> = rays
                     .par_chunks(CHUNK)
                     .map(|rays| {
-                        let mut hits = Vec::new();
-                        let mut ends = Vec::with_capacity(rays.len());
-                        let mut complete = Vec::with_capacity(rays.len());
+                        let mut part = AllHits::new();
                         let mut list = Vec::new();
                         for r in rays {
                             // Checked above: only `Ok` comes back.
-                            complete.push(self.all_hits(r, max_hits_per_ray, &mut list)?);
-                            hits.extend_from_slice(&list);
-                            ends.push(hits.len());
+                            let complete = self.all_hits(r, max_hits_per_ray, &mut list)?;
+                            part.push_ray(&list, complete);
                         }
-                        Ok((hits, ends, complete))
+                        Ok(part)
                     })
                     .collect::<Result<_, SurfaceQueryError>>()?;
-                for (hits, ends, complete) in chunks {
-                    let mut start = 0;
-                    for (&end, &complete) in ends.iter().zip(&complete) {
-                        out.push_ray(&hits[start..end], complete);
-                        start = end;
-                    }
-                }
+                out.append_parts(parts);
                 Ok(())
             }
 
