@@ -170,13 +170,10 @@ impl AllHits {
             self.complete.extend_from_slice(&p.complete);
             base += p.hits.len();
         }
-        // Any hit of the parts fills the new room before the copies overwrite it.
-        let Some(&fill) = parts.iter().find_map(|p| p.hits.first()) else {
-            return;
-        };
-        self.hits.resize(base, fill);
-        let mut dest: Vec<&mut [Hit]> = Vec::with_capacity(parts.len());
-        let mut rest = &mut self.hits[start..];
+        let added = base - start;
+        self.hits.reserve(added);
+        let mut dest: Vec<&mut [std::mem::MaybeUninit<Hit>]> = Vec::with_capacity(parts.len());
+        let mut rest = &mut self.hits.spare_capacity_mut()[..added];
         for p in &parts {
             let (d, tail) = std::mem::take(&mut rest).split_at_mut(p.hits.len());
             dest.push(d);
@@ -184,7 +181,14 @@ impl AllHits {
         }
         dest.into_par_iter()
             .zip(parts.par_iter())
-            .for_each(|(d, p)| d.copy_from_slice(&p.hits));
+            .for_each(|(d, p)| {
+                for (d, &h) in d.iter_mut().zip(&p.hits) {
+                    d.write(h);
+                }
+            });
+        // SAFETY: the parts' lengths sum to `added`, so the loop above wrote every one of the
+        // `added` values past the old length (reserved above); `Hit` is `Copy` (no drop).
+        unsafe { self.hits.set_len(base) };
     }
 }
 
@@ -411,5 +415,55 @@ impl SurfaceQueryError {
             },
             e => e,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::HitKind;
+
+    fn hit(t: f32, primitive_index: u32) -> Hit {
+        Hit {
+            t,
+            u: 0.25,
+            v: 0.5,
+            primitive_index,
+            sbt_gas_index: 0,
+            build_input: 0,
+            hit_kind: HitKind::TRIANGLE_BACK_FACE,
+            instance_id: !0,
+            instance_index: 0,
+        }
+    }
+
+    #[test]
+    fn appended_parts_equal_the_same_rays_pushed_one_by_one() {
+        // Parts of varied sizes (empty ones and rays without hits included), appended after
+        // rays already held.
+        let mut parts = Vec::new();
+        let mut pushed = AllHits::new();
+        let mut appended = AllHits::new();
+        pushed.push_ray(&[hit(0.5, 99)], true);
+        appended.push_ray(&[hit(0.5, 99)], true);
+        let mut next = 0u32;
+        for size in [3usize, 0, 1, 7, 0, 2] {
+            let mut part = AllHits::new();
+            for r in 0..size {
+                let list: Vec<Hit> = (0..(next % 4))
+                    .map(|k| hit(k as f32 + r as f32, next * 10 + k))
+                    .collect();
+                let complete = !next.is_multiple_of(3);
+                part.push_ray(&list, complete);
+                pushed.push_ray(&list, complete);
+                next += 1;
+            }
+            parts.push(part);
+        }
+        appended.append_parts(parts);
+        assert_eq!(appended, pushed);
+        // Nothing to append leaves the result as it was.
+        appended.append_parts(vec![AllHits::new(), AllHits::new()]);
+        assert_eq!(appended, pushed);
     }
 }
