@@ -1,7 +1,7 @@
 #!/bin/bash
 # Runs the binaries scripts/gpu-suite-pack.sh packed, with OXRAY_REQUIRE_GPU=1 (a missing or
 # unusable GPU fails instead of skipping), then the GPU benchmarks of docs/BENCHMARKS.md that
-# the last sessions left to measure. From the repository root; the log goes to $OUT/log.txt
+# the open goals need. From the repository root; the log goes to $OUT/log.txt
 # (or ./log.txt). BENCH=0 skips the benchmarks, TESTS=0 the test binaries (each fits a device
 # call of at most ten minutes).
 set -u
@@ -27,7 +27,11 @@ rm -f "$out/t.txt"
 M=$root/.gpu/meshes
 X=$root/.gpu/bin/oxray
 run() { echo "=== $*" >> "$log"; timeout 200 "$X" "$@" >> "$log" 2>&1; echo "rc=$? (${SECONDS}s)" >> "$log"; }
+# Issue 13's open goal: the pipeline against the query kernel on the same rays (each rays row
+# of `oxray bench --backend cuda` has both), small meshes and a 4.4 M-triangle one.
+run bench --backend cuda --runs 5 "$M/stanford-bunny.obj" "$M/igea.ply"
+run bench --backend cuda --runs 3 --subdivide 3 "$M/stanford-bunny.obj"
+# Measured on 2026-12-05 (docs/BENCHMARKS.md); rerun after changing the simulation kernels or
+# the device builder.
 run bench --backend cuda --simulation --side 1024 --runs 5 "$M/stanford-bunny.obj" "$M/igea.ply"
-run bench --backend cuda --simulation --side 1024 --runs 3 --subdivide 2 "$M/ogre.obj"
 run bench --backend cuda --gas-builds --subdivide 3 --runs 5 "$M/ogre.obj"
-run bench --backend cuda --gas-builds --runs 5 "$M/stanford-bunny.obj" "$M/igea.ply"
