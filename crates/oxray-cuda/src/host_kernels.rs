@@ -6,7 +6,7 @@
 
 use crate::context::compile_options;
 use crate::gas::{hit_of, sphere_words, HitRecord};
-use crate::layout::{ChildRef, DeviceLayout, IasLayout, NodeLayout};
+use crate::layout::{ChildRef, DeviceLayout, IasLayout, NodeLayout, SlotInfo};
 use crate::simulation::distinct_lists;
 use glam::Vec3;
 use oxray_bvh::{Bvh2, GasData, IasData, NO_PRIMITIVE};
@@ -356,44 +356,66 @@ fn offers_make_the_cpus_lists_and_counts() {
     }
 }
 
-#[test]
-fn sphere_offers_make_the_cpus_lists() {
-    let k = kernels();
-    let mut rng = Rng::new(5);
-    let centres: Vec<[f32; 3]> = (0..50).map(|_| rng.vec3(-3.0, 3.0).to_array()).collect();
-    let radii: Vec<f32> = (0..50).map(|_| rng.range(0.2, 0.9)).collect();
+/// A sphere GAS built on the host, in the CPU backend and in the device's binary layout.
+struct Spheres {
+    gas: Gas,
+    /// The tree's binary nodes.
+    nodes: Vec<u32>,
+    /// One float4 per sphere slot.
+    words: Vec<u32>,
+    slots: Vec<SlotInfo>,
+}
+
+impl Spheres {
+    /// The hit a record on one of the GAS's slots reports.
+    fn hit(&self, r: &HitRecord) -> Option<Hit> {
+        let s = self.slots.get(r.slot_index() as usize)?;
+        let mut h = hit_of(r, s, false, !0, 0);
+        h.hit_kind = oxray_core::HitKind::SPHERE_FRONT_FACE;
+        Some(h)
+    }
+}
+
+/// `n` spheres with centres in [-3, 3]^3 and radii in `radii`, and `rays` rays around them.
+fn random_spheres(rng: &mut Rng, n: usize, radii: (f32, f32), rays: usize) -> (Spheres, Vec<Ray>) {
+    let centres: Vec<[f32; 3]> = (0..n).map(|_| rng.vec3(-3.0, 3.0).to_array()).collect();
+    let radii: Vec<f32> = (0..n).map(|_| rng.range(radii.0, radii.1)).collect();
     let (c, r) = (
         [bytemuck::cast_slice::<_, u8>(&centres)],
         [bytemuck::cast_slice::<_, u8>(&radii)],
     );
-    let input: BuildInput<'_> = SphereInput::new(&c, centres.len() as u32, &r).into();
+    let input: BuildInput<'_> = SphereInput::new(&c, n as u32, &r).into();
     let (data, tree) = GasData::build_with_tree(&BuildOptions::default(), &[input]).unwrap();
     let nodes = crate::layout::bvh2_words(&tree).unwrap();
     let (words, slots) = sphere_words(&data);
-    let gas = Gas::from(data);
     let scene = Mesh {
         positions: vec![[-3.0; 3], [3.0; 3]],
         triangles: vec![],
     };
-    let rays = rays_around(&mut rng, &scene, 400);
+    let rays = rays_around(rng, &scene, rays);
+    let spheres = Spheres {
+        gas: Gas::from(data),
+        nodes,
+        words,
+        slots,
+    };
+    (spheres, rays)
+}
+
+#[test]
+fn sphere_offers_make_the_cpus_lists() {
+    let k = kernels();
+    let mut rng = Rng::new(5);
+    let (s, rays) = random_spheres(&mut rng, 50, (0.2, 0.9), 400);
     let (counts, records, insts) = offers(
         |r, c, o, out, _, n| {
             // SAFETY: the tree's binary nodes and one float4 per sphere slot, as above.
-            unsafe { (k.offers_spheres)(nodes.as_ptr(), words.as_ptr(), r, c, o, out, n) }
+            unsafe { (k.offers_spheres)(s.nodes.as_ptr(), s.words.as_ptr(), r, c, o, out, n) }
         },
         &rays,
     );
-    let got = lists(
-        |r, _| {
-            let s = slots.get(r.slot_index() as usize)?;
-            let mut h = hit_of(r, s, false, !0, 0);
-            h.hit_kind = oxray_core::HitKind::SPHERE_FRONT_FACE;
-            Some(h)
-        },
-        &counts,
-        &records,
-        &insts,
-    );
+    let gas = &s.gas;
+    let got = lists(|r, _| s.hit(r), &counts, &records, &insts);
     let mut want = AllHits::new();
     gas.all_hits_batch(&rays, usize::MAX, &mut want).unwrap();
     assert_eq!(got, want);
@@ -791,29 +813,14 @@ fn instance_and_sphere_query_kernels_trace_the_cpus_hits() {
 
     // Spheres.
     let mut rng = Rng::new(6);
-    let centres: Vec<[f32; 3]> = (0..80).map(|_| rng.vec3(-3.0, 3.0).to_array()).collect();
-    let radii: Vec<f32> = (0..80).map(|_| rng.range(0.1, 0.6)).collect();
-    let (c, r) = (
-        [bytemuck::cast_slice::<_, u8>(&centres)],
-        [bytemuck::cast_slice::<_, u8>(&radii)],
-    );
-    let input: BuildInput<'_> = SphereInput::new(&c, centres.len() as u32, &r).into();
-    let (data, tree) = GasData::build_with_tree(&BuildOptions::default(), &[input]).unwrap();
-    let nodes = crate::layout::bvh2_words(&tree).unwrap();
-    let (sphere_words, sphere_slots) = sphere_words(&data);
-    let gas = Gas::from(data);
-    let scene = Mesh {
-        positions: vec![[-3.0; 3], [3.0; 3]],
-        triangles: vec![],
-    };
-    let rays = rays_around(&mut rng, &scene, 500);
+    let (s, rays) = random_spheres(&mut rng, 80, (0.1, 0.6), 500);
     let words = ray_words(&rays);
     let mut hits = vec![0u32; 4 * rays.len()];
     // SAFETY: the binary nodes and one float4 per sphere slot, `n` rays and 4 words each.
     unsafe {
         (k.closest_spheres)(
-            nodes.as_ptr(),
-            sphere_words.as_ptr(),
+            s.nodes.as_ptr(),
+            s.words.as_ptr(),
             words.as_ptr(),
             hits.as_mut_ptr(),
             rays.len() as u32,
@@ -821,16 +828,10 @@ fn instance_and_sphere_query_kernels_trace_the_cpus_hits() {
     };
     let got: Vec<Option<Hit>> = bytemuck::cast_slice::<u32, HitRecord>(&hits)
         .iter()
-        .map(|r| {
-            r.is_hit().then(|| {
-                let mut h = hit_of(r, &sphere_slots[r.slot_index() as usize], false, !0, 0);
-                h.hit_kind = oxray_core::HitKind::SPHERE_FRONT_FACE;
-                h
-            })
-        })
+        .map(|r| r.is_hit().then(|| s.hit(r)).flatten())
         .collect();
     let mut want = vec![None; rays.len()];
-    gas.intersect_batch(&rays, &mut want).unwrap();
+    s.gas.intersect_batch(&rays, &mut want).unwrap();
     let occ: Vec<bool> = want.iter().map(Option::is_some).collect();
     compare_hits(&got, &want, &occ, "spheres", true);
 }

@@ -3,6 +3,7 @@
 //! `optixGetSbtDataPointer` return, the region layout rules of §7.2, and the launch-time checks
 //! of record headers.
 
+mod common;
 mod pipeline_common;
 
 use oxray::cpu::Gas;
@@ -62,55 +63,18 @@ fn sbt_module() -> Module<Sp> {
         .unwrap()
 }
 
-/// The test scene: three triangle inputs with 2, 1 and 3 SBT records, per-primitive SBT index
-/// offsets and primitive index offsets 100, 7 and 0. Triangle `k` (over all inputs) lies around
-/// `(3k, 0, 0)`. Returns the GAS, the targets (one per triangle, plus one empty spot) and the
-/// expected `(sbt_gas_index, primitive_index)` of each triangle.
+/// The test scene: `common::three_input_gas` (three triangle inputs with 2, 1 and 3 SBT
+/// records, per-primitive SBT index offsets and primitive index offsets 100, 7 and 0; triangle
+/// `k` lies around `(3k, 0, 0)`) built on the CPU. Returns the GAS, the targets (one per
+/// triangle, plus one empty spot) and the expected `(sbt_gas_index, primitive_index)` of each
+/// triangle.
 fn three_input_scene() -> (Arc<Gas>, Vec<Vec3>, Vec<(u32, u32)>) {
-    let tris: Vec<Tri> = (0..9)
-        .map(|k| tri_at(3.0 * k as f32, 0.0, 0.0, 1.0))
-        .collect();
-    let v0 = soup(&tris[0..4]);
-    let v1 = soup(&tris[4..6]);
-    let v2 = soup(&tris[6..9]);
-    let f2 = [GeometryFlags::empty(); 2];
-    let f1 = [GeometryFlags::empty(); 1];
-    let f3 = [GeometryFlags::empty(); 3];
-    let o0 = [1u8, 0, 1, 0];
-    let o2 = [2u16, 0, 1];
-    let inputs = [
-        TriangleInput::new(VertexBuffer::f32x3(&v0))
-            .flags(&f2)
-            .sbt_index_offsets(SbtIndexOffsets::u8(&o0))
-            .primitive_index_offset(100)
-            .into(),
-        TriangleInput::new(VertexBuffer::f32x3(&v1))
-            .flags(&f1)
-            .primitive_index_offset(7)
-            .into(),
-        TriangleInput::new(VertexBuffer::f32x3(&v2))
-            .flags(&f3)
-            .sbt_index_offsets(SbtIndexOffsets::u16(&o2))
-            .into(),
-    ];
-    let gas = Arc::new(Gas::build(&BuildOptions::default(), &inputs).unwrap());
+    let (gas, expected) = common::three_input_gas(&oxray::Device::cpu());
+    let gas = Arc::new(gas.as_cpu().expect("built on the CPU").clone());
     let mut targets: Vec<Vec3> = (0..9)
         .map(|k| Vec3::new(3.0 * k as f32, 0.0, 0.0))
         .collect();
     targets.push(Vec3::new(27.0, 0.0, 0.0));
-    // Input 0: records 0..2 (offsets 1,0,1,0); input 1: record 2; input 2: records 3..6
-    // (offsets 2,0,1).
-    let expected = vec![
-        (1, 100),
-        (0, 101),
-        (1, 102),
-        (0, 103),
-        (2, 7),
-        (2, 8),
-        (5, 0),
-        (3, 1),
-        (4, 2),
-    ];
     (gas, targets, expected)
 }
 
