@@ -414,6 +414,9 @@ pub fn bench_mesh(
             }
         }
     }
+    if let (Some(p), Some(one)) = (pipeline.as_ref(), rays.coherent.get(..1)) {
+        launch_latency(device, &on_device, p, one)?;
+    }
     let mut rows = Vec::with_capacity(6);
     for (set, rays) in [
         ("coherent", &rays.coherent),
@@ -432,6 +435,26 @@ pub fn bench_mesh(
         }
     }
     Ok(rows)
+}
+
+/// Prints what a launch of one ray costs, the query kernel's and the pipeline's (the medians of
+/// 200): the fixed cost per launch that the rows' rates include.
+fn launch_latency(
+    device: &Device,
+    root: &oxray::TraversableHandle,
+    pipeline: &RayPipeline,
+    one: &[Ray],
+) -> Result<(), DeviceCommandError> {
+    const LAUNCHES: usize = 200;
+    let mut batch = device.upload_rays(one, BatchKind::Closest)?;
+    let query = time(LAUNCHES, || device.trace_batch(root, &mut batch))?;
+    let (programs, _) = pipeline.trace(device, one, false, LAUNCHES)?;
+    eprintln!(
+        "a launch of one ray: query kernel {:.1} µs, pipeline {:.1} µs",
+        query * 1e6,
+        programs * 1e6
+    );
+    Ok(())
 }
 
 /// One row of `oxray bench --backend cuda --gas-builds`: one mesh and build preset, built by

@@ -10,7 +10,7 @@
 use crate::context::{compile_options, guarded, nvrtc_compile, nvrtc_version, CudaContext};
 use crate::error::{driver, CudaError};
 use bytemuck::{Pod, Zeroable};
-use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig};
+use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig, PinnedHostSlice};
 use oxray_core::sbt::{SbtRegion, ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
 use oxray_core::{
     DeviceContext, Exception, ExceptionCode, LaunchError, LaunchReport, PipelineCompileOptions,
@@ -859,6 +859,22 @@ pub(crate) fn exception_report(words: &[u32]) -> LaunchReport {
     }
 }
 
+/// Whether the PTX declares the variable `name` in the constant state space (`__constant__`),
+/// where the programs cannot write it. Anything else (a `__device__` variable, a name not found)
+/// is treated as writable.
+fn declared_constant(ptx: &str, name: &str) -> bool {
+    ptx.lines().any(|line| {
+        let mut words = line
+            .split_whitespace()
+            .skip_while(|w| matches!(*w, ".visible" | ".extern" | ".weak"));
+        words.next() == Some(".const")
+            && words.any(|w| {
+                w.strip_prefix(name)
+                    .is_some_and(|rest| rest.is_empty() || rest.starts_with(['[', ';']))
+            })
+    })
+}
+
 /// The device address of a pipeline's private buffer. Only the pipeline's stream uses these
 /// buffers, so the access record cudarc keeps for other streams is not needed past this call.
 fn device_address<T>(buffer: &CudaSlice<T>, stream: &Arc<cudarc::driver::CudaStream>) -> u64 {
@@ -874,26 +890,37 @@ pub struct CudaPipeline {
     function: CudaFunction,
     groups: Vec<CudaProgramGroup>,
     params_name: Option<String>,
+    /// Whether the parameter variable is `__constant__`: the programs cannot write it, so the
+    /// bytes of the last launch are still there.
+    params_constant: bool,
     max_trace_depth: u32,
     max_graph_depth: u32,
     /// Whether the pipeline may intersect curves (whose intersector's frames its stack holds).
     curves: bool,
     block: u32,
     context: DeviceContext,
-    scratch: Mutex<Option<LaunchScratch>>,
+    /// The launch buffers, and the launch parameters last copied into a `__constant__` parameter
+    /// variable (which the programs cannot change: an unchanged launch skips the copy).
+    scratch: Mutex<(Option<LaunchScratch>, Option<Vec<u8>>)>,
 }
 
 /// A pipeline's buffers between launches: the SBT's device copy, the exception records, and
 /// what the device already holds, so that a launch issues only the copies it needs (a launch of
-/// a million rays takes a fraction of a millisecond; each copy costs microseconds).
+/// a million rays takes a fraction of a millisecond; each copy from pageable memory costs
+/// microseconds and waits for the stream).
 struct LaunchScratch {
     sbt: CudaSlice<u8>,
     exceptions: CudaSlice<u32>,
+    /// Page-locked host memory that the exception and trace counts are copied into without
+    /// waiting: the launch then waits for the stream once.
+    counts: PinnedHostSlice<u32>,
+    /// The SBT bytes last copied into `sbt`.
+    sbt_bytes: Vec<u8>,
     /// The launch information last written to the module's `__oxray_launch`.
     info: Option<LaunchInfo>,
-    /// Whether the last launch raised exceptions or traced rays: the counts are cleared before
-    /// the next one.
-    raised: bool,
+    /// The trace count the device holds (words 2 and 3 count up over launches; only a launch
+    /// that raised exceptions clears the words).
+    traces: u64,
 }
 
 impl std::fmt::Debug for CudaPipeline {
@@ -921,7 +948,7 @@ impl CudaPipeline {
         let ptx = compile_pipeline_ptx(cc, compile, link, groups)?;
         let cu = ctx.stream.context();
         let module = guarded("loading a pipeline", || {
-            cu.load_module(cudarc::nvrtc::Ptx::from_src(ptx))
+            cu.load_module(cudarc::nvrtc::Ptx::from_src(ptx.clone()))
         })?;
         let function = guarded("loading a pipeline kernel", || {
             module.load_function("__oxray_pipeline")
@@ -940,12 +967,13 @@ impl CudaPipeline {
             function,
             groups: groups.to_vec(),
             params_name: params_variable.map(str::to_string),
+            params_constant: params_variable.is_some_and(|name| declared_constant(&ptx, name)),
             max_trace_depth: link.max_trace_depth,
             max_graph_depth: DEFAULT_MAX_TRAVERSABLE_GRAPH_DEPTH,
             curves: uses_curves(compile.uses_primitive_type_flags),
             block: pipeline_block(),
             context: DeviceContext::new(),
-            scratch: Mutex::new(None),
+            scratch: Mutex::new((None, None)),
         };
         pipeline.reserve_stack()?;
         Ok(pipeline)
@@ -1050,22 +1078,32 @@ impl CudaPipeline {
         let total = launch_size(width, height, depth)?;
         let packed = pack_sbt(&self.groups, sbt)?;
         let stream = &self.ctx.stream;
+        let mut state = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
+        let (scratch, held) = &mut *state;
         match &self.params_name {
             Some(name) => {
-                let mut var = guarded("finding the launch parameters", || {
-                    self.module.get_global(name, stream)
-                })?;
-                if params.len() != var.len() {
-                    return Err(CudaError::Launch(format!(
-                        "{} bytes of launch parameters for {name}, which holds {}",
-                        params.len(),
-                        var.len()
-                    )));
-                }
-                if !params.is_empty() {
-                    stream
-                        .memcpy_htod(params, &mut var)
-                        .map_err(driver("copying the launch parameters"))?;
+                let unchanged =
+                    self.params_constant && held.as_deref().is_some_and(|last| last == params);
+                if !unchanged {
+                    *held = None;
+                    let mut var = guarded("finding the launch parameters", || {
+                        self.module.get_global(name, stream)
+                    })?;
+                    if params.len() != var.len() {
+                        return Err(CudaError::Launch(format!(
+                            "{} bytes of launch parameters for {name}, which holds {}",
+                            params.len(),
+                            var.len()
+                        )));
+                    }
+                    if !params.is_empty() {
+                        stream
+                            .memcpy_htod(params, &mut var)
+                            .map_err(driver("copying the launch parameters"))?;
+                    }
+                    if self.params_constant {
+                        *held = Some(params.to_vec());
+                    }
                 }
             }
             None if !params.is_empty() => {
@@ -1078,7 +1116,6 @@ impl CudaPipeline {
         if total == 0 {
             return Ok(LaunchReport::default());
         }
-        let mut scratch = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
         let grow = scratch
             .as_ref()
             .is_none_or(|s| s.sbt.len() < packed.bytes.len());
@@ -1090,30 +1127,34 @@ impl CudaPipeline {
             let exceptions = stream
                 .alloc_zeros::<u32>(16 + 16 * EXCEPTION_RECORDS)
                 .map_err(driver("allocating exception records"))?;
+            // SAFETY: four words of page-locked host memory (cached: the host reads them),
+            // written by the device copy of each launch before they are read, after the stream
+            // is synchronized.
+            let counts = unsafe { stream.context().alloc_pinned_with_flags::<u32>(4, 0) }
+                .map_err(driver("allocating the launch counts"))?;
             *scratch = Some(LaunchScratch {
                 sbt,
                 exceptions,
+                counts,
+                sbt_bytes: Vec::new(),
                 info: None,
-                raised: false,
+                traces: 0,
             });
         }
         let Some(scratch) = scratch.as_mut() else {
             return Err(CudaError::Launch("scratch buffers missing".into()));
         };
-        // Every launch sees the SBT it is given, as OptiX reads the user's SBT at each launch.
-        stream
-            .memcpy_htod(
-                &packed.bytes[..],
-                &mut scratch.sbt.slice_mut(..packed.bytes.len()),
-            )
-            .map_err(driver("copying the SBT"))?;
-        // The records past the count are never read: clearing the counts (exceptions, traces)
-        // is enough, and only a launch that raised exceptions or traced leaves them set.
-        if scratch.raised {
+        // Every launch sees the SBT it is given, as OptiX reads the user's SBT at each launch;
+        // the device copy is the pipeline's own and read-only to the programs, so bytes equal
+        // to the last launch's are already there.
+        if scratch.sbt_bytes != packed.bytes {
             stream
-                .memset_zeros(&mut scratch.exceptions.slice_mut(..4))
-                .map_err(driver("clearing exception records"))?;
-            scratch.raised = false;
+                .memcpy_htod(
+                    &packed.bytes[..],
+                    &mut scratch.sbt.slice_mut(..packed.bytes.len()),
+                )
+                .map_err(driver("copying the SBT"))?;
+            scratch.sbt_bytes.clone_from(&packed.bytes);
         }
         let base = device_address(&scratch.sbt, stream);
         let exc = device_address(&scratch.exceptions, stream);
@@ -1156,21 +1197,38 @@ impl CudaPipeline {
         // synchronized below while `scratch` is locked) and in the launch parameters and
         // traversables the user's programs read, which the user provides as for OptiX.
         unsafe { launch.launch(cfg) }.map_err(driver("launching a pipeline"))?;
-        // The count and the trace count first (four words); the records only when there are
-        // some.
-        let mut count = [0u32; 4];
+        // The exception count and the trace count (four words) come back without a wait of
+        // their own; the records only when there are some.
         stream
-            .memcpy_dtoh(&scratch.exceptions.slice(..4), &mut count)
+            .memcpy_dtoh(&scratch.exceptions.slice(..4), &mut scratch.counts)
             .map_err(driver("copying exception records"))?;
-        scratch.raised = count.iter().any(|&w| w != 0);
-        let words = if count[0] > 0 {
-            stream
+        self.ctx.synchronize()?;
+        let count: [u32; 4] = scratch
+            .counts
+            .as_slice()
+            .map_err(driver("reading the launch counts"))?
+            .try_into()
+            .map_err(|_| CudaError::Launch("launch counts of the wrong length".into()))?;
+        let device_traces = u64::from(count[2]) | u64::from(count[3]) << 32;
+        let traces = device_traces.wrapping_sub(scratch.traces);
+        scratch.traces = device_traces;
+        let mut words = if count[0] > 0 {
+            let words = stream
                 .clone_dtoh(&scratch.exceptions.slice(..))
-                .map_err(driver("copying exception records"))?
+                .map_err(driver("copying exception records"))?;
+            // The records past the count are never read: clearing the counts is enough, and
+            // only a launch that raised exceptions needs it (the slot of a record is its count).
+            stream
+                .memset_zeros(&mut scratch.exceptions.slice_mut(..4))
+                .map_err(driver("clearing exception records"))?;
+            scratch.traces = 0;
+            words
         } else {
             count.to_vec()
         };
-        self.ctx.synchronize()?;
+        // The report's trace count is this launch's.
+        words[2] = traces as u32;
+        words[3] = (traces >> 32) as u32;
         Ok(exception_report(&words).settle(&self.context, packed.exception.is_some())?)
     }
 
@@ -1584,6 +1642,17 @@ mod tests {
             pack_sbt(&g, &ShaderBindingTable::default()),
             Err(LaunchError::NoRaygenRecord)
         );
+    }
+
+    #[test]
+    fn only_constant_parameter_variables_count_as_unchanged_between_launches() {
+        let ptx = ".const .align 8 .b8 params[32];\n.global .align 4 .b8 state[16];\n\
+                   .visible .const .align 4 .u32 count;\n.const .align 8 .b8 params_two[8];";
+        assert!(declared_constant(ptx, "params"));
+        assert!(declared_constant(ptx, "count"));
+        assert!(!declared_constant(ptx, "state"), "a __device__ variable");
+        assert!(!declared_constant(ptx, "param"), "a prefix of another name");
+        assert!(!declared_constant(ptx, "missing"));
     }
 
     #[test]

@@ -857,6 +857,64 @@ fn an_ias_mixes_triangle_and_custom_gases() {
     );
 }
 
+/// One pipeline launched again and again: every launch sees its own parameters and SBT (the host
+/// skips the copies of what the device already holds) and reports its own exceptions and
+/// traces, also after a launch that raised.
+#[test]
+fn repeated_launches_see_their_own_parameters_sbt_and_counts() {
+    let Some((ctx, _lock)) = gpu() else { return };
+    let cuda = Cuda::from_context(ctx.clone());
+    let gas = quads(&cuda);
+    let s = Suite2::new(&ctx, 1);
+    let sbt_with = |data: u32| ShaderBindingTable {
+        raygen: SbtRegion::from_records(&[(s.header("rg_callables"), data)]),
+        miss: SbtRegion::from_headers(&[s.header("ms_none")]),
+        hitgroup: SbtRegion::from_headers(&[s.header("hg_tri"), s.header("hg_tri")]),
+        callables: SbtRegion::from_records(&[
+            (s.header("cl_scale"), 10.0f32),
+            (s.header("cl_shoot"), 20.0),
+            (s.header("cl_both"), 30.0),
+        ]),
+        ..Default::default()
+    };
+    let dims = [8, 2];
+    let n = u64::from(dims[0] * dims[1]);
+    let handle = gas.optix_handle().unwrap();
+    // (the raygen record's data, the callables asked for); [5, 1] raises at its direct call,
+    // before the continuation callable traces.
+    let launches = [
+        (0xCAFE, [0, 1]),
+        (0xCAFE, [0, 1]),
+        (0xBEEF, [0, 1]),
+        (0xBEEF, [2, 2]),
+        (0xBEEF, [5, 1]),
+        (0xBEEF, [5, 1]),
+        (0xBEEF, [2, 2]),
+        (0xF00D, [0, 1]),
+        (0xF00D, [0, 1]),
+    ];
+    for (k, (data, calls)) in launches.into_iter().enumerate() {
+        let (out, report) = s.run(handle, &sbt_with(data), dims, 0, calls);
+        if calls[0] == 5 {
+            assert_eq!(report.exceptions, n, "launch {k}");
+            assert_eq!(report.traces, 0, "launch {k}: no index reached its trace");
+            continue;
+        }
+        assert_eq!(report.exceptions, 0, "launch {k}: {report:?}");
+        assert_eq!(report.traces, n, "launch {k}: one trace per index");
+        let base = if calls == [0, 1] { 20 } else { 30 };
+        for (i, o) in out.iter().enumerate() {
+            let x = (i as u32) % dims[0];
+            assert_eq!(o[1], 1 + 100 * x + base, "launch {k}, index {i}");
+            assert_eq!(
+                (o[2], o[3]),
+                (data, 0x600D),
+                "launch {k}: this launch's record"
+            );
+        }
+    }
+}
+
 #[test]
 fn direct_and_continuation_callables() {
     let Some((ctx, _lock)) = gpu() else { return };

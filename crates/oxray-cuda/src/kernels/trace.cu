@@ -110,28 +110,43 @@ __device__ __forceinline__ bool ok_mag(float x) {
     return a >= F32_TINY && a < F32_INF;
 }
 
+// What the exact fallback returns: the hit in `h` where `hit` is set. Returned by value (in
+// registers), so that callers need no generic pointer to a local variable, which the pipeline's
+// walks would keep in two registers for its whole loop.
+struct TriHitF64 {
+    TriHit h;
+    bool hit;
+};
+
 // The exact fallback for edge functions of zero and for under- or overflow.
-__device__ __noinline__ bool intersect_f64(float ax_, float ay_, float az_, float bx_, float by_,
-                                           float bz_, float cx_, float cy_, float cz_, float tmin,
-                                           float tmax, TriHit& h) {
+__device__ __noinline__ TriHitF64 intersect_f64(float ax_, float ay_, float az_, float bx_,
+                                                float by_, float bz_, float cx_, float cy_,
+                                                float cz_, float tmin, float tmax) {
+    TriHitF64 out;
+    out.hit = false;
+    out.h.t = 0.0f;
+    out.h.u = 0.0f;
+    out.h.v = 0.0f;
+    out.h.front = false;
     double ax = ax_, ay = ay_, az = az_;
     double bx = bx_, by = by_, bz = bz_;
     double cx = cx_, cy = cy_, cz = cz_;
     double u = cx * by - cy * bx;
     double v = ax * cy - ay * cx;
     double w = bx * ay - by * ax;
-    if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return false;
+    if ((u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0)) return out;
     double det = u + v + w;
-    if (det == 0.0 || !isfinite(det)) return false;
+    if (det == 0.0 || !isfinite(det)) return out;
     double t_scaled = u * az + v * bz + w * cz;
     double inv = 1.0 / det;
     float t = (float)(t_scaled * inv) + 0.0f;
-    if (!(t >= tmin && t <= tmax)) return false;
-    h.t = t;
-    h.u = (float)(v * inv);
-    h.v = (float)(w * inv);
-    h.front = det > 0.0;
-    return true;
+    if (!(t >= tmin && t <= tmax)) return out;
+    out.h.t = t;
+    out.h.u = (float)(v * inv);
+    out.h.v = (float)(w * inv);
+    out.h.front = det > 0.0;
+    out.hit = true;
+    return out;
 }
 
 __device__ __forceinline__ bool intersect_triangle(const TraceRay& r, float3 p0, float3 p1,
@@ -158,7 +173,9 @@ __device__ __forceinline__ bool intersect_triangle(const TraceRay& r, float3 p0,
     float det = u + v + w;
     float t_scaled = u * az + v * bz + w * cz;
     if (u == 0.0f || v == 0.0f || w == 0.0f || !ok_mag(det) || !ok_mag(t_scaled)) {
-        return intersect_f64(ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax, h);
+        const TriHitF64 exact = intersect_f64(ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax);
+        if (exact.hit) h = exact.h;
+        return exact.hit;
     }
     if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return false;
     float inv = 1.0f / det;
@@ -406,19 +423,53 @@ __device__ __forceinline__ Best trace_bvh4(const TraceRay& r, const float4* __re
 // triangles of a GAS and the instances of an IAS are leaves of this one walk. The stack holds at
 // most one entry per level of the tree; pipelines, whose walks nest, size it to the deepest
 // binary tree the builder makes (`STACK`), the query kernels keep the BVH4 bound.
-template <int STACK = OXRAY_STACK_SIZE, typename Leaf>
+// A binary walk's current node and stacked nodes: the node's index (a leaf: its first slot), or
+// with BY_ADDRESS the node's address. Addresses keep the nodes' base off a step's critical path:
+// a pipeline's walk holds it in a register, which the compiler spills under pressure, and a
+// reload before each node's load adds a cache round trip to every step (the query kernels'
+// base is a kernel parameter, in constant memory).
+template <bool BY_ADDRESS>
+struct WalkEntry {
+    u32 child;
+    u32 count;
+    float dist;
+};
+template <>
+struct __align__(16) WalkEntry<true> {
+    unsigned long long child;
+    u32 count;
+    float dist;
+};
+
+template <int STACK = OXRAY_STACK_SIZE, bool BY_ADDRESS = false, typename Leaf>
 __device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __restrict__ nodes,
                                           float tmin, float tmax, Leaf&& leaf) {
+    using E = WalkEntry<BY_ADDRESS>;
+    // What an entry holds for the child `link` (a leaf when `count` is not 0).
+    auto ref = [&](u32 link, u32 count) -> decltype(E::child) {
+        if constexpr (BY_ADDRESS) {
+            return count == 0 ? reinterpret_cast<unsigned long long>(nodes + 4 * (size_t)link)
+                              : (unsigned long long)link;
+        } else {
+            (void)count;
+            return link;
+        }
+    };
     float box_tmax = tmax * TMAX_SLACK;
-    Entry stack[STACK];
+    E stack[STACK];
     int sp = 0;
-    Entry cur;
-    cur.child = 0;
+    E cur;
+    cur.child = ref(0, 0);
     cur.count = 0;
     cur.dist = tmin;
     for (;;) {
         if (cur.count == 0) {
-            const float4* n = nodes + 4 * (size_t)cur.child;
+            const float4* n;
+            if constexpr (BY_ADDRESS) {
+                n = reinterpret_cast<const float4*>(cur.child);
+            } else {
+                n = nodes + 4 * (size_t)cur.child;
+            }
             float4 n0 = load_ro(n), n1 = load_ro(n + 1), n2 = load_ro(n + 2);
             uint4 links = load_ro(reinterpret_cast<const uint4*>(n) + 3);
             float d0, d1;
@@ -428,11 +479,11 @@ __device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __res
             bool h1 = slab(r, r.neg_x ? n1.y : n1.x, r.neg_y ? n1.w : n1.z, r.neg_z ? n2.w : n2.z,
                            r.neg_x ? n1.x : n1.y, r.neg_y ? n1.z : n1.w, r.neg_z ? n2.z : n2.w,
                            tmin, box_tmax, d1);
-            Entry a, b;
-            a.child = links.x;
+            E a, b;
+            a.child = ref(links.x, links.z);
             a.count = links.z;
             a.dist = d0;
-            b.child = links.y;
+            b.child = ref(links.y, links.w);
             b.count = links.w;
             b.dist = d1;
             if (h0 && h1) {
@@ -455,7 +506,7 @@ __device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __res
             }
         } else {
             float before = tmax;
-            if (leaf(cur.child, cur.count, tmax)) return;
+            if (leaf((u32)cur.child, cur.count, tmax)) return;
             if (tmax != before) box_tmax = tmax * TMAX_SLACK;
         }
         for (;;) {
