@@ -29,7 +29,7 @@ pub const DEVICE_HEADER: &str = include_str!("device/oxray_device.h");
 pub const PIPELINE_BLOCK: u32 = 128;
 
 /// Resident threads per SM that a pipeline's kernel is compiled for (its launch bounds).
-const PIPELINE_THREADS_PER_SM: u32 = 1280;
+const PIPELINE_THREADS_PER_SM: u32 = 1152;
 
 /// The block size pipelines are compiled and launched with.
 #[must_use]
@@ -578,9 +578,11 @@ pub fn pipeline_compile_options(
     // Tuning: `OXRAY_NVRTC_OPTIONS` adds NVRTC options (e.g. `-DOXRAY_PIPELINE_MIN_BLOCKS=8`).
     let extra = std::env::var("OXRAY_NVRTC_OPTIONS").unwrap_or_default();
     if !extra.contains("OXRAY_PIPELINE_MIN_BLOCKS") {
-        // 1280 resident threads per SM: at most 48 registers each on a 64K-register SM. The
-        // traversal is latency-bound, so occupancy pays more than registers (measured on the
-        // H200: docs/BENCHMARKS.md); the general paths spill a little instead.
+        // 1152 resident threads per SM: at most 56 registers each on a 64K-register SM, what
+        // the fast path's walk needs to hold its values without reloading them at each node
+        // (as the closest-hit query kernel, 55 registers, does); 48 registers (1280 threads)
+        // measured 1-3 points lower against the query kernel (docs/BENCHMARKS.md, "The
+        // pipeline, fifth round").
         o.push(format!(
             "-DOXRAY_PIPELINE_MIN_BLOCKS={}",
             (PIPELINE_THREADS_PER_SM / pipeline_block()).max(1)

@@ -1780,24 +1780,39 @@ static __forceinline__ __device__ bool __oxray_fast_root(OptixTraversableHandle 
     return t->kind == __OXRAY_GAS && t->motion == 0ull;
 }
 
-// The query kernels' closest-hit loop over a triangle GAS (first hit with FIRST). The query
-// kernels have the GAS's addresses in parameters (constant memory, no registers); here the
-// nodes' address stays in registers, the step's critical path, and the triangles' address is
-// read from the caller's frame (local memory at a fixed offset) at each leaf, so that the walk
-// holds no more registers than the query kernels' own and their values are not spilled.
+// A GAS's nodes or triangles address, loaded where it is used. The query kernels have theirs
+// in parameters (constant memory, no registers); a pipeline's walk has the traversable, and the
+// four registers of the two addresses, held through the walk, make the compiler spill the
+// walk's own values, reloaded from local memory at every node. The load is volatile so that it
+// is not hoisted out of the walk again.
+static __forceinline__ __device__ const float4* __oxray_load_address(
+    const unsigned long long* at) {
+    unsigned long long v;
+    asm volatile("ld.global.nc.u64 %0, [%1];" : "=l"(v) : "l"(at));
+    return reinterpret_cast<const float4*>(v);
+}
+struct __oxray_GasNodes {
+    const __oxray_Traversable* g;
+};
+static __forceinline__ __device__ const float4* node_base(__oxray_GasNodes n) {
+    return __oxray_load_address(&n.g->nodes);
+}
+
+// The query kernels' closest-hit loop over a triangle GAS (first hit with FIRST).
 template <bool FIRST>
 static __forceinline__ __device__ Best __oxray_fast_walk(const TraceRay& r,
-                                                        const float4* nodes,
-                                                        const float4* const volatile& prims) {
+                                                        const __oxray_Traversable* g) {
     Best best;
     best.t = F32_INF;
     best.u = 0.0f;
     best.v = 0.0f;
     best.slot = MISS_SLOT;
-    walk_bvh2<OXRAY_BVH2_STACK, true>(r, nodes, r.tmin, r.tmax, [&](u32 start, u32 count, float& tmax) {
+    auto leaf_slots = [&](u32 start, u32 count, float& tmax) {
         float box_tmax;  // the walk keeps its own
-        return leaf<FIRST>(r, prims, start, count, r.tmin, tmax, box_tmax, best);
-    });
+        return leaf<FIRST>(r, __oxray_load_address(&g->prims), start, count, r.tmin, tmax,
+                           box_tmax, best);
+    };
+    walk_bvh2<OXRAY_BVH2_STACK>(r, __oxray_GasNodes{g}, r.tmin, r.tmax, leaf_slots);
     return best;
 }
 
@@ -1806,9 +1821,6 @@ static __forceinline__ __device__ Best __oxray_fast_walk(const TraceRay& r,
 struct __oxray_Frame {
     const char* record;
     __oxray_RayState ray;
-    // A fast-path trace's GAS and its triangles, for the walk and the trace's end.
-    const __oxray_Traversable* gas;
-    const float4* prims;
 };
 
 // Which of the ray's and the hit's values the pipeline's programs may read: those whose device
@@ -1987,14 +1999,13 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
 // call site keeps as few values alive across its walk as the query kernels do. (Copying the
 // payload out at the call site instead, to keep it in registers there, measured slower: the
 // call then has more live values to save.)
-static __noinline__ __device__ void __oxray_trace_fast(Best fast,
+static __noinline__ __device__ void __oxray_trace_fast(const __oxray_Traversable* g, Best fast,
                                                        unsigned int sbt_offset,
                                                        unsigned int sbt_stride,
                                                        unsigned int miss_index, unsigned int n,
                                                        unsigned int* payload,
                                                        const __oxray_Frame& frame) {
     __oxray_ThreadState& st = __oxray_state();
-    const __oxray_Traversable* g = frame.gas;
     if (fast.slot != MISS_SLOT) {
         const u32 flags = st.ray.flags;
         if ((flags & OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT) == 0u) {
@@ -2064,13 +2075,9 @@ static __forceinline__ __device__ void optixTrace(OptixTraversableHandle handle,
             __oxray_enter(true, __oxray_state(), rayOrigin, rayDirection, tmin, tmax, rayTime,
                           visibilityMask, rayFlags, n, p, frame);
             const __oxray_Traversable* g = reinterpret_cast<const __oxray_Traversable*>(handle);
-            frame.gas = g;
-            frame.prims = reinterpret_cast<const float4*>(g->prims);
-            const float4* nodes = reinterpret_cast<const float4*>(g->nodes);
             const bool first = (rayFlags & OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT) != 0u;
-            Best fast = first ? __oxray_fast_walk<true>(r, nodes, frame.prims)
-                              : __oxray_fast_walk<false>(r, nodes, frame.prims);
-            __oxray_trace_fast(fast, SBToffset, SBTstride, missSBTIndex, n, p, frame);
+            Best fast = first ? __oxray_fast_walk<true>(r, g) : __oxray_fast_walk<false>(r, g);
+            __oxray_trace_fast(g, fast, SBToffset, SBTstride, missSBTIndex, n, p, frame);
             traced = true;
         }
     }

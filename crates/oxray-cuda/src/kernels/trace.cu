@@ -423,53 +423,23 @@ __device__ __forceinline__ Best trace_bvh4(const TraceRay& r, const float4* __re
 // triangles of a GAS and the instances of an IAS are leaves of this one walk. The stack holds at
 // most one entry per level of the tree; pipelines, whose walks nest, size it to the deepest
 // binary tree the builder makes (`STACK`), the query kernels keep the BVH4 bound.
-// A binary walk's current node and stacked nodes: the node's index (a leaf: its first slot), or
-// with BY_ADDRESS the node's address. Addresses keep the nodes' base off a step's critical path:
-// a pipeline's walk holds it in a register, which the compiler spills under pressure, and a
-// reload before each node's load adds a cache round trip to every step (the query kernels'
-// base is a kernel parameter, in constant memory).
-template <bool BY_ADDRESS>
-struct WalkEntry {
-    u32 child;
-    u32 count;
-    float dist;
-};
-template <>
-struct __align__(16) WalkEntry<true> {
-    unsigned long long child;
-    u32 count;
-    float dist;
-};
+// `nodes` is the nodes' address, or anything `node_base` turns into it at each step (a
+// pipeline's walk reloads it from its traversable rather than hold it in registers).
+__device__ __forceinline__ const float4* node_base(const float4* nodes) { return nodes; }
 
-template <int STACK = OXRAY_STACK_SIZE, bool BY_ADDRESS = false, typename Leaf>
-__device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __restrict__ nodes,
-                                          float tmin, float tmax, Leaf&& leaf) {
-    using E = WalkEntry<BY_ADDRESS>;
-    // What an entry holds for the child `link` (a leaf when `count` is not 0).
-    auto ref = [&](u32 link, u32 count) -> decltype(E::child) {
-        if constexpr (BY_ADDRESS) {
-            return count == 0 ? reinterpret_cast<unsigned long long>(nodes + 4 * (size_t)link)
-                              : (unsigned long long)link;
-        } else {
-            (void)count;
-            return link;
-        }
-    };
+template <int STACK = OXRAY_STACK_SIZE, typename Nodes, typename Leaf>
+__device__ __forceinline__ void walk_bvh2(const TraceRay& r, Nodes nodes, float tmin, float tmax,
+                                          Leaf&& leaf) {
     float box_tmax = tmax * TMAX_SLACK;
-    E stack[STACK];
+    Entry stack[STACK];
     int sp = 0;
-    E cur;
-    cur.child = ref(0, 0);
+    Entry cur;
+    cur.child = 0;
     cur.count = 0;
     cur.dist = tmin;
     for (;;) {
         if (cur.count == 0) {
-            const float4* n;
-            if constexpr (BY_ADDRESS) {
-                n = reinterpret_cast<const float4*>(cur.child);
-            } else {
-                n = nodes + 4 * (size_t)cur.child;
-            }
+            const float4* n = node_base(nodes) + 4 * (size_t)cur.child;
             float4 n0 = load_ro(n), n1 = load_ro(n + 1), n2 = load_ro(n + 2);
             uint4 links = load_ro(reinterpret_cast<const uint4*>(n) + 3);
             float d0, d1;
@@ -479,11 +449,11 @@ __device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __res
             bool h1 = slab(r, r.neg_x ? n1.y : n1.x, r.neg_y ? n1.w : n1.z, r.neg_z ? n2.w : n2.z,
                            r.neg_x ? n1.x : n1.y, r.neg_y ? n1.z : n1.w, r.neg_z ? n2.z : n2.w,
                            tmin, box_tmax, d1);
-            E a, b;
-            a.child = ref(links.x, links.z);
+            Entry a, b;
+            a.child = links.x;
             a.count = links.z;
             a.dist = d0;
-            b.child = ref(links.y, links.w);
+            b.child = links.y;
             b.count = links.w;
             b.dist = d1;
             if (h0 && h1) {
@@ -506,7 +476,7 @@ __device__ __forceinline__ void walk_bvh2(const TraceRay& r, const float4* __res
             }
         } else {
             float before = tmax;
-            if (leaf((u32)cur.child, cur.count, tmax)) return;
+            if (leaf(cur.child, cur.count, tmax)) return;
             if (tmax != before) box_tmax = tmax * TMAX_SLACK;
         }
         for (;;) {
