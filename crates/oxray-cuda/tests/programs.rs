@@ -857,6 +857,22 @@ fn an_ias_mixes_triangle_and_custom_gases() {
     );
 }
 
+/// The callables scenario's SBT: the callables ray-generation program with `raygen_data` in its
+/// record, the miss and triangle groups, and three callables records (10, 20 and 30 as data).
+fn callables_sbt(s: &Suite2, raygen_data: u32) -> ShaderBindingTable {
+    ShaderBindingTable {
+        raygen: SbtRegion::from_records(&[(s.header("rg_callables"), raygen_data)]),
+        miss: SbtRegion::from_headers(&[s.header("ms_none")]),
+        hitgroup: SbtRegion::from_headers(&[s.header("hg_tri"), s.header("hg_tri")]),
+        callables: SbtRegion::from_records(&[
+            (s.header("cl_scale"), 10.0f32),
+            (s.header("cl_shoot"), 20.0),
+            (s.header("cl_both"), 30.0),
+        ]),
+        ..Default::default()
+    }
+}
+
 /// One pipeline launched again and again: every launch sees its own parameters and SBT (the host
 /// skips the copies of what the device already holds) and reports its own exceptions and
 /// traces, also after a launch that raised.
@@ -866,17 +882,6 @@ fn repeated_launches_see_their_own_parameters_sbt_and_counts() {
     let cuda = Cuda::from_context(ctx.clone());
     let gas = quads(&cuda);
     let s = Suite2::new(&ctx, 1);
-    let sbt_with = |data: u32| ShaderBindingTable {
-        raygen: SbtRegion::from_records(&[(s.header("rg_callables"), data)]),
-        miss: SbtRegion::from_headers(&[s.header("ms_none")]),
-        hitgroup: SbtRegion::from_headers(&[s.header("hg_tri"), s.header("hg_tri")]),
-        callables: SbtRegion::from_records(&[
-            (s.header("cl_scale"), 10.0f32),
-            (s.header("cl_shoot"), 20.0),
-            (s.header("cl_both"), 30.0),
-        ]),
-        ..Default::default()
-    };
     let dims = [8, 2];
     let n = u64::from(dims[0] * dims[1]);
     let handle = gas.optix_handle().unwrap();
@@ -894,7 +899,7 @@ fn repeated_launches_see_their_own_parameters_sbt_and_counts() {
         (0xF00D, [0, 1]),
     ];
     for (k, (data, calls)) in launches.into_iter().enumerate() {
-        let (out, report) = s.run(handle, &sbt_with(data), dims, 0, calls);
+        let (out, report) = s.run(handle, &callables_sbt(&s, data), dims, 0, calls);
         if calls[0] == 5 {
             assert_eq!(report.exceptions, n, "launch {k}");
             assert_eq!(report.traces, 0, "launch {k}: no index reached its trace");
@@ -921,17 +926,7 @@ fn direct_and_continuation_callables() {
     let cuda = Cuda::from_context(ctx.clone());
     let gas = quads(&cuda);
     let s = Suite2::new(&ctx, 1);
-    let sbt = ShaderBindingTable {
-        raygen: SbtRegion::from_records(&[(s.header("rg_callables"), 0xCAFEu32)]),
-        miss: SbtRegion::from_headers(&[s.header("ms_none")]),
-        hitgroup: SbtRegion::from_headers(&[s.header("hg_tri"), s.header("hg_tri")]),
-        callables: SbtRegion::from_records(&[
-            (s.header("cl_scale"), 10.0f32),
-            (s.header("cl_shoot"), 20.0),
-            (s.header("cl_both"), 30.0),
-        ]),
-        ..Default::default()
-    };
+    let sbt = callables_sbt(&s, 0xCAFE);
     let dims = [8, 2];
     let handle = gas.optix_handle().unwrap();
     for (calls, base) in [([0, 1], (0.0f32, 20)), ([2, 2], (30.0, 30))] {
