@@ -220,6 +220,33 @@ extern "C" __global__ void __miss__none() {}
 extern "C" __global__ void __closesthit__t() { optixSetPayload_0(__float_as_uint(optixGetRayTmax())); }
 "#;
 
+/// The PTX of the benchmark's pipeline ([`RAY_PIPELINE`]: ray generation, one miss and one
+/// closest-hit program) for compute capability `cc`, compiled with NVRTC as
+/// `oxray bench --backend cuda` compiles it, without a GPU (`scripts/pipeline-sass.sh` reads its
+/// machine code beside the query kernels').
+pub fn ray_pipeline_ptx(cc: (i32, i32)) -> Result<String, oxray::cuda::CudaError> {
+    use oxray::cuda::{compile_pipeline_ptx, CudaHitGroupDesc, CudaModule, CudaProgramGroup};
+    let module = CudaModule::from_source(RAY_PIPELINE);
+    let groups = [
+        CudaProgramGroup::raygen(&module, "__raygen__rays")?,
+        CudaProgramGroup::miss(Some((&module, "__miss__none")))?,
+        CudaProgramGroup::hit_group(CudaHitGroupDesc {
+            closest_hit: Some((&module, "__closesthit__t")),
+            ..Default::default()
+        })?,
+    ];
+    let compile = oxray::PipelineCompileOptions {
+        num_payload_values: 1,
+        ..Default::default()
+    };
+    compile_pipeline_ptx(
+        cc,
+        &compile,
+        &oxray::PipelineLinkOptions::default(),
+        &groups,
+    )
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 struct RayParams {
@@ -813,23 +840,7 @@ mod tests {
 
     #[test]
     fn the_benchmark_pipeline_compiles_with_nvrtc_where_it_is_present() {
-        use oxray::cuda::{compile_pipeline_ptx, CudaHitGroupDesc, CudaModule, CudaProgramGroup};
-        let module = CudaModule::from_source(RAY_PIPELINE);
-        let groups = [
-            CudaProgramGroup::raygen(&module, "__raygen__rays").unwrap(),
-            CudaProgramGroup::miss(Some((&module, "__miss__none"))).unwrap(),
-            CudaProgramGroup::hit_group(CudaHitGroupDesc {
-                closest_hit: Some((&module, "__closesthit__t")),
-                ..Default::default()
-            })
-            .unwrap(),
-        ];
-        let compile = oxray::PipelineCompileOptions {
-            num_payload_values: 1,
-            ..Default::default()
-        };
-        let link = oxray::PipelineLinkOptions::default();
-        match compile_pipeline_ptx((9, 0), &compile, &link, &groups) {
+        match ray_pipeline_ptx((9, 0)) {
             Ok(ptx) => assert!(ptx.contains("params"), "the params variable keeps its name"),
             Err(oxray::cuda::CudaError::NoNvrtc(why)) => {
                 assert!(

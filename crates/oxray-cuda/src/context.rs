@@ -302,6 +302,19 @@ fn compile(cc: (i32, i32)) -> Result<cudarc::nvrtc::Ptx, CudaError> {
     nvrtc_compile(KERNEL_SOURCE, compile_options(cc), "oxray_trace.cu")
 }
 
+/// The PTX of the trace kernels ([`KERNEL_SOURCE`]) for a device of compute capability `cc`,
+/// compiled with NVRTC exactly as a [`CudaContext`] compiles them (no GPU needed): for reading
+/// the machine code with `ptxas` (`scripts/pipeline-sass.sh`).
+///
+/// ```no_run
+/// let ptx = oxray_cuda::trace_kernels_ptx((9, 0))?;
+/// assert!(ptx.contains(".entry oxray_closest_bvh2"));
+/// # Ok::<(), oxray_cuda::CudaError>(())
+/// ```
+pub fn trace_kernels_ptx(cc: (i32, i32)) -> Result<String, CudaError> {
+    compile(cc).map(|p| p.to_src())
+}
+
 /// NVRTC's version, `major.minor`, if the library can be loaded.
 pub(crate) fn nvrtc_version() -> Option<String> {
     // SAFETY: only tries to open the library by its usual names (dlopen).

@@ -54,7 +54,7 @@ pub mod simulation;
 mod transform;
 
 pub use backend::{Cuda, CudaBatch};
-pub use context::{CudaContext, DeviceInfo, KernelInfo, KERNEL_SOURCE};
+pub use context::{trace_kernels_ptx, CudaContext, DeviceInfo, KernelInfo, KERNEL_SOURCE};
 pub use device_build::{BuildTimes, DeviceBuildConfig, DeviceBuildError, GasBuilder};
 pub use error::CudaError;
 pub use gas::{CudaGas, DeviceHits, DeviceOcclusion, DeviceRays, HitRecord};
