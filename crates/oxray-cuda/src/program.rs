@@ -901,9 +901,17 @@ pub struct CudaPipeline {
     curves: bool,
     block: u32,
     context: DeviceContext,
-    /// The launch buffers, and the launch parameters last copied into a `__constant__` parameter
-    /// variable (which the programs cannot change: an unchanged launch skips the copy).
-    scratch: Mutex<(Option<LaunchScratch>, Option<Vec<u8>>)>,
+    scratch: Mutex<LaunchState>,
+}
+
+/// What a pipeline keeps between launches.
+#[derive(Default)]
+struct LaunchState {
+    /// The launch buffers, made by the first launch.
+    buffers: Option<LaunchScratch>,
+    /// The launch parameters last copied into a `__constant__` parameter variable, which the
+    /// programs cannot change: an unchanged launch skips the copy.
+    params: Option<Vec<u8>>,
 }
 
 /// A pipeline's buffers between launches: the SBT's device copy, the exception records, and
@@ -975,7 +983,7 @@ impl CudaPipeline {
             curves: uses_curves(compile.uses_primitive_type_flags),
             block: pipeline_block(),
             context: DeviceContext::new(),
-            scratch: Mutex::new((None, None)),
+            scratch: Mutex::new(LaunchState::default()),
         };
         pipeline.reserve_stack()?;
         Ok(pipeline)
@@ -1081,7 +1089,10 @@ impl CudaPipeline {
         let packed = pack_sbt(&self.groups, sbt)?;
         let stream = &self.ctx.stream;
         let mut state = self.scratch.lock().unwrap_or_else(|e| e.into_inner());
-        let (scratch, held) = &mut *state;
+        let LaunchState {
+            buffers: scratch,
+            params: held,
+        } = &mut *state;
         match &self.params_name {
             Some(name) => {
                 let unchanged =

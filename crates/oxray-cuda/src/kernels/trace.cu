@@ -122,12 +122,7 @@ struct TriHitF64 {
 __device__ __noinline__ TriHitF64 intersect_f64(float ax_, float ay_, float az_, float bx_,
                                                 float by_, float bz_, float cx_, float cy_,
                                                 float cz_, float tmin, float tmax) {
-    TriHitF64 out;
-    out.hit = false;
-    out.h.t = 0.0f;
-    out.h.u = 0.0f;
-    out.h.v = 0.0f;
-    out.h.front = false;
+    TriHitF64 out = {};  // no hit
     double ax = ax_, ay = ay_, az = az_;
     double bx = bx_, by = by_, bz = bz_;
     double cx = cx_, cy = cy_, cz = cz_;
@@ -414,6 +409,11 @@ __device__ __forceinline__ Best trace_bvh4(const TraceRay& r, const float4* __re
     }
 }
 
+// The address of a binary walk's nodes: `nodes` itself, or for another type (a pipeline's
+// traversable, whose walk reloads the address rather than hold it in registers) its own
+// `node_base`, found where the walk is instantiated.
+__device__ __forceinline__ const float4* node_base(const float4* nodes) { return nodes; }
+
 // A binary BVH of 64-byte nodes (Aila and Laine's layout): rows (c0.lo.x, c0.hi.x, c0.lo.y,
 // c0.hi.y), (c1.lo.x, c1.hi.x, c1.lo.y, c1.hi.y), (c0.lo.z, c0.hi.z, c1.lo.z, c1.hi.z) and
 // (child0, child1, count0, count1), with the CPU's box and triangle tests.
@@ -422,11 +422,8 @@ __device__ __forceinline__ Best trace_bvh4(const TraceRay& r, const float4* __re
 // `leaf(start, count, tmax)`, which may shrink `tmax` and returns true to end the walk. Both the
 // triangles of a GAS and the instances of an IAS are leaves of this one walk. The stack holds at
 // most one entry per level of the tree; pipelines, whose walks nest, size it to the deepest
-// binary tree the builder makes (`STACK`), the query kernels keep the BVH4 bound.
-// `nodes` is the nodes' address, or anything `node_base` turns into it at each step (a
-// pipeline's walk reloads it from its traversable rather than hold it in registers).
-__device__ __forceinline__ const float4* node_base(const float4* nodes) { return nodes; }
-
+// binary tree the builder makes (`STACK`), the query kernels keep the BVH4 bound. `nodes` goes
+// through `node_base` at each step.
 template <int STACK = OXRAY_STACK_SIZE, typename Nodes, typename Leaf>
 __device__ __forceinline__ void walk_bvh2(const TraceRay& r, Nodes nodes, float tmin, float tmax,
                                           Leaf&& leaf) {
