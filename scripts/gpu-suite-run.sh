@@ -2,8 +2,9 @@
 # Runs the binaries scripts/gpu-suite-pack.sh packed, with OXRAY_REQUIRE_GPU=1 (a missing or
 # unusable GPU fails instead of skipping), then the GPU benchmarks of docs/BENCHMARKS.md that
 # the open goals need. From the repository root; the log goes to $OUT/log.txt
-# (or ./log.txt). BENCH=0 skips the benchmarks, TESTS=0 the test binaries (each fits a device
-# call of at most ten minutes).
+# (or ./log.txt). BENCH=0 skips the benchmarks, TESTS=0 the test binaries, PROFILE=1 adds an
+# Nsight Compute profile. Every test binary takes about twelve minutes on an H100, more than a
+# device call's ten: pack them in two parts (the pack script's ONLY) or set TEST_TIMEOUT.
 set -u
 export OXRAY_REQUIRE_GPU=1
 root=$(pwd)
@@ -13,6 +14,7 @@ log=$out/log.txt
 (cd "$root/.gpu" && tar -xJf bins.tar.xz) || { echo "unpack failed" >> "$log"; exit 1; }
 mkdir -p "$root/target/debug" && cp "$root/.gpu/bin/oxray-debug" "$root/target/debug/oxray"
 export OXRAY_MESH_DIR=$root/.gpu/meshes
+M0=$root/.gpu/meshes
 nvidia-smi --query-gpu=name,driver_version --format=csv >> "$log" 2>&1
 [ "${TESTS:-1}" = 0 ] || while read -r crate exe name; do
   echo "=== $crate $name" >> "$log"
@@ -23,6 +25,19 @@ nvidia-smi --query-gpu=name,driver_version --format=csv >> "$log" 2>&1
   echo "rc=$rc (${SECONDS}s)" >> "$log"
 done < "$root/.gpu/bin/tests.txt"
 rm -f "$out/t.txt"
+# PROFILE=1: Nsight Compute on the query kernel's and the pipeline's launches of the bunny's
+# three ray sets (docs/BENCHMARKS.md, "The pipeline, sixth round"); the 402 launches skipped
+# are `oxray bench`'s launches of one ray (201 of each kernel). The report goes to $OUT/ncu.txt.
+if [ "${PROFILE:-0}" = 1 ]; then
+  ncu=$(command -v ncu || ls /usr/local/cuda*/bin/ncu 2>/dev/null | head -1)
+  echo "=== ncu $ncu" >> "$log"
+  timeout 400 "$ncu" -k regex:'__oxray_pipeline|oxray_closest_bvh2' --launch-skip 402 \
+    --launch-count 24 --section SpeedOfLight --section Occupancy --section LaunchStats \
+    --section WarpStateStats --section SchedulerStats --section MemoryWorkloadAnalysis \
+    --section InstructionStats --section SourceCounters \
+    "$root/.gpu/bin/oxray" bench --backend cuda --runs 1 "$M0/stanford-bunny.obj" > "$out/ncu.txt" 2>&1
+  echo "rc=$? (${SECONDS}s)" >> "$log"
+fi
 [ "${BENCH:-1}" = 0 ] && exit 0
 M=$root/.gpu/meshes
 X=$root/.gpu/bin/oxray
