@@ -26,9 +26,10 @@ Steps per scene:
      and ldsampler, scrambled (0,2)-sequences, the counterpart of oxray's Sobol) so that
      machine load falls on both alike: the render's wall time and its RMSE against the
      reference, over all pixels and over the pixels below 1 in every channel of the reference
-     (the light and its edges excluded). oxray's time is the render time the CLI
-     reports (rendering only: no process start, scene loading or image writing; it does include
-     building the BVH, which Mitsuba does at load). Mitsuba's is the wall time of mi.render()
+     (the light and its edges excluded). oxray's time is that of its passes as the CLI
+     reports them (no process start, scene loading or image writing, and not the render's
+     setup: the BVH build and the light tables, reported apart, as Mitsuba builds its BVH when
+     the scene loads). Mitsuba's is the wall time of mi.render()
      until the image is evaluated, after a warm-up render of the same spp with another seed (so
      no JIT compilation is counted).
   3. Time to equal RMSE: for target RMSEs (those oxray's sobol sampler reaches at the ladder's
@@ -314,16 +315,19 @@ class Oxray:
                "--spp", str(spp), "--seed", str(seed), "--sampler", sampler, "--filter", "box",
                "--max-depth", str(self.max_depth), "-t", str(self.threads), "--quiet"]
         text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-        m = re.search(r"rendered in ([\d.]+) s \(([\d.]+) M samples/s", text)
+        m = re.search(r"rendered in ([\d.]+) s \(([\d.]+) M samples/s, [\d.]+ Mrays/s "
+                      r"after ([\d.]+) s of setup\)", text)
         if not m:
             raise RuntimeError(f"unexpected oxray output: {text}")
         w, h = (int(v) for v in self.size.split("x"))
-        secs, rate = float(m.group(1)), float(m.group(2))
-        # The CLI prints the seconds with one decimal and the rate with two: take whichever
-        # is the more precise (the rate for short renders, the seconds for long ones).
-        if rate > 0 and 0.005 / rate < 0.05 / max(secs, 1e-9):
+        secs, rate, setup = float(m.group(1)), float(m.group(2)), float(m.group(3))
+        # The passes' time (the setup, BVH build and light tables, excluded as Mitsuba's
+        # BVH build at load is). The CLI prints the seconds with one decimal and the rate (of
+        # the passes) with two: take whichever is the more precise.
+        passes = max(secs - setup, 1e-9)
+        if rate > 0 and 0.005 / rate < 0.05 / passes:
             return read_exr(out), w * h * spp / (rate * 1e6)
-        return read_exr(out), secs
+        return read_exr(out), passes
 
 
 class Mitsuba:

@@ -834,14 +834,18 @@ fn run(cli: Cli) -> Result<()> {
                 None => String::new(),
             };
             let (out_w, out_h) = (rendered.image.width, rendered.image.height);
-            let samples_per_s = out_w as f64 * out_h as f64 * done as f64 / render_secs.max(1e-9);
-            let rays_per_s = rendered.rays as f64 / render_secs.max(1e-9);
+            // Rates of the passes: the setup (structures, tables) is a cost per render, not per
+            // sample.
+            let setup_secs = rendered.setup.as_secs_f64().min(render_secs);
+            let pass_secs = (render_secs - setup_secs).max(1e-9);
+            let samples_per_s = out_w as f64 * out_h as f64 * done as f64 / pass_secs;
+            let rays_per_s = rendered.rays as f64 / pass_secs;
             let size = match crop {
                 Some(c) => format!("{out_w}x{out_h}, pixels {c} of {w}x{h}"),
                 None => format!("{w}x{h}"),
             };
             say(format_args!(
-                "wrote {} ({size}, {done} spp, {} triangles, {} instances{on}{stopped}{denoised}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s, {:.2} Mrays/s), total {:.1} s",
+                "wrote {} ({size}, {done} spp, {} triangles, {} instances{on}{stopped}{denoised}): loaded in {loaded:.1} s, rendered in {render_secs:.1} s ({:.2} M samples/s, {:.2} Mrays/s after {setup_secs:.3} s of setup), total {:.1} s",
                 output.display(),
                 desc.triangle_count(),
                 desc.instances.len(),

@@ -65,13 +65,18 @@ impl RenderBackend {
         opts: &RenderOptions,
         on_pass: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
     ) -> Result<Rendered, RenderError> {
-        match self {
-            RenderBackend::Rust => oxray_render::render_passes(scene, env, opts, on_pass),
-            RenderBackend::CxxOnCpu => {
-                Renderer::new(&Device::cpu(), scene, env)?.render(opts, on_pass)
-            }
-            RenderBackend::Device(d) => Renderer::new(d, scene, env)?.render(opts, on_pass),
-        }
+        // A renderer's geometry is built before its render: part of this render's setup.
+        let device = match self {
+            RenderBackend::Rust => return oxray_render::render_passes(scene, env, opts, on_pass),
+            RenderBackend::CxxOnCpu => &Device::cpu(),
+            RenderBackend::Device(d) => d,
+        };
+        let start = std::time::Instant::now();
+        let mut renderer = Renderer::new(device, scene, env)?;
+        let geometry = start.elapsed();
+        let mut rendered = renderer.render(opts, on_pass)?;
+        rendered.setup += geometry;
+        Ok(rendered)
     }
 
     /// What renders, for the summary line (`None` for the default).

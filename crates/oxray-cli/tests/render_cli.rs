@@ -567,7 +567,8 @@ fn a_time_budget_or_an_interrupt_writes_the_samples_done() {
     let said = stopped(&["--time", "0.5"]);
     assert!(said.contains("out of time after"), "{said}");
     assert!(said.contains("M samples/s"), "{said}");
-    assert!(said.contains(" Mrays/s)"), "{said}");
+    assert!(said.contains(" Mrays/s after "), "{said}");
+    assert!(said.contains(" s of setup)"), "{said}");
     assert!(budget.exists());
     assert_one_error(
         &oxray(&["render", "-o", s(&budget), "--time", "0"]),

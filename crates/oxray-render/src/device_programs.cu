@@ -744,9 +744,15 @@ PTI u32 env_texel_of(V3 d) {
 
 PTI V3 env_texel(u32 i) { return v3a(ptr<float>(params.env_texels) + 3ull * i); }
 
+// A one-texel map: a uniform environment, looked up without map coordinates and sampled
+// uniformly over the sphere (lights.rs uniform_map).
+PTI bool env_uniform() { return params.env_width * params.env_height == 1u; }
+#define PT_UNIFORM_PDF (1.0f / (4.0f * PT_PI))
+
 // Bilinear between texel centres, wrapping in u, clamped at the poles (lights.rs radiance).
 PTF V3 env_radiance(V3 d) {
     if (!finite3(d)) return v3s(0.0f);
+    if (env_uniform()) return env_texel(0u);
     long long w = (long long)params.env_width, h = (long long)params.env_height;
     float u = 0.5f + atan2f(d.x, -d.z) / PT_TAU;
     float v = acosf(clampf(d.y, -1.0f, 1.0f)) / PT_PI;
@@ -781,6 +787,7 @@ PTI float env_density(float p, float sin_theta) {
 
 PTF float env_pdf(V3 d) {
     if (params.env_total <= 0.0f || !finite3(d)) return 0.0f;
+    if (env_uniform()) return PT_UNIFORM_PDF;
     u32 i = env_texel_of(d);
     float p = env_cell_probability(i % params.env_width, i / params.env_width);
     return env_density(p, sqrtf(maxf(1.0f - d.y * d.y, 0.0f)));
@@ -816,6 +823,15 @@ PTI V3 direction_at(float u, float v) {
 // Draws a direction in proportion to radiance: false if the environment is black.
 PTF bool env_sample(float u0, float u1, V3& d, V3& l, float& pdf) {
     if (params.env_total <= 0.0f) return false;
+    if (env_uniform()) {
+        float y = 1.0f - 2.0f * u0;
+        float r = sqrtf(maxf(1.0f - y * y, 0.0f));
+        float phi = u1 * PT_TAU;
+        d = v3(r * cosf(phi), y, r * sinf(phi));
+        pdf = PT_UNIFORM_PDF;
+        l = env_texel(0u);
+        return true;
+    }
     u32 w = params.env_width, h = params.env_height;
     const float* marginal = ptr<float>(params.env_marginal);
     u32 y = upper_bound(marginal, h, u0);

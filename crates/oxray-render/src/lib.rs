@@ -535,6 +535,7 @@ pub fn render_passes(
     opts: &RenderOptions,
     mut on_pass: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
 ) -> Result<Rendered, RenderError> {
+    let start = std::time::Instant::now();
     let window = crop::window_of(opts.width, opts.height, opts.crop)?;
     let prep = prepare(scene, env, opts)?;
     // Everything the launch parameters borrow outlives the scene that holds the programs.
@@ -645,6 +646,7 @@ pub fn render_passes(
             ProgramGroup::miss(Some((&module, "__miss__shadow")))?,
         ],
     );
+    let setup = start.elapsed();
     let mut samples = 0;
     let mut rays = 0;
     let mut cancelled = false;
@@ -700,6 +702,7 @@ pub fn render_passes(
         aovs: aov
             .as_ref()
             .map(|a| Aovs::from_sums(w, h, &sums, &a.to_vec())),
+        setup,
     })
 }
 

@@ -207,7 +207,9 @@ impl TriangleLights {
 /// uniform point in the cell. So the pdf is positive wherever the filtered radiance is (a dark
 /// texel next to a bright one still receives samples), and [`Environment::pdf`] is the exact
 /// density of [`Environment::sample`]: the chosen cell's probability, read back from the same
-/// cumulative tables, over the cell's solid angle.
+/// cumulative tables, over the cell's solid angle. A one-texel map (a uniform environment,
+/// [`Environment::uniform`]) is sampled uniformly over the sphere (density 1 / 4 pi) and looked
+/// up without map coordinates.
 #[derive(Clone, Debug)]
 pub struct Environment {
     width: usize,
@@ -402,12 +404,22 @@ impl Environment {
         }
     }
 
+    /// Whether the map is one texel: a uniform environment, which is looked up without map
+    /// coordinates and sampled uniformly over the sphere (as the map's cells would sample it
+    /// uniformly in (u, v), denser towards the poles).
+    fn uniform_map(&self) -> bool {
+        self.width * self.height == 1
+    }
+
     /// Radiance arriving from direction `d` (unit): the map filtered bilinearly between texel
     /// centres, wrapping around in u and clamped at the poles.
     #[must_use]
     pub fn radiance(&self, d: Vec3) -> Vec3 {
         if !d.is_finite() || self.zero {
             return Vec3::ZERO;
+        }
+        if self.uniform_map() {
+            return self.texels[0];
         }
         self.radiance_at(Self::uv_of(d))
     }
@@ -419,6 +431,9 @@ impl Environment {
         // A zero map has no sampling weight either: its pdf is 0.
         if !d.is_finite() || self.zero {
             return (Vec3::ZERO, 0.0);
+        }
+        if self.uniform_map() {
+            return (self.texels[0], UNIFORM_PDF);
         }
         let uv = Self::uv_of(d);
         (self.radiance_at(uv), self.pdf_at(d, uv))
@@ -465,8 +480,11 @@ impl Environment {
     /// The solid-angle pdf of [`Environment::sample`] drawing `d`.
     #[must_use]
     pub fn pdf(&self, d: Vec3) -> f32 {
-        if !d.is_finite() {
+        if !d.is_finite() || self.total <= 0.0 {
             return 0.0;
+        }
+        if self.uniform_map() {
+            return UNIFORM_PDF;
         }
         self.pdf_at(d, Self::uv_of(d))
     }
@@ -487,6 +505,13 @@ impl Environment {
     pub fn sample(&self, u: [f32; 2]) -> Option<(Vec3, Vec3, f32)> {
         if self.total <= 0.0 {
             return None;
+        }
+        if self.uniform_map() {
+            let y = 1.0 - 2.0 * u[0];
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            let phi = u[1] * TAU;
+            let d = Vec3::new(r * phi.cos(), y, r * phi.sin());
+            return Some((d, self.texels[0], UNIFORM_PDF));
         }
         let y = self
             .marginal
@@ -535,6 +560,9 @@ pub struct EnvironmentTables<'a> {
     pub total: f32,
 }
 
+/// The solid-angle density of a direction drawn uniformly over the sphere.
+const UNIFORM_PDF: f32 = 1.0 / (4.0 * PI);
+
 fn direction_at(u: f32, v: f32) -> Vec3 {
     let phi = (u - 0.5) * TAU;
     let theta = v * PI;
@@ -550,6 +578,43 @@ fn texel_direction(x: usize, y: usize, w: usize, h: usize) -> Vec3 {
 mod tests {
     use super::*;
     use oxray_scene::cornell_box;
+
+    /// A one-texel map is sampled uniformly over the sphere: every sample has the radiance and
+    /// the density 1 / 4 pi that `radiance_and_pdf` and `pdf` give its direction, and the
+    /// directions' moments are the sphere's (mean 0, mean square 1/3 per axis).
+    #[test]
+    fn a_uniform_environment_is_sampled_uniformly_over_the_sphere() {
+        let c = Vec3::new(0.5, 1.0, 2.0);
+        let env = Environment::uniform(c);
+        let n = 64 * 64;
+        let (mut mean, mut square) = (Vec3::ZERO, Vec3::ZERO);
+        for i in 0..n {
+            let u = [
+                ((i % 64) as f32 + 0.5) / 64.0,
+                ((i / 64) as f32 + 0.5) / 64.0,
+            ];
+            let (d, l, pdf) = env.sample(u).unwrap();
+            assert!((d.length() - 1.0).abs() < 1e-5, "{d}");
+            assert_eq!(l, c);
+            assert_eq!(pdf, 1.0 / (4.0 * PI));
+            assert_eq!(env.radiance_and_pdf(d), (c, pdf));
+            assert_eq!(env.pdf(d), pdf);
+            assert_eq!(env.radiance(d), c);
+            mean += d;
+            square += d * d;
+        }
+        let (mean, square) = (mean / n as f32, square / n as f32);
+        assert!(mean.abs().max_element() < 1e-3, "{mean}");
+        assert!(
+            (square - Vec3::splat(1.0 / 3.0)).abs().max_element() < 2e-3,
+            "{square}"
+        );
+        // A black one is never sampled and has no density.
+        let black = Environment::uniform(Vec3::ZERO);
+        assert!(black.sample([0.5, 0.5]).is_none());
+        assert_eq!(black.pdf(Vec3::Y), 0.0);
+        assert_eq!(black.radiance_and_pdf(Vec3::Y), (Vec3::ZERO, 0.0));
+    }
 
     #[test]
     fn direction_mapping_round_trips() {

@@ -232,6 +232,7 @@ impl<'s> Renderer<'s> {
         opts: &RenderOptions,
         mut on_pass: impl FnMut(&Progress<'_>) -> ControlFlow<()>,
     ) -> Result<Rendered, RenderError> {
+        let start = std::time::Instant::now();
         let window = crop::window_of(opts.width, opts.height, opts.crop)?;
         let (width, height) = (window.width(), window.height());
         // The instances are posed for one shutter: another one poses them anew.
@@ -285,6 +286,7 @@ impl<'s> Renderer<'s> {
             aov.as_ref(),
             &filter,
         );
+        let setup = start.elapsed();
         let mut samples = 0;
         let mut rays = 0;
         let mut cancelled = false;
@@ -314,6 +316,7 @@ impl<'s> Renderer<'s> {
             rays,
             cancelled,
             aovs,
+            setup,
         })
     }
 }
@@ -398,6 +401,11 @@ pub struct Rendered {
     pub cancelled: bool,
     /// The auxiliary images, with [`RenderOptions::aovs`].
     pub aovs: Option<Aovs>,
+    /// Time the call spent before its first pass, building what the passes need: the
+    /// acceleration structures, light and environment tables and programs for
+    /// [`render_passes`](crate::render_passes); for a [`Renderer`], whose geometry
+    /// [`Renderer::new`] built, only the tables an edit made it rebuild.
+    pub setup: std::time::Duration,
 }
 
 /// Auxiliary images of the first surface each camera ray meets (a denoiser's guides and a

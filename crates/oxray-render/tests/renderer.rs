@@ -50,6 +50,48 @@ fn a_renderer_renders_what_render_on_renders_every_time() {
     assert_eq!(first.image, render(&scene, &env, &o, |_| {}).unwrap());
 }
 
+/// A uniform environment (one texel, sampled uniformly over the sphere) lights the box's open
+/// side the same way in both program sets: the same bits from the Rust and the C++ programs.
+#[test]
+fn a_uniform_environment_gives_the_same_bits_from_both_program_sets() {
+    let scene = cornell_box();
+    let env = Environment::uniform(Vec3::new(0.4, 0.5, 0.6));
+    let o = opts(16, 3);
+    let rust = render(&scene, &env, &o, |_| {}).unwrap();
+    assert_eq!(rust, fresh(&scene, &env, &o));
+    // The environment does light it: brighter than the dark box.
+    let mean = |i: &Image| i.pixels.iter().map(|p| p[0] + p[1] + p[2]).sum::<f32>();
+    assert!(mean(&rust) > mean(&render(&scene, &dark(), &o, |_| {}).unwrap()));
+}
+
+/// A render reports the time it spent before its first pass (building what the passes need),
+/// which lies within the call: for `render_passes` everything (structures, tables, programs),
+/// for a `Renderer` its tables (the first render) and nothing to rebuild after that.
+#[test]
+fn a_render_reports_its_setup_time_within_the_call() {
+    let scene = cornell_box();
+    let env = dark();
+    let o = opts(16, 2);
+    let timed = |f: &mut dyn FnMut() -> Rendered| {
+        let start = std::time::Instant::now();
+        let r = f();
+        (r, start.elapsed())
+    };
+    let (r, call) =
+        timed(&mut || render_passes(&scene, &env, &o, |_| ControlFlow::Continue(())).unwrap());
+    assert!(
+        r.setup > std::time::Duration::ZERO && r.setup <= call,
+        "{:?} of {call:?}",
+        r.setup
+    );
+    let mut renderer = Renderer::new(&Device::cpu(), &scene, &env).unwrap();
+    for _ in 0..2 {
+        let (r, call) = timed(&mut || all(&mut renderer, &o));
+        assert!(r.setup <= call, "{:?} of {call:?}", r.setup);
+        assert_eq!(r.samples, 2);
+    }
+}
+
 /// A render reports the rays it traced (every launch's trace count): at least one camera ray
 /// per pixel and sample, at most a camera ray and, per vertex, a bounce and its shadow rays; the
 /// same count on every render of the same options, and from the Rust programs, which trace the
