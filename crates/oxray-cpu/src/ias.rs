@@ -33,6 +33,9 @@ pub struct Ias {
     data: IasData,
     /// The child of every instance slot resolved to a CPU object; `None` for the null handle.
     pub(crate) nodes: Vec<Option<CpuNode>>,
+    /// Whether every child is a GAS (or the null handle): the graph that
+    /// `ALLOW_SINGLE_LEVEL_INSTANCING` allows, which every trace from such a pipeline checks.
+    pub(crate) single_level: bool,
     /// Whether closest points can be answered under it (checked on first use, again after an
     /// update): `simulation::instanced`.
     pub(crate) closest_support: std::sync::OnceLock<Result<(), crate::SurfaceQueryError>>,
@@ -53,6 +56,7 @@ impl Ias {
         let nodes = resolve_children(&data)?;
         Ok(Ias {
             data,
+            single_level: single_level(&nodes),
             nodes,
             closest_support: Default::default(),
         })
@@ -68,6 +72,7 @@ impl Ias {
         self.data.update(options, inputs)?;
         // The children are the same structures or updates of them: of this backend.
         self.nodes = resolve_children(&self.data)?;
+        self.single_level = single_level(&self.nodes);
         self.closest_support = Default::default();
         Ok(())
     }
@@ -124,4 +129,11 @@ impl Traversable for Ias {
     fn lineage(&self) -> Option<u64> {
         Some(self.data.lineage)
     }
+}
+
+/// Whether every child is a GAS or the null handle (one level of instancing).
+fn single_level(nodes: &[Option<CpuNode>]) -> bool {
+    nodes
+        .iter()
+        .all(|n| matches!(n, None | Some(CpuNode::Gas(_))))
 }

@@ -649,11 +649,7 @@ fn check_graph<P>(
             NodeRef::Gas(_) => graph.contains(G::ALLOW_SINGLE_GAS),
             // One level of instances over GASes without transforms.
             NodeRef::Ias(ias) => {
-                graph.contains(G::ALLOW_SINGLE_LEVEL_INSTANCING)
-                    && ias
-                        .nodes
-                        .iter()
-                        .all(|n| matches!(n, None | Some(crate::gas::CpuNode::Gas(_))))
+                graph.contains(G::ALLOW_SINGLE_LEVEL_INSTANCING) && ias.single_level
             }
             // Transforms need ALLOW_ANY (§5.9.1), motion transforms included.
             NodeRef::Static(_) | NodeRef::MatrixMotion(_) | NodeRef::SrtMotion(_) => false,
