@@ -39,6 +39,7 @@ A markdown report goes to standard output and to --out/report.md.
 
 Usage (one go; installs Mitsuba with scripts/setup-mitsuba.sh and builds oxray if needed):
   python3 scripts/bench_vs_mitsuba.py [--threads 2] [--size 256x256] [--scenes cornell,gltf]
+  [--oxray PATH]   # another oxray binary (e.g. an earlier commit's, for a before/after run)
 """
 
 from __future__ import annotations
@@ -512,16 +513,22 @@ def main() -> None:
     ap.add_argument("--scenes", default="cornell,gltf")
     ap.add_argument("--gltf", type=Path, default=ROOT.parent / "shared/data/gltf/balloon/scene.gltf")
     ap.add_argument("--out", type=Path, default=ROOT / "target/bench-mitsuba")
+    ap.add_argument("--oxray", type=Path, default=None,
+                    help="an oxray binary to measure (default: build and use target/release/oxray)")
     args = ap.parse_args()
     args.ladder = [int(v) for v in args.ladder.split(",")]
     args.samplers = args.samplers.split(",")
     args.mitsuba_samplers = args.mitsuba_samplers.split(",")
     args.out.mkdir(parents=True, exist_ok=True)
-    subprocess.run(["cargo", "build", "--release", "-q", "-p", "oxray-cli"], cwd=ROOT, check=True)
-    exe = ROOT / "target/release/oxray"
+    if args.oxray is None:
+        subprocess.run(["cargo", "build", "--release", "-q", "-p", "oxray-cli"], cwd=ROOT,
+                       check=True)
+    exe = args.oxray or ROOT / "target/release/oxray"
     version = subprocess.run([str(exe), "--version"], capture_output=True, text=True).stdout.strip()
     commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT,
                             capture_output=True, text=True).stdout.strip()
+    if args.oxray is not None:
+        commit = f"binary {args.oxray}, scripts of {commit}"
     cpu = next((l.split(":", 1)[1].strip() for l in open("/proc/cpuinfo") if l.startswith("model name")), "?")
     llvm = os.environ.get("DRJIT_LIBLLVM_PATH", "")
     load = os.getloadavg()[0]
