@@ -316,12 +316,14 @@ class Oxray:
                "--spp", str(spp), "--seed", str(seed), "--sampler", sampler, "--filter", "box",
                "--max-depth", str(self.max_depth), "-t", str(self.threads), "--quiet"]
         text = subprocess.run(cmd, check=True, capture_output=True, text=True).stdout
-        m = re.search(r"rendered in ([\d.]+) s \(([\d.]+) M samples/s, [\d.]+ Mrays/s "
-                      r"after ([\d.]+) s of setup\)", text)
+        # Binaries before the setup was reported apart print no setup: their rate and seconds
+        # include it.
+        m = re.search(r"rendered in ([\d.]+) s \(([\d.]+) M samples/s, [\d.]+ Mrays/s"
+                      r"(?: after ([\d.]+) s of setup)?\)", text)
         if not m:
             raise RuntimeError(f"unexpected oxray output: {text}")
         w, h = (int(v) for v in self.size.split("x"))
-        secs, rate, setup = float(m.group(1)), float(m.group(2)), float(m.group(3))
+        secs, rate, setup = float(m.group(1)), float(m.group(2)), float(m.group(3) or 0.0)
         # The passes' time (the setup, BVH build and light tables, excluded as Mitsuba's
         # BVH build at load is). The CLI prints the seconds with one decimal and the rate (of
         # the passes) with two: take whichever is the more precise.
