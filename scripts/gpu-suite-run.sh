@@ -13,8 +13,8 @@ log=$out/log.txt
 [ -e /work/main ] || { mkdir -p /work && ln -s "$root" /work/main; }
 (cd "$root/.gpu" && tar -xJf bins.tar.xz) || { echo "unpack failed" >> "$log"; exit 1; }
 mkdir -p "$root/target/debug" && cp "$root/.gpu/bin/oxray-debug" "$root/target/debug/oxray"
-export OXRAY_MESH_DIR=$root/.gpu/meshes
-M0=$root/.gpu/meshes
+M=$root/.gpu/meshes
+export OXRAY_MESH_DIR=$M
 nvidia-smi --query-gpu=name,driver_version --format=csv >> "$log" 2>&1
 [ "${TESTS:-1}" = 0 ] || while read -r crate exe name; do
   echo "=== $crate $name" >> "$log"
@@ -35,11 +35,10 @@ if [ "${PROFILE:-0}" = 1 ]; then
     --launch-count 24 --section SpeedOfLight --section Occupancy --section LaunchStats \
     --section WarpStateStats --section SchedulerStats --section MemoryWorkloadAnalysis \
     --section InstructionStats --section SourceCounters \
-    "$root/.gpu/bin/oxray" bench --backend cuda --runs 1 "$M0/stanford-bunny.obj" > "$out/ncu.txt" 2>&1
+    "$root/.gpu/bin/oxray" bench --backend cuda --runs 1 "$M/stanford-bunny.obj" > "$out/ncu.txt" 2>&1
   echo "rc=$? (${SECONDS}s)" >> "$log"
 fi
 [ "${BENCH:-1}" = 0 ] && exit 0
-M=$root/.gpu/meshes
 X=$root/.gpu/bin/oxray
 run() { echo "=== $*" >> "$log"; timeout 200 "$X" "$@" >> "$log" 2>&1; echo "rc=$? (${SECONDS}s)" >> "$log"; }
 # Issue 13's open goal: the pipeline against the query kernel on the same rays (each rays row
