@@ -63,6 +63,8 @@ pub(crate) struct Kernels {
     pub occluded_spheres: CudaFunction,
     pub closest_curves: CudaFunction,
     pub occluded_curves: CudaFunction,
+    /// Copies a pipeline launch's counts into mapped host memory (`CudaPipeline::launch`).
+    pub launch_counts: CudaFunction,
 }
 
 /// A CUDA device ready to trace: driver and NVRTC loaded, a context and stream on the device,
@@ -194,6 +196,7 @@ impl CudaContext {
             occluded_spheres: load("oxray_occluded_spheres")?,
             closest_curves: load("oxray_closest_curves")?,
             occluded_curves: load("oxray_occluded_curves")?,
+            launch_counts: load("oxray_launch_counts")?,
         };
         let stream = guarded("creating a stream", || ctx.new_stream())?;
         Ok(CudaContext {
@@ -422,6 +425,7 @@ mod tests {
             "oxray_occluded_spheres",
             "oxray_closest_curves",
             "oxray_occluded_curves",
+            "oxray_launch_counts",
         ] {
             assert!(ptx.contains(&format!(".entry {entry}")), "{entry} missing");
         }

@@ -10,7 +10,9 @@
 use crate::context::{compile_options, guarded, nvrtc_compile, nvrtc_version, CudaContext};
 use crate::error::{driver, CudaError};
 use bytemuck::{Pod, Zeroable};
-use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig, PinnedHostSlice};
+use cudarc::driver::{
+    CudaFunction, CudaSlice, DevicePtr, LaunchConfig, PinnedHostSlice, PushKernelArg,
+};
 use oxray_core::sbt::{SbtRegion, ShaderBindingTable, SBT_RECORD_HEADER_SIZE};
 use oxray_core::{
     DeviceContext, Exception, ExceptionCode, LaunchError, LaunchReport, PipelineCompileOptions,
@@ -921,16 +923,16 @@ struct LaunchState {
 struct LaunchScratch {
     sbt: CudaSlice<u8>,
     exceptions: CudaSlice<u32>,
-    /// Page-locked host memory that the exception and trace counts are copied into without
-    /// waiting: the launch then waits for the stream once.
+    /// Page-locked host memory mapped into the device's address space, which the
+    /// `oxray_launch_counts` kernel queued after each launch writes the exception and trace
+    /// counts into: the launch then waits for the stream once, with no copy queued.
     counts: PinnedHostSlice<u32>,
+    /// The address of `counts` on the device.
+    counts_device: u64,
     /// The SBT bytes last copied into `sbt`.
     sbt_bytes: Vec<u8>,
     /// The launch information last written to the module's `__oxray_launch`.
     info: Option<LaunchInfo>,
-    /// The trace count the device holds (words 2 and 3 count up over launches; only a launch
-    /// that raised exceptions clears the words).
-    traces: u64,
 }
 
 impl std::fmt::Debug for CudaPipeline {
@@ -1141,17 +1143,37 @@ impl CudaPipeline {
                 .alloc_zeros::<u32>(16 + 16 * EXCEPTION_RECORDS)
                 .map_err(driver("allocating exception records"))?;
             // SAFETY: four words of page-locked host memory (cached: the host reads them),
-            // written by the device copy of each launch before they are read, after the stream
-            // is synchronized.
-            let counts = unsafe { stream.context().alloc_pinned_with_flags::<u32>(4, 0) }
+            // mapped for the device; the counts kernel of each launch writes them before the
+            // host reads them, after the stream is synchronized.
+            let mut counts = unsafe {
+                stream.context().alloc_pinned_with_flags::<u32>(
+                    4,
+                    cudarc::driver::sys::CU_MEMHOSTALLOC_DEVICEMAP,
+                )
+            }
+            .map_err(driver("allocating the launch counts"))?;
+            let counts_host = counts
+                .as_mut_ptr()
                 .map_err(driver("allocating the launch counts"))?;
+            let mut counts_device: cudarc::driver::sys::CUdeviceptr = 0;
+            // SAFETY: `counts_host` is the start of a live page-locked allocation made with
+            // DEVICEMAP, in the context bound by the allocation above; flags must be 0.
+            unsafe {
+                cudarc::driver::sys::cuMemHostGetDevicePointer_v2(
+                    &mut counts_device,
+                    counts_host.cast(),
+                    0,
+                )
+            }
+            .result()
+            .map_err(driver("mapping the launch counts"))?;
             *scratch = Some(LaunchScratch {
                 sbt,
                 exceptions,
                 counts,
+                counts_device,
                 sbt_bytes: Vec::new(),
                 info: None,
-                traces: 0,
             });
         }
         let Some(scratch) = scratch.as_mut() else {
@@ -1212,9 +1234,17 @@ impl CudaPipeline {
         unsafe { launch.launch(cfg) }.map_err(driver("launching a pipeline"))?;
         // The exception count and the trace count (four words) come back without a wait of
         // their own; the records only when there are some.
-        stream
-            .memcpy_dtoh(&scratch.exceptions.slice(..4), &mut scratch.counts)
-            .map_err(driver("copying exception records"))?;
+        let mut counts = stream.launch_builder(&self.ctx.kernels.launch_counts);
+        counts.arg(&exc).arg(&scratch.counts_device);
+        let one = LaunchConfig {
+            grid_dim: (1, 1, 1),
+            block_dim: (1, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        // SAFETY: the kernel reads and clears words of the exception buffer (`exc`, at least
+        // four words) and writes four words at the device address of `scratch.counts`; both
+        // are alive and locked with `scratch`.
+        unsafe { counts.launch(one) }.map_err(driver("launching the launch counts"))?;
         self.ctx.synchronize()?;
         let count: [u32; 4] = scratch
             .counts
@@ -1222,19 +1252,16 @@ impl CudaPipeline {
             .map_err(driver("reading the launch counts"))?
             .try_into()
             .map_err(|_| CudaError::Launch("launch counts of the wrong length".into()))?;
-        let device_traces = u64::from(count[2]) | u64::from(count[3]) << 32;
-        let traces = device_traces.wrapping_sub(scratch.traces);
-        scratch.traces = device_traces;
+        let traces = u64::from(count[2]) | u64::from(count[3]) << 32;
         let mut words = if count[0] > 0 {
             let words = stream
                 .clone_dtoh(&scratch.exceptions.slice(..))
                 .map_err(driver("copying exception records"))?;
-            // The records past the count are never read: clearing the counts is enough, and
+            // The records past the count are never read: clearing the count is enough, and
             // only a launch that raised exceptions needs it (the slot of a record is its count).
             stream
-                .memset_zeros(&mut scratch.exceptions.slice_mut(..4))
+                .memset_zeros(&mut scratch.exceptions.slice_mut(..1))
                 .map_err(driver("clearing exception records"))?;
-            scratch.traces = 0;
             words
         } else {
             count.to_vec()

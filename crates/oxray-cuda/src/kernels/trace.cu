@@ -805,4 +805,18 @@ extern "C" __global__ void __launch_bounds__(128)
     builtin_entry<true, SphereLeaf>(nodes, spheres, rays, nullptr, occluded, n);
 }
 
+// Queued on one thread after each launch of a programmable pipeline: copies the exception
+// count and the trace count of the pipeline's exception buffer (words 0, 2 and 3) into mapped
+// host memory, which the host reads once the stream is done (no copy to wait for), and starts
+// the next launch's trace count at zero. Here rather than in the pipeline's own module, whose
+// size and indirect calls it would only add to.
+extern "C" __global__ void oxray_launch_counts(u32* __restrict__ words, u32* __restrict__ host) {
+    host[0] = words[0];
+    host[1] = 0u;
+    host[2] = words[2];
+    host[3] = words[3];
+    words[2] = 0u;
+    words[3] = 0u;
+}
+
 #endif  // OXRAY_NO_QUERY_KERNELS
