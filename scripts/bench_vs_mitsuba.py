@@ -76,7 +76,9 @@ def ensure_mitsuba_python() -> None:
     os.execve(py, [py, __file__, *sys.argv[1:]], env)
 
 
-ensure_mitsuba_python()
+# Only as a script: importing the module (for its scene helpers) must not start a benchmark.
+if __name__ == "__main__":
+    ensure_mitsuba_python()
 
 import drjit as dr  # noqa: E402
 import mitsuba as mi  # noqa: E402
