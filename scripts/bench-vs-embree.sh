@@ -17,6 +17,8 @@
 #   BUILD          the oxray build preset the rays trace: default, fast-build, fast-trace
 #                  (default: default)
 #   EMBREE3_FLAGS  robust or none: Embree 3's scene flags (default robust: watertight, as oxray)
+#   PACKET         1 or 8: Embree 3 traces one ray a call (rtcIntersect1, default) or packets of
+#                  eight consecutive rays (rtcIntersect8)
 #   EMBREE4        0 to skip Embree 4 (embreex is installed into scripts/.venv-embree on first use)
 #   CARGO_TARGET_DIR  where cargo builds; PYTHON (default python3); CC (default cc)
 # Installs Embree 3 when missing (scripts/setup-embree3.sh). Writes bench-out/rays (meshes,
@@ -83,7 +85,7 @@ done
 echo
 echo "== Embree 3 (C, $threads thread(s))"
 "$out/embree3_bench" "$rays" "${names[@]}" --threads "$threads" --runs "$runs" --builds "$runs" \
-    --scene-flags "$e3flags" 2>&1 | tee "$out/embree3.txt"
+    --scene-flags "$e3flags" --packet "${PACKET:-1}" 2>&1 | tee "$out/embree3.txt"
 rm -f "$out/embree4.txt"
 if [ "${EMBREE4:-1}" != 0 ]; then
     echo

@@ -5,6 +5,7 @@
  *
  *   cc -O2 -o embree3_bench scripts/embree3_bench.c -lembree3 -lpthread
  *   embree3_bench DIR NAME... [--threads 1,2] [--runs 5] [--builds 5] [--scene-flags robust|none]
+ *                 [--packet 8]
  *
  * Input (all little endian), for each NAME (the files `oxray bench --export` writes):
  *   NAME.mesh                u32 vertex count, u32 triangle count, f32x3 vertices, u32x3 triangles
@@ -24,7 +25,9 @@
  * Threads: each timed call runs T POSIX threads that take chunks of 256 rays from a shared
  * counter (as oxray's rayon loop takes chunks of 256), each ray with its own rtcIntersect1 or
  * rtcOccluded1 call. The BVH build runs on Embree's own (TBB) threads, limited to T with the
- * device configuration "threads=T"; one device per thread count.
+ * device configuration "threads=T"; one device per thread count. With --packet 8, each thread
+ * traces its chunk in groups of eight consecutive rays with rtcIntersect8 / rtcOccluded8 (a
+ * packet of SIMD lanes, one ray a lane), as a renderer that keeps its paths in lanes would.
  */
 #define _GNU_SOURCE
 #include <embree3/rtcore.h>
@@ -39,6 +42,9 @@
 
 #define CHUNK 256
 #define NO_PRIM 0xffffffffu
+
+/* Rays per rtcIntersect call: 1, or 8 with --packet 8. */
+static int packet = 1;
 
 static void die(const char *msg, const char *arg) {
     fprintf(stderr, "embree3_bench: error: %s%s%s\n", msg, arg ? ": " : "", arg ? arg : "");
@@ -101,6 +107,41 @@ typedef struct {
     atomic_size_t next;
 } Job;
 
+/* Rays start..end of the job in groups of eight (the last group masked). */
+static void trace8(Job *job, struct RTCIntersectContext *ctx, size_t start, size_t end) {
+    for (size_t g = start; g < end; g += 8) {
+        int valid[8];
+        struct RTCRayHit8 rh;
+        for (int l = 0; l < 8; l++) {
+            size_t i = g + l;
+            valid[l] = i < end ? -1 : 0;
+            const RayRec *r = &job->rays[i < end ? i : start];
+            rh.ray.org_x[l] = r->o[0]; rh.ray.org_y[l] = r->o[1]; rh.ray.org_z[l] = r->o[2];
+            rh.ray.dir_x[l] = r->d[0]; rh.ray.dir_y[l] = r->d[1]; rh.ray.dir_z[l] = r->d[2];
+            rh.ray.tnear[l] = r->tmin; rh.ray.tfar[l] = r->tmax;
+            rh.ray.time[l] = 0.0f; rh.ray.mask[l] = 0xffffffffu; rh.ray.id[l] = 0;
+            rh.ray.flags[l] = 0;
+            rh.hit.geomID[l] = RTC_INVALID_GEOMETRY_ID;
+            rh.hit.instID[0][l] = RTC_INVALID_GEOMETRY_ID;
+        }
+        if (job->occluded) {
+            rtcOccluded8(valid, job->scene, ctx, &rh.ray);
+        } else {
+            rtcIntersect8(valid, job->scene, ctx, &rh);
+        }
+        for (int l = 0; l < 8 && g + l < end; l++) {
+            size_t i = g + l;
+            if (job->occluded) {
+                if (job->blocked) job->blocked[i] = rh.ray.tfar[l] < 0.0f;
+            } else {
+                int hit = rh.hit.geomID[l] != RTC_INVALID_GEOMETRY_ID;
+                if (job->t) job->t[i] = hit ? rh.ray.tfar[l] : INFINITY;
+                if (job->prim) job->prim[i] = hit ? rh.hit.primID[l] : NO_PRIM;
+            }
+        }
+    }
+}
+
 static void *worker(void *arg) {
     Job *job = arg;
     struct RTCIntersectContext ctx;
@@ -109,6 +150,10 @@ static void *worker(void *arg) {
         size_t start = atomic_fetch_add_explicit(&job->next, CHUNK, memory_order_relaxed);
         if (start >= job->n) break;
         size_t end = start + CHUNK < job->n ? start + CHUNK : job->n;
+        if (packet == 8) {
+            trace8(job, &ctx, start, end);
+            continue;
+        }
         for (size_t i = start; i < end; i++) {
             const RayRec *r = &job->rays[i];
             if (job->occluded) {
@@ -249,7 +294,7 @@ static void agree_occluded(const char *mesh, const char *set, size_t n, const ui
 static void usage(void) {
     fprintf(stderr,
             "usage: embree3_bench DIR NAME... [--threads 1,2] [--runs 5] [--builds 5] "
-            "[--scene-flags robust|none]\n");
+            "[--scene-flags robust|none] [--packet 8]\n");
     exit(2);
 }
 
@@ -261,6 +306,10 @@ int main(int argc, char **argv) {
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--runs") && i + 1 < argc) runs = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--builds") && i + 1 < argc) builds = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--packet") && i + 1 < argc) {
+            packet = atoi(argv[++i]);
+            if (packet != 1 && packet != 8) usage();
+        }
         else if (!strcmp(argv[i], "--scene-flags") && i + 1 < argc) {
             const char *f = argv[++i];
             if (!strcmp(f, "robust")) robust = 1;
@@ -282,9 +331,9 @@ int main(int argc, char **argv) {
     if (nthreads == 0) threads[nthreads++] = 1;
 
     printf("Embree %d.%d.%d (libembree3), scene flags %s, build quality MEDIUM, "
-           "median of %d builds and %d runs after a warm-up\n",
+           "median of %d builds and %d runs after a warm-up, %d ray(s) a call\n",
            RTC_VERSION_MAJOR, RTC_VERSION_MINOR, RTC_VERSION_PATCH,
-           robust ? "ROBUST" : "NONE", builds, runs);
+           robust ? "ROBUST" : "NONE", builds, runs, packet);
     for (int m = 0; m < nnames; m++) {
         char path[4096];
         size_t len;
