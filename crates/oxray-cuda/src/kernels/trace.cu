@@ -808,8 +808,10 @@ extern "C" __global__ void __launch_bounds__(128)
 // Queued on one thread after each launch of a programmable pipeline: copies the exception
 // count and the trace count of the pipeline's exception buffer (words 0, 2 and 3) into mapped
 // host memory, which the host reads once the stream is done (no copy to wait for), and starts
-// the next launch's trace count at zero. Here rather than in the pipeline's own module, whose
-// size and indirect calls it would only add to.
+// the next launch's trace count at zero. Here, loaded once per context, rather than in each
+// pipeline's generated module: there, pipelines with callables and custom primitives crashed
+// the process while they were compiled or loaded (docs/BENCHMARKS.md, "The pipeline, seventh
+// round").
 extern "C" __global__ void oxray_launch_counts(u32* __restrict__ words, u32* __restrict__ host) {
     host[0] = words[0];
     host[1] = 0u;
