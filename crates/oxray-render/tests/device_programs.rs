@@ -412,6 +412,18 @@ fn materials_textures_alpha_and_the_sky_agree_with_the_rust_programs() {
     );
 }
 
+/// A uniform environment (one texel: looked up without map coordinates, sampled uniformly over
+/// the sphere) is lit alike by both program sets, on every device.
+#[test]
+fn a_uniform_sky_agrees_with_the_rust_programs() {
+    compare_on_devices(
+        "feature scene under a uniform sky",
+        &feature_scene(),
+        &Environment::uniform(Vec3::new(0.8, 0.9, 1.0)),
+        &opts(64, 32, 6),
+    );
+}
+
 /// The comparison itself: independent noise passes, a changed algorithm fails.
 #[test]
 fn the_comparison_tells_noise_from_a_changed_algorithm() {
