@@ -427,7 +427,10 @@ __device__ __forceinline__ const float4* node_base(const float4* nodes) { return
 template <int STACK = OXRAY_STACK_SIZE, typename Nodes, typename Leaf>
 __device__ __forceinline__ void walk_bvh2(const TraceRay& r, Nodes nodes, float tmin, float tmax,
                                           Leaf&& leaf) {
-    float box_tmax = tmax * TMAX_SLACK;
+    // The boxes' bound is `tmax * TMAX_SLACK`, computed where it is used rather than kept: one
+    // multiplication a node costs less than the register it would hold, which in the
+    // pipeline's 56-register walk pushed `tmax` out to local memory, reloaded at every leaf
+    // and pop (docs/BENCHMARKS.md, "The pipeline, eighth round"); the bound is the same bits.
     Entry stack[STACK];
     int sp = 0;
     Entry cur;
@@ -442,10 +445,10 @@ __device__ __forceinline__ void walk_bvh2(const TraceRay& r, Nodes nodes, float 
             float d0, d1;
             bool h0 = slab(r, r.neg_x ? n0.y : n0.x, r.neg_y ? n0.w : n0.z, r.neg_z ? n2.y : n2.x,
                            r.neg_x ? n0.x : n0.y, r.neg_y ? n0.z : n0.w, r.neg_z ? n2.x : n2.y,
-                           tmin, box_tmax, d0);
+                           tmin, tmax * TMAX_SLACK, d0);
             bool h1 = slab(r, r.neg_x ? n1.y : n1.x, r.neg_y ? n1.w : n1.z, r.neg_z ? n2.w : n2.z,
                            r.neg_x ? n1.x : n1.y, r.neg_y ? n1.z : n1.w, r.neg_z ? n2.z : n2.w,
-                           tmin, box_tmax, d1);
+                           tmin, tmax * TMAX_SLACK, d1);
             Entry a, b;
             a.child = links.x;
             a.count = links.z;
@@ -472,14 +475,12 @@ __device__ __forceinline__ void walk_bvh2(const TraceRay& r, Nodes nodes, float 
                 continue;
             }
         } else {
-            float before = tmax;
             if (leaf(cur.child, cur.count, tmax)) return;
-            if (tmax != before) box_tmax = tmax * TMAX_SLACK;
         }
         for (;;) {
             if (sp == 0) return;
             cur = stack[--sp];
-            if (cur.dist <= box_tmax) break;
+            if (cur.dist <= tmax * TMAX_SLACK) break;
         }
     }
 }
