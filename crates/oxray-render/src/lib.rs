@@ -457,9 +457,15 @@ pub(crate) fn prepare_lighting(
             "the scene has no visible instance".into(),
         ));
     }
+    // The GAS itself is the root only where its hit records start the SBT: no mesh before it
+    // has traced primitives (every such mesh has records, placed or not), since a root GAS
+    // adds no instance's SBT offset.
     let single = placements.len() == 1
         && placements[0].transform == Transform::IDENTITY
-        && placements[0].motion.is_none();
+        && placements[0].motion.is_none()
+        && scene.meshes[..placements[0].mesh]
+            .iter()
+            .all(|m| !m.primitives.iter().any(traced));
     let mut moving = Vec::new();
     if placements.iter().any(|p| p.motion.is_some()) {
         moving = vec![false; scene.instances.len()];
@@ -621,8 +627,8 @@ pub fn render_passes(
         u.motion = p.motion.clone();
         instances.push(u);
     }
-    // A single untransformed instance's SBT offset is 0 either way, as the scene's only chunk
-    // starts the hit-group table.
+    // A single untransformed instance's SBT offset is 0 either way: its chunk starts the
+    // hit-group table (`Lighting::single`).
     let single = prep.lit.single.then(|| instances[0].gas);
     let ias = util.add_ias(instances, BuildFlags::PREFER_FAST_TRACE);
     util.rebuild_dirty()?;

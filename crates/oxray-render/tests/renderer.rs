@@ -550,3 +550,64 @@ fn the_renderer_on_cuda_agrees_with_the_cpu() {
     );
     assert!((a - b).abs() < 0.05 * b, "{a} against {b}");
 }
+
+/// A quad facing the camera at the origin (+Z), with material `material`.
+fn quad_mesh(name: &str, material: u32) -> oxray_scene::MeshDesc {
+    oxray_scene::MeshDesc {
+        name: name.into(),
+        primitives: vec![oxray_scene::Primitive {
+            positions: vec![
+                [-1.0, -1.0, 0.0],
+                [1.0, -1.0, 0.0],
+                [1.0, 1.0, 0.0],
+                [-1.0, 1.0, 0.0],
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+            material,
+            ..Default::default()
+        }],
+    }
+}
+
+/// The SBT index of a hit adds the instance's offset (§7.3): a scene whose only placement is
+/// untransformed is traced through its GAS alone only where that mesh's hit records start the
+/// table. With an unplaced mesh before it (a glTF file's unused mesh), its records start later,
+/// and a root GAS would shade the placed mesh with the unplaced mesh's materials.
+#[test]
+fn an_unplaced_mesh_before_the_only_placement_keeps_its_materials_out() {
+    use oxray_scene::{InstanceDesc, MaterialDesc};
+    let emission = [2.0f32, 3.0, 4.0];
+    let mut scene = SceneDesc::default();
+    scene.materials = vec![
+        MaterialDesc {
+            name: "unused".into(),
+            base_color: [0.0, 0.0, 0.0, 1.0],
+            ..Default::default()
+        },
+        MaterialDesc {
+            name: "lamp".into(),
+            emissive: emission,
+            ..Default::default()
+        },
+    ];
+    scene.meshes = vec![quad_mesh("unused", 0), quad_mesh("lamp", 1)];
+    scene.instances.push(InstanceDesc::new(1, Mat4::IDENTITY));
+    scene
+        .cameras
+        .push(Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 0.5));
+    // The same placement with the unused mesh gone.
+    let mut alone = scene.clone();
+    alone.meshes.remove(0);
+    alone.instances[0].mesh = 0;
+    let o = opts(8, 2);
+    let rust = render(&scene, &dark(), &o, |_| {}).unwrap();
+    let cpp = fresh(&scene, &dark(), &o);
+    for img in [&rust, &cpp] {
+        // Every pixel sees the lamp (half-angle 0.25 rad at distance 3 spans 0.77 < 1).
+        for p in &img.pixels {
+            assert_eq!(&p[..3], &emission[..], "a pixel shows {p:?}");
+        }
+    }
+    assert_eq!(rust, render(&alone, &dark(), &o, |_| {}).unwrap());
+    assert_eq!(cpp, fresh(&alone, &dark(), &o));
+}
