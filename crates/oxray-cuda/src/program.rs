@@ -581,10 +581,11 @@ pub fn pipeline_compile_options(
     let extra = std::env::var("OXRAY_NVRTC_OPTIONS").unwrap_or_default();
     if !extra.contains("OXRAY_PIPELINE_MIN_BLOCKS") {
         // 1152 resident threads per SM: at most 56 registers each on a 64K-register SM, what
-        // the fast path's walk needs to hold its values without reloading them at each node
-        // (as the closest-hit query kernel, 55 registers, does); 48 registers (1280 threads)
-        // measured 1-3 points lower against the query kernel (docs/BENCHMARKS.md, "The
-        // pipeline, fifth round").
+        // the fast path's walks need to hold their values without reloading them at each node
+        // (the query kernels need 48 and 40, with no program state around them); 48
+        // registers (1280 threads) spill in both walks and measured 1-3 points lower against
+        // the query kernel (docs/BENCHMARKS.md, "The pipeline, fifth round" and "eighth
+        // round").
         o.push(format!(
             "-DOXRAY_PIPELINE_MIN_BLOCKS={}",
             (PIPELINE_THREADS_PER_SM / pipeline_block()).max(1)
