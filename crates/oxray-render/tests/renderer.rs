@@ -577,24 +577,24 @@ fn quad_mesh(name: &str, material: u32) -> oxray_scene::MeshDesc {
 fn an_unplaced_mesh_before_the_only_placement_keeps_its_materials_out() {
     use oxray_scene::{InstanceDesc, MaterialDesc};
     let emission = [2.0f32, 3.0, 4.0];
-    let mut scene = SceneDesc::default();
-    scene.materials = vec![
-        MaterialDesc {
-            name: "unused".into(),
-            base_color: [0.0, 0.0, 0.0, 1.0],
-            ..Default::default()
-        },
-        MaterialDesc {
-            name: "lamp".into(),
-            emissive: emission,
-            ..Default::default()
-        },
-    ];
-    scene.meshes = vec![quad_mesh("unused", 0), quad_mesh("lamp", 1)];
-    scene.instances.push(InstanceDesc::new(1, Mat4::IDENTITY));
-    scene
-        .cameras
-        .push(Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 0.5));
+    let scene = SceneDesc {
+        materials: vec![
+            MaterialDesc {
+                name: "unused".into(),
+                base_color: [0.0, 0.0, 0.0, 1.0],
+                ..Default::default()
+            },
+            MaterialDesc {
+                name: "lamp".into(),
+                emissive: emission,
+                ..Default::default()
+            },
+        ],
+        meshes: vec![quad_mesh("unused", 0), quad_mesh("lamp", 1)],
+        instances: vec![InstanceDesc::new(1, Mat4::IDENTITY)],
+        cameras: vec![Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 0.5)],
+        ..Default::default()
+    };
     // The same placement with the unused mesh gone.
     let mut alone = scene.clone();
     alone.meshes.remove(0);
