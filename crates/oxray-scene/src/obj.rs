@@ -1,7 +1,10 @@
 //! The OBJ + MTL loader (through `tobj`).
 //!
-//! Each OBJ object, split wherever its material changes, becomes one mesh with one primitive and
-//! an identity instance. Polygons are triangulated as fans in file order. MTL materials map onto
+//! The file becomes one mesh, placed once by an identity instance: OBJ has no instancing, so
+//! nothing is gained by a level of instances, which costs every ray a walk over the objects'
+//! overlapping boxes (a quarter of the render time of a 38-object file, docs/BENCHMARKS.md).
+//! Each object, split wherever its material changes, is one primitive of that mesh (one build
+//! input of its GAS), named after the file. Polygons are triangulated as fans in file order. MTL materials map onto
 //! the metallic-roughness model:
 //!
 //! - `Kd` is the base colour, `map_Kd` its texture (relative to the `.mtl` file);
@@ -180,6 +183,7 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
     }
 
     let mut default_material = None;
+    let mut primitives = Vec::new();
     for model in models {
         let mesh = model.mesh;
         if mesh.indices.len() < 3 {
@@ -222,21 +226,25 @@ pub fn load(path: &Path) -> Result<SceneDesc, SceneError> {
                 scene.materials.len() as u32 - 1
             }),
         };
+        primitives.push(Primitive {
+            positions,
+            normals,
+            uvs,
+            triangles,
+            material,
+            ..Default::default()
+        });
+    }
+    if !primitives.is_empty() {
         scene.instances.push(InstanceDesc {
-            mesh: scene.meshes.len() as u32,
+            mesh: 0,
             transform: Mat4::IDENTITY,
             node: None,
         });
+        let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
         scene.meshes.push(MeshDesc {
-            name: model.name,
-            primitives: vec![Primitive {
-                positions,
-                normals,
-                uvs,
-                triangles,
-                material,
-                ..Default::default()
-            }],
+            name: stem.unwrap_or_else(|| name.clone()),
+            primitives,
         });
     }
     scene.validate().map_err(|message| SceneError::Malformed {

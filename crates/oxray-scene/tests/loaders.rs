@@ -332,10 +332,12 @@ fn truncated_and_corrupt_glb_files_are_errors() {
 fn obj_with_mtl_materials_and_texture() {
     let s = SceneDesc::load(&data("materials.obj")).unwrap();
     assert!(s.warnings.is_empty(), "{:?}", s.warnings);
-    let names: Vec<&str> = s.meshes.iter().map(|m| m.name.as_str()).collect();
-    assert_eq!(names, ["textured", "lamp", "veil", "glass", "plain"]);
-    assert_eq!(s.instances.len(), 5);
-    assert!(s.instances.iter().all(|i| i.transform == Mat4::IDENTITY));
+    // One mesh placed once, an object per primitive (OBJ has no instancing).
+    assert_eq!(s.meshes.len(), 1);
+    assert_eq!(s.meshes[0].name, "materials");
+    assert_eq!(s.meshes[0].primitives.len(), 5);
+    assert_eq!(s.instances.len(), 1);
+    assert_eq!(s.instances[0].transform, Mat4::IDENTITY);
     // Quads fan-triangulated in file order.
     let q = &s.meshes[0].primitives[0];
     assert_eq!(q.triangles, vec![[0, 1, 2], [0, 2, 3]]);
@@ -343,9 +345,9 @@ fn obj_with_mtl_materials_and_texture() {
     assert_eq!(q.normals, vec![[0.0, 0.0, 1.0]; 4]);
     // v is flipped: OBJ counts from the bottom row, textures start at the top.
     assert_eq!(q.uvs, vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]);
-    assert!(s.meshes[1].primitives[0].uvs.is_empty());
+    assert!(s.meshes[0].primitives[1].uvs.is_empty());
 
-    let mat = |mesh: usize| &s.materials[s.meshes[mesh].primitives[0].material as usize];
+    let mat = |prim: usize| &s.materials[s.meshes[0].primitives[prim].material as usize];
     let t = mat(0);
     assert_eq!(t.name, "textured");
     assert_eq!(t.base_color, [0.5, 0.25, 1.0, 1.0]);
