@@ -226,7 +226,7 @@ fn edits_then_a_render_equal_a_new_renderer_over_the_edited_scene() {
 
 /// A quad facing the camera, its material's base colour from a 2 x 2 texture, under a white sky.
 fn textured_quad(texels: [[u8; 4]; 4]) -> SceneDesc {
-    use oxray_scene::{InstanceDesc, MaterialDesc, MeshDesc, Primitive, Texture, TextureRef, Wrap};
+    use oxray_scene::{InstanceDesc, MaterialDesc, Texture, TextureRef, Wrap};
     let mut s = SceneDesc::default();
     s.textures.push(Texture {
         name: "checker".into(),
@@ -243,21 +243,7 @@ fn textured_quad(texels: [[u8; 4]; 4]) -> SceneDesc {
         roughness: 1.0,
         ..Default::default()
     });
-    s.meshes.push(MeshDesc {
-        name: "quad".into(),
-        primitives: vec![Primitive {
-            positions: vec![
-                [-1.0, -1.0, 0.0],
-                [1.0, -1.0, 0.0],
-                [1.0, 1.0, 0.0],
-                [-1.0, 1.0, 0.0],
-            ],
-            uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
-            triangles: vec![[0, 1, 2], [0, 2, 3]],
-            material: 0,
-            ..Default::default()
-        }],
-    });
+    s.meshes.push(quad_mesh("quad", 0));
     s.instances.push(InstanceDesc::new(0, Mat4::IDENTITY));
     s.cameras
         .push(Camera::look_at(Vec3::new(0.0, 0.0, 3.0), Vec3::ZERO, 0.9));
@@ -551,7 +537,8 @@ fn the_renderer_on_cuda_agrees_with_the_cpu() {
     assert!((a - b).abs() < 0.05 * b, "{a} against {b}");
 }
 
-/// A quad facing the camera at the origin (+Z), with material `material`.
+/// A 2 x 2 quad facing +Z at the origin, with material `material` and texture coordinates
+/// (v down the image).
 fn quad_mesh(name: &str, material: u32) -> oxray_scene::MeshDesc {
     oxray_scene::MeshDesc {
         name: name.into(),
@@ -562,6 +549,7 @@ fn quad_mesh(name: &str, material: u32) -> oxray_scene::MeshDesc {
                 [1.0, 1.0, 0.0],
                 [-1.0, 1.0, 0.0],
             ],
+            uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
             material,
             ..Default::default()
