@@ -698,6 +698,8 @@ fn run(cli: Cli) -> Result<()> {
             if ground {
                 desc.add_ground();
             }
+            // One render and no edits: the meshes placed once are traced as one structure.
+            let mut desc = desc.flattened();
             for w in &desc.warnings {
                 eprintln!("warning: {w}");
             }

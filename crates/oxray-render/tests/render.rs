@@ -523,3 +523,63 @@ fn pixel_filters_spread_an_edge_by_their_width_and_keep_its_energy() {
         );
     }
 }
+
+/// A scene flattened for rendering ([`SceneDesc::flattened`]: its meshes placed once baked
+/// into world space as one mesh) renders the scene it came from: the Cornell box's primitives
+/// as separate meshes, each placed by a rotation, a scale and a translation (their vertices the
+/// inverse of it), against the flattened scene, up to Monte-Carlo noise where the paths part.
+#[test]
+fn a_flattened_scene_renders_as_its_instances_do() {
+    use glam::{Mat4, Quat};
+    let box_ = cornell_box();
+    let mut placed = SceneDesc {
+        meshes: Vec::new(),
+        instances: Vec::new(),
+        ..box_.clone()
+    };
+    for (k, p) in box_.meshes[0].primitives.iter().enumerate() {
+        let m = Mat4::from_scale_rotation_translation(
+            Vec3::new(1.0 + k as f32 * 0.5, 0.7, 1.3),
+            Quat::from_rotation_y(0.4 * k as f32 + 0.3),
+            Vec3::new(0.1 * k as f32, -0.2, 0.3),
+        );
+        let inv = m.inverse();
+        let mut q = p.clone();
+        for v in &mut q.positions {
+            *v = inv.transform_point3(Vec3::from(*v)).to_array();
+        }
+        placed.meshes.push(MeshDesc {
+            name: format!("part {k}"),
+            primitives: vec![q],
+        });
+        placed.instances.push(InstanceDesc::new(k as u32, m));
+    }
+    let flat = placed.flattened();
+    assert_eq!((flat.meshes.len(), flat.instances.len()), (1, 1));
+    let o = opts(24, 24, 8, 4);
+    let a = render(&placed, &black(), &o, |_| {}).unwrap();
+    let b = render(&flat, &black(), &o, |_| {}).unwrap();
+    let n = a.pixels.len() as f64;
+    for c in 0..3 {
+        let d: Vec<f64> = a
+            .pixels
+            .iter()
+            .zip(&b.pixels)
+            .map(|(p, q)| p[c] as f64 - q[c] as f64)
+            .collect();
+        let mean = d.iter().sum::<f64>() / n;
+        let se = (d.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0) / n).sqrt();
+        let level = a.pixels.iter().map(|p| p[c] as f64).sum::<f64>() / n;
+        assert!(
+            mean.abs() <= 4.5 * se + 1e-4 * level,
+            "channel {c}: mean difference {mean} ({se} standard error, mean {level})"
+        );
+    }
+    let same = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .filter(|(p, q)| p == q)
+        .count();
+    println!("{same} of {} pixels bit-identical", a.pixels.len());
+}

@@ -34,6 +34,7 @@
 pub mod animation;
 mod cornell;
 pub mod files;
+mod flatten;
 pub mod gltf;
 mod image;
 pub mod mesh;
