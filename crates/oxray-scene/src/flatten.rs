@@ -112,6 +112,10 @@ impl SceneDesc {
 
 /// `p` moved by `m` (positions by `m`, normals by its inverse transpose, renormalised).
 fn baked(p: &Primitive, m: Mat4) -> Primitive {
+    // In place already: the same bits (a product by the identity can turn -0 into +0).
+    if m == Mat4::IDENTITY {
+        return p.clone();
+    }
     let normal = Mat3::from_mat4(m).inverse().transpose();
     let positions = p
         .positions
