@@ -937,6 +937,9 @@ fn run(cli: Cli) -> Result<()> {
             if ground {
                 desc.add_ground();
             }
+            // The view moves the camera, never an instance: the meshes placed once are traced
+            // as one structure.
+            let mut desc = desc.flattened();
             for w in &desc.warnings {
                 eprintln!("warning: {w}");
             }
