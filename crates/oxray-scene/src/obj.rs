@@ -1,12 +1,11 @@
 //! The OBJ + MTL loader (through `tobj`).
 //!
-//! The file becomes one mesh, placed once by an identity instance: OBJ has no instancing, so
-//! nothing is gained by a level of instances, which costs every ray a walk over the objects'
-//! overlapping boxes (a 38-object file renders 1.25x faster as one structure,
-//! docs/BENCHMARKS.md).
-//! Each object, split wherever its material changes, is one primitive of that mesh (one build
-//! input of its GAS), named after the file. Polygons are triangulated as fans in file order. MTL materials map onto
-//! the metallic-roughness model:
+//! The file becomes one mesh, named after the file and placed once by an identity instance:
+//! OBJ has no instancing, so nothing is gained by a level of instances, which costs every ray a
+//! walk over the objects' overlapping boxes (a 38-object file renders 1.25x faster as one
+//! structure, docs/BENCHMARKS.md). Each object, split wherever its material changes, is one
+//! primitive of that mesh (one build input of its GAS). Polygons are triangulated as fans in
+//! file order. MTL materials map onto the metallic-roughness model:
 //!
 //! - `Kd` is the base colour, `map_Kd` its texture (relative to the `.mtl` file);
 //! - `Ke` (or a `Ke` tobj did not recognise) is the emitted radiance;
