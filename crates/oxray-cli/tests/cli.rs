@@ -15,6 +15,12 @@ fn tmp(name: &str) -> PathBuf {
 
 /// A quad and a triangle behind it, as OBJ; the quad is a polygon, fan-triangulated.
 fn scene_obj() -> PathBuf {
+    // Written once per process: tests share it and run in parallel.
+    static DONE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DONE.get_or_init(scene_obj_file).clone()
+}
+
+fn scene_obj_file() -> PathBuf {
     let p = tmp("scene.obj");
     std::fs::write(
         &p,

@@ -35,6 +35,12 @@ fn assert_one_error(out: &Output, needle: &str) {
 
 /// A red triangle over a grey floor, as OBJ + MTL with an emissive material.
 fn obj_scene() -> PathBuf {
+    // Written once per process: tests share it and run in parallel.
+    static DONE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DONE.get_or_init(obj_scene_files).clone()
+}
+
+fn obj_scene_files() -> PathBuf {
     let obj = tmp("lit.obj");
     std::fs::write(
         tmp("lit.mtl"),
@@ -760,6 +766,12 @@ fn crop_renders_a_window_of_the_image() {
 /// A glTF scene whose one node slides a square from x = -1 to x = +1 in one second, lit by
 /// the default environment, with its own camera.
 fn sliding_gltf() -> PathBuf {
+    // Written once per process: tests share it and run in parallel.
+    static DONE: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    DONE.get_or_init(sliding_gltf_files).clone()
+}
+
+fn sliding_gltf_files() -> PathBuf {
     let mut bin: Vec<u8> = Vec::new();
     let square = [
         -0.5f32, -0.5, 0.0, 0.5, -0.5, 0.0, 0.5, 0.5, 0.0, -0.5, 0.5, 0.0,

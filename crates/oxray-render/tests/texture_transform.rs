@@ -10,8 +10,12 @@ use oxray_scene::{
 use std::path::{Path, PathBuf};
 
 fn fixture_with_transform(extension: &str) -> PathBuf {
+    // A directory of its own per fixture: tests run in parallel, and one test rewriting the
+    // texture while another's loader reads it would lose that texture.
+    static NEXT: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../oxray-scene/tests/data");
-    let dir = std::env::temp_dir().join(format!("oxray-khr-tt-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("oxray-khr-tt-{}-{n}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::copy(src.join("tex2x2.png"), dir.join("tex2x2.png")).unwrap();
     let text = std::fs::read_to_string(src.join("hierarchy.gltf"))
