@@ -22,6 +22,9 @@
 //! comparisons run. Without a GPU the programs are still compiled to PTX by NVRTC where
 //! libnvrtc loads (`OXRAY_REQUIRE_NVRTC=1` makes its absence a failure).
 
+mod common;
+
+use common::region;
 use glam::{Mat4, Quat, Vec3};
 use oxray::Device;
 use oxray_render::device::{render_on, render_with_source, SOURCE};
@@ -45,20 +48,6 @@ fn opts(size: u32, spp: u32, max_depth: u32) -> RenderOptions {
         max_depth,
         ..Default::default()
     }
-}
-
-/// The mean difference over `pixels` (indices) of channel `c`, its standard error and the mean
-/// of `a`.
-fn region(a: &Image, b: &Image, pixels: &[usize], c: usize) -> (f64, f64, f64) {
-    let n = pixels.len() as f64;
-    let d: Vec<f64> = pixels
-        .iter()
-        .map(|&i| a.pixels[i][c] as f64 - b.pixels[i][c] as f64)
-        .collect();
-    let mean = d.iter().sum::<f64>() / n;
-    let var = d.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
-    let reference = pixels.iter().map(|&i| a.pixels[i][c] as f64).sum::<f64>() / n;
-    (mean, (var / n).sqrt(), reference)
 }
 
 /// Compares two renders of one scene; `Err` names the first region and channel that differ

@@ -2,6 +2,8 @@
 //! independence, materials against analytic expectations (a white furnace, a mirror, glass),
 //! alpha cutouts on the pine glTF, and the `oxray render` command's outputs and errors.
 
+mod common;
+
 use glam::Vec3;
 use oxray_render::lights::Environment;
 use oxray_render::{render, Image, RenderOptions};
@@ -261,17 +263,7 @@ fn alpha_mask_cuts_holes_in_both_ray_types() {
         wrap_u: Default::default(),
         wrap_v: Default::default(),
     };
-    let quad = Primitive {
-        positions: vec![
-            [-1.0, -1.0, 0.0],
-            [1.0, -1.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [-1.0, 1.0, 0.0],
-        ],
-        uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
-        triangles: vec![[0, 1, 2], [0, 2, 3]],
-        ..Default::default()
-    };
+    let quad = common::quad(0);
     let mut scene = SceneDesc {
         meshes: vec![MeshDesc {
             name: "quad".into(),
@@ -559,17 +551,9 @@ fn a_flattened_scene_renders_as_its_instances_do() {
     let o = opts(24, 24, 8, 4);
     let a = render(&placed, &black(), &o, |_| {}).unwrap();
     let b = render(&flat, &black(), &o, |_| {}).unwrap();
-    let n = a.pixels.len() as f64;
+    let all: Vec<usize> = (0..a.pixels.len()).collect();
     for c in 0..3 {
-        let d: Vec<f64> = a
-            .pixels
-            .iter()
-            .zip(&b.pixels)
-            .map(|(p, q)| p[c] as f64 - q[c] as f64)
-            .collect();
-        let mean = d.iter().sum::<f64>() / n;
-        let se = (d.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0) / n).sqrt();
-        let level = a.pixels.iter().map(|p| p[c] as f64).sum::<f64>() / n;
+        let (mean, se, level) = common::region(&a, &b, &all, c);
         assert!(
             mean.abs() <= 4.5 * se + 1e-4 * level,
             "channel {c}: mean difference {mean} ({se} standard error, mean {level})"

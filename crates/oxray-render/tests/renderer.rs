@@ -3,6 +3,8 @@
 //! CUDA C++ programs compiled by the host's C++ compiler), where renders are deterministic, so
 //! equalities are bit for bit.
 
+mod common;
+
 use glam::{Mat4, Vec3};
 use oxray::Device;
 use oxray_render::device::render_on;
@@ -537,23 +539,11 @@ fn the_renderer_on_cuda_agrees_with_the_cpu() {
     assert!((a - b).abs() < 0.05 * b, "{a} against {b}");
 }
 
-/// A 2 x 2 quad facing +Z at the origin, with material `material` and texture coordinates
-/// (v down the image).
+/// A mesh of one quad ([`common::quad`]) with material `material`.
 fn quad_mesh(name: &str, material: u32) -> oxray_scene::MeshDesc {
     oxray_scene::MeshDesc {
         name: name.into(),
-        primitives: vec![oxray_scene::Primitive {
-            positions: vec![
-                [-1.0, -1.0, 0.0],
-                [1.0, -1.0, 0.0],
-                [1.0, 1.0, 0.0],
-                [-1.0, 1.0, 0.0],
-            ],
-            uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
-            triangles: vec![[0, 1, 2], [0, 2, 3]],
-            material,
-            ..Default::default()
-        }],
+        primitives: vec![common::quad(material)],
     }
 }
 

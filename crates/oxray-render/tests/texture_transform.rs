@@ -1,12 +1,12 @@
 //! glTF `KHR_texture_transform`: parsed into the material's texture references and applied by
 //! the renderer before sampling.
 
+mod common;
+
 use glam::{Mat4, Vec3};
 use oxray_render::lights::Environment;
 use oxray_render::{render, RenderOptions};
-use oxray_scene::{
-    Camera, InstanceDesc, MaterialDesc, MeshDesc, Primitive, SceneDesc, Texture, TextureRef,
-};
+use oxray_scene::{Camera, InstanceDesc, MaterialDesc, MeshDesc, SceneDesc, Texture, TextureRef};
 use std::path::{Path, PathBuf};
 
 fn fixture_with_transform(extension: &str) -> PathBuf {
@@ -78,17 +78,7 @@ fn non_finite_transforms_are_an_error() {
 fn the_renderer_samples_through_the_transform() {
     // An emissive quad textured red (left texel) and blue (right texel), seen head on. An
     // offset of half the texture swaps what the two halves show.
-    let quad = Primitive {
-        positions: vec![
-            [-1.0, -1.0, 0.0],
-            [1.0, -1.0, 0.0],
-            [1.0, 1.0, 0.0],
-            [-1.0, 1.0, 0.0],
-        ],
-        uvs: vec![[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]],
-        triangles: vec![[0, 1, 2], [0, 2, 3]],
-        ..Default::default()
-    };
+    let quad = common::quad(0);
     let tex = Texture {
         name: "red|blue".into(),
         width: 2,
