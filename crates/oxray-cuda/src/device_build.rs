@@ -12,6 +12,7 @@ use crate::context::{nvrtc_compile, CudaContext};
 use crate::error::{driver, CudaError};
 use crate::gas::CudaGas;
 use crate::layout::{SlotInfo, MAX_SLOTS};
+use crate::node_buffer::NodeBuffer;
 use cudarc::driver::{CudaFunction, CudaSlice, DevicePtr, LaunchConfig, PushKernelArg};
 use oxray_bvh::{AccelBufferSizes, Bvh2, BvhStats, GasData, GasInfo, GasKind, MAX_BVH2_DEPTH};
 use oxray_core::{
@@ -673,7 +674,7 @@ pub fn build_box_tree(
         .map_err(timing("recording an event"))?;
     let kernels_ms = t0.elapsed_ms(&t1).map_err(timing("reading an event"))? as f64;
     let mut words = vec![0u32; 16 * result.num_nodes];
-    s.memcpy_dtoh(&result.nodes, &mut words[..])
+    s.memcpy_dtoh(&result.nodes.nodes(), &mut words[..])
         .map_err(driver("copying the tree to the host"))?;
     let mut order = vec![0u32; result.active];
     s.memcpy_dtoh(&result.values.slice(..result.active), &mut order[..])
@@ -813,7 +814,7 @@ pub(crate) fn upload_inputs(
 
 /// What the kernels leave: the layout's arrays and what the host keeps of the build.
 struct Built {
-    nodes: CudaSlice<u32>,
+    nodes: NodeBuffer,
     num_nodes: usize,
     triangles: CudaSlice<u32>,
     /// The sorted triangle ids (the first `active` are the slots').
@@ -1080,8 +1081,9 @@ fn run_kernels(
     }
 
     let num_nodes = kept_nodes.max(1);
-    let mut nodes: CudaSlice<u32> = scratch(ctx, 16 * num_nodes)?;
+    let mut nodes = NodeBuffer::uninit(ctx, 16 * num_nodes)?;
     {
+        let mut out = nodes.nodes_mut();
         let mut b = s.launch_builder(&k.write_nodes);
         b.arg(&inodes)
             .arg(&kept)
@@ -1089,7 +1091,7 @@ fn run_kernels(
             .arg(&boxes)
             .arg(&values)
             .arg(&counters)
-            .arg(&mut nodes);
+            .arg(&mut out);
         // SAFETY: oxray_build_write_nodes(const INode*, const u32* kept, const u32* index,
         // const float4* boxes, const u32* values, const u32* counters, float4* out): each kept
         // node writes 16 words at its index, below the kept count `num_nodes` was sized by

@@ -4,8 +4,9 @@ use crate::context::CudaContext;
 use crate::device_build::GasBuilder;
 use crate::error::{driver, CudaError};
 use crate::layout::{bvh2_words, DeviceLayout, NodeLayout, SlotInfo, MAX_SLOTS};
+use crate::node_buffer::NodeBuffer;
 use bytemuck::{Pod, Zeroable};
-use cudarc::driver::{CudaSlice, DevicePtr, LaunchConfig, PushKernelArg};
+use cudarc::driver::{CudaSlice, CudaView, DevicePtr, LaunchConfig, PushKernelArg};
 use oxray_bvh::{Bvh2, GasData, GasInfo, GasKind};
 use oxray_core::{
     Aabb, BackendKind, CurveType, Hit, HitKind, MotionOptions, Ray, RayRecord, Traversable,
@@ -257,7 +258,7 @@ pub struct CudaGas {
     pub(crate) ctx: CudaContext,
     pub(crate) kind: GasKind,
     pub(crate) layout: NodeLayout,
-    pub(crate) nodes: CudaSlice<u32>,
+    pub(crate) nodes: NodeBuffer,
     pub(crate) triangles: CudaSlice<u32>,
     pub(crate) slots: Vec<SlotInfo>,
     pub(crate) info: GasInfo,
@@ -403,14 +404,24 @@ fn triangle_key_words(gas: &GasData, blocks: &[oxray_bvh::Triangle4]) -> Vec<u32
 #[derive(Debug)]
 pub(crate) struct ProgramView {
     _tables: Vec<CudaSlice<u32>>,
-    _descriptor: CudaSlice<u32>,
+    /// The descriptor, when it has a buffer of its own (an IAS's); a GAS's is the header of
+    /// its node buffer.
+    _descriptor: Option<CudaSlice<u32>>,
     pub(crate) address: u64,
 }
 
+/// Where a [`ProgramView`]'s descriptor goes, and the nodes it describes.
+pub(crate) enum DescriptorHome<'a> {
+    /// A buffer of its own, over the nodes at this address.
+    Own(u64),
+    /// The header of a GAS's node buffer, right before its nodes.
+    Header(&'a NodeBuffer),
+}
+
 impl ProgramView {
-    /// Uploads `tables` and a descriptor of `kind` over `nodes`, `prims`, the tables'
-    /// addresses and `motion` (a `__oxray_Motion` table's address, 0 for none); `types` is a
-    /// curve GAS's `OptixPrimitiveTypeFlags` (0 otherwise).
+    /// Uploads `tables` and a descriptor of `kind` over the nodes of `home`, `prims`, the
+    /// tables' addresses and `motion` (a `__oxray_Motion` table's address, 0 for none); `types`
+    /// is a curve GAS's `OptixPrimitiveTypeFlags` (0 otherwise).
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn upload(
         ctx: &CudaContext,
@@ -418,11 +429,15 @@ impl ProgramView {
         types: u32,
         depth: u32,
         count: u32,
-        nodes: u64,
+        home: DescriptorHome<'_>,
         prims: u64,
         tables: Vec<Vec<u32>>,
         motion: u64,
     ) -> Result<ProgramView, CudaError> {
+        let nodes = match &home {
+            DescriptorHome::Own(nodes) => *nodes,
+            DescriptorHome::Header(buffer) => buffer.nodes_address(ctx),
+        };
         let tables: Vec<CudaSlice<u32>> = tables
             .into_iter()
             .map(|t| {
@@ -446,13 +461,19 @@ impl ProgramView {
         words[13] = (random >> 32) as u32;
         words[14] = motion as u32;
         words[15] = (motion >> 32) as u32;
-        let descriptor = ctx
-            .stream
-            .clone_htod(&words[..])
-            .map_err(driver("copying a traversable descriptor"))?;
-        let address = {
-            let (p, _g) = descriptor.device_ptr(&ctx.stream);
-            p
+        let (descriptor, address) = match home {
+            DescriptorHome::Own(_) => {
+                let descriptor = ctx
+                    .stream
+                    .clone_htod(&words[..])
+                    .map_err(driver("copying a traversable descriptor"))?;
+                let address = {
+                    let (p, _g) = descriptor.device_ptr(&ctx.stream);
+                    p
+                };
+                (Some(descriptor), address)
+            }
+            DescriptorHome::Header(buffer) => (None, buffer.write_header(ctx, &words)?),
         };
         ctx.synchronize()?;
         Ok(ProgramView {
@@ -786,10 +807,7 @@ impl CudaGas {
         }
         let export = gas.export_triangles().ok_or(CudaError::CustomPrimitives)?;
         let host = DeviceLayout::new(&export, tree, layout).map_err(CudaError::TooLarge)?;
-        let nodes = ctx
-            .stream
-            .clone_htod(&host.nodes[..])
-            .map_err(driver("copying BVH nodes to the device"))?;
+        let nodes = NodeBuffer::upload(ctx, &host.nodes)?;
         let tri_words: Vec<u32> = if host.triangles.is_empty() {
             vec![0; 12]
         } else {
@@ -868,10 +886,7 @@ impl CudaGas {
             )));
         }
         let nodes_host = bvh2_words(tree).map_err(CudaError::TooLarge)?;
-        let nodes = ctx
-            .stream
-            .clone_htod(&nodes_host[..])
-            .map_err(driver("copying BVH nodes to the device"))?;
+        let nodes = NodeBuffer::upload(ctx, &nodes_host)?;
         let boxes = ctx
             .stream
             .clone_htod(&words[..])
@@ -909,7 +924,7 @@ impl CudaGas {
     /// slot table and summary.
     pub(crate) fn from_device_build(
         ctx: &CudaContext,
-        nodes: CudaSlice<u32>,
+        nodes: NodeBuffer,
         num_nodes: usize,
         triangles: CudaSlice<u32>,
         slots: Vec<SlotInfo>,
@@ -982,7 +997,6 @@ impl CudaGas {
             .iter()
             .flat_map(|s| [s.primitive_index, s.sbt_gas_index])
             .collect();
-        let (nodes, _g1) = self.nodes.device_ptr(&self.ctx.stream);
         let (tris, _g2) = self.triangles.device_ptr(&self.ctx.stream);
         let kind = match self.kind {
             GasKind::Triangles => DESCRIPTOR_GAS,
@@ -998,7 +1012,7 @@ impl CudaGas {
                 .fold(0, |f, t| f | t.type_flag().bits()),
             1,
             self.record_flags.len() as u32,
-            nodes,
+            DescriptorHome::Header(&self.nodes),
             tris,
             match self.random_access_words() {
                 Some(r) => vec![slots, self.record_flags.clone(), r],
@@ -1048,8 +1062,8 @@ impl CudaGas {
     }
 
     /// The device arrays of nodes and triangles (for an IAS over this GAS).
-    pub(crate) fn device_arrays(&self) -> (&CudaSlice<u32>, &CudaSlice<u32>) {
-        (&self.nodes, &self.triangles)
+    pub(crate) fn device_arrays(&self) -> (CudaView<'_, u32>, &CudaSlice<u32>) {
+        (self.nodes.nodes(), &self.triangles)
     }
 
     /// What a hit on leaf slot `slot` reports.
@@ -1187,9 +1201,10 @@ impl CudaGas {
             (_, NodeLayout::Bvh4) => &k.closest_bvh4,
             (_, NodeLayout::Bvh2) => &k.closest_bvh2,
         };
+        let nodes = self.nodes.nodes();
         let mut launch = self.ctx.stream.launch_builder(f);
         launch
-            .arg(&self.nodes)
+            .arg(&nodes)
             .arg(&self.triangles)
             .arg(rays)
             .arg(hits)
@@ -1220,9 +1235,10 @@ impl CudaGas {
             (_, NodeLayout::Bvh4) => &k.occluded_bvh4,
             (_, NodeLayout::Bvh2) => &k.occluded_bvh2,
         };
+        let nodes = self.nodes.nodes();
         let mut launch = self.ctx.stream.launch_builder(f);
         launch
-            .arg(&self.nodes)
+            .arg(&nodes)
             .arg(&self.triangles)
             .arg(rays)
             .arg(out)

@@ -6,7 +6,7 @@ use crate::context::CudaContext;
 use crate::device_build::GasBuilder;
 use crate::error::{driver, CudaError};
 use crate::gas::CudaGas;
-use crate::gas::{check_batch, grid, hit_of, HitRecord, ProgramView, Scratch};
+use crate::gas::{check_batch, grid, hit_of, DescriptorHome, HitRecord, ProgramView, Scratch};
 use crate::gas::{DESCRIPTOR_IAS, DESCRIPTOR_INSTANCE};
 use crate::layout::{ChildRef, IasLayout};
 use crate::transform::{resolve_child, CudaChild};
@@ -243,7 +243,7 @@ impl CudaIas {
             0,
             self.data.depth,
             self.data.instances.len() as u32,
-            nodes,
+            DescriptorHome::Own(nodes),
             insts,
             tables,
             self.motion.as_ref().map_or(0, |m| {

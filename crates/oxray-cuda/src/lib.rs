@@ -44,6 +44,7 @@ mod error;
 mod gas;
 mod ias;
 mod layout;
+mod node_buffer;
 mod program;
 mod random_access;
 #[cfg(test)]

@@ -304,9 +304,10 @@ impl CudaGas {
             let wide = plan.layout == NodeLayout::Bvh4;
             for &(first, count) in &plan.levels {
                 let prims_arg = prims.as_ref().unwrap_or(&self.triangles);
+                let mut nodes = self.nodes.nodes_mut();
                 let launched = if wide {
                     let mut b = self.ctx.stream.launch_builder(&k.refit_nodes4);
-                    b.arg(&mut self.nodes)
+                    b.arg(&mut nodes)
                         .arg(&plan.order)
                         .arg(&first)
                         .arg(&count)
@@ -320,7 +321,7 @@ impl CudaGas {
                     unsafe { b.launch(build_grid(count)) }
                 } else {
                     let mut b = self.ctx.stream.launch_builder(&k.refit_nodes);
-                    b.arg(&mut self.nodes)
+                    b.arg(&mut nodes)
                         .arg(&plan.order)
                         .arg(&first)
                         .arg(&count)
@@ -344,7 +345,7 @@ impl CudaGas {
         let mut root = vec![0u32; words];
         self.ctx
             .stream
-            .memcpy_dtoh(&self.nodes.slice(..words), &mut root[..])
+            .memcpy_dtoh(&self.nodes.nodes().slice(..words), &mut root[..])
             .map_err(driver("copying the root node"))
             .map_err(device)?;
         self.ctx.synchronize().map_err(device)?;

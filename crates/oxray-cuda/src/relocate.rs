@@ -11,7 +11,7 @@ use crate::context::CudaContext;
 use crate::error::{driver, CudaError};
 use crate::gas::{CudaGas, Scratch};
 use crate::layout::NodeLayout;
-use cudarc::driver::CudaSlice;
+use cudarc::driver::{CudaSlice, CudaView};
 use oxray_bvh::{
     Bvh2, Bvh2Node, Bvh4Node, CurveSegment, GasData, GasKind, SlotPrimitives, Sphere, NO_PRIMITIVE,
 };
@@ -27,7 +27,7 @@ fn copy(ctx: &CudaContext, w: &CudaSlice<u32>) -> Result<CudaSlice<u32>, CudaErr
         .map_err(driver("copying a structure on the device"))
 }
 
-fn download(ctx: &CudaContext, w: &CudaSlice<u32>, len: usize) -> Result<Vec<u32>, CudaError> {
+fn download(ctx: &CudaContext, w: &CudaView<'_, u32>, len: usize) -> Result<Vec<u32>, CudaError> {
     let mut out = vec![0u32; len.min(w.len())];
     if !out.is_empty() {
         ctx.stream
@@ -55,7 +55,7 @@ impl CudaGas {
             ctx: self.ctx.clone(),
             kind: self.kind,
             layout: self.layout,
-            nodes: copy(&self.ctx, &self.nodes)?,
+            nodes: self.nodes.duplicate(&self.ctx)?,
             triangles: copy(&self.ctx, &self.triangles)?,
             slots: self.slots.clone(),
             info: self.info.clone(),
@@ -114,7 +114,7 @@ impl CudaGas {
         let dev = |e: CudaError| LoadError::Device(e.to_string());
         let nodes = download(
             &self.ctx,
-            &self.nodes,
+            &self.nodes.nodes(),
             self.num_nodes * self.layout.node_bytes() / 4,
         )
         .map_err(dev)?;
@@ -125,7 +125,8 @@ impl CudaGas {
             GasKind::Curves => 24,
         };
         let n_slots = self.slots.len();
-        let words = download(&self.ctx, &self.triangles, per_slot * n_slots).map_err(dev)?;
+        let words =
+            download(&self.ctx, &self.triangles.slice(..), per_slot * n_slots).map_err(dev)?;
         if words.len() < per_slot * n_slots {
             return Err(LoadError::Invalid {
                 what: "device primitive array",

@@ -225,16 +225,16 @@ impl Target<'_> {
                     GasKind::Spheres => &k.offers_spheres,
                     _ => &k.offers_triangles,
                 },
-                &g.nodes,
+                g.nodes.nodes(),
                 &g.triangles,
             ),
             Target::Ias(i) => {
                 let (nodes, instances) = i.device_tables();
-                (&k.offers_ias, nodes, instances)
+                (&k.offers_ias, nodes.slice(..), instances)
             }
         };
         let mut launch = ctx.stream.launch_builder(f);
-        launch.arg(top).arg(prims).arg(rays).arg(counts);
+        launch.arg(&top).arg(prims).arg(rays).arg(counts);
         match out {
             None => {
                 launch.arg(&NULL).arg(&NULL);
@@ -632,13 +632,14 @@ impl CudaGas {
         let extent = b.min.abs().max(b.max.abs()).max_element();
         let extent = if extent.is_finite() { extent } else { 0.0 };
         let n32 = n as u32;
+        let nodes = self.nodes.nodes();
         let mut launch = s.launch_builder(if signed {
             &k.signed_distances
         } else {
             &k.closest_points
         });
         launch
-            .arg(&self.nodes)
+            .arg(&nodes)
             .arg(&self.triangles)
             .arg(&tables.ids)
             .arg(&d_points)

@@ -1780,22 +1780,29 @@ static __forceinline__ __device__ bool __oxray_fast_root(OptixTraversableHandle 
     return t->kind == __OXRAY_GAS && t->motion == 0ull;
 }
 
-// A GAS's nodes or triangles address, loaded where it is used. The query kernels have theirs
-// in parameters (constant memory, no registers); a pipeline's walk has the traversable, and the
-// four registers of the two addresses, held through the walk, make the compiler spill the
-// walk's own values, reloaded from local memory at every node. The load is volatile so that it
-// is not hoisted out of the walk again.
+// A GAS's triangles address, loaded where it is used. The query kernels have theirs in
+// parameters (constant memory, no registers); a pipeline's walk has the traversable, and the
+// registers of an address held through the walk make the compiler spill the walk's own values,
+// reloaded from local memory at every node. The load is volatile so that it is not hoisted out
+// of the walk again.
 static __forceinline__ __device__ const float4* __oxray_load_address(
     const unsigned long long* at) {
     unsigned long long v;
     asm volatile("ld.global.nc.u64 %0, [%1];" : "=l"(v) : "l"(at));
     return reinterpret_cast<const float4*>(v);
 }
+// A GAS's descriptor is the 64-byte header of its node buffer (`node_buffer.rs`): its nodes
+// start right after it, so a walk computes their address from the handle, with no load at
+// each node (docs/BENCHMARKS.md, "The pipeline, ninth round"). The addition is volatile for
+// the same reason as the load above: hoisted, the sum would hold two more registers.
+static_assert(sizeof(__oxray_Traversable) == 64, "a GAS's nodes follow its 64-byte descriptor");
 struct __oxray_GasNodes {
     const __oxray_Traversable* g;
 };
 static __forceinline__ __device__ const float4* node_base(__oxray_GasNodes n) {
-    return __oxray_load_address(&n.g->nodes);
+    unsigned long long v;
+    asm volatile("add.u64 %0, %1, 64;" : "=l"(v) : "l"(n.g));
+    return reinterpret_cast<const float4*>(v);
 }
 
 // The query kernels' closest-hit loop over a triangle GAS (first hit with FIRST).
