@@ -11,7 +11,8 @@
 //!   `pt.incoherent.rays` and `pt.shadow.rays`, the files `oxray bench --export` writes, so that
 //!   `scripts/embree3_bench.c` and the `ray_sets` benchmark trace the rays a renderer traces;
 //! - `--count FILE` prints, for the rays of FILE, how many leaves and triangles of the built
-//!   tree their whole segment enters, against a tree with one leaf per quad.
+//!   tree their whole segment enters, against a tree with one leaf per quad;
+//! - `--tree` prints the built tree's nodes and leaves (count and box).
 //!
 //! ```text
 //! cargo run --release -p oxray-render --example path_rays -- 32
@@ -292,6 +293,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     let scene = Scene::cornell();
     let data = scene.gas_data();
+    if args.iter().any(|a| a == "--tree") {
+        for (n, node) in data.bvh.nodes.iter().enumerate() {
+            for lane in (0..4).filter(|&l| node.is_used(l)) {
+                let b = node.child_bounds(lane);
+                match node.count[lane] {
+                    0 => println!("node {n}.{lane}: node {}", node.child[lane]),
+                    c => println!("node {n}.{lane}: leaf of {c} {:.3?}-{:.3?}", b.min, b.max),
+                }
+            }
+        }
+        return Ok(());
+    }
     if let Some(file) = option("--count") {
         let bytes = std::fs::read(&file)?;
         let rays: &[RayRecord] = oxray::bytemuck::try_cast_slice(&bytes)
