@@ -24,30 +24,17 @@ use oxray::glam::{Mat4, Vec3};
 use oxray::{
     Aabb, BuildFlags, BuildOptions, IndexBuffer, Ray, RayRecord, TriangleInput, VertexBuffer,
 };
+use oxray_render::bsdf::Rng;
+use oxray_render::programs::CameraFrame;
+use oxray_render::{camera_frame, RenderOptions};
 use std::f32::consts::{FRAC_1_PI, PI};
-use std::sync::Mutex;
 use std::time::Instant;
 
 /// Rays a set of the export, as `oxray bench --export` writes.
 const EXPORTED: usize = 262_144;
 
-fn hash(mut x: u32) -> u32 {
-    x ^= x >> 16;
-    x = x.wrapping_mul(0x7feb_352d);
-    x ^= x >> 15;
-    x = x.wrapping_mul(0x846c_a68b);
-    x ^ (x >> 16)
-}
-
-/// A hash-chain stream of uniform numbers.
-struct Stream(u32);
-
-impl Stream {
-    fn next(&mut self) -> f32 {
-        self.0 = hash(self.0.wrapping_add(0x9e37_79b9));
-        (self.0 >> 8) as f32 * (1.0 / 16_777_216.0)
-    }
-}
+/// The image's width and height.
+const SIDE: u32 = 256;
 
 /// The box's triangles in world space, with each one's material.
 struct Scene {
@@ -59,11 +46,18 @@ struct Scene {
     lights: Vec<usize>,
     light_areas: Vec<f32>,
     light_area: f32,
-    camera: (Vec3, Vec3, Vec3, Vec3),
+    camera: CameraFrame,
+}
+
+/// The corners of triangle `i`.
+fn corners(positions: &[[f32; 3]], triangles: &[[u32; 3]], i: usize) -> (Vec3, Vec3, Vec3) {
+    let [a, b, c] = triangles[i].map(|v| Vec3::from(positions[v as usize]));
+    (a, b, c)
 }
 
 impl Scene {
-    fn cornell() -> Scene {
+    /// The built-in box at `side` x `side` pixels, seen by the renderer's camera.
+    fn cornell(side: u32) -> Scene {
         let desc = oxray_scene::cornell_box();
         let (mut positions, mut triangles, mut material) = (Vec::new(), Vec::new(), Vec::new());
         for inst in &desc.instances {
@@ -91,43 +85,36 @@ impl Scene {
             .iter()
             .map(|m| Vec3::from(m.emissive))
             .collect();
-        let mut s = Scene {
+        let lights: Vec<usize> = (0..triangles.len())
+            .filter(|&i| emission[material[i] as usize] != Vec3::ZERO)
+            .collect();
+        let light_areas: Vec<f32> = lights
+            .iter()
+            .map(|&i| {
+                let (a, b, c) = corners(&positions, &triangles, i);
+                0.5 * (b - a).cross(c - a).length()
+            })
+            .collect();
+        let opts = RenderOptions {
+            width: side,
+            height: side,
+            ..Default::default()
+        };
+        Scene {
+            light_area: light_areas.iter().sum(),
+            camera: camera_frame(&desc, &opts).expect("the box's camera"),
             positions,
             triangles,
             material,
             albedo,
             emission,
-            lights: Vec::new(),
-            light_areas: Vec::new(),
-            light_area: 0.0,
-            camera: (Vec3::ZERO, Vec3::NEG_Z, Vec3::X, Vec3::Y),
-        };
-        s.lights = (0..s.triangles.len())
-            .filter(|&i| s.emission[s.material[i] as usize] != Vec3::ZERO)
-            .collect();
-        s.light_areas = s
-            .lights
-            .iter()
-            .map(|&i| {
-                let (a, b, c) = s.corners(i);
-                0.5 * (b - a).cross(c - a).length()
-            })
-            .collect();
-        s.light_area = s.light_areas.iter().sum();
-        let cam = &desc.cameras[0];
-        let h = (cam.yfov * 0.5).tan();
-        s.camera = (
-            cam.to_world.transform_point3(Vec3::ZERO),
-            cam.to_world.transform_vector3(Vec3::NEG_Z).normalize(),
-            cam.to_world.transform_vector3(Vec3::X).normalize() * h,
-            cam.to_world.transform_vector3(Vec3::Y).normalize() * h,
-        );
-        s
+            lights,
+            light_areas,
+        }
     }
 
     fn corners(&self, i: usize) -> (Vec3, Vec3, Vec3) {
-        let [a, b, c] = self.triangles[i].map(|v| Vec3::from(self.positions[v as usize]));
-        (a, b, c)
+        corners(&self.positions, &self.triangles, i)
     }
 
     fn gas_data(&self) -> oxray::bvh::GasData {
@@ -141,29 +128,21 @@ impl Scene {
     }
 }
 
-/// Where the paths' rays go when they are exported: camera, bounce and shadow rays.
-static EXPORT: Mutex<Option<[Vec<RayRecord>; 3]>> = Mutex::new(None);
-
-fn record(set: usize, ray: &Ray) {
-    if let Some(sets) = EXPORT.lock().unwrap_or_else(|e| e.into_inner()).as_mut() {
-        sets[set].push(RayRecord::from(*ray));
-    }
-}
-
-/// One path's radiance and its ray count.
+/// One path's radiance and its ray count; `record` sees each ray traced, with its set (0:
+/// camera, 1: bounce, 2: shadow).
 fn path(
     s: &Scene,
     gas: &oxray::cpu::Gas,
-    rng: &mut Stream,
+    rng: &mut Rng,
     x: u32,
     y: u32,
-    side: u32,
+    mut record: impl FnMut(usize, &Ray),
 ) -> (Vec3, u64) {
     let power = |a: f32, b: f32| (a * a) / (a * a + b * b);
-    let (origin, forward, right, up) = s.camera;
-    let sx = 2.0 * (x as f32 + rng.next()) / side as f32 - 1.0;
-    let sy = 1.0 - 2.0 * (y as f32 + rng.next()) / side as f32;
-    let mut ray = Ray::new(origin, (forward + right * sx + up * sy).normalize());
+    let c = &s.camera;
+    let sx = 2.0 * (x as f32 + rng.uniform()) / SIDE as f32 - 1.0;
+    let sy = 1.0 - 2.0 * (y as f32 + rng.uniform()) / SIDE as f32;
+    let mut ray = Ray::new(c.origin, (c.forward + c.right * sx + c.up * sy).normalize());
     let (mut throughput, mut radiance, mut bsdf_pdf, mut rays) = (Vec3::ONE, Vec3::ZERO, 0.0, 0);
     for depth in 0..8 {
         rays += 1;
@@ -192,14 +171,14 @@ fn path(
         let p = ray.origin + ray.direction * hit.t;
         let f = s.albedo[m] * FRAC_1_PI;
         // One light sample: a light triangle by area, a point on it.
-        let mut u = rng.next() * s.light_area;
+        let mut u = rng.uniform() * s.light_area;
         let mut k = 0;
         while k + 1 < s.lights.len() && u >= s.light_areas[k] {
             u -= s.light_areas[k];
             k += 1;
         }
         let (la, lb, lc) = s.corners(s.lights[k]);
-        let (mut u1, mut u2) = (rng.next(), rng.next());
+        let (mut u1, mut u2) = (rng.uniform(), rng.uniform());
         if u1 + u2 > 1.0 {
             (u1, u2) = (1.0 - u1, 1.0 - u2);
         }
@@ -221,7 +200,7 @@ fn path(
             }
         }
         // A cosine-weighted bounce.
-        let (r1, r2) = (rng.next(), rng.next());
+        let (r1, r2) = (rng.uniform(), rng.uniform());
         let (phi, r) = (2.0 * PI * r1, r2.sqrt());
         let (t, bt) = n.any_orthonormal_pair();
         let wi = (t * (r * phi.cos()) + bt * (r * phi.sin()) + n * (1.0 - r2).max(0.0).sqrt())
@@ -231,13 +210,33 @@ fn path(
         ray = Ray::new(from, wi);
         if depth >= 2 {
             let q = throughput.max_element().clamp(0.05, 1.0);
-            if rng.next() >= q {
+            if rng.uniform() >= q {
                 break;
             }
             throughput /= q;
         }
     }
     (radiance, rays)
+}
+
+/// Row `y`'s paths, `spp` a pixel: their summed radiance and their ray count.
+fn row(
+    scene: &Scene,
+    gas: &oxray::cpu::Gas,
+    y: u32,
+    spp: u32,
+    mut record: impl FnMut(usize, &Ray),
+) -> (Vec3, u64) {
+    let (mut sum, mut rays) = (Vec3::ZERO, 0u64);
+    for x in 0..SIDE {
+        for s in 0..spp {
+            let mut rng = Rng::new(y * SIDE + x, s, 0x7061_7468);
+            let (l, n) = path(scene, gas, &mut rng, x, y, &mut record);
+            sum += l;
+            rays += n;
+        }
+    }
+    (sum, rays)
 }
 
 /// Leaves and triangles of `data`'s tree whose boxes the segment of `r` enters.
@@ -291,7 +290,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .and_then(|i| args.get(i + 1))
             .map(std::path::PathBuf::from)
     };
-    let scene = Scene::cornell();
+    let scene = Scene::cornell(SIDE);
     let data = scene.gas_data();
     if args.iter().any(|a| a == "--tree") {
         for (n, node) in data.bvh.nodes.iter().enumerate() {
@@ -338,32 +337,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         return Ok(());
     }
     let export = option("--export");
-    if export.is_some() {
-        *EXPORT.lock().unwrap_or_else(|e| e.into_inner()) = Some(Default::default());
-    }
     let gas = oxray::cpu::Gas::from(data);
-    let side = 256u32;
     let start = Instant::now();
-    let trace_row = |y: u32| {
-        let (mut sum, mut rays) = (Vec3::ZERO, 0u64);
-        for x in 0..side {
-            for s in 0..spp {
-                let mut rng = Stream(hash(y * side + x) ^ hash(s.wrapping_add(7)));
-                let (l, n) = path(&scene, &gas, &mut rng, x, y, side);
-                sum += l;
-                rays += n;
-            }
-        }
-        (sum, rays)
-    };
+    let mut sets: [Vec<RayRecord>; 3] = Default::default();
     // The export keeps the paths' order: one thread.
     let rows: Vec<(Vec3, u64)> = if export.is_some() {
-        (0..side).map(trace_row).collect()
+        (0..SIDE)
+            .map(|y| {
+                row(&scene, &gas, y, spp, |k, r| {
+                    sets[k].push(RayRecord::from(*r))
+                })
+            })
+            .collect()
     } else {
         use rayon::prelude::*;
-        (0..side).into_par_iter().map(trace_row).collect()
+        (0..SIDE)
+            .into_par_iter()
+            .map(|y| row(&scene, &gas, y, spp, |_, _| {}))
+            .collect()
     };
     let secs = start.elapsed().as_secs_f64();
+    let side = SIDE;
     let samples = f64::from(side * side * spp);
     let rays: u64 = rows.iter().map(|r| r.1).sum();
     let mean = rows.iter().map(|r| r.0).sum::<Vec3>() / samples as f32;
@@ -373,11 +367,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         rays as f64 / samples
     );
     if let Some(dir) = export {
-        let sets = EXPORT
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .take()
-            .unwrap_or_default();
         let n = sets.iter().map(Vec::len).min().unwrap_or(0).min(EXPORTED);
         std::fs::create_dir_all(&dir)?;
         let mut mesh = Vec::new();
