@@ -322,6 +322,12 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
         "#define OXRAY_PIPELINE_HAS_ANYHIT {}\n",
         any_hit as u32
     ));
+    // The triangle test's rare cases (the exact fallback, the division's slow path) in one call
+    // outside the walks' hot path: a call keeps every live value of the walk in a register at
+    // its site, which sized the pipeline's register budget (`kernels/trace.cu`,
+    // `intersect_rare`). The query kernels, which have registers to spare, keep the plain
+    // division.
+    s.push_str("#ifndef OXRAY_TRIANGLE_RARE_CALL\n#define OXRAY_TRIANGLE_RARE_CALL 1\n#endif\n");
     // What the programs may read of the ray and the hit (an NVRTC option may say otherwise).
     s.push_str(&format!(
         "#ifndef OXRAY_READS\n#define OXRAY_READS {}u\n#endif\n",

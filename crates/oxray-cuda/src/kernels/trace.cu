@@ -144,6 +144,63 @@ __device__ __noinline__ TriHitF64 intersect_f64(float ax_, float ay_, float az_,
     return out;
 }
 
+// Whether `1.0f / x` takes the fast sequence of the IEEE division (`rcp_fast`): the exponent
+// range in which that sequence is exact, as the compiler's division tests it. Outside it, the
+// division calls a slow path.
+__device__ __forceinline__ bool rcp_fast_range(float x) {
+    return ((__float_as_uint(x) + 0x01800000u) & 0x7f800000u) > 0x01ffffffu;
+}
+
+// `1.0f / x` for `x` where `rcp_fast_range(x)`: the fast sequence of the compiler's IEEE
+// division, instruction for instruction (an approximate reciprocal, refined once with the
+// residual flushed to zero when subnormal), so the same bits. Written out so that the walks
+// hold no call to the division's slow path, which at its call site keeps every live value in a
+// register (docs/BENCHMARKS.md, "The pipeline, tenth round").
+__device__ __forceinline__ float rcp_fast(float x) {
+    float r;
+    asm("{\n\t"
+        ".reg .f32 a, e;\n\t"
+        "rcp.approx.ftz.f32 a, %1;\n\t"
+        "fma.rn.f32 e, a, %1, 0fBF800000;\n\t"
+        "neg.ftz.f32 e, e;\n\t"
+        "fma.rn.f32 %0, a, e, a;\n\t"
+        "}"
+        : "=f"(r)
+        : "f"(x));
+    return r;
+}
+
+// The cases of the triangle test that are rare, in one call out of the walk's way: the exact
+// fallback (edge functions of zero, under- or overflow) and a determinant whose reciprocal
+// needs the division's slow path. Computes what `intersect_triangle` computes, in the same
+// order (fused multiply-adds are off), so its hits are the same bits.
+__device__ __noinline__ TriHitF64 intersect_rare(float ax, float ay, float az, float bx,
+                                                 float by, float bz, float cx, float cy,
+                                                 float cz, float tmin, float tmax) {
+    float u = cx * by - cy * bx;
+    float v = ax * cy - ay * cx;
+    float w = bx * ay - by * ax;
+    float det = u + v + w;
+    float t_scaled = u * az + v * bz + w * cz;
+    TriHitF64 out = {};  // no hit
+    if (u == 0.0f || v == 0.0f || w == 0.0f || !ok_mag(det) || !ok_mag(t_scaled)) {
+        return intersect_f64(ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax);
+    }
+    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return out;
+    float inv = 1.0f / det;
+    float t = t_scaled * inv + 0.0f;
+    if (!(t >= tmin && t <= tmax)) return out;
+    out.h.t = t;
+    out.h.u = v * inv;
+    out.h.v = w * inv;
+    out.h.front = det > 0.0f;
+    out.hit = true;
+    return out;
+}
+
+#ifndef OXRAY_TRIANGLE_RARE_CALL
+#define OXRAY_TRIANGLE_RARE_CALL 0
+#endif
 __device__ __forceinline__ bool intersect_triangle(const TraceRay& r, float3 p0, float3 p1,
                                                    float3 p2, float tmin, float tmax, TriHit& h) {
     float3 a = make_float3(p0.x - r.org.x, p0.y - r.org.y, p0.z - r.org.z);
@@ -167,6 +224,16 @@ __device__ __forceinline__ bool intersect_triangle(const TraceRay& r, float3 p0,
 
     float det = u + v + w;
     float t_scaled = u * az + v * bz + w * cz;
+#if OXRAY_TRIANGLE_RARE_CALL
+    if (u == 0.0f || v == 0.0f || w == 0.0f || !ok_mag(det) || !ok_mag(t_scaled) ||
+        !rcp_fast_range(det)) {
+        const TriHitF64 rare = intersect_rare(ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax);
+        if (rare.hit) h = rare.h;
+        return rare.hit;
+    }
+    if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return false;
+    float inv = rcp_fast(det);
+#else
     if (u == 0.0f || v == 0.0f || w == 0.0f || !ok_mag(det) || !ok_mag(t_scaled)) {
         const TriHitF64 exact = intersect_f64(ax, ay, az, bx, by, bz, cx, cy, cz, tmin, tmax);
         if (exact.hit) h = exact.h;
@@ -174,6 +241,7 @@ __device__ __forceinline__ bool intersect_triangle(const TraceRay& r, float3 p0,
     }
     if ((u < 0.0f || v < 0.0f || w < 0.0f) && (u > 0.0f || v > 0.0f || w > 0.0f)) return false;
     float inv = 1.0f / det;
+#endif
     // `+ 0.0f` turns a -0.0 distance into +0.0.
     float t = t_scaled * inv + 0.0f;
     if (!(t >= tmin && t <= tmax)) return false;
