@@ -5,7 +5,7 @@
  *
  *   cc -O2 -o embree3_bench scripts/embree3_bench.c -lembree3 -lpthread
  *   embree3_bench DIR NAME... [--threads 1,2] [--runs 5] [--builds 5] [--scene-flags robust|none]
- *                 [--packet 8]
+ *                 [--packet 8] [--quality low|medium|high]
  *
  * Input (all little endian), for each NAME (the files `oxray bench --export` writes):
  *   NAME.mesh                u32 vertex count, u32 triangle count, f32x3 vertices, u32x3 triangles
@@ -45,6 +45,10 @@
 
 /* Rays per rtcIntersect call: 1, or 8 with --packet 8. */
 static int packet = 1;
+
+/* The scene's build quality (--quality; MEDIUM by default, HIGH is what Mitsuba 3 asks for:
+ * spatial splits). */
+static enum RTCBuildQuality quality = RTC_BUILD_QUALITY_MEDIUM;
 
 static void die(const char *msg, const char *arg) {
     fprintf(stderr, "embree3_bench: error: %s%s%s\n", msg, arg ? ": " : "", arg ? arg : "");
@@ -211,9 +215,9 @@ typedef struct {
 static RTCScene make_scene(RTCDevice dev, const Mesh *m, int robust, double *build_s) {
     RTCScene scene = rtcNewScene(dev);
     rtcSetSceneFlags(scene, robust ? RTC_SCENE_FLAG_ROBUST : RTC_SCENE_FLAG_NONE);
-    rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
+    rtcSetSceneBuildQuality(scene, quality);
     RTCGeometry g = rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE);
-    rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_MEDIUM);
+    rtcSetGeometryBuildQuality(g, quality);
     /* Embree's own buffers (padded and aligned as it requires); the copy is not timed. */
     float *v = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
                                        3 * sizeof(float), m->nv);
@@ -294,7 +298,7 @@ static void agree_occluded(const char *mesh, const char *set, size_t n, const ui
 static void usage(void) {
     fprintf(stderr,
             "usage: embree3_bench DIR NAME... [--threads 1,2] [--runs 5] [--builds 5] "
-            "[--scene-flags robust|none] [--packet 8]\n");
+            "[--scene-flags robust|none] [--packet 8] [--quality low|medium|high]\n");
     exit(2);
 }
 
@@ -309,6 +313,13 @@ int main(int argc, char **argv) {
         else if (!strcmp(argv[i], "--packet") && i + 1 < argc) {
             packet = atoi(argv[++i]);
             if (packet != 1 && packet != 8) usage();
+        }
+        else if (!strcmp(argv[i], "--quality") && i + 1 < argc) {
+            const char *q = argv[++i];
+            if (!strcmp(q, "low")) quality = RTC_BUILD_QUALITY_LOW;
+            else if (!strcmp(q, "medium")) quality = RTC_BUILD_QUALITY_MEDIUM;
+            else if (!strcmp(q, "high")) quality = RTC_BUILD_QUALITY_HIGH;
+            else usage();
         }
         else if (!strcmp(argv[i], "--scene-flags") && i + 1 < argc) {
             const char *f = argv[++i];

@@ -79,16 +79,17 @@ pub mod renderer;
 pub mod sampler;
 pub mod texture;
 pub mod tonemap;
+mod wavefront;
 
 use glam::Vec3;
 use lights::{Environment, TriangleLights};
 use oxray::{
     BuildFlags, DeviceContext, GeometryFlags, HitGroupDesc, OutputBuffer, PipelineCompileOptions,
-    PipelineLinkOptions, ProgramGroup, Transform,
+    PipelineLinkOptions, ProgramGroup, Transform, TraversableHandle,
 };
 use oxray_scene::{AlphaMode, Camera, Primitive, SceneDesc};
 use oxray_util::{
-    GasDesc, Geometry, GeometryInstance, Material, Scene, ScenePipeline, UtilInstance,
+    GasDesc, Geometry, GeometryInstance, HitGroupData, Material, Scene, ScenePipeline, UtilInstance,
 };
 use programs::{CameraFrame, Params, AOV_WORDS, RAY_TYPES};
 use std::ops::ControlFlow;
@@ -590,8 +591,11 @@ pub fn render_passes(
         .collect();
     let mut next_prim = 0u32;
     let mut gas_of_mesh = Vec::with_capacity(scene.meshes.len());
+    // Per mesh, the hit-group data of its GAS's build inputs (what its SBT records hold).
+    let mut records_of_mesh = Vec::with_capacity(scene.meshes.len());
     for mesh in &scene.meshes {
         let mut children = Vec::new();
+        let mut records = Vec::new();
         for prim in mesh.primitives.iter().filter(|p| traced(p)) {
             let m = prim.material as usize;
             let flags = if scene.materials[m].alpha_mode == AlphaMode::Opaque {
@@ -609,18 +613,26 @@ pub fn render_passes(
             .material(0, 0, mats[m])
             .flags(0, flags)
             .user_data(next_prim);
+            records.push(HitGroupData {
+                material: m as u32,
+                geometry: next_prim,
+                gas: 0,
+            });
             next_prim += 1;
             children.push(util.add_geometry(geom));
         }
+        records_of_mesh.push(records);
         gas_of_mesh.push(
             (!children.is_empty()).then(|| util.add_gas(GasDesc::new(children, vec![RAY_TYPES]))),
         );
     }
     let mut instances = Vec::new();
+    let mut first_mesh = None;
     for p in &prep.lit.placements {
         let Some(gas) = gas_of_mesh[p.mesh] else {
             continue;
         };
+        first_mesh.get_or_insert(p.mesh);
         let mut u = UtilInstance::new(gas, 0);
         u.transform = p.transform;
         u.instance_id = p.id;
@@ -637,6 +649,12 @@ pub fn render_passes(
         None => util.ias_handle(ias),
     }
     .ok_or_else(|| RenderError::Scene("the scene could not be built".into()))?;
+    let wavefront = wavefront_for(
+        scene,
+        &handle,
+        prep.lit.single && !prep.lit.has_motion(),
+        first_mesh.map(|m| std::mem::take(&mut records_of_mesh[m])),
+    );
 
     let pipeline = ScenePipeline::new(
         &DeviceContext::new(),
@@ -682,15 +700,21 @@ pub fn render_passes(
                 .filter(|s| s.is_open() && (prep.lit.has_motion() || !prep.camera_keys.is_empty())),
             moving: &prep.lit.moving,
         };
-        // One launch index per pixel of the window.
-        let report = pipeline.launch(&mut util, &params, w, h, 1)?;
-        rays += report.traces;
-        if let Some((index, e)) = report.first_exceptions.first() {
-            return Err(RenderError::Exceptions {
-                pass: sample,
-                count: report.exceptions,
-                first: format!("at pixel {:?}: {e}", window.image_pixel(index)),
-            });
+        if let Some(wf) = &wavefront {
+            rays += wf.pass(&params, w, h);
+            #[cfg(test)]
+            WAVEFRONT_PASSES.with(|n| n.set(n.get() + 1));
+        } else {
+            // One launch index per pixel of the window.
+            let report = pipeline.launch(&mut util, &params, w, h, 1)?;
+            rays += report.traces;
+            if let Some((index, e)) = report.first_exceptions.first() {
+                return Err(RenderError::Exceptions {
+                    pass: sample,
+                    count: report.exceptions,
+                    first: format!("at pixel {:?}: {e}", window.image_pixel(index)),
+                });
+            }
         }
         samples = sample + 1;
         let progress = Progress::host(samples, opts.spp, (w, h), &accum);
@@ -710,6 +734,46 @@ pub fn render_passes(
             .map(|a| Aovs::from_sums(w, h, &sums, &a.to_vec())),
         setup,
     })
+}
+
+/// The wavefront for a scene traced through `handle`, when it applies: `one_gas` says the
+/// scene traces as one GAS without motion, whose build inputs have the hit-group data
+/// `records`. `None`: the pipeline renders it.
+fn wavefront_for<'g>(
+    scene: &SceneDesc,
+    handle: &'g TraversableHandle,
+    one_gas: bool,
+    records: Option<Vec<HitGroupData>>,
+) -> Option<wavefront::Wavefront<'g>> {
+    if !one_gas || forced_pipeline() {
+        return None;
+    }
+    let gas = handle.downcast_ref::<oxray::cpu::Gas>()?;
+    let alpha = scene
+        .materials
+        .iter()
+        .any(|m| m.alpha_mode != AlphaMode::Opaque);
+    Some(wavefront::Wavefront::new(gas, records?, alpha))
+}
+
+/// Whether renders go through the pipeline even where the wavefront applies: for the tests
+/// that compare the two.
+fn forced_pipeline() -> bool {
+    #[cfg(test)]
+    {
+        FORCE_PIPELINE.with(std::cell::Cell::get)
+    }
+    #[cfg(not(test))]
+    {
+        false
+    }
+}
+
+#[cfg(test)]
+thread_local! {
+    static FORCE_PIPELINE: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    /// Passes the wavefront traced on this thread's renders.
+    static WAVEFRONT_PASSES: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
 }
 
 /// The README's examples (the library's, the renderer's), compiled and run as doctests.

@@ -148,16 +148,16 @@ pub fn stream_salt(seed: u32) -> u32 {
 #[repr(C)]
 #[derive(Clone, Copy, Default, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct PathState {
-    seed: u32,
-    done: u32,
-    depth: u32,
+    pub(crate) seed: u32,
+    pub(crate) done: u32,
+    pub(crate) depth: u32,
     /// Solid-angle pdf of the BSDF sample that made this ray; 0 for camera rays and specular
     /// bounces (emission they find is counted in full).
-    pdf: f32,
-    radiance: [f32; 3],
-    throughput: [f32; 3],
-    origin: [f32; 3],
-    direction: [f32; 3],
+    pub(crate) pdf: f32,
+    pub(crate) radiance: [f32; 3],
+    pub(crate) throughput: [f32; 3],
+    pub(crate) origin: [f32; 3],
+    pub(crate) direction: [f32; 3],
 }
 
 /// Payload words of a radiance ray.
@@ -254,34 +254,94 @@ fn record<'p>(p: &'p Params, data: HitGroupData) -> Option<(&'p MaterialDesc, &'
     ))
 }
 
-/// `__anyhit__alpha`: cutouts for MASK materials, stochastic transparency for BLEND ones.
-fn any_hit_alpha(ctx: &mut AnyHitCtx<Params>) -> ProgramResult {
-    let p = ctx.params();
-    let data = ctx.sbt_data::<HitGroupData>().unwrap_or_default();
+/// Whether the alpha rule keeps a candidate: cutouts for MASK materials, stochastic
+/// transparency for BLEND ones (`seed`: payload word 0 of the ray, the path's random state).
+/// The any-hit program of the pipeline and the wavefront's query filters both decide here.
+pub(crate) fn alpha_keeps(
+    p: &Params,
+    data: HitGroupData,
+    seed: u32,
+    prim_index: u32,
+    bary: [f32; 2],
+    instance_index: u32,
+) -> bool {
     let Some((m, prim)) = record(p, data) else {
-        return Ok(());
+        return true;
     };
-    let alpha = alpha_at(
-        p,
-        m,
-        prim,
-        ctx.primitive_index(),
-        ctx.triangle_barycentrics(),
-    );
-    let keep = match m.alpha_mode {
+    let alpha = alpha_at(p, m, prim, prim_index, bary);
+    match m.alpha_mode {
         AlphaMode::Opaque => true,
         AlphaMode::Mask { cutoff } => alpha >= cutoff,
         AlphaMode::Blend => {
             // One decision per (path state, primitive, instance): the same surface point is
             // either in or out for this ray, whatever the traversal order.
-            let h = hash(ctx.payload(0) ^ hash(ctx.primitive_index() ^ hash(ctx.instance_index())));
+            let h = hash(seed ^ hash(prim_index ^ hash(instance_index)));
             alpha > h as f32 * (1.0 / 4294967296.0)
         }
-    };
+    }
+}
+
+/// `__anyhit__alpha`: cutouts for MASK materials, stochastic transparency for BLEND ones.
+fn any_hit_alpha(ctx: &mut AnyHitCtx<Params>) -> ProgramResult {
+    let data = ctx.sbt_data::<HitGroupData>().unwrap_or_default();
+    let keep = alpha_keeps(
+        ctx.params(),
+        data,
+        ctx.payload(0),
+        ctx.primitive_index(),
+        ctx.triangle_barycentrics(),
+        ctx.instance_index(),
+    );
     if keep {
         Ok(())
     } else {
         ctx.ignore_intersection()
+    }
+}
+
+/// What a path vertex reads of its hit: a closest-hit program's context in the pipeline, a
+/// query's hit in the wavefront ([`crate::wavefront`]). Both give the same values for the same
+/// hit (the methods are the device functions of the same names), so a vertex is shaded alike,
+/// bit for bit, whichever integrator found it.
+pub(crate) trait PathHit {
+    fn world_ray_origin(&self) -> Vec3;
+    fn world_ray_direction(&self) -> Vec3;
+    fn ray_tmax(&self) -> f32;
+    fn triangle_vertex_data(&self) -> [Vec3; 3];
+    fn triangle_barycentrics(&self) -> [f32; 2];
+    fn primitive_index(&self) -> u32;
+    fn instance_id(&self) -> u32;
+    fn transform_normal_to_world(&self, n: Vec3) -> Vec3;
+    fn transform_vector_to_world(&self, v: Vec3) -> Vec3;
+}
+
+impl PathHit for ClosestHitCtx<'_, Params<'_>> {
+    fn world_ray_origin(&self) -> Vec3 {
+        ClosestHitCtx::world_ray_origin(self)
+    }
+    fn world_ray_direction(&self) -> Vec3 {
+        ClosestHitCtx::world_ray_direction(self)
+    }
+    fn ray_tmax(&self) -> f32 {
+        ClosestHitCtx::ray_tmax(self)
+    }
+    fn triangle_vertex_data(&self) -> [Vec3; 3] {
+        ClosestHitCtx::triangle_vertex_data(self)
+    }
+    fn triangle_barycentrics(&self) -> [f32; 2] {
+        ClosestHitCtx::triangle_barycentrics(self)
+    }
+    fn primitive_index(&self) -> u32 {
+        ClosestHitCtx::primitive_index(self)
+    }
+    fn instance_id(&self) -> u32 {
+        ClosestHitCtx::instance_id(self)
+    }
+    fn transform_normal_to_world(&self, n: Vec3) -> Vec3 {
+        ClosestHitCtx::transform_normal_to_world(self, n)
+    }
+    fn transform_vector_to_world(&self, v: Vec3) -> Vec3 {
+        ClosestHitCtx::transform_vector_to_world(self, v)
     }
 }
 
@@ -299,8 +359,7 @@ struct Shading {
     front: bool,
 }
 
-fn shading(ctx: &ClosestHitCtx<Params>, m: &MaterialDesc, prim: &Primitive) -> Shading {
-    let p = ctx.params();
+fn shading(p: &Params, ctx: &impl PathHit, m: &MaterialDesc, prim: &Primitive) -> Shading {
     let dir = ctx.world_ray_direction();
     let point = ctx.world_ray_origin() + dir * ctx.ray_tmax();
     let [a, b, c] = ctx.triangle_vertex_data();
@@ -378,18 +437,30 @@ fn offset(p: &Params, s: &Shading, dir: Vec3) -> Vec3 {
     }
 }
 
+/// A shadow ray that a path vertex asks for, and the radiance it adds to the path when nothing
+/// blocks it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ShadowRay {
+    pub from: Vec3,
+    pub dir: Vec3,
+    pub tmax: f32,
+    /// The path's random state when the ray was made: payload word 0 of the shadow ray, which
+    /// the alpha rule draws from.
+    pub seed: u32,
+    /// The light sample's contribution, throughput included.
+    pub radiance: Vec3,
+}
+
+/// The shadow rays of one vertex: the light sample's, then the punctual light's (the order in
+/// which their radiance is added).
+pub(crate) type VertexShadows = [Option<ShadowRay>; 2];
+
 /// Traces a shadow ray; true when nothing blocks it.
-fn visible(
-    ctx: &ClosestHitCtx<Params>,
-    seed: u32,
-    from: Vec3,
-    dir: Vec3,
-    tmax: f32,
-) -> Result<bool, oxray::Interrupt> {
+fn visible(ctx: &ClosestHitCtx<Params>, r: &ShadowRay) -> Result<bool, oxray::Interrupt> {
     let p = ctx.params();
-    let mut words = [seed, 0u32];
-    let ray = TraceRay::new(&p.handle, from, dir)
-        .interval(0.0, tmax)
+    let mut words = [r.seed, 0u32];
+    let ray = TraceRay::new(&p.handle, r.from, r.dir)
+        .interval(0.0, r.tmax)
         .time(ctx.ray_time())
         .flags(RayFlags::TERMINATE_ON_FIRST_HIT | RayFlags::DISABLE_CLOSESTHIT)
         .sbt(SHADOW, RAY_TYPES, SHADOW);
@@ -400,15 +471,13 @@ fn visible(
 /// The first hit's auxiliary values, added to its pixel's sums ([`Params::aov`]): the base
 /// colour with its texture and vertex colour, the shading normal, the distance from the camera.
 fn write_aov(
-    ctx: &ClosestHitCtx<Params>,
+    p: &Params,
     aov: &OutputBuffer<[f32; AOV_WORDS]>,
+    pixel: usize,
+    t: f32,
     m: &MaterialDesc,
     sh: &Shading,
 ) {
-    let [x, y, _] = ctx.launch_index();
-    let [w, _, _] = ctx.launch_dimensions();
-    let pixel = (y * w + x) as usize;
-    let p = ctx.params();
     let base_tex = tex(p, m.base_color_texture, &sh.uvs, true);
     let albedo = Vec3::from_slice(&m.base_color[..3]) * base_tex.truncate() * sh.color.truncate();
     let a = aov.read(pixel).unwrap_or([0.0; AOV_WORDS]);
@@ -421,33 +490,81 @@ fn write_aov(
             a[3] + sh.ns.x,
             a[4] + sh.ns.y,
             a[5] + sh.ns.z,
-            a[6] + ctx.ray_tmax(),
+            a[6] + t,
             a[7] + 1.0,
         ],
     );
 }
 
+/// Where a path's sample lands: its pixel in the launch (the sums of `accum` and `aov`) and
+/// in the full image (its random stream).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct PixelAt {
+    pub launch: u32,
+    pub image: u32,
+}
+
+impl PixelAt {
+    /// The pixel of launch index (`lx`, `ly`) in a launch `launch_width` wide.
+    pub(crate) fn new(p: &Params, lx: u32, ly: u32, launch_width: u32) -> PixelAt {
+        let (x, y) = (p.window[0] + lx, p.window[1] + ly);
+        PixelAt {
+            launch: ly * launch_width + lx,
+            image: y * p.image[0] + x,
+        }
+    }
+}
+
 /// `__closesthit__radiance`: one path vertex.
 fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
     let mut s = load(ctx.payload_words());
-    let p = ctx.params();
     let data = ctx.sbt_data::<HitGroupData>().unwrap_or_default();
+    let [lx, ly, _] = ctx.launch_index();
+    let [w, _, _] = ctx.launch_dimensions();
+    let at = PixelAt::new(ctx.params(), lx, ly, w);
+    let shadows = vertex(ctx.params(), &*ctx, data, at, &mut s);
+    let mut rad = Vec3::from(s.radiance);
+    for r in shadows.iter().flatten() {
+        if visible(ctx, r)? {
+            rad += r.radiance;
+        }
+    }
+    s.radiance = rad.to_array();
+    store(&s, |i, w| ctx.set_payload(i, w));
+    Ok(())
+}
+
+/// One path vertex at `hit`, whose hit group's data is `data`: its emission, weighted against
+/// the light sample that could have found it, added to the path's radiance; the light samples
+/// as shadow rays (for the caller to trace: each adds its radiance when nothing blocks it);
+/// the BSDF sample that makes the next ray, and Russian roulette. The closest-hit program of
+/// the pipeline and the wavefront ([`crate::wavefront`]) both shade here.
+pub(crate) fn vertex(
+    p: &Params,
+    hit: &impl PathHit,
+    data: HitGroupData,
+    at: PixelAt,
+    s: &mut PathState,
+) -> VertexShadows {
+    let mut shadows = [None, None];
     let Some((m, prim)) = record(p, data) else {
         s.done = 1;
-        store(&s, |i, w| ctx.set_payload(i, w));
-        return Ok(());
+        return shadows;
     };
-    let sh = shading(ctx, m, prim);
+    let sh = shading(p, hit, m, prim);
     if let (Some(aov), 0) = (p.aov, s.depth) {
-        write_aov(ctx, aov, m, &sh);
+        write_aov(p, aov, at.launch as usize, hit.ray_tmax(), m, &sh);
     }
-    let dir = ctx.world_ray_direction();
+    let dir = hit.world_ray_direction();
     let wo = -dir;
     let mut rng = {
-        let [lx, ly, _] = ctx.launch_index();
-        let (x, y) = (p.window[0] + lx, p.window[1] + ly);
-        let pixel = y * p.image[0] + x;
-        let mut d = Draws::new(p.sampler, Rng(s.seed), pixel, p.sample, stream_salt(p.seed));
+        let mut d = Draws::new(
+            p.sampler,
+            Rng(s.seed),
+            at.image,
+            p.sample,
+            stream_salt(p.seed),
+        );
         d.base = dim::vertex(s.depth);
         d
     };
@@ -464,11 +581,11 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
     };
     if le != Vec3::ZERO {
         let w = if s.pdf > 0.0 {
-            let t = ctx.ray_tmax();
+            let t = hit.ray_tmax();
             let cos_l = sh.ng.dot(wo).abs().max(1e-6);
             let sampled = !p
                 .moving
-                .get(ctx.instance_id() as usize)
+                .get(hit.instance_id() as usize)
                 .copied()
                 .unwrap_or(false);
             let light_pdf = match sampled {
@@ -499,8 +616,12 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
         );
 
         if !surf.dielectric {
-            rad += thr * next_event(ctx, &mut rng, &surf, &sh, wo)?;
-            rad += thr * punctual_light(ctx, &mut rng, &surf, &sh, wo)?;
+            let with_throughput = |mut r: ShadowRay| {
+                r.radiance = thr * r.radiance;
+                r
+            };
+            shadows[0] = next_event(p, &mut rng, &surf, &sh, wo).map(with_throughput);
+            shadows[1] = punctual_light(p, &mut rng, &surf, &sh, wo).map(with_throughput);
         }
         let u = dim::BSDF.map(|k| rng.get(k));
         match surf.sample(sh.ns, wo, sh.front, u) {
@@ -527,46 +648,42 @@ fn closest_hit(ctx: &mut ClosestHitCtx<Params>) -> ProgramResult {
     s.seed = rng.rng.0;
     s.radiance = rad.to_array();
     s.throughput = thr.to_array();
-    store(&s, |i, w| ctx.set_payload(i, w));
-    Ok(())
+    shadows
 }
 
-/// One light sample (a triangle or the environment) with its MIS weight against BSDF sampling.
+/// One light sample (a triangle or the environment) with its MIS weight against BSDF sampling:
+/// the shadow ray towards it, carrying its contribution without the path's throughput.
 fn next_event(
-    ctx: &ClosestHitCtx<Params>,
+    p: &Params,
     rng: &mut Draws,
     surf: &Surface,
     sh: &Shading,
     wo: Vec3,
-) -> Result<Vec3, oxray::Interrupt> {
-    let p = ctx.params();
+) -> Option<ShadowRay> {
     let pick = rng.get(dim::LIGHT_PICK);
     let u = dim::LIGHT.map(|k| rng.get(k));
     if pick < p.p_env {
-        let Some((wi, l, pdf)) = p.env.sample([u[0], u[1]]) else {
-            return Ok(Vec3::ZERO);
-        };
+        let (wi, l, pdf) = p.env.sample([u[0], u[1]])?;
         let pdf = pdf * p.p_env;
         let (f, bsdf_pdf) = surf.eval(sh.ns, wo, wi);
         if f == Vec3::ZERO || wi.dot(sh.ng) <= 0.0 {
-            return Ok(Vec3::ZERO);
+            return None;
         }
-        if !visible(ctx, rng.rng.0, offset(p, sh, wi), wi, f32::INFINITY)? {
-            return Ok(Vec3::ZERO);
-        }
-        return Ok(f * l * (power_heuristic(pdf, bsdf_pdf) / pdf));
+        return Some(ShadowRay {
+            from: offset(p, sh, wi),
+            dir: wi,
+            tmax: f32::INFINITY,
+            seed: rng.rng.0,
+            radiance: f * l * (power_heuristic(pdf, bsdf_pdf) / pdf),
+        });
     }
-    let Some((tri, lp, [b1, b2], area_pdf)) = p.lights.sample(u) else {
-        return Ok(Vec3::ZERO);
-    };
-    let Some(lm) = p.scene.materials.get(tri.material as usize) else {
-        return Ok(Vec3::ZERO);
-    };
+    let (tri, lp, [b1, b2], area_pdf) = p.lights.sample(u)?;
+    let lm = p.scene.materials.get(tri.material as usize)?;
     let from = offset(p, sh, lp - sh.point);
     let to = lp - from;
     let dist = to.length();
     if dist.is_nan() || dist <= 0.0 {
-        return Ok(Vec3::ZERO);
+        return None;
     }
     let wi = to / dist;
     let ln = tri.normal;
@@ -577,20 +694,23 @@ fn next_event(
     };
     let (f, bsdf_pdf) = surf.eval(sh.ns, wo, wi);
     if f == Vec3::ZERO || wi.dot(sh.ng) <= 0.0 || cos_l <= 1e-6 {
-        return Ok(Vec3::ZERO);
+        return None;
     }
     let uv = tri.uv[0] * (1.0 - b1 - b2) + tri.uv[1] * b1 + tri.uv[2] * b2;
     // The light's texture coordinates are those of its emissive texture's set.
     let le = emission(p, lm, &[uv, uv]);
     let pdf = (1.0 - p.p_env) * area_pdf * dist * dist / cos_l;
     if le == Vec3::ZERO || pdf.is_nan() || pdf <= 0.0 {
-        return Ok(Vec3::ZERO);
+        return None;
     }
-    // Stop short of the light itself.
-    if !visible(ctx, rng.rng.0, from, wi, dist * (1.0 - 1e-4) - p.eps)? {
-        return Ok(Vec3::ZERO);
-    }
-    Ok(f * le * (power_heuristic(pdf, bsdf_pdf) / pdf))
+    Some(ShadowRay {
+        from,
+        dir: wi,
+        // Stop short of the light itself.
+        tmax: dist * (1.0 - 1e-4) - p.eps,
+        seed: rng.rng.0,
+        radiance: f * le * (power_heuristic(pdf, bsdf_pdf) / pdf),
+    })
 }
 
 /// glTF gives punctual lights in photometric units (candela, lux); the renderer works in
@@ -598,18 +718,17 @@ fn next_event(
 const LUMENS_PER_WATT: f32 = 683.0;
 
 /// One punctual light, chosen uniformly, sampled exactly (it is a delta light: BSDF sampling can
-/// never find it, so there is nothing to weigh it against).
+/// never find it, so there is nothing to weigh it against): the shadow ray towards it.
 fn punctual_light(
-    ctx: &ClosestHitCtx<Params>,
+    p: &Params,
     rng: &mut Draws,
     surf: &Surface,
     sh: &Shading,
     wo: Vec3,
-) -> Result<Vec3, oxray::Interrupt> {
-    let p = ctx.params();
+) -> Option<ShadowRay> {
     let lights = &p.scene.lights;
     if lights.is_empty() {
-        return Ok(Vec3::ZERO);
+        return None;
     }
     let i = ((rng.get(dim::PUNCTUAL) * lights.len() as f32) as usize).min(lights.len() - 1);
     let l = &lights[i];
@@ -619,7 +738,7 @@ fn punctual_light(
             let to = l.position - sh.point;
             let d2 = to.length_squared();
             if d2.is_nan() || d2 <= 0.0 {
-                return Ok(Vec3::ZERO);
+                return None;
             }
             let d = d2.sqrt();
             let wi = to / d;
@@ -644,11 +763,11 @@ fn punctual_light(
     };
     e /= LUMENS_PER_WATT;
     if e == Vec3::ZERO || wi.dot(sh.ng) <= 0.0 {
-        return Ok(Vec3::ZERO);
+        return None;
     }
     let (f, _) = surf.eval(sh.ns, wo, wi);
     if f == Vec3::ZERO {
-        return Ok(Vec3::ZERO);
+        return None;
     }
     let from = offset(p, sh, wi);
     let tmax = if dist.is_finite() {
@@ -656,10 +775,81 @@ fn punctual_light(
     } else {
         f32::INFINITY
     };
-    if !visible(ctx, rng.rng.0, from, wi, tmax)? {
-        return Ok(Vec3::ZERO);
+    Some(ShadowRay {
+        from,
+        dir: wi,
+        tmax,
+        seed: rng.rng.0,
+        radiance: f * e * lights.len() as f32,
+    })
+}
+
+/// The path of sample `p.sample` at launch index (`lx`, `ly`) of a launch `launch_width` wide:
+/// its camera ray, in a path state ready to trace, and the path's time.
+pub(crate) fn camera_path(p: &Params, lx: u32, ly: u32) -> (PathState, f32) {
+    // The sample is the full image's: its place there keys the random stream and the camera
+    // ray; the sums go to the window's pixel.
+    let (x, y) = (p.window[0] + lx, p.window[1] + ly);
+    let [w, h] = p.image;
+    let (index, salt) = (y * w + x, stream_salt(p.seed));
+    let mut rng = Draws::new(
+        p.sampler,
+        Rng::new(index, p.sample, salt),
+        index,
+        p.sample,
+        salt,
+    );
+    // Filter importance sampling: the offset from the pixel's centre follows the filter.
+    let (jx, jy) = (rng.get(dim::PIXEL), rng.get(dim::PIXEL + 1));
+    let ox = 0.5 + sample_offset(p.filter, jx);
+    let oy = 0.5 + sample_offset(p.filter, jy);
+    let sx = 2.0 * (x as f32 + ox) / w as f32 - 1.0;
+    let sy = 1.0 - 2.0 * (y as f32 + oy) / h as f32;
+    // The path's time, drawn after the pixel's offsets so that a render without motion keeps
+    // its random sequence; a moving camera is where it is at that time.
+    let time = p.shutter.map_or(0.0, |s| s.time(rng.get(dim::TIME)));
+    let c = p
+        .shutter
+        .and_then(|s| CameraFrame::at(p.camera_keys, s, time))
+        .unwrap_or(p.camera);
+    let dir = (c.forward + c.right * sx + c.up * sy).normalize();
+    let s = PathState {
+        seed: rng.rng.0,
+        throughput: [1.0; 3],
+        origin: c.origin.to_array(),
+        direction: dir.to_array(),
+        ..Default::default()
+    };
+    (s, time)
+}
+
+/// `__miss__environment` on path state `s`: the environment's radiance in the ray's direction
+/// `d`, weighted against its light sample, and the end of the path.
+pub(crate) fn miss_environment(p: &Params, s: &mut PathState, d: Vec3) {
+    let (l, env_pdf) = p.env.radiance_and_pdf(d);
+    if l != Vec3::ZERO {
+        let w = if s.pdf > 0.0 {
+            power_heuristic(s.pdf, p.p_env * env_pdf)
+        } else {
+            1.0
+        };
+        let r = Vec3::from(s.radiance) + Vec3::from(s.throughput) * l * w;
+        s.radiance = r.to_array();
     }
-    Ok(f * e * lights.len() as f32)
+    s.done = 1;
+}
+
+/// Adds a finished path's radiance to the sums of its launch pixel `pixel`.
+pub(crate) fn accumulate(p: &Params, pixel: usize, s: &PathState) {
+    let r = Vec3::from(s.radiance);
+    // A non-finite sample (a degenerate input the guards missed) is dropped rather than
+    // poisoning the pixel; the count still advances, so it reads as black.
+    let r = if r.is_finite() { r } else { Vec3::ZERO };
+    let old = p.accum.read(pixel).unwrap_or([0.0; 4]);
+    p.accum.write(
+        pixel,
+        [old[0] + r.x, old[1] + r.y, old[2] + r.z, old[3] + 1.0],
+    );
 }
 
 /// The module with every program of the path tracer.
@@ -669,40 +859,7 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             let [lx, ly, _] = ctx.launch_index();
             let [lw, _, _] = ctx.launch_dimensions();
             let p = ctx.params();
-            // The sample is the full image's: its place there keys the random stream and the
-            // camera ray; the sums go to the window's pixel.
-            let (x, y) = (p.window[0] + lx, p.window[1] + ly);
-            let [w, h] = p.image;
-            let (index, salt) = (y * w + x, stream_salt(p.seed));
-            let mut rng = Draws::new(
-                p.sampler,
-                Rng::new(index, p.sample, salt),
-                index,
-                p.sample,
-                salt,
-            );
-            let pixel = ly * lw + lx;
-            // Filter importance sampling: the offset from the pixel's centre follows the filter.
-            let (jx, jy) = (rng.get(dim::PIXEL), rng.get(dim::PIXEL + 1));
-            let ox = 0.5 + sample_offset(p.filter, jx);
-            let oy = 0.5 + sample_offset(p.filter, jy);
-            let sx = 2.0 * (x as f32 + ox) / w as f32 - 1.0;
-            let sy = 1.0 - 2.0 * (y as f32 + oy) / h as f32;
-            // The path's time, drawn after the pixel's offsets so that a render without motion
-            // keeps its random sequence; a moving camera is where it is at that time.
-            let time = p.shutter.map_or(0.0, |s| s.time(rng.get(dim::TIME)));
-            let c = p
-                .shutter
-                .and_then(|s| CameraFrame::at(p.camera_keys, s, time))
-                .unwrap_or(p.camera);
-            let dir = (c.forward + c.right * sx + c.up * sy).normalize();
-            let mut s = PathState {
-                seed: rng.rng.0,
-                throughput: [1.0; 3],
-                origin: c.origin.to_array(),
-                direction: dir.to_array(),
-                ..Default::default()
-            };
+            let (mut s, time) = camera_path(p, lx, ly);
             // Each trace either ends the path or adds a vertex, and vertices are capped.
             for _ in 0..=p.max_depth {
                 let mut words = [0u32; WORDS];
@@ -716,34 +873,14 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
                     break;
                 }
             }
-            let r = Vec3::from(s.radiance);
-            // A non-finite sample (a degenerate input the guards missed) is dropped rather than
-            // poisoning the pixel; the count still advances, so it reads as black.
-            let r = if r.is_finite() { r } else { Vec3::ZERO };
-            let old = p.accum.read(pixel as usize).unwrap_or([0.0; 4]);
-            p.accum.write(
-                pixel as usize,
-                [old[0] + r.x, old[1] + r.y, old[2] + r.z, old[3] + 1.0],
-            );
+            accumulate(p, (ly * lw + lx) as usize, &s);
             Ok(())
         })?
         .closest_hit("__closesthit__radiance", closest_hit)?
         .any_hit("__anyhit__alpha", any_hit_alpha)?
         .miss("__miss__environment", |ctx| {
             let mut s = load(ctx.payload_words());
-            let p = ctx.params();
-            let d = ctx.world_ray_direction();
-            let (l, env_pdf) = p.env.radiance_and_pdf(d);
-            if l != Vec3::ZERO {
-                let w = if s.pdf > 0.0 {
-                    power_heuristic(s.pdf, p.p_env * env_pdf)
-                } else {
-                    1.0
-                };
-                let r = Vec3::from(s.radiance) + Vec3::from(s.throughput) * l * w;
-                s.radiance = r.to_array();
-            }
-            s.done = 1;
+            miss_environment(ctx.params(), &mut s, ctx.world_ray_direction());
             store(&s, |i, w| ctx.set_payload(i, w));
             Ok(())
         })?

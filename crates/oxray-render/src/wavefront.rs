@@ -1,0 +1,442 @@
+//! The CPU renderer's wavefront: the path tracer's programs run over tiles of paths, one ray
+//! kind at a time, straight on the CPU backend's queries instead of through the pipeline.
+//!
+//! A pass traces one sample of every pixel. The launch's pixels are cut into fixed tiles of
+//! [`TILE`] consecutive pixels (the same whatever the thread count), a tile per rayon task.
+//! A tile keeps its paths' states side by side and advances them in lock step: the rays of
+//! every live path, traced as one batch (camera rays from a pinhole go as packets of eight,
+//! [`oxray::cpu::Gas::intersect_batch`]), then every path's vertex shaded (emission, light
+//! samples, the BSDF sample), then the light samples' shadow rays as one occlusion batch, then
+//! their radiance added to the paths they are not blocked for. A batch of one ray kind keeps
+//! the traversal's code and data hot; the pipeline traced each path's rays in turn, a camera,
+//! closest-hit and shadow ray interleaved, each through the launch's program dispatch.
+//!
+//! The shading is the pipeline's own ([`programs::vertex`], [`programs::camera_path`],
+//! [`programs::miss_environment`], [`programs::accumulate`]), fed the same hits, random
+//! numbers and shadow answers in the same order, so a pass gives the pipeline's image bit for
+//! bit (`tests` below). The wavefront covers the scenes that trace as one GAS without motion
+//! (the built-in Cornell box, OBJ and PLY files, glTF files whose meshes are each placed once,
+//! [`oxray_scene::SceneDesc::flattened`]); alpha-tested materials go through the queries'
+//! filters. Other scenes render through the pipeline.
+
+use crate::programs::{self, Params, PathHit, PathState, PixelAt, ShadowRay};
+use glam::Vec3;
+use oxray::cpu::Gas;
+use oxray::{CandidateAction, Hit, NoCustomPrimitives, Ray, Transform};
+use oxray_util::HitGroupData;
+use rayon::prelude::*;
+
+/// Pixels per tile: one rayon task, and the paths one batch holds.
+pub const TILE: usize = 256;
+
+/// What the wavefront traces: the scene's one GAS and the hit-group data of its build inputs
+/// (what the pipeline's SBT records hold).
+pub(crate) struct Wavefront<'g> {
+    gas: &'g Gas,
+    /// Per build input of the GAS, its hit group's data.
+    records: Vec<HitGroupData>,
+    /// Whether a material is alpha-tested: then every query filters its candidates by the
+    /// alpha rule (as the pipeline's any-hit program does), ray by ray.
+    alpha: bool,
+}
+
+/// One path of a tile.
+#[derive(Clone, Copy)]
+struct Lane {
+    state: PathState,
+    time: f32,
+    /// The launch pixel (the index of `accum`).
+    at: PixelAt,
+    /// Radiance rays the path may still trace (the pipeline's ray-generation loop bound).
+    traces_left: u32,
+}
+
+/// A tile's buffers, kept across the tiles a rayon worker takes (no allocation per ray).
+#[derive(Default)]
+struct Scratch {
+    lanes: Vec<Lane>,
+    live: Vec<u32>,
+    rays: Vec<Ray>,
+    hits: Vec<Option<Hit>>,
+    shadows: Vec<(u32, ShadowRay)>,
+    shadow_rays: Vec<Ray>,
+    occluded: Vec<bool>,
+}
+
+impl<'g> Wavefront<'g> {
+    /// The wavefront over `gas`, whose build input `i` has the hit-group data `records[i]`;
+    /// `alpha` when a material is alpha-tested.
+    pub(crate) fn new(gas: &'g Gas, records: Vec<HitGroupData>, alpha: bool) -> Self {
+        Wavefront {
+            gas,
+            records,
+            alpha,
+        }
+    }
+
+    /// Traces one pass (sample `p.sample` of every pixel of a `width` x `height` launch),
+    /// adding each path's radiance to its pixel's sums; returns the rays traced.
+    pub(crate) fn pass(&self, p: &Params, width: u32, height: u32) -> u64 {
+        let pixels = width as usize * height as usize;
+        let tiles = pixels.div_ceil(TILE);
+        (0..tiles)
+            .into_par_iter()
+            .map_init(Scratch::default, |scratch, tile| {
+                let start = tile * TILE;
+                let end = (start + TILE).min(pixels);
+                self.tile(p, width, start..end, scratch)
+            })
+            .sum()
+    }
+
+    fn tile(
+        &self,
+        p: &Params,
+        width: u32,
+        pixels: std::ops::Range<usize>,
+        scratch: &mut Scratch,
+    ) -> u64 {
+        let Scratch {
+            lanes,
+            live,
+            rays,
+            hits,
+            shadows,
+            shadow_rays,
+            occluded,
+        } = scratch;
+        lanes.clear();
+        for pixel in pixels {
+            let (lx, ly) = (pixel as u32 % width, pixel as u32 / width);
+            let (state, time) = programs::camera_path(p, lx, ly);
+            lanes.push(Lane {
+                state,
+                time,
+                at: PixelAt::new(p, lx, ly, width),
+                traces_left: p.max_depth + 1,
+            });
+        }
+        live.clear();
+        live.extend(0..lanes.len() as u32);
+        let mut traced = 0u64;
+        while !live.is_empty() {
+            rays.clear();
+            rays.extend(live.iter().map(|&l| {
+                let lane = &lanes[l as usize];
+                Ray {
+                    origin: lane.state.origin.into(),
+                    tmin: 0.0,
+                    direction: lane.state.direction.into(),
+                    tmax: f32::INFINITY,
+                    time: lane.time,
+                }
+            }));
+            hits.clear();
+            hits.resize(rays.len(), None);
+            self.closest(p, live, lanes, rays, hits);
+            traced += rays.len() as u64;
+
+            shadows.clear();
+            for ((&l, ray), hit) in live.iter().zip(rays.iter()).zip(hits.iter()) {
+                let lane = &mut lanes[l as usize];
+                lane.traces_left -= 1;
+                match hit {
+                    Some(hit) => {
+                        let data = self.record(hit);
+                        let view = QueryHit::new(p, data, ray, hit);
+                        let made = programs::vertex(p, &view, data, lane.at, &mut lane.state);
+                        shadows.extend(made.into_iter().flatten().map(|r| (l, r)));
+                    }
+                    None => programs::miss_environment(p, &mut lane.state, ray.direction),
+                }
+            }
+
+            shadow_rays.clear();
+            shadow_rays.extend(shadows.iter().map(|&(l, r)| Ray {
+                origin: r.from,
+                tmin: 0.0,
+                direction: r.dir,
+                tmax: r.tmax,
+                time: lanes[l as usize].time,
+            }));
+            occluded.clear();
+            occluded.resize(shadow_rays.len(), false);
+            self.occluded(p, shadows, shadow_rays, occluded);
+            traced += shadow_rays.len() as u64;
+            // A vertex's shadow rays are in the order the pipeline's closest-hit program
+            // traced them: their radiance adds up in the same order.
+            for (&(l, r), &blocked) in shadows.iter().zip(occluded.iter()) {
+                if !blocked {
+                    let s = &mut lanes[l as usize].state;
+                    s.radiance = (Vec3::from(s.radiance) + r.radiance).to_array();
+                }
+            }
+
+            live.retain(|&l| {
+                let lane = &lanes[l as usize];
+                lane.state.done == 0 && lane.traces_left > 0
+            });
+        }
+        for lane in lanes.iter() {
+            programs::accumulate(p, lane.at.launch as usize, &lane.state);
+        }
+        traced
+    }
+
+    /// The hit-group data of a hit's build input (the default record's for one the table does
+    /// not have, as a missing SBT record reads in the pipeline).
+    fn record(&self, hit: &Hit) -> HitGroupData {
+        self.records
+            .get(hit.build_input as usize)
+            .copied()
+            .unwrap_or_default()
+    }
+
+    /// Closest hits of the live paths' radiance rays.
+    fn closest(
+        &self,
+        p: &Params,
+        live: &[u32],
+        lanes: &[Lane],
+        rays: &[Ray],
+        hits: &mut [Option<Hit>],
+    ) {
+        if !self.alpha {
+            // Lengths agree by construction; a mismatch would leave every path missing.
+            let _ = self.gas.intersect_batch(rays, hits);
+            return;
+        }
+        for ((&l, ray), hit) in live.iter().zip(rays).zip(hits.iter_mut()) {
+            let seed = lanes[l as usize].state.seed;
+            *hit = self
+                .gas
+                .intersect_filtered(ray, &mut NoCustomPrimitives, |h| {
+                    match self.keeps(p, seed, h) {
+                        true => CandidateAction::Accept,
+                        false => CandidateAction::Ignore,
+                    }
+                });
+        }
+    }
+
+    /// Whether the shadow rays are blocked: the pipeline's shadow rays end at the first hit
+    /// the alpha rule keeps.
+    fn occluded(
+        &self,
+        p: &Params,
+        shadows: &[(u32, ShadowRay)],
+        rays: &[Ray],
+        occluded: &mut [bool],
+    ) {
+        if !self.alpha {
+            let _ = self.gas.occluded_batch(rays, occluded);
+            return;
+        }
+        for ((&(_, r), ray), blocked) in shadows.iter().zip(rays).zip(occluded.iter_mut()) {
+            *blocked = self
+                .gas
+                .intersect_filtered(ray, &mut NoCustomPrimitives, |h| {
+                    match self.keeps(p, r.seed, h) {
+                        true => CandidateAction::Terminate,
+                        false => CandidateAction::Ignore,
+                    }
+                })
+                .is_some();
+        }
+    }
+
+    /// The any-hit program's decision on a candidate of a ray whose payload word 0 is `seed`.
+    fn keeps(&self, p: &Params, seed: u32, h: &Hit) -> bool {
+        programs::alpha_keeps(
+            p,
+            self.record(h),
+            seed,
+            h.primitive_index,
+            [h.u, h.v],
+            h.instance_index,
+        )
+    }
+}
+
+/// A query's hit as a path vertex sees it: what a closest-hit program's context reads, for a
+/// GAS traced without instances (object space is world space).
+struct QueryHit<'a> {
+    ray: &'a Ray,
+    hit: &'a Hit,
+    vertices: [Vec3; 3],
+}
+
+impl<'a> QueryHit<'a> {
+    fn new(p: &Params, data: HitGroupData, ray: &'a Ray, hit: &'a Hit) -> Self {
+        // The GAS's triangles are the primitive's, as given to the build.
+        let vertices = p
+            .prims
+            .get(data.geometry as usize)
+            .and_then(|prim| {
+                let t = prim.triangles.get(hit.primitive_index as usize)?;
+                let v = |i: u32| prim.positions.get(i as usize).copied().map(Vec3::from);
+                Some([v(t[0])?, v(t[1])?, v(t[2])?])
+            })
+            .unwrap_or([Vec3::ZERO; 3]);
+        QueryHit { ray, hit, vertices }
+    }
+}
+
+impl PathHit for QueryHit<'_> {
+    fn world_ray_origin(&self) -> Vec3 {
+        self.ray.origin
+    }
+    fn world_ray_direction(&self) -> Vec3 {
+        self.ray.direction
+    }
+    fn ray_tmax(&self) -> f32 {
+        self.hit.t
+    }
+    fn triangle_vertex_data(&self) -> [Vec3; 3] {
+        self.vertices
+    }
+    fn triangle_barycentrics(&self) -> [f32; 2] {
+        [self.hit.u, self.hit.v]
+    }
+    fn primitive_index(&self) -> u32 {
+        self.hit.primitive_index
+    }
+    fn instance_id(&self) -> u32 {
+        self.hit.instance_id
+    }
+    fn transform_normal_to_world(&self, n: Vec3) -> Vec3 {
+        // The pipeline's arithmetic with no instance: the identity's inverse transpose.
+        Transform::transform_normal_with_inverse(&Transform::IDENTITY, n)
+    }
+    fn transform_vector_to_world(&self, v: Vec3) -> Vec3 {
+        Transform::IDENTITY.transform_vector(v)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::crop::CropWindow;
+    use crate::lights::Environment;
+    use crate::sampler::Sampler;
+    use crate::{render_passes, RenderOptions, Rendered, FORCE_PIPELINE, WAVEFRONT_PASSES};
+    use glam::Vec3;
+    use oxray_scene::{AlphaMode, LightKind, PunctualLight, SceneDesc};
+    use std::ops::ControlFlow;
+
+    /// A render, and the passes the wavefront traced of it.
+    fn render(
+        scene: &SceneDesc,
+        env: &Environment,
+        opts: &RenderOptions,
+        pipeline: bool,
+    ) -> (Rendered, u32) {
+        FORCE_PIPELINE.with(|f| f.set(pipeline));
+        let before = WAVEFRONT_PASSES.with(std::cell::Cell::get);
+        let done = render_passes(scene, env, opts, |_| ControlFlow::Continue(()));
+        FORCE_PIPELINE.with(|f| f.set(false));
+        (
+            done.unwrap(),
+            WAVEFRONT_PASSES.with(std::cell::Cell::get) - before,
+        )
+    }
+
+    fn bits(r: &Rendered) -> Vec<u32> {
+        let mut v: Vec<u32> = r
+            .image
+            .pixels
+            .iter()
+            .flatten()
+            .map(|x| x.to_bits())
+            .collect();
+        if let Some(a) = &r.aovs {
+            v.extend(a.albedo.iter().flatten().map(|x| x.to_bits()));
+            v.extend(a.normal.iter().flatten().map(|x| x.to_bits()));
+            v.extend(a.depth.iter().map(|x| x.to_bits()));
+            v.extend(a.samples.iter().map(|x| x.to_bits()));
+        }
+        v
+    }
+
+    /// The wavefront renders the pipeline's image, bit for bit, with the same rays.
+    fn same_as_pipeline(scene: &SceneDesc, env: &Environment, opts: &RenderOptions) {
+        let (wavefront, passes) = render(scene, env, opts, false);
+        assert_eq!(passes, opts.spp, "the wavefront should trace every pass");
+        let (pipeline, passes) = render(scene, env, opts, true);
+        assert_eq!(passes, 0);
+        assert_eq!(wavefront.rays, pipeline.rays, "rays traced");
+        assert!(wavefront.rays > u64::from(opts.width * opts.height * opts.spp));
+        let (a, b) = (bits(&wavefront), bits(&pipeline));
+        let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+        assert_eq!(differ, 0, "{differ} of {} values differ", a.len());
+        let mean: f32 = wavefront
+            .image
+            .pixels
+            .iter()
+            .map(|p| p[0] + p[1] + p[2])
+            .sum();
+        assert!(mean > 0.0, "a black image proves nothing");
+    }
+
+    fn opts(sampler: Sampler) -> RenderOptions {
+        RenderOptions {
+            width: 40,
+            height: 30,
+            spp: 4,
+            max_depth: 6,
+            sampler,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn the_cornell_box_renders_as_through_the_pipeline() {
+        let scene = oxray_scene::cornell_box();
+        let env = Environment::uniform(Vec3::ZERO);
+        same_as_pipeline(&scene, &env, &opts(Sampler::Sobol));
+        let mut o = opts(Sampler::Independent);
+        o.aovs = true;
+        o.crop = Some(CropWindow::new(5, 3, 31, 22).unwrap());
+        o.seed = 7;
+        same_as_pipeline(&scene, &env, &o);
+    }
+
+    #[test]
+    fn environment_and_punctual_lights_render_as_through_the_pipeline() {
+        let mut scene = oxray_scene::cornell_box();
+        scene.lights.push(PunctualLight {
+            kind: LightKind::Point,
+            position: Vec3::new(0.5, 0.6, 0.5),
+            direction: Vec3::NEG_Y,
+            intensity: Vec3::splat(300.0),
+            range: None,
+        });
+        scene.lights.push(PunctualLight {
+            kind: LightKind::Directional,
+            position: Vec3::ZERO,
+            direction: Vec3::new(0.3, -1.0, 0.2).normalize(),
+            intensity: Vec3::splat(500.0),
+            range: None,
+        });
+        same_as_pipeline(&scene, &Environment::sky(1.0), &opts(Sampler::Sobol));
+    }
+
+    #[test]
+    fn alpha_tested_materials_render_as_through_the_pipeline() {
+        // Cut-out red wall (its alpha under the cutoff) and half-transparent white surfaces
+        // (stochastic transparency), lit by the box's light and a sky seen through them.
+        let mut scene = oxray_scene::cornell_box();
+        let mut blended = false;
+        for m in &mut scene.materials {
+            if m.base_color[0] > 0.5 && m.base_color[1] < 0.2 {
+                m.alpha_mode = AlphaMode::Mask { cutoff: 0.5 };
+                m.base_color[3] = 0.3;
+            } else if m.emissive == [0.0; 3] && !blended {
+                m.alpha_mode = AlphaMode::Blend;
+                m.base_color[3] = 0.6;
+                blended = true;
+            }
+        }
+        assert!(blended);
+        same_as_pipeline(&scene, &Environment::sky(1.0), &opts(Sampler::Sobol));
+    }
+}
