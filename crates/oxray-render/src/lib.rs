@@ -627,12 +627,13 @@ pub fn render_passes(
         );
     }
     let mut instances = Vec::new();
-    let mut first_mesh = None;
+    // Per instance of the IAS, the mesh it places.
+    let mut mesh_of_instance = Vec::new();
     for p in &prep.lit.placements {
         let Some(gas) = gas_of_mesh[p.mesh] else {
             continue;
         };
-        first_mesh.get_or_insert(p.mesh);
+        mesh_of_instance.push(p.mesh as u32);
         let mut u = UtilInstance::new(gas, 0);
         u.transform = p.transform;
         u.instance_id = p.id;
@@ -649,12 +650,10 @@ pub fn render_passes(
         None => util.ias_handle(ias),
     }
     .ok_or_else(|| RenderError::Scene("the scene could not be built".into()))?;
-    let wavefront = wavefront_for(
-        scene,
-        &handle,
-        prep.lit.single && !prep.lit.has_motion(),
-        first_mesh.map(|m| std::mem::take(&mut records_of_mesh[m])),
-    );
+    let wavefront = match prep.lit.has_motion() {
+        true => None,
+        false => wavefront_for(scene, &handle, records_of_mesh, mesh_of_instance),
+    };
 
     let pipeline = ScenePipeline::new(
         &DeviceContext::new(),
@@ -736,24 +735,39 @@ pub fn render_passes(
     })
 }
 
-/// The wavefront for a scene traced through `handle`, when it applies: `one_gas` says the
-/// scene traces as one GAS without motion, whose build inputs have the hit-group data
-/// `records`. `None`: the pipeline renders it.
+/// The wavefront for a scene without motion traced through `handle` (a GAS placed without a
+/// transform, the first instance's mesh, or an IAS whose instance `i` places mesh
+/// `mesh_of_instance[i]`), whose mesh `m` has the hit-group data `records[m]`. `None`: the
+/// pipeline renders it.
 fn wavefront_for<'g>(
     scene: &SceneDesc,
     handle: &'g TraversableHandle,
-    one_gas: bool,
-    records: Option<Vec<HitGroupData>>,
+    mut records: Vec<Vec<HitGroupData>>,
+    mesh_of_instance: Vec<u32>,
 ) -> Option<wavefront::Wavefront<'g>> {
-    if !one_gas || forced_pipeline() {
+    if forced_pipeline() {
         return None;
     }
-    let gas = handle.downcast_ref::<oxray::cpu::Gas>()?;
     let alpha = scene
         .materials
         .iter()
         .any(|m| m.alpha_mode != AlphaMode::Opaque);
-    Some(wavefront::Wavefront::new(gas, records?, alpha))
+    let root = if let Some(gas) = handle.downcast_ref::<oxray::cpu::Gas>() {
+        let first = *mesh_of_instance.first()? as usize;
+        records = vec![std::mem::take(records.get_mut(first)?)];
+        wavefront::Root::Gas(gas)
+    } else {
+        let ias = handle.downcast_ref::<oxray::cpu::Ias>()?;
+        // One level of instances over GASes: the only graph the scene layer makes here.
+        if ias.data().depth != 2 {
+            return None;
+        }
+        wavefront::Root::Ias {
+            ias,
+            mesh_of_instance,
+        }
+    };
+    Some(wavefront::Wavefront::new(root, records, alpha))
 }
 
 /// Whether renders go through the pipeline even where the wavefront applies: for the tests

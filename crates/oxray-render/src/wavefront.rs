@@ -14,14 +14,17 @@
 //! The shading is the pipeline's own ([`programs::vertex`], [`programs::camera_path`],
 //! [`programs::miss_environment`], [`programs::accumulate`]), fed the same hits, random
 //! numbers and shadow answers in the same order, so a pass gives the pipeline's image bit for
-//! bit (`tests` below). The wavefront covers the scenes that trace as one GAS without motion
-//! (the built-in Cornell box, OBJ and PLY files, glTF files whose meshes are each placed once,
-//! [`oxray_scene::SceneDesc::flattened`]); alpha-tested materials go through the queries'
-//! filters. Other scenes render through the pipeline.
+//! bit (`tests` below). The wavefront covers the scenes without motion: one GAS placed without
+//! a transform (the built-in Cornell box, OBJ and PLY files, glTF files whose meshes are each
+//! placed once, [`oxray_scene::SceneDesc::flattened`]) or an IAS of static instances over
+//! GASes, whose hits it resolves as the pipeline does (the instance's own matrices from the
+//! IAS); alpha-tested materials go through the queries' filters. Scenes with motion render
+//! through the pipeline.
 
 use crate::programs::{self, Params, PathHit, PathState, PixelAt, ShadowRay};
 use glam::Vec3;
-use oxray::cpu::Gas;
+use oxray::bvh::InstanceData;
+use oxray::cpu::{Gas, Ias};
 use oxray::{CandidateAction, Hit, NoCustomPrimitives, Ray, Transform};
 use oxray_util::HitGroupData;
 use rayon::prelude::*;
@@ -29,15 +32,79 @@ use rayon::prelude::*;
 /// Pixels per tile: one rayon task, and the paths one batch holds.
 pub const TILE: usize = 256;
 
-/// What the wavefront traces: the scene's one GAS and the hit-group data of its build inputs
-/// (what the pipeline's SBT records hold).
+/// What the wavefront traces: the scene's root and, per mesh, the hit-group data of its GAS's
+/// build inputs (what the pipeline's SBT records hold).
 pub(crate) struct Wavefront<'g> {
-    gas: &'g Gas,
-    /// Per build input of the GAS, its hit group's data.
-    records: Vec<HitGroupData>,
+    root: Root<'g>,
+    /// Per mesh the root's hits may be on, its build inputs' hit-group data.
+    records: Vec<Vec<HitGroupData>>,
     /// Whether a material is alpha-tested: then every query filters its candidates by the
     /// alpha rule (as the pipeline's any-hit program does), ray by ray.
     alpha: bool,
+}
+
+/// The structure the rays are traced through.
+pub(crate) enum Root<'g> {
+    /// One GAS placed without a transform: its hits are on mesh 0 of the records.
+    Gas(&'g Gas),
+    /// An IAS over GASes (one level of static instances); instance `i` of its build input
+    /// places mesh `mesh_of_instance[i]`.
+    Ias {
+        ias: &'g Ias,
+        mesh_of_instance: Vec<u32>,
+    },
+}
+
+impl Root<'_> {
+    fn intersect_batch(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
+        // Lengths agree by construction; a mismatch would leave every path missing.
+        let _ = match self {
+            Root::Gas(g) => g.intersect_batch(rays, hits),
+            Root::Ias { ias, .. } => ias.intersect_batch(rays, hits),
+        };
+    }
+
+    fn occluded_batch(&self, rays: &[Ray], occluded: &mut [bool]) {
+        let _ = match self {
+            Root::Gas(g) => g.occluded_batch(rays, occluded),
+            Root::Ias { ias, .. } => ias.occluded_batch(rays, occluded),
+        };
+    }
+
+    fn intersect_filtered(
+        &self,
+        ray: &Ray,
+        filter: impl FnMut(&Hit) -> CandidateAction,
+    ) -> Option<Hit> {
+        match self {
+            Root::Gas(g) => g.intersect_filtered(ray, &mut NoCustomPrimitives, filter),
+            Root::Ias { ias, .. } => ias.intersect_filtered(ray, &mut NoCustomPrimitives, filter),
+        }
+    }
+
+    /// The instance a hit is on, `None` for a GAS root.
+    fn instance(&self, hit: &Hit) -> Option<&InstanceData> {
+        match self {
+            Root::Gas(_) => None,
+            Root::Ias { ias, .. } => {
+                let data = ias.data();
+                let slot = *data.slot_of.get(hit.instance_index as usize)?;
+                data.instances.get(slot as usize)
+            }
+        }
+    }
+
+    /// The mesh a hit is on.
+    fn mesh(&self, hit: &Hit) -> Option<usize> {
+        match self {
+            Root::Gas(_) => Some(0),
+            Root::Ias {
+                mesh_of_instance, ..
+            } => mesh_of_instance
+                .get(hit.instance_index as usize)
+                .map(|&m| m as usize),
+        }
+    }
 }
 
 /// One path of a tile.
@@ -64,11 +131,11 @@ struct Scratch {
 }
 
 impl<'g> Wavefront<'g> {
-    /// The wavefront over `gas`, whose build input `i` has the hit-group data `records[i]`;
-    /// `alpha` when a material is alpha-tested.
-    pub(crate) fn new(gas: &'g Gas, records: Vec<HitGroupData>, alpha: bool) -> Self {
+    /// The wavefront over `root`, whose hits on mesh `m`'s build input `i` have the
+    /// hit-group data `records[m][i]`; `alpha` when a material is alpha-tested.
+    pub(crate) fn new(root: Root<'g>, records: Vec<Vec<HitGroupData>>, alpha: bool) -> Self {
         Wavefront {
-            gas,
+            root,
             records,
             alpha,
         }
@@ -143,7 +210,7 @@ impl<'g> Wavefront<'g> {
                 match hit {
                     Some(hit) => {
                         let data = self.record(hit);
-                        let view = QueryHit::new(p, data, ray, hit);
+                        let view = QueryHit::new(p, data, ray, hit, self.root.instance(hit));
                         let made = programs::vertex(p, &view, data, lane.at, &mut lane.state);
                         shadows.extend(made.into_iter().flatten().map(|r| (l, r)));
                     }
@@ -186,8 +253,9 @@ impl<'g> Wavefront<'g> {
     /// The hit-group data of a hit's build input (the default record's for one the table does
     /// not have, as a missing SBT record reads in the pipeline).
     fn record(&self, hit: &Hit) -> HitGroupData {
-        self.records
-            .get(hit.build_input as usize)
+        self.root
+            .mesh(hit)
+            .and_then(|m| self.records.get(m)?.get(hit.build_input as usize))
             .copied()
             .unwrap_or_default()
     }
@@ -202,19 +270,16 @@ impl<'g> Wavefront<'g> {
         hits: &mut [Option<Hit>],
     ) {
         if !self.alpha {
-            // Lengths agree by construction; a mismatch would leave every path missing.
-            let _ = self.gas.intersect_batch(rays, hits);
+            self.root.intersect_batch(rays, hits);
             return;
         }
         for ((&l, ray), hit) in live.iter().zip(rays).zip(hits.iter_mut()) {
             let seed = lanes[l as usize].state.seed;
             *hit = self
-                .gas
-                .intersect_filtered(ray, &mut NoCustomPrimitives, |h| {
-                    match self.keeps(p, seed, h) {
-                        true => CandidateAction::Accept,
-                        false => CandidateAction::Ignore,
-                    }
+                .root
+                .intersect_filtered(ray, |h| match self.keeps(p, seed, h) {
+                    true => CandidateAction::Accept,
+                    false => CandidateAction::Ignore,
                 });
         }
     }
@@ -229,17 +294,15 @@ impl<'g> Wavefront<'g> {
         occluded: &mut [bool],
     ) {
         if !self.alpha {
-            let _ = self.gas.occluded_batch(rays, occluded);
+            self.root.occluded_batch(rays, occluded);
             return;
         }
         for ((&(_, r), ray), blocked) in shadows.iter().zip(rays).zip(occluded.iter_mut()) {
             *blocked = self
-                .gas
-                .intersect_filtered(ray, &mut NoCustomPrimitives, |h| {
-                    match self.keeps(p, r.seed, h) {
-                        true => CandidateAction::Terminate,
-                        false => CandidateAction::Ignore,
-                    }
+                .root
+                .intersect_filtered(ray, |h| match self.keeps(p, r.seed, h) {
+                    true => CandidateAction::Terminate,
+                    false => CandidateAction::Ignore,
                 })
                 .is_some();
         }
@@ -258,16 +321,24 @@ impl<'g> Wavefront<'g> {
     }
 }
 
-/// A query's hit as a path vertex sees it: what a closest-hit program's context reads, for a
-/// GAS traced without instances (object space is world space).
+/// A query's hit as a path vertex sees it: what a closest-hit program's context reads.
 struct QueryHit<'a> {
     ray: &'a Ray,
     hit: &'a Hit,
+    /// The triangle in object space.
     vertices: [Vec3; 3],
+    /// The instance the hit is on (`None`: object space is world space).
+    instance: Option<&'a InstanceData>,
 }
 
 impl<'a> QueryHit<'a> {
-    fn new(p: &Params, data: HitGroupData, ray: &'a Ray, hit: &'a Hit) -> Self {
+    fn new(
+        p: &Params,
+        data: HitGroupData,
+        ray: &'a Ray,
+        hit: &'a Hit,
+        instance: Option<&'a InstanceData>,
+    ) -> Self {
         // The GAS's triangles are the primitive's, as given to the build.
         let vertices = p
             .prims
@@ -278,7 +349,12 @@ impl<'a> QueryHit<'a> {
                 Some([v(t[0])?, v(t[1])?, v(t[2])?])
             })
             .unwrap_or([Vec3::ZERO; 3]);
-        QueryHit { ray, hit, vertices }
+        QueryHit {
+            ray,
+            hit,
+            vertices,
+            instance,
+        }
     }
 }
 
@@ -304,12 +380,18 @@ impl PathHit for QueryHit<'_> {
     fn instance_id(&self) -> u32 {
         self.hit.instance_id
     }
+    // The pipeline's arithmetic: one level of instance transforms (the IAS's own matrices), or
+    // the identity's without an instance.
     fn transform_normal_to_world(&self, n: Vec3) -> Vec3 {
-        // The pipeline's arithmetic with no instance: the identity's inverse transpose.
-        Transform::transform_normal_with_inverse(&Transform::IDENTITY, n)
+        let inverse = self
+            .instance
+            .map_or(&Transform::IDENTITY, |i| &i.world_to_object);
+        Transform::transform_normal_with_inverse(inverse, n)
     }
     fn transform_vector_to_world(&self, v: Vec3) -> Vec3 {
-        Transform::IDENTITY.transform_vector(v)
+        self.instance
+            .map_or(&Transform::IDENTITY, |i| &i.object_to_world)
+            .transform_vector(v)
     }
 }
 
@@ -320,7 +402,8 @@ mod tests {
     use crate::sampler::Sampler;
     use crate::{render_passes, RenderOptions, Rendered, FORCE_PIPELINE, WAVEFRONT_PASSES};
     use glam::Vec3;
-    use oxray_scene::{AlphaMode, LightKind, PunctualLight, SceneDesc};
+    use glam::{Mat4, Quat};
+    use oxray_scene::{AlphaMode, InstanceDesc, LightKind, PunctualLight, SceneDesc};
     use std::ops::ControlFlow;
 
     /// A render, and the passes the wavefront traced of it.
@@ -438,5 +521,41 @@ mod tests {
         }
         assert!(blended);
         same_as_pipeline(&scene, &Environment::sky(1.0), &opts(Sampler::Sobol));
+    }
+
+    #[test]
+    fn instanced_scenes_render_as_through_the_pipeline() {
+        // The box placed twice more inside itself: scaled, turned and once mirrored (the
+        // instance level's transforms, normals through the inverse transpose, a mirror's
+        // facing), alpha-tested and not.
+        let mut scene = oxray_scene::cornell_box();
+        let mesh = scene.instances[0].mesh;
+        let base = scene.instances[0].transform;
+        for (k, mirror) in [(0.0f32, false), (1.0, true)] {
+            let t = Mat4::from_scale_rotation_translation(
+                Vec3::new(if mirror { -0.15 } else { 0.15 }, 0.2, 0.15),
+                Quat::from_rotation_y(0.4 + k),
+                Vec3::new(0.3 + 0.35 * k, 0.1, 0.4),
+            );
+            scene.instances.push(InstanceDesc {
+                mesh,
+                transform: t * base,
+                node: None,
+            });
+        }
+        same_as_pipeline(
+            &scene,
+            &Environment::uniform(Vec3::ZERO),
+            &opts(Sampler::Sobol),
+        );
+        for m in &mut scene.materials {
+            if m.emissive == [0.0; 3] {
+                m.alpha_mode = AlphaMode::Blend;
+                m.base_color[3] = 0.8;
+            }
+        }
+        let mut o = opts(Sampler::Independent);
+        o.aovs = true;
+        same_as_pipeline(&scene, &Environment::sky(0.5), &o);
     }
 }
