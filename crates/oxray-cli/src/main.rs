@@ -289,7 +289,8 @@ struct RenderArgs {
     quiet: bool,
     /// Which path tracer on which device: cpu, cpu-cxx, cuda, cuda:N or auto.
     ///
-    /// cpu: the path tracer's Rust programs on the CPU. cpu-cxx: its CUDA C++ programs on
+    /// cpu: the path tracer's Rust programs on the CPU (a wavefront of paths over the batched
+    /// queries; through the CPU pipeline for scenes with motion). cpu-cxx: its CUDA C++ programs on
     /// the CPU (compiled by the host's C++ compiler). cuda, cuda:N: the CUDA C++ programs on
     /// that GPU (asking for one this machine lacks is an error). auto: a GPU where there is
     /// one, else cpu.

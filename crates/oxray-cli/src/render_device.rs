@@ -1,6 +1,8 @@
 //! `oxray render --backend`: which version of the path tracer renders, on which device.
 //!
-//! - `cpu` (the default): the Rust programs on the CPU pipeline ([`oxray_render::render`]).
+//! - `cpu` (the default): the Rust programs on the CPU ([`oxray_render::render`]: as a
+//!   wavefront of paths over the batched queries for a scene without motion, else through the
+//!   CPU pipeline; the same image either way).
 //! - `cpu-cxx`: the path tracer's CUDA C++ programs on the CPU, compiled by the host's C++
 //!   compiler ([`oxray_render::device::render_on`] with the CPU device).
 //! - `cuda`, `cuda:N`: the CUDA C++ programs on that GPU; asking for one this machine lacks is
@@ -17,7 +19,7 @@ use std::ops::ControlFlow;
 
 /// A renderer chosen by `--backend`.
 pub enum RenderBackend {
-    /// The Rust programs on the CPU pipeline.
+    /// The Rust programs on the CPU (a wavefront, or the CPU pipeline for scenes with motion).
     Rust,
     /// The CUDA C++ programs on the CPU device (made on the render's thread pool).
     CxxOnCpu,
