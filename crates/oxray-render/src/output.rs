@@ -94,14 +94,27 @@ impl Image {
     }
 
     fn write_exr(&self, path: &Path) -> Result<(), WriteError> {
+        use exr::prelude::*;
         let w = self.width as usize;
-        exr::prelude::write_rgba_file(path, w, self.height as usize, |x, y| {
+        let channels = SpecificChannels::rgba(|Vec2(x, y): Vec2<usize>| {
             let p = self.pixels[y * w + x];
             (p[0], p[1], p[2], p[3])
-        })?;
+        });
+        Image::from_encoded_channels((w, self.height as usize), EXR_ENCODING, channels)
+            .write()
+            .to_file(path)?;
         Ok(())
     }
 }
+
+/// How EXR files are encoded: the library's fast lossless encoding (run lengths in tiles of
+/// 64x64), its tiles stored in increasing order. The tiles are compressed in parallel; without
+/// an order the file would hold them in the order they finish, so the same image could make
+/// files of different bytes.
+const EXR_ENCODING: exr::prelude::Encoding = exr::prelude::Encoding {
+    line_order: exr::prelude::LineOrder::Increasing,
+    ..exr::prelude::Encoding::FAST_LOSSLESS
+};
 
 /// Writes `image` (channels `R`, `G`, `B`, `A`) and `aovs` (layers `albedo.{R,G,B}`,
 /// `normal.{X,Y,Z}`, `depth.Z`, `samples.Y`) as one linear 32-bit float OpenEXR file,
@@ -166,7 +179,7 @@ pub(crate) fn write_layers_exr(
         let layer = Layer::new(
             (image.width as usize, image.height as usize),
             LayerAttributes::named("oxray"),
-            Encoding::FAST_LOSSLESS,
+            EXR_ENCODING,
             AnyChannels::sort(list),
         );
         exr::prelude::Image::from_layer(layer)
@@ -260,5 +273,37 @@ mod tests {
             .save(Path::new("x.bmp"))
             .unwrap_err()
             .contains("unknown image format"));
+    }
+
+    #[test]
+    fn exr_files_hold_their_tiles_in_order() {
+        // Tiles compressed in parallel, stored in increasing order: the same image makes the
+        // same bytes, whichever tile finished first.
+        let (w, h) = (300u32, 200u32);
+        let img = Image {
+            width: w,
+            height: h,
+            pixels: (0..w * h)
+                .map(|i| [(i % 97) as f32 * 0.1, (i / w) as f32, 0.5, 1.0])
+                .collect(),
+        };
+        let dir = std::env::temp_dir();
+        let paths: Vec<_> = (0..3)
+            .map(|k| dir.join(format!("oxray-tiles-{}-{k}.exr", std::process::id())))
+            .collect();
+        for p in &paths {
+            img.save(p).unwrap();
+        }
+        let bytes: Vec<Vec<u8>> = paths.iter().map(|p| std::fs::read(p).unwrap()).collect();
+        let meta = exr::meta::MetaData::read_from_file(&paths[0], false).unwrap();
+        for p in &paths {
+            std::fs::remove_file(p).ok();
+        }
+        assert_eq!(
+            meta.headers[0].line_order,
+            exr::meta::attribute::LineOrder::Increasing
+        );
+        assert!(meta.headers[0].chunk_count > 4, "one tile proves nothing");
+        assert!(bytes.windows(2).all(|b| b[0] == b[1]));
     }
 }
