@@ -173,6 +173,12 @@ impl Surface {
         !self.dielectric && self.specular == 0.0 && self.metallic == 0.0
     }
 
+    /// Whether the surface is Lambertian (no coat, no metal, not a dielectric).
+    #[must_use]
+    pub fn is_lambertian(&self) -> bool {
+        self.lambertian()
+    }
+
     /// What depends on the outgoing direction only: Turquin's factor that scales the GGX lobe,
     /// the compensated lobe's albedo `E_spec`, and the probability of sampling the specular
     /// lobe rather than the diffuse one (in proportion to their albedos, so that a pure metal

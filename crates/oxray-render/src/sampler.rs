@@ -330,6 +330,33 @@ impl Draws {
     }
 }
 
+/// The first eight numbers of path vertex `depth` (its first two groups of dimensions) of
+/// sample `index` for the pixel with Sobol seed `seed` ([`pixel_seed`]): what
+/// [`Draws::get`] returns for those dimensions with the Sobol sampler. `None` past
+/// [`SOBOL_DIMENSIONS`], where the draws are hash numbers.
+#[inline]
+#[must_use]
+pub fn vertex_numbers(index: u32, depth: u32, seed: u32) -> Option<[f32; 8]> {
+    let first = dim::vertex(depth);
+    if first.saturating_add(8) > SOBOL_DIMENSIONS {
+        return None;
+    }
+    let (a, b) = (
+        Group::new(index, first / 4, seed),
+        Group::new(index, first / 4 + 1, seed),
+    );
+    Some([
+        a.coordinate(0),
+        a.coordinate(1),
+        a.coordinate(2),
+        a.coordinate(3),
+        b.coordinate(0),
+        b.coordinate(1),
+        b.coordinate(2),
+        b.coordinate(3),
+    ])
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -360,6 +387,23 @@ mod tests {
                         reference(index, dim, seed).to_bits(),
                         "index {index}, dim {dim}, seed {seed}"
                     );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn vertex_numbers_are_those_draws_return() {
+        for depth in 0..6 {
+            for sample in [0u32, 3, 77] {
+                let seed = pixel_seed(4321, 0x5eed);
+                let got = vertex_numbers(sample, depth, seed);
+                let mut d = Draws::new(Sampler::Sobol, Rng(1), 4321, sample, 0x5eed);
+                d.base = dim::vertex(depth);
+                let want: Vec<u32> = (0..8).map(|k| d.get(k).to_bits()).collect();
+                match got {
+                    Some(v) => assert_eq!(v.map(f32::to_bits).to_vec(), want),
+                    None => assert!(depth >= 5),
                 }
             }
         }

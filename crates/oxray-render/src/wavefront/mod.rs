@@ -21,6 +21,8 @@
 //! IAS); alpha-tested materials go through the queries' filters. Scenes with motion render
 //! through the pipeline.
 
+mod lanes;
+
 use crate::programs::{self, Params, PathHit, PathState, PixelAt, ShadowRay};
 use glam::Vec3;
 use oxray::bvh::InstanceData;
@@ -186,6 +188,11 @@ impl<'g> Wavefront<'g> {
         live.clear();
         live.extend(0..lanes.len() as u32);
         let mut traced = 0u64;
+        // Plain diffuse vertices go eight at a time ([`lanes`]) where the scene allows it.
+        let lanes_apply = lanes::applies(p) && matches!(self.root, Root::Gas(_));
+        // Every live path is at the same vertex: the tile's paths start together and each
+        // step adds one vertex to each path it does not end.
+        let mut depth = 0u32;
         while !live.is_empty() {
             rays.clear();
             rays.extend(live.iter().map(|&l| {
@@ -204,12 +211,22 @@ impl<'g> Wavefront<'g> {
             traced += rays.len() as u64;
 
             shadows.clear();
+            let mut batch = Batch::default();
             for ((&l, ray), hit) in live.iter().zip(rays.iter()).zip(hits.iter()) {
                 let lane = &mut lanes[l as usize];
                 lane.traces_left -= 1;
                 match hit {
                     Some(hit) => {
                         let data = self.record(hit);
+                        if lanes_apply && lane.state.depth == depth {
+                            if let Some(input) = lane_input(p, data, ray, hit, lane) {
+                                batch.push(l, input);
+                                if batch.n == lanes::LANES {
+                                    batch.flush(p, lanes, shadows);
+                                }
+                                continue;
+                            }
+                        }
                         let view = QueryHit::new(p, data, ray, hit, self.root.instance(hit));
                         let made = programs::vertex(p, &view, data, lane.at, &mut lane.state);
                         shadows.extend(made.into_iter().flatten().map(|r| (l, r)));
@@ -217,6 +234,7 @@ impl<'g> Wavefront<'g> {
                     None => programs::miss_environment(p, &mut lane.state, ray.direction),
                 }
             }
+            batch.flush(p, lanes, shadows);
 
             shadow_rays.clear();
             shadow_rays.extend(shadows.iter().map(|&(l, r)| Ray {
@@ -243,6 +261,7 @@ impl<'g> Wavefront<'g> {
                 let lane = &lanes[l as usize];
                 lane.state.done == 0 && lane.traces_left > 0
             });
+            depth += 1;
         }
         for lane in lanes.iter() {
             programs::accumulate(p, lane.at.launch as usize, &lane.state);
@@ -319,6 +338,69 @@ impl<'g> Wavefront<'g> {
             h.instance_index,
         )
     }
+}
+
+/// Up to [`lanes::LANES`] plain diffuse vertices waiting to be shaded together.
+#[derive(Default)]
+struct Batch {
+    lane: [u32; lanes::LANES],
+    inputs: [lanes::Input; lanes::LANES],
+    n: usize,
+}
+
+impl Batch {
+    fn push(&mut self, lane: u32, input: lanes::Input) {
+        self.lane[self.n] = lane;
+        self.inputs[self.n] = input;
+        self.n += 1;
+    }
+
+    /// Shades the batch's vertices, and empties it.
+    fn flush(&mut self, p: &Params, lanes: &mut [Lane], shadows: &mut Vec<(u32, ShadowRay)>) {
+        if self.n == 0 {
+            return;
+        }
+        let mut out = [lanes::Output::default(); lanes::LANES];
+        lanes::vertices(p, &self.inputs, self.n, &mut out);
+        for (&l, (state, shadow)) in self.lane.iter().zip(out).take(self.n) {
+            lanes[l as usize].state = state;
+            shadows.extend(shadow.map(|r| (l, r)));
+        }
+        self.n = 0;
+    }
+}
+
+/// A hit's vertex as [`lanes::vertices`] takes it, if it is a plain diffuse one (a hit without
+/// an instance: the root is a GAS).
+fn lane_input(
+    p: &Params,
+    data: HitGroupData,
+    ray: &Ray,
+    hit: &Hit,
+    lane: &Lane,
+) -> Option<lanes::Input> {
+    let m = p.scene.materials.get(data.material as usize)?;
+    let prim = *p.prims.get(data.geometry as usize)?;
+    if !lanes::qualifies(m, prim) {
+        return None;
+    }
+    Some(lanes::Input {
+        state: lane.state,
+        image_pixel: lane.at.image,
+        origin: ray.origin,
+        dir: ray.direction,
+        t: hit.t,
+        vertices: QueryHit::new(p, data, ray, hit, None).vertices,
+        base: Vec3::from_slice(&m.base_color[..3]),
+        emissive: Vec3::from(m.emissive),
+        double_sided: m.double_sided,
+        area_pdf: p.lights.area_pdf(data.material),
+        sampled: !p
+            .moving
+            .get(hit.instance_id as usize)
+            .copied()
+            .unwrap_or(false),
+    })
 }
 
 /// A query's hit as a path vertex sees it: what a closest-hit program's context reads.
@@ -557,5 +639,30 @@ mod tests {
         let mut o = opts(Sampler::Independent);
         o.aovs = true;
         same_as_pipeline(&scene, &Environment::sky(0.5), &o);
+    }
+
+    #[test]
+    fn diffuse_vertices_in_lanes_render_as_through_the_pipeline() {
+        // Scenes whose vertices go eight at a time: the box lit by its light and a sky (light
+        // samples on both), by the sky alone (its light turned off), deep paths past the Sobol
+        // sequence's dimensions, both samplers, a crop window.
+        let mut scene = oxray_scene::cornell_box();
+        let sky = Environment::sky(0.7);
+        for sampler in [Sampler::Sobol, Sampler::Independent] {
+            let mut o = opts(sampler);
+            o.max_depth = 9;
+            o.roulette_depth = 2;
+            same_as_pipeline(&scene, &sky, &o);
+            o.crop = Some(CropWindow::new(3, 4, 29, 25).unwrap());
+            same_as_pipeline(&scene, &Environment::uniform(Vec3::ZERO), &o);
+        }
+        for m in &mut scene.materials {
+            m.emissive = [0.0; 3];
+        }
+        same_as_pipeline(
+            &scene,
+            &Environment::uniform(Vec3::splat(0.8)),
+            &opts(Sampler::Sobol),
+        );
     }
 }
