@@ -96,8 +96,9 @@ fn map<const K: usize>(f: impl Fn(usize) -> [f32; K]) -> [F; K] {
     out
 }
 
-/// The vertices of up to [`LANES`] paths (`inputs[n..]` are padding), each what
-/// [`programs::vertex`] computes for it; `out[i]` for `inputs[i]`.
+/// The vertices of up to [`LANES`] paths, all at one depth (`inputs[n..]` are padding, and
+/// `n` is at least 1), each what [`programs::vertex`] computes for it; `out[i]` for
+/// `inputs[i]`.
 pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]) {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
