@@ -226,6 +226,12 @@ struct __oxray_ThreadState {
 // traversal's node fetches and stack.
 __shared__ __oxray_ThreadState* __oxray_states[OXRAY_PIPELINE_BLOCK];
 
+// The pointer stays generic. (Telling the compiler that the state is local memory,
+// `__builtin_assume(__isLocal(s))`, makes it address the state with `ld.local` and `st.local`
+// in every function, but ptxas then takes a callee's local accesses through such an address
+// for accesses to the callee's own frame and drops its stores: the programs' writes to the
+// state are lost. Measured on a device and in the assembly, docs/BENCHMARKS.md, "The pipeline,
+// eleventh round".)
 static __forceinline__ __device__ __oxray_ThreadState& __oxray_state() {
     return *__oxray_states[threadIdx.x];
 }
