@@ -176,7 +176,7 @@ fn store(s: &PathState, mut set: impl FnMut(usize, u32)) {
     }
 }
 
-fn power_heuristic(a: f32, b: f32) -> f32 {
+pub(crate) fn power_heuristic(a: f32, b: f32) -> f32 {
     let (a2, b2) = (a * a, b * b);
     if a2 + b2 > 0.0 {
         a2 / (a2 + b2)
@@ -626,21 +626,10 @@ pub(crate) fn vertex(
         let u = dim::BSDF.map(|k| rng.get(k));
         match surf.sample(sh.ns, wo, sh.front, u) {
             Some(b) if surf.dielectric || b.wi.dot(sh.ng) > 0.0 => {
-                thr *= b.weight;
-                s.pdf = b.pdf;
-                s.origin = offset(p, &sh, b.wi).to_array();
-                s.direction = b.wi.to_array();
-                if s.depth >= p.roulette_depth {
-                    let q = thr.max_element().clamp(0.05, 1.0);
-                    if rng.get(dim::ROULETTE) >= q {
-                        s.done = 1;
-                    } else {
-                        thr /= q;
-                    }
-                }
-                if !thr.is_finite() {
-                    s.done = 1;
-                }
+                let origin = offset(p, &sh, b.wi);
+                continue_path(p, s, &mut thr, b.weight, b.pdf, origin, b.wi, || {
+                    rng.get(dim::ROULETTE)
+                });
             }
             _ => s.done = 1,
         }
@@ -649,6 +638,37 @@ pub(crate) fn vertex(
     s.radiance = rad.to_array();
     s.throughput = thr.to_array();
     shadows
+}
+
+/// The path's next ray after an accepted BSDF sample (`weight`, `pdf`, the ray from `origin`
+/// towards `wi`), and Russian roulette from vertex `p.roulette_depth` on, whose number `draw`
+/// gives (drawn only then). [`vertex`] and the wavefront's lanes both end a vertex here.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn continue_path(
+    p: &Params,
+    s: &mut PathState,
+    thr: &mut Vec3,
+    weight: Vec3,
+    pdf: f32,
+    origin: Vec3,
+    wi: Vec3,
+    draw: impl FnOnce() -> f32,
+) {
+    *thr *= weight;
+    s.pdf = pdf;
+    s.origin = origin.to_array();
+    s.direction = wi.to_array();
+    if s.depth >= p.roulette_depth {
+        let q = thr.max_element().clamp(0.05, 1.0);
+        if draw() >= q {
+            s.done = 1;
+        } else {
+            *thr /= q;
+        }
+    }
+    if !thr.is_finite() {
+        s.done = 1;
+    }
 }
 
 /// One light sample (a triangle or the environment) with its MIS weight against BSDF sampling:

@@ -173,7 +173,7 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
                     true => (1.0 - p.p_env) * i[l].area_pdf * t * t / cos_l,
                     false => 0.0,
                 };
-                power_heuristic(s.pdf, light_pdf)
+                programs::power_heuristic(s.pdf, light_pdf)
             } else {
                 1.0
             };
@@ -205,11 +205,16 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
     let salt = programs::stream_salt(p.seed);
     let mut rng: [u32; LANES] = std::array::from_fn(|l| i[l].state.seed);
     let mut hashed = [[0.0f32; LANES]; 7];
-    for h in &mut hashed {
+    // The stream after the light's four draws: the shadow ray's payload word 0.
+    let mut rng4 = [0u32; LANES];
+    for (k, h) in hashed.iter_mut().enumerate() {
         for l in 0..LANES {
             let mut g = Rng(rng[l]);
             h[l] = g.uniform();
             rng[l] = g.0;
+        }
+        if k == 3 {
+            rng4 = rng;
         }
     }
     // Draw order: the light's pick and point (dimensions 3, 2, 0, 1), the BSDF's (6, 4, 5);
@@ -229,16 +234,6 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
         }
         numbers[7][l] = seq.map_or(f32::NAN, |v| v[7]);
     }
-    // The stream after the light's four draws: the shadow ray's payload word 0.
-    let mut rng4 = [0u32; LANES];
-    for l in 0..LANES {
-        let mut g = Rng(i[l].state.seed);
-        for _ in 0..4 {
-            g.uniform();
-        }
-        rng4[l] = g.0;
-    }
-
     // `Surface::eval` of a Lambertian surface at light direction `wi`.
     let eval = |l: usize, wi: Vec3| {
         let d = i[l].dir;
@@ -299,7 +294,7 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
                 dir: wi,
                 tmax: f32::INFINITY,
                 seed: rng4[l],
-                radiance: thr_l * (f * le * (power_heuristic(pdf, bsdf_pdf) / pdf)),
+                radiance: thr_l * (f * le * (programs::power_heuristic(pdf, bsdf_pdf) / pdf)),
             });
             continue;
         }
@@ -340,7 +335,7 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
         if le == Vec3::ZERO || pdf.is_nan() || pdf <= 0.0 {
             continue;
         }
-        let contribution = f * le * (power_heuristic(pdf, bsdf_pdf) / pdf);
+        let contribution = f * le * (programs::power_heuristic(pdf, bsdf_pdf) / pdf);
         let thr_l = Vec3::new(thr[0][l], thr[1][l], thr[2][l]);
         shadows[l] = Some(ShadowRay {
             from: Vec3::new(fx[l], fy[l], fz[l]),
@@ -415,31 +410,24 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
             (pdf > 0.0 && pdf.is_finite()).then(|| (f / pdf, pdf))
         };
         let wi_ng = wx[l] * gx[l] + wy[l] * gy[l] + wz[l] * gz[l];
-        match (cos_o[l] > 0.0).then_some(sampled).flatten() {
+        match sampled {
             Some((weight, pdf)) if wi_ng > 0.0 => {
-                t *= weight;
-                s.pdf = pdf;
-                s.origin = [ox[l], oy[l], oz[l]];
-                s.direction = [wx[l], wy[l], wz[l]];
-                if s.depth >= p.roulette_depth {
-                    let q = t.max_element().clamp(0.05, 1.0);
+                let (origin, wi) = (
+                    Vec3::new(ox[l], oy[l], oz[l]),
+                    Vec3::new(wx[l], wy[l], wz[l]),
+                );
+                programs::continue_path(p, &mut s, &mut t, weight, pdf, origin, wi, || {
+                    // The roulette's draw: the hash stream advances; the number is the
+                    // sequence's where it reaches.
                     let mut g = Rng(seed);
                     let u = g.uniform();
                     seed = g.0;
-                    let x = if numbers[7][l].is_nan() {
+                    if numbers[7][l].is_nan() {
                         u
                     } else {
                         numbers[7][l]
-                    };
-                    if x >= q {
-                        s.done = 1;
-                    } else {
-                        t /= q;
                     }
-                }
-                if !t.is_finite() {
-                    s.done = 1;
-                }
+                });
             }
             _ => s.done = 1,
         }
@@ -447,14 +435,5 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
         s.radiance = [rad[0][l], rad[1][l], rad[2][l]];
         s.throughput = t.to_array();
         out[l] = (s, shadows[l]);
-    }
-}
-
-fn power_heuristic(a: f32, b: f32) -> f32 {
-    let (a2, b2) = (a * a, b * b);
-    if a2 + b2 > 0.0 {
-        a2 / (a2 + b2)
-    } else {
-        0.0
     }
 }
