@@ -5,7 +5,8 @@
 //! the device header ([`DEVICE_HEADER`]), every module's source, and generated dispatch
 //! functions: program groups are numbered in the order the pipeline is given them, the host
 //! writes that number into word 0 of each SBT record header as it uploads the SBT, and the
-//! device calls a group's programs through a `switch` on it.
+//! device calls a group's programs through a `switch` on it (or, for a kind of group the
+//! pipeline has only one of, calls that group's programs without reading the header).
 
 use crate::context::{compile_options, guarded, nvrtc_compile, nvrtc_version, CudaContext};
 use crate::error::{driver, CudaError};
@@ -362,18 +363,33 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
         s.push('\n');
     }
     s.push_str("#line 1 \"oxray_pipeline.cu\"\n#undef __global__\n#define __global__ __location__(global)\n");
-    let switch = |name: &str, ret: &str, pick: &dyn Fn(&GroupInner) -> Option<String>| {
+    // A dispatch function receives the group index of a record of one SBT region, and
+    // `pack_sbt` admits into a region only headers of this pipeline's groups of the region's
+    // kind: where the pipeline has one group of that kind, every record names it, and the
+    // function calls its program without reading the index. The record's header word, a load
+    // on the way from a trace's hit (or from the launch) to its program, is then never read.
+    let switch = |name: &str,
+                  ret: &str,
+                  kind: CudaProgramGroupKind,
+                  pick: &dyn Fn(&GroupInner) -> Option<String>| {
+        let default = match ret {
+            "bool" => "return false;",
+            "void*" | "const void*" => "return nullptr;",
+            _ => "return;",
+        };
+        let mut of_kind = groups.iter().filter(|g| g.inner.kind == kind);
+        if let (Some(only), None) = (of_kind.next(), of_kind.next()) {
+            let body = pick(&only.inner).unwrap_or_else(|| default.to_string());
+            return format!(
+                "__device__ {ret} {name}(u32 group) {{\n    (void)group;\n    {body}\n}}\n"
+            );
+        }
         let mut f = format!("__device__ {ret} {name}(u32 group) {{\n    switch (group) {{\n");
         for (i, g) in groups.iter().enumerate() {
             if let Some(body) = pick(&g.inner) {
                 f.push_str(&format!("    case {i}: {body}\n"));
             }
         }
-        let default = match ret {
-            "bool" => "return false;",
-            "void*" | "const void*" => "return nullptr;",
-            _ => "return;",
-        };
         f.push_str(&format!("    default: {default}\n    }}\n}}\n"));
         f
     };
@@ -384,35 +400,42 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
                 .flatten()
         }
     };
+    use CudaProgramGroupKind::{Callables, Exception, HitGroup, Miss, RayGen};
     s.push_str(&switch(
         "__oxray_call_raygen",
         "void",
-        &call(CudaProgramGroupKind::RayGen),
+        RayGen,
+        &call(RayGen),
     ));
-    s.push_str(&switch(
-        "__oxray_call_miss",
-        "void",
-        &call(CudaProgramGroupKind::Miss),
-    ));
+    s.push_str(&switch("__oxray_call_miss", "void", Miss, &call(Miss)));
     s.push_str(&switch(
         "__oxray_call_closesthit",
         "void",
-        &call(CudaProgramGroupKind::HitGroup),
+        HitGroup,
+        &call(HitGroup),
     ));
     s.push_str(&switch(
         "__oxray_call_exception",
         "void",
-        &call(CudaProgramGroupKind::Exception),
+        Exception,
+        &call(Exception),
     ));
-    s.push_str(&switch("__oxray_call_anyhit", "void", &|g: &GroupInner| {
-        g.any_hit.as_ref().map(|e| format!("{}(); return;", e.name))
-    }));
-    s.push_str(&switch("__oxray_has_anyhit", "bool", &|g: &GroupInner| {
-        g.any_hit.as_ref().map(|_| "return true;".to_string())
-    }));
+    s.push_str(&switch(
+        "__oxray_call_anyhit",
+        "void",
+        HitGroup,
+        &|g: &GroupInner| g.any_hit.as_ref().map(|e| format!("{}(); return;", e.name)),
+    ));
+    s.push_str(&switch(
+        "__oxray_has_anyhit",
+        "bool",
+        HitGroup,
+        &|g: &GroupInner| g.any_hit.as_ref().map(|_| "return true;".to_string()),
+    ));
     s.push_str(&switch(
         "__oxray_call_intersection",
         "void",
+        HitGroup,
         &|g: &GroupInner| {
             g.intersection
                 .as_ref()
@@ -422,27 +445,37 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     s.push_str(&switch(
         "__oxray_has_intersection",
         "bool",
+        HitGroup,
         &|g: &GroupInner| g.intersection.as_ref().map(|_| "return true;".to_string()),
     ));
     // Callables have signatures of their own: the group gives the function's address, which
     // optixDirectCall / optixContinuationCall call through a pointer of the caller's type.
     let address = |e: &Entry| format!("return reinterpret_cast<void*>(&{});", e.name);
-    s.push_str(&switch("__oxray_dc_of", "void*", &|g: &GroupInner| {
-        (g.kind == CudaProgramGroupKind::Callables)
-            .then(|| g.main.as_ref().map(address))
-            .flatten()
-    }));
-    s.push_str(&switch("__oxray_cc_of", "void*", &|g: &GroupInner| {
-        g.continuation.as_ref().map(address)
-    }));
+    s.push_str(&switch(
+        "__oxray_dc_of",
+        "void*",
+        Callables,
+        &|g: &GroupInner| {
+            (g.kind == Callables)
+                .then(|| g.main.as_ref().map(address))
+                .flatten()
+        },
+    ));
+    s.push_str(&switch(
+        "__oxray_cc_of",
+        "void*",
+        Callables,
+        &|g: &GroupInner| g.continuation.as_ref().map(address),
+    ));
     // Each callable's signature, as a tag unique to its function type, which a call compares
     // with its own (CALLABLE_PARAMETER_MISMATCH otherwise, as on the CPU).
     let signature = |e: &Entry| format!("return __oxray_signature<decltype(&{})>();", e.name);
     s.push_str(&switch(
         "__oxray_dc_signature",
         "const void*",
+        Callables,
         &|g: &GroupInner| {
-            (g.kind == CudaProgramGroupKind::Callables)
+            (g.kind == Callables)
                 .then(|| g.main.as_ref().map(signature))
                 .flatten()
         },
@@ -450,6 +483,7 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
     s.push_str(&switch(
         "__oxray_cc_signature",
         "const void*",
+        Callables,
         &|g: &GroupInner| g.continuation.as_ref().map(signature),
     ));
     s.push_str(
@@ -1465,13 +1499,28 @@ mod tests {
         let (_, g) = groups();
         let src = pipeline_source(&g);
         assert_eq!(src.matches("#line 1 \"module").count(), 1);
-        assert!(src.contains("case 0: __raygen__a(); return;"));
-        assert!(src.contains("case 1: __miss__m(); return;"));
-        assert!(src.contains("case 2: __closesthit__c(); return;"));
+        let body = |name: &str| {
+            let at = src.find(&format!(" {name}(u32 group) {{")).unwrap();
+            src[at..at + src[at..].find("\n}\n").unwrap()].to_string()
+        };
+        // Two miss groups: the record's group index picks the program.
+        let miss = body("__oxray_call_miss");
+        assert!(miss.contains("case 1: __miss__m(); return;"));
         assert!(
-            !src.contains("case 3:"),
+            !miss.contains("case 3:"),
             "a miss group without a program calls nothing"
         );
+        // One group of the kind: every record of the region names it (`pack_sbt`), so its
+        // program is called without reading the index.
+        for (name, call) in [
+            ("__oxray_call_raygen", "__raygen__a(); return;"),
+            ("__oxray_call_closesthit", "__closesthit__c(); return;"),
+        ] {
+            let f = body(name);
+            assert!(f.contains(call) && !f.contains("switch"), "{f}");
+        }
+        // No exception group: the exception dispatch calls nothing.
+        assert!(!body("__oxray_call_exception").contains("();"));
         let o = pipeline_compile_options(
             (9, 0),
             &PipelineCompileOptions::default(),
@@ -1563,8 +1612,12 @@ mod tests {
             let at = src.find(&format!(" {name}(u32 group) {{")).unwrap();
             src[at..at + src[at..].find("\n}\n").unwrap()].to_string()
         };
-        assert!(body("__oxray_call_intersection").contains("case 1: __intersection__i(); return;"));
-        assert!(body("__oxray_has_intersection").contains("case 1: return true;"));
+        // The one hit group's programs, called without reading the record's group index.
+        let is = body("__oxray_call_intersection");
+        assert!(is.contains("__intersection__i(); return;") && !is.contains("switch"));
+        let has = body("__oxray_has_intersection");
+        assert!(has.contains("return true;") && !has.contains("switch"));
+        assert!(body("__oxray_has_anyhit").contains("return false;"));
         let dc = body("__oxray_dc_of");
         assert!(dc.contains("case 2: return reinterpret_cast<void*>(&__direct_callable__d);"));
         assert!(dc.contains("case 4:") && !dc.contains("case 3:"));

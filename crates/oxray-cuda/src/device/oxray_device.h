@@ -8,7 +8,8 @@
 // How it is compiled. oxray compiles each pipeline into one kernel (`__oxray_pipeline`) with
 // NVRTC. The translation unit is, in order: the traversal code (kernels/trace.cu), this header,
 // every module of the pipeline, then generated dispatch functions (a `switch` on the program
-// index that the host writes into word 0 of each SBT record header) and the kernel itself.
+// index that the host writes into word 0 of each SBT record header; for a kind of group the
+// pipeline has one of, a plain call that reads no header) and the kernel itself.
 // While the modules are compiled, `__global__` is defined as `__device__`, so that the
 // guide's `extern "C" __global__ void __raygen__name()` entry points become device functions
 // that the kernel and `optixTrace` call.
@@ -2005,31 +2006,41 @@ static __noinline__ __device__ void __oxray_trace(OptixTraversableHandle handle,
     __oxray_leave(st, n, payload, frame);
 }
 
+// The payload a trace on the fast path hands back to its call site: returned by value, in
+// registers for a few words, rather than stored into an array of the caller's that the caller
+// then reloads (two local-memory round trips on the way from the program to the caller).
+template <unsigned int N>
+struct __oxray_Payload {
+    u32 v[N > 0 ? N : 1];
+};
+
 // The end of a trace whose traversal the call site did (`optixTrace`, after `__oxray_enter`
 // and `__oxray_fast_walk`): the closest hit `fast` of the triangle GAS `g`, written straight
 // into the state (no intermediate hit record, no path of its own: the shared root path), then
-// the closest-hit or miss program. The ray's flags are read back from the state, so that the
-// call site keeps as few values alive across its walk as the query kernels do. (Copying the
-// payload out at the call site instead, to keep it in registers there, measured slower: the
-// call then has more live values to save.)
-static __noinline__ __device__ void __oxray_trace_fast(const __oxray_Traversable* g, Best fast,
-                                                       unsigned int sbt_offset,
-                                                       unsigned int sbt_stride,
-                                                       unsigned int miss_index, unsigned int n,
-                                                       unsigned int* payload,
-                                                       const __oxray_Frame& frame) {
+// the closest-hit or miss program; returns the payload. The ray's flags are read back from the
+// state, so that the call site keeps as few values alive across its walk as the query kernels
+// do. (Copying the payload out at the call site instead, to keep it in registers there,
+// measured slower: the call then has more live values to save.)
+template <unsigned int N>
+static __noinline__ __device__ __oxray_Payload<N> __oxray_trace_fast(
+    const __oxray_Traversable* g, Best fast, unsigned int sbt_offset, unsigned int sbt_stride,
+    unsigned int miss_index, const __oxray_Frame& frame) {
     __oxray_ThreadState& st = __oxray_state();
     if (fast.slot != MISS_SLOT) {
+        const u32 s = fast.slot & ~BACK_FACE_BIT;
+        // The ray's flags and the GAS's record count are both loaded before either is tested,
+        // so that the two loads overlap rather than follow each other: the descriptor's line
+        // has usually left the L1 during the walk, and so may the state's. (The descriptor is
+        // read-only while a launch runs.) With one SBT record the SBT-GAS index is 0: the
+        // slot's entry is needed only when a program reads the primitive or that index.
         const u32 flags = st.ray.flags;
+        const u32 count = __ldg(&g->count);
+        uint2 info = make_uint2(0u, 0u);
+        if (__OXRAY_STORES(true, __OXRAY_READS_PRIMITIVE | __OXRAY_READS_SBT_GAS) ||
+            count != 1u) {
+            info = reinterpret_cast<const uint2*>(g->info)[s];
+        }
         if ((flags & OPTIX_RAY_FLAG_DISABLE_CLOSESTHIT) == 0u) {
-            const u32 s = fast.slot & ~BACK_FACE_BIT;
-            // With one SBT record the SBT-GAS index is 0: the slot's entry is needed only
-            // when a program reads the primitive or that index.
-            uint2 info = make_uint2(0u, 0u);
-            if (__OXRAY_STORES(true, __OXRAY_READS_PRIMITIVE | __OXRAY_READS_SBT_GAS) ||
-                g->count != 1u) {
-                info = reinterpret_cast<const uint2*>(g->info)[s];
-            }
             __oxray_TraceArgs a;
             a.flags = flags;
             a.sbt_offset = sbt_offset;
@@ -2058,7 +2069,9 @@ static __noinline__ __device__ void __oxray_trace_fast(const __oxray_Traversable
     } else {
         __oxray_miss(st, miss_index, &__oxray_root_path);
     }
-    __oxray_leave(st, n, payload, frame);
+    __oxray_Payload<N> out;
+    __oxray_leave(st, N, out.v, frame);
+    return out;
 }
 
 // The guide's optixTrace: 0 to 32 payload words, passed by reference, copied in and out.
@@ -2090,17 +2103,23 @@ static __forceinline__ __device__ void optixTrace(OptixTraversableHandle handle,
             const __oxray_Traversable* g = reinterpret_cast<const __oxray_Traversable*>(handle);
             const bool first = (rayFlags & OPTIX_RAY_FLAG_TERMINATE_ON_FIRST_HIT) != 0u;
             Best fast = first ? __oxray_fast_walk<true>(r, g) : __oxray_fast_walk<false>(r, g);
-            __oxray_trace_fast(g, fast, SBToffset, SBTstride, missSBTIndex, n, p, frame);
+            const __oxray_Payload<n> out =
+                __oxray_trace_fast<n>(g, fast, SBToffset, SBTstride, missSBTIndex, frame);
+            // The payload comes back in registers, not through the array the general
+            // traversal fills.
+            unsigned int i = 0;
+            ((payload = out.v[i++]), ...);
+            (void)i;
             traced = true;
         }
     }
     if (!traced) {
         __oxray_trace(handle, rayOrigin, rayDirection, tmin, tmax, rayTime, visibilityMask,
                       rayFlags, SBToffset, SBTstride, missSBTIndex, n, p);
+        unsigned int i = 0;
+        ((payload = p[i++]), ...);
+        (void)i;
     }
-    unsigned int i = 0;
-    ((payload = p[i++]), ...);
-    (void)i;
 }
 
 // The overload with a payload type (one payload type for now: the type is not checked).
