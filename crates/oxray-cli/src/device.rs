@@ -237,6 +237,8 @@ pub fn ray_pipeline_ptx(cc: (i32, i32)) -> Result<String, oxray::cuda::CudaError
     ];
     let compile = oxray::PipelineCompileOptions {
         num_payload_values: 1,
+        traversable_graph_flags: oxray::TraversableGraphFlags::ALLOW_SINGLE_GAS,
+        uses_primitive_type_flags: oxray::PrimitiveTypeFlags::TRIANGLE,
         ..Default::default()
     };
     compile_pipeline_ptx(

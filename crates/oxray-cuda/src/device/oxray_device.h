@@ -1295,6 +1295,20 @@ static __forceinline__ __device__ u32 __oxray_candidate(const __oxray_TraceArgs&
     return terminate ? 2u : 1u;
 }
 
+// Whether the pipeline's primitive types (§6.3) include `bits`: an empty set means triangles
+// and custom primitives.
+#define __OXRAY_TYPE_TRIANGLE (1u << 31)
+#define __OXRAY_TYPE_CUSTOM 1u
+#define __OXRAY_TYPE_SPHERE (1u << 6)
+#define __OXRAY_TYPE_CURVES (0xFBEu)
+#define __OXRAY_USES_TYPE(bits)                                                               \
+    (((OXRAY_PRIMITIVE_TYPE_FLAGS == 0u ? (__OXRAY_TYPE_TRIANGLE | __OXRAY_TYPE_CUSTOM)        \
+                                        : OXRAY_PRIMITIVE_TYPE_FLAGS) &                        \
+      (bits)) != 0u)
+// A pipeline whose graph flags allow a single GAS and nothing else (§5.9.1): its root check
+// rejects every other traversable, so no trace reaches an instance or a transform.
+#define __OXRAY_SINGLE_GAS_ONLY (OXRAY_GRAPH_FLAGS == 1u)
+
 // The pipeline's primitive types (§6.3), wherever in the graph a GAS sits. An empty set means
 // triangles and custom primitives: spheres and curves must be named (§9.1), a curve GAS's every
 // type (its descriptor's `types`).
@@ -1683,13 +1697,24 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
         path.gas = t;
         path.org = r.org;
         path.dir = r.dir;
-        if (t->kind == __OXRAY_GAS) return __oxray_walk_triangles(r, t, a, path, tmin, tmax, best);
-        if (t->kind == __OXRAY_SPHERE_GAS) {
+        // The walks of types the pipeline does not use are left out of its kernel (the
+        // check above has thrown for them), so that their registers do not size it.
+        if (__OXRAY_USES_TYPE(__OXRAY_TYPE_TRIANGLE) && t->kind == __OXRAY_GAS) {
+            return __oxray_walk_triangles(r, t, a, path, tmin, tmax, best);
+        }
+        if (__OXRAY_USES_TYPE(__OXRAY_TYPE_SPHERE) && t->kind == __OXRAY_SPHERE_GAS) {
             return __oxray_walk_spheres(r, t, a, path, tmin, tmax, best);
         }
-        if (t->kind == __OXRAY_CURVE_GAS) return __oxray_walk_curves(r, t, a, path, tmin, tmax, best);
-        return __oxray_walk_custom(r, t, a, path, tmin, tmax, best);
+        if (__OXRAY_USES_TYPE(__OXRAY_TYPE_CURVES) && t->kind == __OXRAY_CURVE_GAS) {
+            return __oxray_walk_curves(r, t, a, path, tmin, tmax, best);
+        }
+        if (__OXRAY_USES_TYPE(__OXRAY_TYPE_CUSTOM) && t->kind == __OXRAY_CUSTOM_GAS) {
+            return __oxray_walk_custom(r, t, a, path, tmin, tmax, best);
+        }
+        __oxray_throw(OPTIX_EXCEPTION_CODE_UNSUPPORTED_PRIMITIVE_TYPE, 0, nullptr);
+        return true;
     case __OXRAY_IAS: {
+        if (__OXRAY_SINGLE_GAS_ONLY) break;
         // Guide §5.10.3: an IAS's vanish flags hide every instance outside its range.
         const __oxray_Motion* m = __oxray_motion_of(t);
         if (m != nullptr && __oxray_vanishes(m->keys, m->flags, m->begin, m->end, a.time)) {
@@ -1699,6 +1724,7 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
     }
     case __OXRAY_MATRIX_MOTION:
     case __OXRAY_SRT_MOTION: {
+        if (__OXRAY_SINGLE_GAS_ONLY) break;
         // §5.10.4, §5.10.5: the transform at the ray's time; none where it vanishes, and an
         // interpolated matrix that is singular (a scale through zero) hides its child then.
         float o2w[12], w2o[12];
@@ -1713,6 +1739,7 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
                                tmin, tmax, best);
     }
     case __OXRAY_STATIC: {
+        if (__OXRAY_SINGLE_GAS_ONLY) break;
         const OptixStaticTransform* st = reinterpret_cast<const OptixStaticTransform*>(t->nodes);
         if (st->child == 0ull) return false;
         TraceRay o;
@@ -1722,9 +1749,10 @@ static __noinline__ __device__ bool __oxray_walk(const __oxray_Traversable* t, c
                                tmin, tmax, best);
     }
     default:
-        __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE, 0, nullptr);
-        return true;
+        break;
     }
+    __oxray_throw(OPTIX_EXCEPTION_CODE_TRAVERSAL_INVALID_TRAVERSABLE, 0, nullptr);
+    return true;
 }
 
 // The root of a trace against the pipeline's graph flags (§5.9.1) and traversable graph depth,
