@@ -3,9 +3,10 @@
 //! A tile's paths are all at one vertex, and on the commonest surfaces (Lambertian, without
 //! textures, vertex normals or vertex colours, lit by emissive triangles) a vertex is the same
 //! short sequence of arithmetic for every path. Here it runs as loops over eight paths' values
-//! side by side (structure of arrays), which the compiler turns into vector instructions; the
-//! steps that look things up (the light's triangle, the Sobol points) or call the maths
-//! library (the direction's sine and cosine) stay lane by lane. Every operation is the one
+//! side by side (structure of arrays), which the compiler turns into vector instructions, and
+//! so are the Sobol numbers' hashes and scrambles ([`sampler::vertex_numbers_lanes`]); the
+//! steps that look things up (the light's triangle, the Sobol table) or call the maths library
+//! (the direction's sine and cosine) stay lane by lane. Every operation is the one
 //! [`programs::vertex`] does, in the same order, so a path's numbers come out bit for bit the
 //! same; the wavefront's tests compare whole images with the pipeline's.
 
@@ -100,24 +101,63 @@ fn map<const K: usize>(f: impl Fn(usize) -> [f32; K]) -> [F; K] {
 /// `n` is at least 1), each what [`programs::vertex`] computes for it; `out[i]` for
 /// `inputs[i]`.
 pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]) {
+    // The vertex's Sobol numbers, apart: inlined into the vertex, their vector registers
+    // pushed the vertex's own values out to the stack (measured 5 % slower a sample).
+    let seq = if p.sampler == Sampler::Sobol {
+        let salt = programs::stream_salt(p.seed);
+        let seeds = std::array::from_fn(|l| sampler::pixel_seed(inputs[l].image_pixel, salt));
+        sobol_numbers(p.sample, inputs[0].state.depth, &seeds)
+    } else {
+        None
+    };
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2, checked just above.
-        unsafe { vertices_avx2(p, inputs, n, out) };
+        unsafe { vertices_avx2(p, inputs, n, seq, out) };
         return;
     }
-    vertices_of(p, inputs, n, out);
+    vertices_of(p, inputs, n, seq, out);
+}
+
+/// [`sampler::vertex_numbers_lanes`], in AVX2 where the processor has it.
+fn sobol_numbers(index: u32, depth: u32, seeds: &[u32; LANES]) -> Option<[F; 8]> {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2, checked just above.
+        return unsafe { sobol_numbers_avx2(index, depth, seeds) };
+    }
+    sampler::vertex_numbers_lanes(index, depth, seeds)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn vertices_avx2(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]) {
-    vertices_of(p, inputs, n, out);
+unsafe fn sobol_numbers_avx2(index: u32, depth: u32, seeds: &[u32; LANES]) -> Option<[F; 8]> {
+    sampler::vertex_numbers_lanes(index, depth, seeds)
 }
 
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn vertices_avx2(
+    p: &Params,
+    inputs: &[Input; LANES],
+    n: usize,
+    seq: Option<[F; 8]>,
+    out: &mut [Output],
+) {
+    vertices_of(p, inputs, n, seq, out);
+}
+
+/// The vertex; `seq`: its Sobol numbers ([`sampler::vertex_numbers_lanes`]), if the sampler
+/// is Sobol and the sequence reaches the vertex's dimensions.
 #[inline(always)]
 #[allow(clippy::too_many_lines)]
-fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]) {
+fn vertices_of(
+    p: &Params,
+    inputs: &[Input; LANES],
+    n: usize,
+    seq: Option<[F; 8]>,
+    out: &mut [Output],
+) {
     let i = inputs;
     // The hit point and the geometric normal (through the identity's inverse transpose, as
     // the closest-hit context computes it without an instance).
@@ -202,7 +242,6 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
 
     // The draws: the hash stream advances once per draw, the numbers are the vertex's Sobol
     // points where the sequence reaches (or the stream's own).
-    let salt = programs::stream_salt(p.seed);
     let mut rng: [u32; LANES] = std::array::from_fn(|l| i[l].state.seed);
     let mut hashed = [[0.0f32; LANES]; 7];
     // The stream after the light's four draws: the shadow ray's payload word 0.
@@ -220,20 +259,13 @@ fn vertices_of(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut [Output]
     // Draw order: the light's pick and point (dimensions 3, 2, 0, 1), the BSDF's (6, 4, 5);
     // roulette (7) only where it is asked.
     const ORDER: [usize; 7] = [3, 2, 0, 1, 6, 4, 5];
-    let mut numbers = [[0.0f32; LANES]; 8];
-    let sobol = p.sampler == Sampler::Sobol;
-    for l in 0..n {
-        let seq = if sobol {
-            let seed = sampler::pixel_seed(i[l].image_pixel, salt);
-            sampler::vertex_numbers(p.sample, i[l].state.depth, seed)
-        } else {
-            None
-        };
+    let numbers = seq.unwrap_or_else(|| {
+        let mut numbers = [[f32::NAN; LANES]; 8];
         for (k, &d) in ORDER.iter().enumerate() {
-            numbers[d][l] = seq.map_or(hashed[k][l], |v| v[d]);
+            numbers[d] = hashed[k];
         }
-        numbers[7][l] = seq.map_or(f32::NAN, |v| v[7]);
-    }
+        numbers
+    });
     // `Surface::eval` of a Lambertian surface at light direction `wi`.
     let eval = |l: usize, wi: Vec3| {
         let d = i[l].dir;
