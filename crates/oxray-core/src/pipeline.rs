@@ -171,7 +171,11 @@ impl PrimitiveTypeFlags {
 pub struct PipelineCompileOptions {
     /// Whether rays carry a time (otherwise `ray_time()` is 0).
     pub uses_motion_blur: bool,
-    /// Allowed traversable graphs.
+    /// Allowed traversable graphs (empty: any). A trace whose root the flags exclude raises
+    /// `UNSUPPORTED_SINGLE_LEVEL_GAS` or `TRAVERSAL_INVALID_TRAVERSABLE` (guide §5.9.1). On the
+    /// CUDA backend a pipeline that allows only a single GAS is compiled without the instance
+    /// and transform traversal, as OptiX specialises its pipelines: name the graphs the
+    /// pipeline traces.
     pub traversable_graph_flags: TraversableGraphFlags,
     /// Payload words a trace may pass (at most 32).
     pub num_payload_values: u32,
@@ -179,7 +183,9 @@ pub struct PipelineCompileOptions {
     pub num_attribute_values: u32,
     /// Exceptions checked for.
     pub exception_flags: ExceptionFlags,
-    /// Allowed primitive types.
+    /// Allowed primitive types (empty: triangles and custom primitives). A hit GAS of another
+    /// type raises `UNSUPPORTED_PRIMITIVE_TYPE` (guide §6.3); on the CUDA backend only the
+    /// named types' walks are compiled into the pipeline's kernel.
     pub uses_primitive_type_flags: PrimitiveTypeFlags,
 }
 
