@@ -368,27 +368,44 @@ pub fn vertex_numbers_lanes(index: u32, depth: u32, seeds: &[u32; 8]) -> Option<
     if first.saturating_add(8) > SOBOL_DIMENSIONS {
         return None;
     }
-    let reversed = index.reverse_bits();
     let mut out = [[0.0f32; 8]; 8];
-    for (half, out) in out.chunks_exact_mut(4).enumerate() {
-        let salt = GROUP_SALTS[(first / 4) as usize + half];
-        let seed: [u32; 8] = std::array::from_fn(|l| hash(seeds[l] ^ salt));
-        let shuffled: [u32; 8] = std::array::from_fn(|l| lk_permute(reversed, seed[l]));
-        let mut points = [[0u32; 8]; 4];
-        for (l, &s) in shuffled.iter().enumerate() {
-            for (k, x) in sobol_reversed(s).into_iter().enumerate() {
-                points[k][l] = x;
-            }
-        }
-        for (k, out) in out.iter_mut().enumerate() {
-            for l in 0..8 {
-                let x =
-                    lk_permute(points[k][l], hash(seed[l] ^ COORDINATE_SALTS[k])).reverse_bits();
-                out[l] = (x >> 8) as f32 * (1.0 / 16_777_216.0);
-            }
+    let (a, b) = out.split_at_mut(4);
+    group_lanes(index, first / 4, seeds, a);
+    group_lanes(index, first / 4 + 1, seeds, b);
+    Some(out)
+}
+
+/// The pixel offset's two Sobol numbers ([`dim::PIXEL`] and the next) of sample `index` for
+/// eight pixels with Sobol seeds `seeds`: what [`Draws::get`] returns for them with the Sobol
+/// sampler, `[k][l]` for dimension `k` of pixel `l`.
+#[inline(always)]
+#[must_use]
+pub fn pixel_numbers_lanes(index: u32, seeds: &[u32; 8]) -> [[f32; 8]; 2] {
+    let mut out = [[0.0f32; 8]; 2];
+    group_lanes(index, dim::PIXEL / 4, seeds, &mut out);
+    out
+}
+
+/// The first `out.len()` (at most four) coordinates of group `g` of sample `index` for eight
+/// pixels: [`Group::new`] and [`Group::coordinate`] as loops over the lanes.
+#[inline(always)]
+fn group_lanes(index: u32, g: u32, seeds: &[u32; 8], out: &mut [[f32; 8]]) {
+    let reversed = index.reverse_bits();
+    let salt = GROUP_SALTS[g as usize];
+    let seed: [u32; 8] = std::array::from_fn(|l| hash(seeds[l] ^ salt));
+    let shuffled: [u32; 8] = std::array::from_fn(|l| lk_permute(reversed, seed[l]));
+    let mut points = [[0u32; 8]; 4];
+    for (l, &s) in shuffled.iter().enumerate() {
+        for (k, x) in sobol_reversed(s).into_iter().enumerate() {
+            points[k][l] = x;
         }
     }
-    Some(out)
+    for (k, out) in out.iter_mut().enumerate().take(4) {
+        for l in 0..8 {
+            let x = lk_permute(points[k][l], hash(seed[l] ^ COORDINATE_SALTS[k])).reverse_bits();
+            out[l] = (x >> 8) as f32 * (1.0 / 16_777_216.0);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -448,6 +465,27 @@ mod tests {
                             );
                         }
                     }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn pixel_numbers_of_eight_pixels_are_those_draws_return() {
+        let mut h = 0x0bad_5eedu32;
+        for index in [0u32, 1, 2, 3, 17, 255, 4096, u32::MAX] {
+            let seeds: [u32; 8] = std::array::from_fn(|_| {
+                h = hash(h);
+                h
+            });
+            let lanes = pixel_numbers_lanes(index, &seeds);
+            for (l, &seed) in seeds.iter().enumerate() {
+                for (k, numbers) in lanes.iter().enumerate() {
+                    assert_eq!(
+                        numbers[l].to_bits(),
+                        sobol_sample(index, dim::PIXEL + k as u32, seed).to_bits(),
+                        "{index} {l} {k}"
+                    );
                 }
             }
         }

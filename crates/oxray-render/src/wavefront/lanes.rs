@@ -10,7 +10,8 @@
 //! [`programs::vertex`] does, in the same order, so a path's numbers come out bit for bit the
 //! same; the wavefront's tests compare whole images with the pipeline's.
 
-use crate::bsdf::Rng;
+use crate::bsdf::{hash, Rng};
+use crate::filter::sample_offset;
 use crate::programs::{self, Params, PathState, ShadowRay};
 use crate::sampler::{self, Sampler};
 use glam::Vec3;
@@ -117,6 +118,76 @@ pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut 
         return;
     }
     vertices_of(p, inputs, n, seq, out);
+}
+
+/// The camera paths of eight pixels (launch indices `lx`, `ly`), each what
+/// [`programs::camera_path`] makes: the same draws and arithmetic in the same order, as loops
+/// over the lanes. `None` for a moving camera (a shutter), whose paths draw a time.
+pub(super) fn camera_paths(
+    p: &Params,
+    lx: &[u32; LANES],
+    ly: &[u32; LANES],
+) -> Option<[PathState; LANES]> {
+    if p.shutter.is_some() {
+        return None;
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2, checked just above.
+        return Some(unsafe { camera_paths_avx2(p, lx, ly) });
+    }
+    Some(camera_paths_of(p, lx, ly))
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn camera_paths_avx2(
+    p: &Params,
+    lx: &[u32; LANES],
+    ly: &[u32; LANES],
+) -> [PathState; LANES] {
+    camera_paths_of(p, lx, ly)
+}
+
+#[inline(always)]
+fn camera_paths_of(p: &Params, lx: &[u32; LANES], ly: &[u32; LANES]) -> [PathState; LANES] {
+    let [w, h] = p.image;
+    let x: [u32; LANES] = std::array::from_fn(|l| p.window[0] + lx[l]);
+    let y: [u32; LANES] = std::array::from_fn(|l| p.window[1] + ly[l]);
+    let index: [u32; LANES] = std::array::from_fn(|l| y[l] * w + x[l]);
+    let salt = programs::stream_salt(p.seed);
+    // `Rng::new(index, p.sample, salt)`, then the two draws of the pixel's offset.
+    let key = hash(p.sample.wrapping_add(hash(salt)));
+    let mut rng: [u32; LANES] = std::array::from_fn(|l| hash(index[l] ^ key));
+    let mut hashed = [[0.0f32; LANES]; 2];
+    for h in &mut hashed {
+        for l in 0..LANES {
+            let mut g = Rng(rng[l]);
+            h[l] = g.uniform();
+            rng[l] = g.0;
+        }
+    }
+    let [jx, jy] = if p.sampler == Sampler::Sobol {
+        let seeds = std::array::from_fn(|l| sampler::pixel_seed(index[l], salt));
+        sampler::pixel_numbers_lanes(p.sample, &seeds)
+    } else {
+        hashed
+    };
+    let ox: F = std::array::from_fn(|l| 0.5 + sample_offset(p.filter, jx[l]));
+    let oy: F = std::array::from_fn(|l| 0.5 + sample_offset(p.filter, jy[l]));
+    let c = p.camera;
+    std::array::from_fn(|l| {
+        let sx = 2.0 * (x[l] as f32 + ox[l]) / w as f32 - 1.0;
+        let sy = 1.0 - 2.0 * (y[l] as f32 + oy[l]) / h as f32;
+        let dir = (c.forward + c.right * sx + c.up * sy).normalize();
+        PathState {
+            seed: rng[l],
+            throughput: [1.0; 3],
+            origin: c.origin.to_array(),
+            direction: dir.to_array(),
+            ..Default::default()
+        }
+    })
 }
 
 /// [`sampler::vertex_numbers_lanes`], in AVX2 where the processor has it.

@@ -175,15 +175,30 @@ impl<'g> Wavefront<'g> {
             occluded,
         } = scratch;
         lanes.clear();
-        for pixel in pixels {
-            let (lx, ly) = (pixel as u32 % width, pixel as u32 / width);
-            let (state, time) = programs::camera_path(p, lx, ly);
-            lanes.push(Lane {
-                state,
-                time,
-                at: PixelAt::new(p, lx, ly, width),
-                traces_left: p.max_depth + 1,
-            });
+        let (start, end) = (pixels.start as u32, pixels.end as u32);
+        for first in (start..end).step_by(lanes::LANES) {
+            let n = (end - first).min(lanes::LANES as u32) as usize;
+            // The camera rays eight at a time where the camera does not move; the launch
+            // indices past the tile's end are the last one's, computed and dropped.
+            let at = |k: usize| {
+                let pixel = first + k.min(n - 1) as u32;
+                (pixel % width, pixel / width)
+            };
+            let lx = std::array::from_fn(|k| at(k).0);
+            let ly = std::array::from_fn(|k| at(k).1);
+            let eight = lanes::camera_paths(p, &lx, &ly);
+            for k in 0..n {
+                let (state, time) = match &eight {
+                    Some(states) => (states[k], 0.0),
+                    None => programs::camera_path(p, lx[k], ly[k]),
+                };
+                lanes.push(Lane {
+                    state,
+                    time,
+                    at: PixelAt::new(p, lx[k], ly[k], width),
+                    traces_left: p.max_depth + 1,
+                });
+            }
         }
         live.clear();
         live.extend(0..lanes.len() as u32);
@@ -562,6 +577,12 @@ mod tests {
         o.aovs = true;
         o.crop = Some(CropWindow::new(5, 3, 31, 22).unwrap());
         o.seed = 7;
+        same_as_pipeline(&scene, &env, &o);
+        // The camera rays eight at a time: a window whose tiles end in part of a batch, both
+        // pixel filters' offset tables.
+        let mut o = opts(Sampler::Sobol);
+        o.crop = Some(CropWindow::new(2, 1, 39, 30).unwrap());
+        o.filter = crate::filter::Filter::Box;
         same_as_pipeline(&scene, &env, &o);
     }
 
