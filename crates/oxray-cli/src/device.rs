@@ -225,6 +225,23 @@ extern "C" __global__ void __closesthit__t() { optixSetPayload_0(__float_as_uint
 /// `oxray bench --backend cuda` compiles it, without a GPU (`scripts/pipeline-sass.sh` reads its
 /// machine code beside the query kernels').
 pub fn ray_pipeline_ptx(cc: (i32, i32)) -> Result<String, oxray::cuda::CudaError> {
+    ray_pipeline_ptx_with(cc, &ray_pipeline_options())
+}
+
+/// The benchmark pipeline's compile options: one payload word, and the default graph and
+/// primitive-type flags (any graph, triangles and custom primitives), so that the kernel holds
+/// the general traversal as an arbitrary pipeline's does.
+fn ray_pipeline_options() -> oxray::PipelineCompileOptions {
+    oxray::PipelineCompileOptions {
+        num_payload_values: 1,
+        ..Default::default()
+    }
+}
+
+fn ray_pipeline_ptx_with(
+    cc: (i32, i32),
+    compile: &oxray::PipelineCompileOptions,
+) -> Result<String, oxray::cuda::CudaError> {
     use oxray::cuda::{compile_pipeline_ptx, CudaHitGroupDesc, CudaModule, CudaProgramGroup};
     let module = CudaModule::from_source(RAY_PIPELINE);
     let groups = [
@@ -235,18 +252,7 @@ pub fn ray_pipeline_ptx(cc: (i32, i32)) -> Result<String, oxray::cuda::CudaError
             ..Default::default()
         })?,
     ];
-    let compile = oxray::PipelineCompileOptions {
-        num_payload_values: 1,
-        traversable_graph_flags: oxray::TraversableGraphFlags::ALLOW_SINGLE_GAS,
-        uses_primitive_type_flags: oxray::PrimitiveTypeFlags::TRIANGLE,
-        ..Default::default()
-    };
-    compile_pipeline_ptx(
-        cc,
-        &compile,
-        &oxray::PipelineLinkOptions::default(),
-        &groups,
-    )
+    compile_pipeline_ptx(cc, compile, &oxray::PipelineLinkOptions::default(), &groups)
 }
 
 #[repr(C)]
@@ -285,13 +291,9 @@ impl RayPipeline {
             ..Default::default()
         })
         .map_err(|e| err(&e))?;
-        let compile = oxray::PipelineCompileOptions {
-            num_payload_values: 1,
-            ..Default::default()
-        };
         let pipeline = device
             .create_pipeline(
-                &compile,
+                &ray_pipeline_options(),
                 &oxray::PipelineLinkOptions::default(),
                 Some("params"),
                 &[raygen.clone(), miss.clone(), hit.clone()],
@@ -853,6 +855,58 @@ mod tests {
             }
             Err(e) => panic!("{e}"),
         }
+    }
+
+    /// Guide §5.9.1 and §6.3 restrict a pipeline's graphs and primitive types; a CUDA
+    /// pipeline is compiled without the walks they exclude, and with every walk when its
+    /// flags allow any graph and the types.
+    #[test]
+    fn a_pipeline_leaves_out_the_walks_its_flags_exclude_5_9_1_and_6_3() {
+        let single_gas_of_triangles = oxray::PipelineCompileOptions {
+            traversable_graph_flags: oxray::TraversableGraphFlags::ALLOW_SINGLE_GAS,
+            uses_primitive_type_flags: oxray::PrimitiveTypeFlags::TRIANGLE,
+            ..ray_pipeline_options()
+        };
+        let narrow = match ray_pipeline_ptx_with((9, 0), &single_gas_of_triangles) {
+            Ok(ptx) => ptx,
+            Err(oxray::cuda::CudaError::NoNvrtc(why)) => {
+                assert!(
+                    std::env::var_os("OXRAY_REQUIRE_NVRTC").is_none(),
+                    "OXRAY_REQUIRE_NVRTC is set but NVRTC is missing: {why}"
+                );
+                println!("skipping: {why}");
+                return;
+            }
+            Err(e) => panic!("{e}"),
+        };
+        let every_type = oxray::PipelineCompileOptions {
+            uses_primitive_type_flags: oxray::PrimitiveTypeFlags::TRIANGLE
+                | oxray::PrimitiveTypeFlags::CUSTOM
+                | oxray::PrimitiveTypeFlags::SPHERE
+                | oxray::PrimitiveTypeFlags::ROUND_LINEAR,
+            ..ray_pipeline_options()
+        };
+        let wide = ray_pipeline_ptx_with((9, 0), &every_type).unwrap();
+        for walk in [
+            "__oxray_walk_ias",
+            "__oxray_walk_custom",
+            "__oxray_walk_spheres",
+            "__oxray_walk_curves",
+        ] {
+            assert!(
+                wide.contains(walk),
+                "{walk} missing where the flags allow it"
+            );
+            assert!(
+                !narrow.contains(walk),
+                "{walk} in a single-GAS triangle pipeline"
+            );
+        }
+        assert!(narrow.contains("__oxray_walk_triangles"));
+        // The default flags (the benchmark's): any graph, triangles and custom primitives.
+        let default = ray_pipeline_ptx_with((9, 0), &ray_pipeline_options()).unwrap();
+        assert!(default.contains("__oxray_walk_ias") && default.contains("__oxray_walk_custom"));
+        assert!(!default.contains("__oxray_walk_spheres"));
     }
 
     #[test]

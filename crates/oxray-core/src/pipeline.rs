@@ -184,8 +184,9 @@ pub struct PipelineCompileOptions {
     /// Exceptions checked for.
     pub exception_flags: ExceptionFlags,
     /// Allowed primitive types (empty: triangles and custom primitives). A hit GAS of another
-    /// type raises `UNSUPPORTED_PRIMITIVE_TYPE` (guide §6.3); on the CUDA backend only the
-    /// named types' walks are compiled into the pipeline's kernel.
+    /// type raises `UNSUPPORTED_PRIMITIVE_TYPE` (guide §6.3); on the CUDA backend only these
+    /// types' walks (by default the triangles' and the custom primitives') are compiled into
+    /// the pipeline's kernel.
     pub uses_primitive_type_flags: PrimitiveTypeFlags,
 }
 
