@@ -377,15 +377,22 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
             "void*" | "const void*" => "return nullptr;",
             _ => "return;",
         };
-        let mut of_kind = groups.iter().filter(|g| g.inner.kind == kind);
-        if let (Some(only), None) = (of_kind.next(), of_kind.next()) {
+        // Only the kind's groups can be named by a record of its region.
+        let of_kind = || {
+            groups
+                .iter()
+                .enumerate()
+                .filter(|(_, g)| g.inner.kind == kind)
+        };
+        let mut it = of_kind();
+        if let (Some((_, only)), None) = (it.next(), it.next()) {
             let body = pick(&only.inner).unwrap_or_else(|| default.to_string());
             return format!(
                 "__device__ {ret} {name}(u32 group) {{\n    (void)group;\n    {body}\n}}\n"
             );
         }
         let mut f = format!("__device__ {ret} {name}(u32 group) {{\n    switch (group) {{\n");
-        for (i, g) in groups.iter().enumerate() {
+        for (i, g) in of_kind() {
             if let Some(body) = pick(&g.inner) {
                 f.push_str(&format!("    case {i}: {body}\n"));
             }
@@ -393,33 +400,12 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
         f.push_str(&format!("    default: {default}\n    }}\n}}\n"));
         f
     };
-    let call = |kind: CudaProgramGroupKind| {
-        move |g: &GroupInner| {
-            (g.kind == kind)
-                .then(|| g.main.as_ref().map(|e| format!("{}(); return;", e.name)))
-                .flatten()
-        }
-    };
+    let call = |g: &GroupInner| g.main.as_ref().map(|e| format!("{}(); return;", e.name));
     use CudaProgramGroupKind::{Callables, Exception, HitGroup, Miss, RayGen};
-    s.push_str(&switch(
-        "__oxray_call_raygen",
-        "void",
-        RayGen,
-        &call(RayGen),
-    ));
-    s.push_str(&switch("__oxray_call_miss", "void", Miss, &call(Miss)));
-    s.push_str(&switch(
-        "__oxray_call_closesthit",
-        "void",
-        HitGroup,
-        &call(HitGroup),
-    ));
-    s.push_str(&switch(
-        "__oxray_call_exception",
-        "void",
-        Exception,
-        &call(Exception),
-    ));
+    s.push_str(&switch("__oxray_call_raygen", "void", RayGen, &call));
+    s.push_str(&switch("__oxray_call_miss", "void", Miss, &call));
+    s.push_str(&switch("__oxray_call_closesthit", "void", HitGroup, &call));
+    s.push_str(&switch("__oxray_call_exception", "void", Exception, &call));
     s.push_str(&switch(
         "__oxray_call_anyhit",
         "void",
@@ -455,11 +441,7 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
         "__oxray_dc_of",
         "void*",
         Callables,
-        &|g: &GroupInner| {
-            (g.kind == Callables)
-                .then(|| g.main.as_ref().map(address))
-                .flatten()
-        },
+        &|g: &GroupInner| g.main.as_ref().map(address),
     ));
     s.push_str(&switch(
         "__oxray_cc_of",
@@ -474,11 +456,7 @@ pub fn pipeline_source(groups: &[CudaProgramGroup]) -> String {
         "__oxray_dc_signature",
         "const void*",
         Callables,
-        &|g: &GroupInner| {
-            (g.kind == Callables)
-                .then(|| g.main.as_ref().map(signature))
-                .flatten()
-        },
+        &|g: &GroupInner| g.main.as_ref().map(signature),
     ));
     s.push_str(&switch(
         "__oxray_cc_signature",

@@ -1301,10 +1301,10 @@ static __forceinline__ __device__ u32 __oxray_candidate(const __oxray_TraceArgs&
 #define __OXRAY_TYPE_CUSTOM 1u
 #define __OXRAY_TYPE_SPHERE (1u << 6)
 #define __OXRAY_TYPE_CURVES (0xFBEu)
-#define __OXRAY_USES_TYPE(bits)                                                               \
-    (((OXRAY_PRIMITIVE_TYPE_FLAGS == 0u ? (__OXRAY_TYPE_TRIANGLE | __OXRAY_TYPE_CUSTOM)        \
-                                        : OXRAY_PRIMITIVE_TYPE_FLAGS) &                        \
-      (bits)) != 0u)
+#define __OXRAY_TYPES                                                                         \
+    (OXRAY_PRIMITIVE_TYPE_FLAGS == 0u ? (__OXRAY_TYPE_TRIANGLE | __OXRAY_TYPE_CUSTOM)          \
+                                      : OXRAY_PRIMITIVE_TYPE_FLAGS)
+#define __OXRAY_USES_TYPE(bits) ((__OXRAY_TYPES & (bits)) != 0u)
 // A pipeline whose graph flags allow a single GAS and nothing else (§5.9.1): its root check
 // rejects every other traversable, so no trace reaches an instance or a transform.
 #define __OXRAY_SINGLE_GAS_ONLY (OXRAY_GRAPH_FLAGS == 1u)
@@ -1313,15 +1313,12 @@ static __forceinline__ __device__ u32 __oxray_candidate(const __oxray_TraceArgs&
 // triangles and custom primitives: spheres and curves must be named (§9.1), a curve GAS's every
 // type (its descriptor's `types`).
 static __forceinline__ __device__ void __oxray_check_primitive_type(const __oxray_Traversable* g) {
-    const u32 triangle = 1u << 31, custom = 1u, sphere = 1u << 6;
-    const u32 allowed = OXRAY_PRIMITIVE_TYPE_FLAGS == 0u ? (triangle | custom)
-                                                         : OXRAY_PRIMITIVE_TYPE_FLAGS;
     const u32 kind = g->kind;
-    u32 needed = kind == __OXRAY_GAS          ? triangle
-                 : kind == __OXRAY_SPHERE_GAS ? sphere
+    u32 needed = kind == __OXRAY_GAS          ? __OXRAY_TYPE_TRIANGLE
+                 : kind == __OXRAY_SPHERE_GAS ? __OXRAY_TYPE_SPHERE
                  : kind == __OXRAY_CURVE_GAS  ? g->types
-                                              : custom;
-    if ((allowed & needed) != needed) {
+                                              : __OXRAY_TYPE_CUSTOM;
+    if ((__OXRAY_TYPES & needed) != needed) {
         __oxray_throw(OPTIX_EXCEPTION_CODE_UNSUPPORTED_PRIMITIVE_TYPE, 0, nullptr);
     }
 }
@@ -1808,9 +1805,7 @@ static __forceinline__ __device__ bool __oxray_fast_root(OptixTraversableHandle 
         return false;
     }
     if (OXRAY_GRAPH_FLAGS != 0u && (OXRAY_GRAPH_FLAGS & 1u) == 0u) return false;
-    if (OXRAY_PRIMITIVE_TYPE_FLAGS != 0u && (OXRAY_PRIMITIVE_TYPE_FLAGS & (1u << 31)) == 0u) {
-        return false;
-    }
+    if (!__OXRAY_USES_TYPE(__OXRAY_TYPE_TRIANGLE)) return false;
     const __oxray_Traversable* t = reinterpret_cast<const __oxray_Traversable*>(handle);
     return t->kind == __OXRAY_GAS && t->motion == 0ull;
 }
