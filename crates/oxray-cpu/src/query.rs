@@ -3,8 +3,8 @@
 //! program pipeline is built on.
 
 use crate::traversal::{
-    coherent, traverse_gas_packet, traverse_node, with_stack, Decision, Entry, GasVisitor, NodeRef,
-    Path, SceneVisitor, PACKET,
+    coherent, traverse_gas_packet, traverse_node, triangle_gas_rays, with_stack, Decision, Entry,
+    GasVisitor, NodeRef, Path, SceneVisitor, PACKET,
 };
 use crate::Gas;
 use oxray_bvh::triangle::TriangleHit;
@@ -67,14 +67,24 @@ impl<F: FnMut(&Hit) -> CandidateAction> CandidateFilter for Closure<F> {
     }
 }
 
-struct QueryVisitor<'s, 'a, C, F> {
+/// A caller's intersector, borrowed for one query.
+struct Borrowed<'a, C>(&'a mut C);
+
+impl<C: CustomIntersector> CustomIntersector for Borrowed<'_, C> {
+    #[inline(always)]
+    fn intersect(&mut self, primitive: &CustomPrimitive, ray: &Ray) -> Option<CustomHit> {
+        self.0.intersect(primitive, ray)
+    }
+}
+
+struct QueryVisitor<'s, C, F> {
     /// The GAS being traversed, and where it sits.
     gas: Option<&'s Gas>,
     /// The instance nearest to the current GAS (a reference, not a copy of the whole path:
     /// entering a GAS happens once per ray and instance).
     instance: Option<&'s InstanceRecord>,
     object_ray: Ray,
-    custom: &'a mut C,
+    custom: C,
     filter: F,
     first_hit_ends: bool,
     best: Option<Hit>,
@@ -83,7 +93,7 @@ struct QueryVisitor<'s, 'a, C, F> {
     unresolved: Option<(&'s Gas, u32)>,
 }
 
-impl<'s, C: CustomIntersector, F: CandidateFilter> QueryVisitor<'s, '_, C, F> {
+impl<'s, C: CustomIntersector, F: CandidateFilter> QueryVisitor<'s, C, F> {
     /// Offers the candidate at leaf `slot` of the current GAS (a built-in primitive: its
     /// distance, attributes and hit kind), with the nearest instance's id and index.
     #[inline(always)]
@@ -147,7 +157,7 @@ impl<'s, C: CustomIntersector, F: CandidateFilter> QueryVisitor<'s, '_, C, F> {
     }
 }
 
-impl<'s, C: CustomIntersector, F: CandidateFilter> SceneVisitor<'s> for QueryVisitor<'s, '_, C, F> {
+impl<'s, C: CustomIntersector, F: CandidateFilter> SceneVisitor<'s> for QueryVisitor<'s, C, F> {
     fn enter_gas(&mut self, gas: &'s Gas, path: &Path<'s>, object_ray: &Ray) {
         self.gas = Some(gas);
         self.instance = path.instance;
@@ -159,7 +169,7 @@ impl<'s, C: CustomIntersector, F: CandidateFilter> SceneVisitor<'s> for QueryVis
     }
 }
 
-impl<'s, C: CustomIntersector, F: CandidateFilter> GasVisitor for QueryVisitor<'s, '_, C, F> {
+impl<'s, C: CustomIntersector, F: CandidateFilter> GasVisitor for QueryVisitor<'s, C, F> {
     #[inline(always)]
     fn nearest_first(&self) -> bool {
         // An occlusion query stops at its first hit, wherever it is.
@@ -247,8 +257,8 @@ impl<'s, C: CustomIntersector, F: CandidateFilter> GasVisitor for QueryVisitor<'
     }
 }
 
-impl<'s, 'a, C: CustomIntersector, F: CandidateFilter> QueryVisitor<'s, 'a, C, F> {
-    fn new(ray: &Ray, custom: &'a mut C, filter: F, first_hit_ends: bool) -> Self {
+impl<C: CustomIntersector, F: CandidateFilter> QueryVisitor<'_, C, F> {
+    fn new(ray: &Ray, custom: C, filter: F, first_hit_ends: bool) -> Self {
         QueryVisitor {
             gas: None,
             instance: None,
@@ -271,7 +281,7 @@ fn query<'s, C: CustomIntersector, F: CandidateFilter>(
     first_hit_ends: bool,
 ) -> Option<Hit> {
     ray.validate().ok()?;
-    let mut v = QueryVisitor::new(ray, custom, filter, first_hit_ends);
+    let mut v = QueryVisitor::new(ray, Borrowed(custom), filter, first_hit_ends);
     with_stack(|stack| traverse_node(root, &Path::ROOT, ray, &mut v, stack));
     v.finish()
 }
@@ -294,26 +304,41 @@ fn batch_queries<T: Send>(
     let Some(NodeRef::Gas(gas)) = root else {
         return par_batch(rays, out, |ray| answer(single(ray)));
     };
-    par_chunks(rays, out, |rays, out| {
-        for (group, out) in rays.chunks(PACKET).zip(out.chunks_mut(PACKET)) {
-            if coherent(group) {
-                let mut customs = [NoCustomPrimitives; PACKET];
-                let mut customs = customs.iter_mut();
-                let mut visitors: [_; PACKET] = std::array::from_fn(|l| {
-                    let custom = customs.next().expect("one per ray");
-                    QueryVisitor::new(&group[l], custom, AcceptAll, first_hit_ends)
-                });
-                if traverse_gas_packet(gas, group, &mut visitors) {
-                    for (o, v) in out.iter_mut().zip(&visitors) {
-                        *o = answer(v.finish());
-                    }
-                    continue;
-                }
-            }
-            for (o, ray) in out.iter_mut().zip(group) {
+    // Rays that do not go as a packet: one at a time, through the batch path where it applies.
+    let one_by_one = |rays: &[Ray], out: &mut [T]| {
+        let visitor = |ray: &Ray| {
+            let mut v = QueryVisitor::new(ray, NoCustomPrimitives, AcceptAll, first_hit_ends);
+            v.gas = Some(gas);
+            v
+        };
+        let done = |v: Option<QueryVisitor<'_, _, _>>| answer(v.and_then(|v| v.finish()));
+        if !triangle_gas_rays(gas, rays, out, visitor, done) {
+            for (o, ray) in out.iter_mut().zip(rays) {
                 *o = answer(single(ray));
             }
         }
+    };
+    par_chunks(rays, out, |rays, out| {
+        // Rays before `pending` are answered.
+        let mut pending = 0;
+        for at in (0..rays.len()).step_by(PACKET) {
+            let end = (at + PACKET).min(rays.len());
+            let group = &rays[at..end];
+            if !coherent(group) {
+                continue;
+            }
+            let mut visitors: [_; PACKET] = std::array::from_fn(|l| {
+                QueryVisitor::new(&group[l], NoCustomPrimitives, AcceptAll, first_hit_ends)
+            });
+            if traverse_gas_packet(gas, group, &mut visitors) {
+                one_by_one(&rays[pending..at], &mut out[pending..at]);
+                for (o, v) in out[at..end].iter_mut().zip(&visitors) {
+                    *o = answer(v.finish());
+                }
+                pending = end;
+            }
+        }
+        one_by_one(&rays[pending..], &mut out[pending..]);
     })
 }
 

@@ -179,7 +179,7 @@ fn entry8(node: &Bvh8Node, lane: usize, dist: f32) -> Entry {
 }
 
 /// The 8-wide layout tested with AVX2. Traversed only by
-/// [`traverse_avx2`](super::kernel::traverse_avx2).
+/// [`traverse_avx2`](super::kernel::traverse_avx2) and the batch path's `rays_avx2`.
 #[cfg(target_arch = "x86_64")]
 pub(crate) struct Bvh8Avx2;
 
@@ -190,10 +190,11 @@ impl NodeLayout for Bvh8Avx2 {
 
     #[inline(always)]
     fn intersect(node: &Bvh8Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 8], u32) {
-        // SAFETY: this layout is traversed only by `kernel::traverse_avx2`, which is called only
-        // for a structure whose kernel is `Isa::Avx2` or `Isa::Avx512`, and a structure gets
-        // those kernels only after `Isa::is_available` detected AVX2 (and the features
-        // `intersect8_avx2` is compiled with) on this processor.
+        // SAFETY: this layout is traversed only by `kernel::traverse_avx2` and
+        // `batch::rays_avx2`, which are called only for a structure whose kernel is
+        // `Isa::Avx2` or `Isa::Avx512`, and a structure gets those kernels only after
+        // `Isa::is_available` detected AVX2 (and the features `intersect8_avx2` is compiled
+        // with) on this processor.
         unsafe { intersect8_avx2(node, ray, tmin, tmax) }
     }
 
@@ -204,7 +205,8 @@ impl NodeLayout for Bvh8Avx2 {
 }
 
 /// The 8-wide layout tested with AVX-512 (VL): the compare writes a mask register. Traversed
-/// only by [`traverse_avx512`](super::kernel::traverse_avx512).
+/// only by [`traverse_avx512`](super::kernel::traverse_avx512) and the batch path's
+/// `rays_avx512`.
 #[cfg(target_arch = "x86_64")]
 pub(crate) struct Bvh8Avx512;
 
@@ -215,9 +217,9 @@ impl NodeLayout for Bvh8Avx512 {
 
     #[inline(always)]
     fn intersect(node: &Bvh8Node, ray: &PreparedRay, tmin: f32, tmax: f32) -> ([f32; 8], u32) {
-        // SAFETY: traversed only by `kernel::traverse_avx512`, called only for a structure
-        // whose kernel is `Isa::Avx512`, which `Isa::is_available` gives only after detecting
-        // AVX2, AVX-512F and AVX-512VL on this processor.
+        // SAFETY: traversed only by `kernel::traverse_avx512` and `batch::rays_avx512`, called
+        // only for a structure whose kernel is `Isa::Avx512`, which `Isa::is_available` gives
+        // only after detecting AVX2, AVX-512F and AVX-512VL on this processor.
         unsafe { intersect8_avx512(node, ray, tmin, tmax) }
     }
 
