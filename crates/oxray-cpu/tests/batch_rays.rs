@@ -5,15 +5,15 @@
 //! in, with several build inputs, and whatever the number of threads.
 
 use glam::Vec3;
-use oxray_core::{BuildFlags, BuildOptions, Hit, IndexBuffer, Ray, TriangleInput, VertexBuffer};
+use oxray_core::{BuildFlags, BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
 use oxray_cpu::{Gas, Isa};
 use oxray_testkit::mesh::{grid_cube, icosphere, random_soup, Mesh};
-use oxray_testkit::oracle::check_closest;
+use oxray_testkit::oracle::{check_closest, hit_bits};
 use oxray_testkit::rays::{rays_around, rays_at_features};
 use oxray_testkit::rng::Rng;
 
 mod common;
-use common::{kernels, mesh_gas, soup_mesh};
+use common::{batched, kernels, mesh_gas, soup_mesh};
 
 /// A GAS with the mesh's triangles split over two build inputs (the second half's hits carry
 /// build input 1 and their own primitive indices).
@@ -52,36 +52,6 @@ fn rays(m: &Mesh, rng: &mut Rng) -> Vec<Ray> {
     rays
 }
 
-fn bits(h: &Option<Hit>) -> Option<[u32; 9]> {
-    h.map(|h| {
-        [
-            h.t.to_bits(),
-            h.u.to_bits(),
-            h.v.to_bits(),
-            h.primitive_index,
-            h.sbt_gas_index,
-            h.build_input,
-            u32::from(h.hit_kind.0),
-            h.instance_id,
-            h.instance_index,
-        ]
-    })
-}
-
-fn batched(gas: &Gas, rays: &[Ray], threads: usize) -> (Vec<Option<Hit>>, Vec<bool>) {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    let mut hits = vec![None; rays.len()];
-    let mut occluded = vec![true; rays.len()];
-    pool.install(|| {
-        gas.intersect_batch(rays, &mut hits).unwrap();
-        gas.occluded_batch(rays, &mut occluded).unwrap();
-    });
-    (hits, occluded)
-}
-
 #[test]
 fn batches_of_scattered_rays_answer_as_single_queries_bit_for_bit() {
     let mut rng = Rng::new(17);
@@ -108,10 +78,14 @@ fn batches_of_scattered_rays_answer_as_single_queries_bit_for_bit() {
                     let (mut hit_count, mut second_input) = (0, 0);
                     for (i, ray) in rays.iter().enumerate() {
                         let one = gas.intersect(ray);
-                        assert_eq!(bits(&hits[i]), bits(&one), "{name}, {isa}, ray {i} {ray:?}");
                         assert_eq!(
-                            bits(&hits2[i]),
-                            bits(&one),
+                            hit_bits(&hits[i]),
+                            hit_bits(&one),
+                            "{name}, {isa}, ray {i} {ray:?}"
+                        );
+                        assert_eq!(
+                            hit_bits(&hits2[i]),
+                            hit_bits(&one),
                             "{name}, {isa}, ray {i}, 2 threads"
                         );
                         assert_eq!(occluded[i], gas.occluded(ray), "{name}, {isa}, ray {i}");

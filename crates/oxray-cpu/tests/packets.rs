@@ -15,7 +15,7 @@ use oxray_testkit::rays::{camera_rays, center_radius};
 use oxray_testkit::rng::Rng;
 
 mod common;
-use common::{kernels, mesh_gas, soup_mesh};
+use common::{batched, kernels, mesh_gas, soup_mesh};
 
 fn scenes() -> Vec<(String, Mesh)> {
     let mut rng = Rng::new(3);
@@ -86,20 +86,6 @@ fn single(gas: &Gas, rays: &[Ray]) -> (Vec<Option<Hit>>, Vec<bool>) {
         rays.iter().map(|r| gas.intersect(r)).collect(),
         rays.iter().map(|r| gas.occluded(r)).collect(),
     )
-}
-
-fn batched(gas: &Gas, rays: &[Ray], threads: usize) -> (Vec<Option<Hit>>, Vec<bool>) {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .unwrap();
-    let mut hits = vec![None; rays.len()];
-    let mut occluded = vec![false; rays.len()];
-    pool.install(|| {
-        gas.intersect_batch(rays, &mut hits).unwrap();
-        gas.occluded_batch(rays, &mut occluded).unwrap();
-    });
-    (hits, occluded)
 }
 
 #[test]

@@ -1,6 +1,6 @@
 //! Helpers of the kernel and layout tests (each test file declares `mod common;`).
 
-use oxray_core::{BuildFlags, BuildOptions, IndexBuffer, TriangleInput, VertexBuffer};
+use oxray_core::{BuildFlags, BuildOptions, Hit, IndexBuffer, Ray, TriangleInput, VertexBuffer};
 use oxray_cpu::{Gas, Isa};
 use oxray_testkit::mesh::Mesh;
 use oxray_testkit::Tri;
@@ -32,4 +32,21 @@ pub fn soup_mesh(tris: &[Tri]) -> Mesh {
             .map(|i| [3 * i, 3 * i + 1, 3 * i + 2])
             .collect(),
     }
+}
+
+/// Closest hits and occlusion of `rays` through the batched queries on a pool of `threads`
+/// (occlusion starts `true` in every slot, so a slot the batch leaves unwritten shows).
+#[allow(dead_code)] // the batch tests' helper; the layout tests trace ray by ray
+pub fn batched(gas: &Gas, rays: &[Ray], threads: usize) -> (Vec<Option<Hit>>, Vec<bool>) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let mut hits = vec![None; rays.len()];
+    let mut occluded = vec![true; rays.len()];
+    pool.install(|| {
+        gas.intersect_batch(rays, &mut hits).unwrap();
+        gas.occluded_batch(rays, &mut occluded).unwrap();
+    });
+    (hits, occluded)
 }
