@@ -339,6 +339,8 @@ pub(crate) enum Split {
     Sorted { axis: usize, count: usize },
     /// Object median along `axis` (or, with `axis == 3`, by position in the array).
     Median { axis: usize },
+    /// The references are in order already: the first `count` go left.
+    Ordered { count: usize },
 }
 
 #[inline(always)]
@@ -596,6 +598,46 @@ pub(crate) fn small_split(refs: &mut [PrimRef], cb: &Box4, block: usize) -> Opti
         .then_some((Split::Sorted { axis, count: block }, cost))
 }
 
+/// How close to a face of its node's box, relative to the box's extent across the face, a
+/// primitive's box must lie for [`face_split`] (modelled rooms are rarely square to a
+/// thousandth: the Cornell data's walls lean by about 1 %).
+const FACE_SLAB: f32 = 1.0 / 32.0;
+
+/// The split that takes the primitives lying in one face of the node's box (boxes within
+/// [`FACE_SLAB`] of the box's extent from that face: a room's wall, floor or ceiling) away
+/// from the others, if any: the first such face along x, y, z, low face before high.
+///
+/// The builders call it where the surface-area heuristic chose a leaf. The heuristic prices a
+/// node by its box's area, which is right for rays from outside it; but rays that start
+/// inside a room (every bounce of a path in it) enter the room-spanning box of a leaf of
+/// several walls whatever its area, and test every wall in it, where walls in leaves of their
+/// own have flat boxes that most rays pass by. Peeling the faces' primitives off one face at a
+/// time gives each wall its own leaf. Scanned and smooth meshes have no primitives exactly in
+/// a face of their leaves' boxes, and keep their trees.
+pub(crate) fn face_split(refs: &mut [PrimRef], bounds: &Box4) -> Option<Split> {
+    let n = refs.len();
+    for axis in 0..3 {
+        let (lo, hi) = (bounds.lo[axis], bounds.hi[axis]);
+        let slab = (hi - lo) * FACE_SLAB;
+        if !(slab > 0.0) {
+            continue;
+        }
+        let faces: [&dyn Fn(&PrimRef) -> bool; 2] = [&|r| r.0.hi[axis] <= lo + slab, &|r| {
+            r.0.lo[axis] >= hi - slab
+        }];
+        for in_face in faces {
+            let count = refs.iter().filter(|r| in_face(r)).count();
+            if count > 0 && count < n {
+                // A stable order (the face's references first), so the tree stays the same
+                // whatever the thread count.
+                refs.sort_by_key(|r| !in_face(r));
+                return Some(Split::Ordered { count });
+            }
+        }
+    }
+    None
+}
+
 /// Exact SAH: sorts along each axis and evaluates every split position.
 pub(crate) fn best_sweep_split(refs: &mut [PrimRef], block: usize) -> Option<(Split, f32)> {
     let n = refs.len();
@@ -664,6 +706,7 @@ pub(crate) fn partition<const B: usize>(
             sort_by_centroid(refs, axis);
             (count, None)
         }
+        Split::Ordered { count } => (count, None),
         Split::Median { axis } => {
             let mid = refs.len() / 2;
             if axis < 3 {
@@ -937,14 +980,28 @@ fn build_node_b<const B: usize>(
         max: aabb.max.to_array(),
         count: n as u32,
     };
-    if (n <= config.block_size.max(1) && depth < FORCE_MEDIAN_DEPTH) || n <= 1 {
+    if n <= 1 {
+        refs.settle();
+        return leaf;
+    }
+    let small = n <= config.block_size.max(1) && depth < FORCE_MEDIAN_DEPTH;
+    // Even a node of one block is split where the surface-area heuristic would keep walls of
+    // a room together ([`face_split`]).
+    let face_first = if small {
+        face_split(refs.cur, &bounds)
+    } else {
+        None
+    };
+    if small && face_first.is_none() {
         refs.settle();
         return leaf;
     }
     let blocks = |k: usize| k.div_ceil(config.block_size.max(1)) as f32;
     let mut side_bounds = None;
     let block = config.block_size.max(1);
-    let split = if depth >= FORCE_MEDIAN_DEPTH {
+    let split = if let Some(split) = face_first {
+        Some((split, 0.0))
+    } else if depth >= FORCE_MEDIAN_DEPTH {
         None
     } else if n <= 2 * block && n <= config.max_leaf_size && n > config.sweep_threshold {
         // At most two blocks: the only split worth a node puts one full block on one side.
@@ -964,17 +1021,35 @@ fn build_node_b<const B: usize>(
             // SAH in units of one block test, relative to this node's area.
             let split_cost = config.traversal_cost + cost / bounds.half_area();
             let leaf_cost = blocks(n);
-            if n <= config.max_leaf_size && (leaf_cost <= split_cost || !split_cost.is_finite()) {
-                refs.settle();
-                return leaf;
+            if face_first.is_none()
+                && n <= config.max_leaf_size
+                && (leaf_cost <= split_cost || !split_cost.is_finite())
+            {
+                match face_split(refs.cur, &bounds) {
+                    Some(face) => {
+                        // The references are sorted for it, not moved by the binned split.
+                        side_bounds = None;
+                        face
+                    }
+                    None => {
+                        refs.settle();
+                        return leaf;
+                    }
+                }
+            } else {
+                split
             }
-            split
+        }
+        None if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH => {
+            match face_split(refs.cur, &bounds) {
+                Some(face) => face,
+                None => {
+                    refs.settle();
+                    return leaf;
+                }
+            }
         }
         None => {
-            if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH {
-                refs.settle();
-                return leaf;
-            }
             let axis = widest_axis(&cb);
             Split::Median {
                 axis: if cb.hi[axis] - cb.lo[axis] > 0.0 {

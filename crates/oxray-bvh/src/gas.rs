@@ -1460,6 +1460,96 @@ pub(crate) mod tests {
         }
     }
 
+    /// A room as modelled ones are, its walls leaning by up to 1 % (the Cornell data's), a
+    /// light just under the ceiling and a block on the floor: quads of two triangles each.
+    fn room() -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let quads: [[[f32; 3]; 4]; 8] = [
+            // floor, ceiling, back, left, right (leaning), light, block top, block side
+            [
+                [0.0, 0.0, 0.0],
+                [5.5, 0.0, 0.0],
+                [5.5, 0.0, 5.6],
+                [0.0, 0.0, 5.6],
+            ],
+            [
+                [0.0, 5.5, 0.0],
+                [5.6, 5.5, 0.0],
+                [5.6, 5.5, 5.6],
+                [0.0, 5.5, 5.6],
+            ],
+            [
+                [0.0, 0.0, 5.6],
+                [5.5, 0.0, 5.6],
+                [5.6, 5.5, 5.6],
+                [0.0, 5.5, 5.6],
+            ],
+            [
+                [0.0, 0.0, 0.0],
+                [0.0, 0.0, 5.6],
+                [0.0, 5.5, 5.6],
+                [0.0, 5.5, 0.0],
+            ],
+            [
+                [5.5, 0.0, 0.0],
+                [5.5, 0.0, 5.6],
+                [5.6, 5.5, 5.6],
+                [5.6, 5.5, 0.0],
+            ],
+            [
+                [2.1, 5.49, 2.2],
+                [3.4, 5.49, 2.2],
+                [3.4, 5.49, 3.3],
+                [2.1, 5.49, 3.3],
+            ],
+            [
+                [1.3, 1.6, 0.6],
+                [2.9, 1.6, 1.1],
+                [2.4, 1.6, 2.7],
+                [0.8, 1.6, 2.2],
+            ],
+            [
+                [1.3, 0.0, 0.6],
+                [2.9, 0.0, 1.1],
+                [2.9, 1.6, 1.1],
+                [1.3, 1.6, 0.6],
+            ],
+        ];
+        let mut v = Vec::new();
+        let mut t = Vec::new();
+        for q in quads {
+            let b = v.len() as u32;
+            v.extend(q);
+            t.extend([[b, b + 1, b + 2], [b, b + 2, b + 3]]);
+        }
+        (v, t)
+    }
+
+    /// Rays that start inside a room enter the box of any leaf that holds two of its walls
+    /// (the box spans the room), which the surface-area heuristic does not count: every build
+    /// gives each wall a leaf of its own (`build::face_split`).
+    #[test]
+    fn the_walls_of_a_room_get_leaves_of_their_own() {
+        let (v, t) = room();
+        for flags in [
+            BuildFlags::empty(),
+            BuildFlags::PREFER_FAST_BUILD,
+            BuildFlags::PREFER_FAST_TRACE,
+        ] {
+            let input = TriangleInput::new(VertexBuffer::f32x3(&v)).indices(IndexBuffer::u32x3(&t));
+            let options = BuildOptions::new(flags);
+            let (gas, tree) = GasData::build_with_tree(&options, &[input.into()]).unwrap();
+            for (first, count) in tree_leaves(&tree) {
+                let quads: Vec<u32> = (first..first + count)
+                    .map(|slot| gas.slot_prim[slot as usize] / 2)
+                    .collect();
+                assert!(
+                    quads.iter().all(|&q| q == quads[0] && q < 5) || quads.iter().all(|&q| q >= 5),
+                    "{flags:?}: a leaf holds the quads {quads:?}"
+                );
+            }
+        }
+    }
+
     fn wide_leaves<N: WideNode>(nodes: &[N]) -> Vec<(u32, u32)> {
         let mut out: Vec<(u32, u32)> = nodes
             .iter()
