@@ -619,7 +619,7 @@ pub(crate) fn face_split(refs: &mut [PrimRef], bounds: &Box4) -> Option<Split> {
     for axis in 0..3 {
         let (lo, hi) = (bounds.lo[axis], bounds.hi[axis]);
         let slab = (hi - lo) * FACE_SLAB;
-        if !(slab > 0.0) {
+        if slab.is_nan() || slab <= 0.0 {
             continue;
         }
         let faces: [&dyn Fn(&PrimRef) -> bool; 2] = [&|r| r.0.hi[axis] <= lo + slab, &|r| {
