@@ -416,6 +416,24 @@ struct BsdfSample {
 };
 
 // glam's any_orthonormal_pair.
+// sin_cos_turns (bsdf.rs): the sine and cosine of 2 pi u by the same operations, so that the
+// programs on the CPU give the Rust programs' bits (compiled without FMA contraction).
+PTI void sin_cos_turns(float u, float& sin_out, float& cos_out) {
+    float four = u * 4.0f;
+    float q = roundf(four);
+    float x = (four - q) * 1.57079632679489661923f;
+    float x2 = x * x;
+    float s = x * (1.0f + x2 * (-1.0f / 6.0f + x2 * (1.0f / 120.0f + x2 * (-1.0f / 5040.0f + x2 * (1.0f / 362880.0f)))));
+    float c = 1.0f + x2 * (-0.5f + x2 * (1.0f / 24.0f + x2 * (-1.0f / 720.0f + x2 * (1.0f / 40320.0f + x2 * (-1.0f / 3628800.0f)))));
+    // Clamped before the conversion (NaN to the low end), as the Rust side's saturating cast.
+    int qi = (int)fminf(fmaxf(q, -1048576.0f), 1048576.0f);
+    if (qi & 1) { float k = s; s = c; c = k; }
+    if (qi & 2) s = -s;
+    if ((qi + 1) & 2) c = -c;
+    sin_out = s;
+    cos_out = c;
+}
+
 PTI void basis(V3 n, V3& t, V3& b) {
     float sign = copysignf(1.0f, n.z);
     float a = -1.0f / (sign + n.z);
@@ -543,8 +561,9 @@ PTI bool bsdf_sample(const Surface& s, V3 n, V3 wo, bool entering, float u0, flo
         wi = 2.0f * dot(wo, h) * h - wo;
     } else {
         float r = sqrtf(u1);
-        float phi = PT_TAU * u2;
-        wi = normalize(t * (r * cosf(phi)) + b * (r * sinf(phi)) + n * sqrtf(maxf(1.0f - u1, 0.0f)));
+        float sin_phi, cos_phi;
+        sin_cos_turns(u2, sin_phi, cos_phi);
+        wi = normalize(t * (r * cos_phi) + b * (r * sin_phi) + n * sqrtf(maxf(1.0f - u1, 0.0f)));
     }
     float pdf;
     V3 f = bsdf_eval(s, n, wo, wi, pdf);

@@ -5,19 +5,18 @@
 //! short sequence of arithmetic for every path. Here it runs as loops over eight paths' values
 //! side by side (structure of arrays), which the compiler turns into vector instructions, and
 //! so are the Sobol numbers' hashes and scrambles ([`sampler::vertex_numbers_lanes`]); the
-//! steps that look things up (the light's triangle, the Sobol table) or call the maths library
-//! (the direction's sine and cosine) stay lane by lane. Every operation is the one
+//! steps that look things up (the light's triangle, the Sobol table) stay lane by lane. Every operation is the one
 //! [`programs::vertex`] does, in the same order, so a path's numbers come out bit for bit the
 //! same; the wavefront's tests compare whole images with the pipeline's.
 
-use crate::bsdf::{hash, Rng};
+use crate::bsdf::{hash, sin_cos_turns, Rng};
 use crate::filter::sample_offset;
 use crate::programs::{self, Params, PathState, ShadowRay};
 use crate::sampler::{self, Sampler};
 use glam::Vec3;
 use oxray::Transform;
 use oxray_scene::MaterialDesc;
-use std::f32::consts::{FRAC_1_PI, TAU};
+use std::f32::consts::FRAC_1_PI;
 
 /// Paths per batch.
 pub(super) const LANES: usize = 8;
@@ -478,13 +477,10 @@ fn vertices_of(
         let u1 = numbers[4][l];
         [u1.sqrt(), (1.0 - u1).max(0.0).sqrt()]
     });
-    let mut cos_phi = splat(0.0);
-    let mut sin_phi = splat(0.0);
-    for l in 0..LANES {
-        let phi = TAU * numbers[5][l];
-        cos_phi[l] = phi.cos();
-        sin_phi[l] = phi.sin();
-    }
+    let [sin_phi, cos_phi] = map(|l| {
+        let (s, c) = sin_cos_turns(numbers[5][l]);
+        [s, c]
+    });
     let [vx, vy, vz] = map(|l| {
         let (rc, rs) = (rr[l] * cos_phi[l], rr[l] * sin_phi[l]);
         [
