@@ -622,10 +622,11 @@ pub(crate) fn face_split(refs: &mut [PrimRef], bounds: &Box4) -> Option<Split> {
         if slab.is_nan() || slab <= 0.0 {
             continue;
         }
-        let faces: [&dyn Fn(&PrimRef) -> bool; 2] = [&|r| r.0.hi[axis] <= lo + slab, &|r| {
-            r.0.lo[axis] >= hi - slab
-        }];
-        for in_face in faces {
+        for high in [false, true] {
+            let in_face = |r: &PrimRef| match high {
+                false => r.0.hi[axis] <= lo + slab,
+                true => r.0.lo[axis] >= hi - slab,
+            };
             let count = refs.iter().filter(|r| in_face(r)).count();
             if count > 0 && count < n {
                 // A stable order (the face's references first), so the tree stays the same
@@ -984,81 +985,63 @@ fn build_node_b<const B: usize>(
         refs.settle();
         return leaf;
     }
-    let small = n <= config.block_size.max(1) && depth < FORCE_MEDIAN_DEPTH;
-    // Even a node of one block is split where the surface-area heuristic would keep walls of
-    // a room together ([`face_split`]).
-    let face_first = if small {
-        face_split(refs.cur, &bounds)
-    } else {
-        None
-    };
-    if small && face_first.is_none() {
-        refs.settle();
-        return leaf;
-    }
     let blocks = |k: usize| k.div_ceil(config.block_size.max(1)) as f32;
     let mut side_bounds = None;
     let block = config.block_size.max(1);
-    let split = if let Some(split) = face_first {
-        Some((split, 0.0))
-    } else if depth >= FORCE_MEDIAN_DEPTH {
+    // The split the surface-area heuristic chooses, `None` where it keeps a leaf (a node of at
+    // most one block always).
+    let chosen = if n <= block && depth < FORCE_MEDIAN_DEPTH {
         None
-    } else if n <= 2 * block && n <= config.max_leaf_size && n > config.sweep_threshold {
-        // At most two blocks: the only split worth a node puts one full block on one side.
-        small_split(refs.cur, &cb, block)
-    } else if n <= config.sweep_threshold {
-        best_sweep_split(refs.cur, config.block_size.max(1))
     } else {
-        best_binned_split_counted::<B>(refs.cur, &cb, block, n < config.widest_axis_below).map(
-            |(split, cost, sides, left)| {
-                side_bounds = Some((sides, left));
-                (split, cost)
-            },
-        )
-    };
-    let split = match split {
-        Some((split, cost)) => {
-            // SAH in units of one block test, relative to this node's area.
-            let split_cost = config.traversal_cost + cost / bounds.half_area();
-            let leaf_cost = blocks(n);
-            if face_first.is_none()
-                && n <= config.max_leaf_size
-                && (leaf_cost <= split_cost || !split_cost.is_finite())
-            {
-                match face_split(refs.cur, &bounds) {
-                    Some(face) => {
-                        // The references are sorted for it, not moved by the binned split.
-                        side_bounds = None;
-                        face
-                    }
-                    None => {
-                        refs.settle();
-                        return leaf;
-                    }
-                }
-            } else {
-                split
-            }
-        }
-        None if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH => {
-            match face_split(refs.cur, &bounds) {
-                Some(face) => face,
-                None => {
-                    refs.settle();
-                    return leaf;
-                }
-            }
-        }
-        None => {
-            let axis = widest_axis(&cb);
-            Split::Median {
-                axis: if cb.hi[axis] - cb.lo[axis] > 0.0 {
-                    axis
-                } else {
-                    3
+        let found = if depth >= FORCE_MEDIAN_DEPTH {
+            None
+        } else if n <= 2 * block && n <= config.max_leaf_size && n > config.sweep_threshold {
+            // At most two blocks: the only split worth a node puts one full block on one side.
+            small_split(refs.cur, &cb, block)
+        } else if n <= config.sweep_threshold {
+            best_sweep_split(refs.cur, block)
+        } else {
+            best_binned_split_counted::<B>(refs.cur, &cb, block, n < config.widest_axis_below).map(
+                |(split, cost, sides, left)| {
+                    side_bounds = Some((sides, left));
+                    (split, cost)
                 },
+            )
+        };
+        match found {
+            Some((split, cost)) => {
+                // SAH in units of one block test, relative to this node's area.
+                let split_cost = config.traversal_cost + cost / bounds.half_area();
+                let leaf_wins = blocks(n) <= split_cost || !split_cost.is_finite();
+                (n > config.max_leaf_size || !leaf_wins).then_some(split)
+            }
+            None if n <= config.max_leaf_size && depth < FORCE_MEDIAN_DEPTH => None,
+            None => {
+                let axis = widest_axis(&cb);
+                Some(Split::Median {
+                    axis: if cb.hi[axis] - cb.lo[axis] > 0.0 {
+                        axis
+                    } else {
+                        3
+                    },
+                })
             }
         }
+    };
+    let split = match chosen {
+        Some(split) => split,
+        // Where the heuristic keeps a leaf, a room's walls are still split apart.
+        None => match face_split(refs.cur, &bounds) {
+            Some(face) => {
+                // The references are ordered for it, not moved by a binned split.
+                side_bounds = None;
+                face
+            }
+            None => {
+                refs.settle();
+                return leaf;
+            }
+        },
     };
     // A binned split moves the references into the other buffer (its bins counted the left
     // side, which is never empty nor everything); the others sort in place.
