@@ -160,6 +160,7 @@ impl TriangleLights {
     /// Picks a triangle in proportion to its power and a uniform point on it: the triangle, the
     /// point, its barycentrics (for texture lookups) and the pdf per unit area of the whole
     /// choice.
+    #[inline]
     #[must_use]
     pub fn sample(&self, u: [f32; 3]) -> Option<(&LightTriangle, Vec3, [f32; 2], f32)> {
         let i = self

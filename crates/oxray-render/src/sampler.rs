@@ -364,14 +364,28 @@ pub fn vertex_numbers(index: u32, depth: u32, seed: u32) -> Option<[f32; 8]> {
 #[inline(always)]
 #[must_use]
 pub fn vertex_numbers_lanes(index: u32, depth: u32, seeds: &[u32; 8]) -> Option<[[f32; 8]; 8]> {
+    vertex_numbers_lanes_of(index, depth, seeds, 0xff)
+}
+
+/// [`vertex_numbers_lanes`] of the numbers whose bits are set in `needed` (bit `k`: number
+/// `k`); the others are NaN. A vertex that does not draw a number (a Lambertian surface's
+/// lobe, roulette before its first vertex) skips its scramble.
+#[inline(always)]
+#[must_use]
+pub fn vertex_numbers_lanes_of(
+    index: u32,
+    depth: u32,
+    seeds: &[u32; 8],
+    needed: u8,
+) -> Option<[[f32; 8]; 8]> {
     let first = dim::vertex(depth);
     if first.saturating_add(8) > SOBOL_DIMENSIONS {
         return None;
     }
-    let mut out = [[0.0f32; 8]; 8];
+    let mut out = [[f32::NAN; 8]; 8];
     let (a, b) = out.split_at_mut(4);
-    group_lanes(index, first / 4, seeds, a);
-    group_lanes(index, first / 4 + 1, seeds, b);
+    group_lanes(index, first / 4, seeds, a, needed & 0xf);
+    group_lanes(index, first / 4 + 1, seeds, b, needed >> 4);
     Some(out)
 }
 
@@ -382,14 +396,15 @@ pub fn vertex_numbers_lanes(index: u32, depth: u32, seeds: &[u32; 8]) -> Option<
 #[must_use]
 pub fn pixel_numbers_lanes(index: u32, seeds: &[u32; 8]) -> [[f32; 8]; 2] {
     let mut out = [[0.0f32; 8]; 2];
-    group_lanes(index, dim::PIXEL / 4, seeds, &mut out);
+    group_lanes(index, dim::PIXEL / 4, seeds, &mut out, 0x3);
     out
 }
 
 /// The first `out.len()` (at most four) coordinates of group `g` of sample `index` for eight
-/// pixels: [`Group::new`] and [`Group::coordinate`] as loops over the lanes.
+/// pixels, those whose bits are set in `needed`: [`Group::new`] and [`Group::coordinate`] as
+/// loops over the lanes.
 #[inline(always)]
-fn group_lanes(index: u32, g: u32, seeds: &[u32; 8], out: &mut [[f32; 8]]) {
+fn group_lanes(index: u32, g: u32, seeds: &[u32; 8], out: &mut [[f32; 8]], needed: u8) {
     let reversed = index.reverse_bits();
     let salt = GROUP_SALTS[g as usize];
     let seed: [u32; 8] = std::array::from_fn(|l| hash(seeds[l] ^ salt));
@@ -401,6 +416,9 @@ fn group_lanes(index: u32, g: u32, seeds: &[u32; 8], out: &mut [[f32; 8]]) {
         }
     }
     for (k, out) in out.iter_mut().enumerate().take(4) {
+        if needed & (1 << k) == 0 {
+            continue;
+        }
         for l in 0..8 {
             let x = lk_permute(points[k][l], hash(seed[l] ^ COORDINATE_SALTS[k])).reverse_bits();
             out[l] = (x >> 8) as f32 * (1.0 / 16_777_216.0);
@@ -441,6 +459,26 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_vertex_computes_the_numbers_it_draws_and_only_those() {
+        let seeds: [u32; 8] = std::array::from_fn(|l| hash(l as u32 + 17));
+        for needed in [0u8, 0b0011_0111, 0b1011_1111, 0xff, 0x80, 0x01] {
+            let all = vertex_numbers_lanes(9, 1, &seeds).unwrap();
+            let some = vertex_numbers_lanes_of(9, 1, &seeds, needed).unwrap();
+            for k in 0..8 {
+                for l in 0..8 {
+                    if needed & (1 << k) != 0 {
+                        assert_eq!(some[k][l].to_bits(), all[k][l].to_bits(), "{needed:b} {k}");
+                    } else {
+                        assert!(some[k][l].is_nan(), "{needed:b} {k}");
+                    }
+                }
+            }
+        }
+        // Past the sequence's dimensions, none.
+        assert!(vertex_numbers_lanes_of(0, 5, &seeds, 0xff).is_none());
     }
 
     #[test]

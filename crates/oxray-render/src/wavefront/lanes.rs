@@ -23,7 +23,7 @@ pub(super) const LANES: usize = 8;
 
 /// Whether [`vertices`] applies to a scene at all: it samples emissive triangles and the
 /// environment but no punctual light, writes no AOVs, and reads emission without textures.
-/// Then a hit qualifies by [`qualifies`].
+/// Then a hit qualifies by [`qualifies_material`] and [`qualifies_prim`].
 pub(super) fn applies(p: &Params) -> bool {
     p.aov.is_none()
         && p.scene.lights.is_empty()
@@ -33,9 +33,9 @@ pub(super) fn applies(p: &Params) -> bool {
             .all(|m| m.emissive_texture.is_none())
 }
 
-/// Whether a hit on material `m` of primitive `prim` is a plain diffuse vertex: no texture, no
-/// normal map, no vertex normals or colours, no metal, no coat, no transmission.
-pub(super) fn qualifies(m: &MaterialDesc, prim: &oxray_scene::Primitive) -> bool {
+/// Whether a hit on material `m` may be a plain diffuse vertex (if its primitive
+/// [`qualifies_prim`]): no texture, no normal map, no metal, no coat, no transmission.
+pub(super) fn qualifies_material(m: &MaterialDesc) -> bool {
     let surf = crate::bsdf::Surface::new(
         Vec3::ZERO,
         m.metallic,
@@ -48,8 +48,12 @@ pub(super) fn qualifies(m: &MaterialDesc, prim: &oxray_scene::Primitive) -> bool
         && m.base_color_texture.is_none()
         && m.metallic_roughness_texture.is_none()
         && m.normal_texture.is_none()
-        && prim.normals.is_empty()
-        && prim.colors.is_empty()
+}
+
+/// Whether a hit on primitive `prim` may be a plain diffuse vertex (if its material
+/// [`qualifies_material`]): no vertex normals, no vertex colours.
+pub(super) fn qualifies_prim(prim: &oxray_scene::Primitive) -> bool {
+    prim.normals.is_empty() && prim.colors.is_empty()
 }
 
 /// One path of a batch, as gathered for [`vertices`].
@@ -106,7 +110,18 @@ pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut 
     let seq = if p.sampler == Sampler::Sobol {
         let salt = programs::stream_salt(p.seed);
         let seeds = std::array::from_fn(|l| sampler::pixel_seed(inputs[l].image_pixel, salt));
-        sobol_numbers(p.sample, inputs[0].state.depth, &seeds)
+        // What a plain diffuse vertex draws: the light's point and triangle (numbers 0 to 2),
+        // its pick where the environment is lit too (3), the direction (4, 5), roulette (7)
+        // from its first vertex on; never a lobe (6).
+        let depth = inputs[0].state.depth;
+        let needed = 0b0011_0111
+            | if p.p_env > 0.0 { 1 << 3 } else { 0 }
+            | if depth + 1 >= p.roulette_depth {
+                1 << 7
+            } else {
+                0
+            };
+        sobol_numbers(p.sample, depth, &seeds, needed)
     } else {
         None
     };
@@ -190,19 +205,24 @@ fn camera_paths_of(p: &Params, lx: &[u32; LANES], ly: &[u32; LANES]) -> [PathSta
 }
 
 /// [`sampler::vertex_numbers_lanes`], in AVX2 where the processor has it.
-fn sobol_numbers(index: u32, depth: u32, seeds: &[u32; LANES]) -> Option<[F; 8]> {
+fn sobol_numbers(index: u32, depth: u32, seeds: &[u32; LANES], needed: u8) -> Option<[F; 8]> {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2, checked just above.
-        return unsafe { sobol_numbers_avx2(index, depth, seeds) };
+        return unsafe { sobol_numbers_avx2(index, depth, seeds, needed) };
     }
-    sampler::vertex_numbers_lanes(index, depth, seeds)
+    sampler::vertex_numbers_lanes_of(index, depth, seeds, needed)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-unsafe fn sobol_numbers_avx2(index: u32, depth: u32, seeds: &[u32; LANES]) -> Option<[F; 8]> {
-    sampler::vertex_numbers_lanes(index, depth, seeds)
+unsafe fn sobol_numbers_avx2(
+    index: u32,
+    depth: u32,
+    seeds: &[u32; LANES],
+    needed: u8,
+) -> Option<[F; 8]> {
+    sampler::vertex_numbers_lanes_of(index, depth, seeds, needed)
 }
 
 #[cfg(target_arch = "x86_64")]

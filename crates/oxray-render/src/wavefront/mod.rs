@@ -148,12 +148,13 @@ impl<'g> Wavefront<'g> {
     pub(crate) fn pass(&self, p: &Params, width: u32, height: u32) -> u64 {
         let pixels = width as usize * height as usize;
         let tiles = pixels.div_ceil(TILE);
+        let plain = Plain::of(p);
         (0..tiles)
             .into_par_iter()
             .map_init(Scratch::default, |scratch, tile| {
                 let start = tile * TILE;
                 let end = (start + TILE).min(pixels);
-                self.tile(p, width, start..end, scratch)
+                self.tile(p, &plain, width, start..end, scratch)
             })
             .sum()
     }
@@ -161,6 +162,7 @@ impl<'g> Wavefront<'g> {
     fn tile(
         &self,
         p: &Params,
+        plain: &Plain,
         width: u32,
         pixels: std::ops::Range<usize>,
         scratch: &mut Scratch,
@@ -234,7 +236,7 @@ impl<'g> Wavefront<'g> {
                     Some(hit) => {
                         let data = self.record(hit);
                         if lanes_apply && lane.state.depth == depth {
-                            if let Some(input) = lane_input(p, data, ray, hit, lane) {
+                            if let Some(input) = lane_input(p, plain, data, ray, hit, lane) {
                                 batch.push(l, input);
                                 if batch.n == lanes::LANES {
                                     batch.flush(p, lanes, shadows);
@@ -389,14 +391,14 @@ impl Batch {
 /// an instance: the root is a GAS).
 fn lane_input(
     p: &Params,
+    plain: &Plain,
     data: HitGroupData,
     ray: &Ray,
     hit: &Hit,
     lane: &Lane,
 ) -> Option<lanes::Input> {
-    let m = p.scene.materials.get(data.material as usize)?;
-    let prim = *p.prims.get(data.geometry as usize)?;
-    if !lanes::qualifies(m, prim) {
+    let m = plain.materials.get(data.material as usize)?.as_ref()?;
+    if !*plain.prims.get(data.geometry as usize)? {
         return None;
     }
     Some(lanes::Input {
@@ -406,16 +408,56 @@ fn lane_input(
         dir: ray.direction,
         t: hit.t,
         vertices: QueryHit::new(p, data, ray, hit, None).vertices,
-        base: Vec3::from_slice(&m.base_color[..3]),
-        emissive: Vec3::from(m.emissive),
+        base: m.base,
+        emissive: m.emissive,
         double_sided: m.double_sided,
-        area_pdf: p.lights.area_pdf(data.material),
+        area_pdf: m.area_pdf,
         sampled: !p
             .moving
             .get(hit.instance_id as usize)
             .copied()
             .unwrap_or(false),
     })
+}
+
+/// Which hits the lanes shade ([`lanes::qualifies_material`], [`lanes::qualifies_prim`]), decided once a pass rather than a hit:
+/// per material, what a plain diffuse vertex reads of it (`None`: not plain); per primitive,
+/// whether it has neither vertex normals nor vertex colours.
+struct Plain {
+    materials: Vec<Option<PlainMaterial>>,
+    prims: Vec<bool>,
+}
+
+/// What [`lanes::Input`] takes of a plain diffuse material.
+struct PlainMaterial {
+    base: Vec3,
+    emissive: Vec3,
+    double_sided: bool,
+    /// Its area pdf as a light ([`crate::lights::TriangleLights::area_pdf`]).
+    area_pdf: f32,
+}
+
+impl Plain {
+    fn of(p: &Params) -> Plain {
+        let materials = p.scene.materials.iter().enumerate();
+        Plain {
+            materials: materials
+                .map(|(i, m)| {
+                    lanes::qualifies_material(m).then(|| PlainMaterial {
+                        base: Vec3::from_slice(&m.base_color[..3]),
+                        emissive: Vec3::from(m.emissive),
+                        double_sided: m.double_sided,
+                        area_pdf: p.lights.area_pdf(i as u32),
+                    })
+                })
+                .collect(),
+            prims: p
+                .prims
+                .iter()
+                .map(|prim| lanes::qualifies_prim(prim))
+                .collect(),
+        }
+    }
 }
 
 /// A query's hit as a path vertex sees it: what a closest-hit program's context reads.
