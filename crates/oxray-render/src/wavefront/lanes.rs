@@ -12,7 +12,7 @@
 use crate::bsdf::{hash, sin_cos_turns, Rng};
 use crate::filter::sample_offset;
 use crate::programs::{self, Params, PathState, ShadowRay};
-use crate::sampler::{self, Sampler};
+use crate::sampler::{self, dim, Sampler};
 use glam::Vec3;
 use oxray::Transform;
 use oxray_scene::MaterialDesc;
@@ -110,17 +110,25 @@ pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut 
     let seq = if p.sampler == Sampler::Sobol {
         let salt = programs::stream_salt(p.seed);
         let seeds = std::array::from_fn(|l| sampler::pixel_seed(inputs[l].image_pixel, salt));
-        // What a plain diffuse vertex draws: the light's point and triangle (numbers 0 to 2),
-        // its pick where the environment is lit too (3), the direction (4, 5), roulette (7)
-        // from its first vertex on; never a lobe (6).
+        // What a plain diffuse vertex draws: the light's triangle and point, its pick where
+        // the environment is lit too, the direction (never a lobe: there is one), and roulette
+        // where `programs::continue_path` plays it (at the new vertex's depth).
         let depth = inputs[0].state.depth;
-        let needed = 0b0011_0111
-            | if p.p_env > 0.0 { 1 << 3 } else { 0 }
-            | if depth + 1 >= p.roulette_depth {
-                1 << 7
-            } else {
-                0
-            };
+        let bit = |d: u32| 1u8 << d;
+        let drawn = [
+            dim::LIGHT[0],
+            dim::LIGHT[1],
+            dim::LIGHT[2],
+            dim::BSDF[1],
+            dim::BSDF[2],
+        ];
+        let mut needed = drawn.iter().fold(0, |m, &d| m | bit(d));
+        if p.p_env > 0.0 {
+            needed |= bit(dim::LIGHT_PICK);
+        }
+        if depth + 1 >= p.roulette_depth {
+            needed |= bit(dim::ROULETTE);
+        }
         sobol_numbers(p.sample, depth, &seeds, needed)
     } else {
         None
@@ -204,7 +212,7 @@ fn camera_paths_of(p: &Params, lx: &[u32; LANES], ly: &[u32; LANES]) -> [PathSta
     })
 }
 
-/// [`sampler::vertex_numbers_lanes`], in AVX2 where the processor has it.
+/// [`sampler::vertex_numbers_lanes_of`], in AVX2 where the processor has it.
 fn sobol_numbers(index: u32, depth: u32, seeds: &[u32; LANES], needed: u8) -> Option<[F; 8]> {
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {

@@ -420,9 +420,9 @@ fn lane_input(
     })
 }
 
-/// Which hits the lanes shade ([`lanes::qualifies_material`], [`lanes::qualifies_prim`]), decided once a pass rather than a hit:
-/// per material, what a plain diffuse vertex reads of it (`None`: not plain); per primitive,
-/// whether it has neither vertex normals nor vertex colours.
+/// Which hits the lanes shade ([`lanes::qualifies_material`], [`lanes::qualifies_prim`]),
+/// decided once a pass rather than a hit: per material, what a plain diffuse vertex reads of it
+/// (`None`: not plain); per primitive, whether it has neither vertex normals nor colours.
 struct Plain {
     materials: Vec<Option<PlainMaterial>>,
     prims: Vec<bool>,
