@@ -235,14 +235,15 @@ impl<'g> Wavefront<'g> {
                 match hit {
                     Some(hit) => {
                         let data = self.record(hit);
-                        if lanes_apply && lane.state.depth == depth {
-                            if let Some(input) = lane_input(p, plain, data, ray, hit, lane) {
-                                batch.push(l, input);
-                                if batch.n == lanes::LANES {
-                                    batch.flush(p, lanes, shadows);
-                                }
-                                continue;
+                        if lanes_apply
+                            && lane.state.depth == depth
+                            && lane_input(p, plain, data, ray, hit, lane, batch.next())
+                        {
+                            batch.take(l);
+                            if batch.n == lanes::LANES {
+                                batch.flush(p, lanes, shadows);
                             }
+                            continue;
                         }
                         let view = QueryHit::new(p, data, ray, hit, self.root.instance(hit));
                         let made = programs::vertex(p, &view, data, lane.at, &mut lane.state);
@@ -366,9 +367,15 @@ struct Batch {
 }
 
 impl Batch {
-    fn push(&mut self, lane: u32, input: lanes::Input) {
+    /// The input the next path taken will have: written in place (an input is 150 bytes,
+    /// which a copy into the batch would move once more).
+    fn next(&mut self) -> &mut lanes::Input {
+        &mut self.inputs[self.n]
+    }
+
+    /// Takes path `lane`, whose input [`next`](Self::next) holds.
+    fn take(&mut self, lane: u32) {
         self.lane[self.n] = lane;
-        self.inputs[self.n] = input;
         self.n += 1;
     }
 
@@ -387,8 +394,9 @@ impl Batch {
     }
 }
 
-/// A hit's vertex as [`lanes::vertices`] takes it, if it is a plain diffuse one (a hit without
-/// an instance: the root is a GAS).
+/// Writes a hit's vertex as [`lanes::vertices`] takes it into `input`, if it is a plain diffuse
+/// one (a hit without an instance: the root is a GAS); otherwise leaves `input` and returns
+/// `false`.
 fn lane_input(
     p: &Params,
     plain: &Plain,
@@ -396,12 +404,15 @@ fn lane_input(
     ray: &Ray,
     hit: &Hit,
     lane: &Lane,
-) -> Option<lanes::Input> {
-    let m = plain.materials.get(data.material as usize)?.as_ref()?;
-    if !*plain.prims.get(data.geometry as usize)? {
-        return None;
+    input: &mut lanes::Input,
+) -> bool {
+    let Some(Some(m)) = plain.materials.get(data.material as usize) else {
+        return false;
+    };
+    if plain.prims.get(data.geometry as usize) != Some(&true) {
+        return false;
     }
-    Some(lanes::Input {
+    *input = lanes::Input {
         state: lane.state,
         image_pixel: lane.at.image,
         origin: ray.origin,
@@ -417,7 +428,8 @@ fn lane_input(
             .get(hit.instance_id as usize)
             .copied()
             .unwrap_or(false),
-    })
+    };
+    true
 }
 
 /// Which hits the lanes shade ([`lanes::qualifies_material`], [`lanes::qualifies_prim`]),
