@@ -11,8 +11,10 @@ Scenes, each built identically in both renderers:
            renders it as an OBJ+MTL file and Mitsuba as one PLY per material: the same
            triangles. Skipped when the glTF file is absent.
 Both renderers: box pixel filter, paths of at most --max-depth vertices (oxray's --max-depth and
-Mitsuba's max_depth count alike), Russian roulette from the 3rd vertex (oxray's default; Mitsuba's
-rr_depth=3), two-sided surfaces, linear RGB (no tone mapping), the same thread count.
+Mitsuba's max_depth count alike), each renderer's own Russian roulette at its default (oxray's
+from the 3rd vertex with three times the throughput as the probability to go on; Mitsuba's
+rr_depth=5, the throughput itself; --mitsuba-rr-depth changes it), two-sided surfaces, linear
+RGB (no tone mapping), the same thread count.
 
 Steps per scene:
   1. The reference and the check that the two scenes agree: oxray (sobol) and Mitsuba, each
@@ -270,11 +272,11 @@ def write_obj(path: Path, meshes: dict, albedo: dict) -> None:
 
 def mitsuba_scene(meshes: dict, albedo: dict, camera: dict, size: tuple[int, int], max_depth: int,
                   folder: Path, emitter: dict | None = None, env: float | None = None,
-                  sampler: str = "independent"):
+                  sampler: str = "independent", rr_depth: int = 5):
     """The Mitsuba scene: one PLY per material (flat-shaded, two-sided diffuse), a pinhole
     camera with a box filter, the path integrator."""
     d = {"type": "scene",
-         "integrator": {"type": "path", "max_depth": max_depth, "rr_depth": 3},
+         "integrator": {"type": "path", "max_depth": max_depth, "rr_depth": rr_depth},
          "sensor": {"type": "perspective", "fov": camera["fov"], "fov_axis": "y",
                     "near_clip": 1e-3, "far_clip": 1e4,
                     "to_world": mi.ScalarTransform4f().look_at(
@@ -514,6 +516,8 @@ def main() -> None:
     ap.add_argument("--samplers", default="sobol,independent", help="oxray's (--sampler)")
     ap.add_argument("--mitsuba-samplers", default="independent,ldsampler",
                     help="Mitsuba's sampler plugins; the first also renders the reference")
+    ap.add_argument("--mitsuba-rr-depth", type=int, default=5,
+                    help="Mitsuba's rr_depth (its default, 5)")
     ap.add_argument("--scenes", default="cornell,gltf")
     ap.add_argument("--gltf", type=Path, default=ROOT.parent / "shared/data/gltf/balloon/scene.gltf")
     ap.add_argument("--out", type=Path, default=ROOT / "target/bench-mitsuba")
@@ -540,7 +544,7 @@ def main() -> None:
               f"{version} (commit {commit}); Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}, "
               f"variant {VARIANT}" + (f" ({Path(llvm).name})" if llvm else " (no LLVM: scalar fallback)")
               + f"; {cpu}, {os.cpu_count()} CPUs; {args.threads} threads each; {args.size}, "
-              f"max depth {args.max_depth}, box filter; load average {load:.1f} at the start.\n"]
+              f"max depth {args.max_depth}, Mitsuba's rr_depth {args.mitsuba_rr_depth}, box filter; load average {load:.1f} at the start.\n"]
     if VARIANT != "llvm_ad_rgb":
         report.append("**Mitsuba runs its scalar variant: the LLVM backend is unavailable.**\n")
     with tempfile.TemporaryDirectory() as tmpdir:
@@ -551,7 +555,8 @@ def main() -> None:
                 meshes, camera = cornell_geometry()
                 mts = {f"Mitsuba {s}": Mitsuba(mitsuba_scene(
                     meshes, CORNELL_ALBEDO, camera, (w, h), args.max_depth, tmp,
-                    emitter={"light": CORNELL_RADIANCE}, sampler=s), args.threads)
+                    emitter={"light": CORNELL_RADIANCE}, sampler=s,
+                    rr_depth=args.mitsuba_rr_depth), args.threads)
                     for s in args.mitsuba_samplers}
                 ox = Oxray(exe, [], args.size, args.max_depth, args.threads, tmp)
                 report.append(bench_scene("Cornell box", ox, mts, args, args.out))
@@ -563,7 +568,8 @@ def main() -> None:
                 obj = tmp / "scene.obj"
                 write_obj(obj, meshes, albedo)
                 mts = {f"Mitsuba {s}": Mitsuba(mitsuba_scene(
-                    meshes, albedo, camera, (w, h), args.max_depth, tmp, env=1.0, sampler=s),
+                    meshes, albedo, camera, (w, h), args.max_depth, tmp, env=1.0, sampler=s,
+                    rr_depth=args.mitsuba_rr_depth),
                     args.threads) for s in args.mitsuba_samplers}
                 ox = Oxray(exe, [str(obj), "--env", "1",
                                  "--look-from", ",".join(f"{v:.9g}" for v in camera["origin"]),

@@ -206,6 +206,9 @@ PTI float maxf(float a, float b) { return fmaxf(a, b); }
 PTI float minf(float a, float b) { return fminf(a, b); }
 PTI float clampf(float x, float lo, float hi) { return x < lo ? lo : (x > hi ? hi : x); }
 PTI float max_element(V3 a) { return maxf(a.x, maxf(a.y, a.z)); }
+// Russian roulette's probability of going on: the Rust `programs::roulette_survival`, with
+// its ROULETTE_SCALE of 3.
+PTI float roulette_survival(V3 thr) { return clampf(max_element(thr) * 3.0f, 0.05f, 1.0f); }
 PTI V3 abs3(V3 a) { return v3(fabsf(a.x), fabsf(a.y), fabsf(a.z)); }
 PTI V3 lerp3(V3 a, V3 b, float s) { return a * (1.0f - s) + b * s; }
 PTI V4 lerp4(V4 a, V4 b, float s) { return a * (1.0f - s) + b * s; }
@@ -1256,7 +1259,7 @@ extern "C" __global__ void __closesthit__radiance() {
             s.origin = offset(sh, b.wi);
             s.direction = b.wi;
             if (s.depth >= params.roulette_depth) {
-                float q = clampf(max_element(thr), 0.05f, 1.0f);
+                float q = roulette_survival(thr);
                 if (rng.get(PT_DIM_ROULETTE) >= q) {
                     s.done = 1u;
                 } else {

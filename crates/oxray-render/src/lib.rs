@@ -114,8 +114,9 @@ pub struct RenderOptions {
     pub camera: Option<usize>,
     /// The pixel reconstruction filter.
     pub filter: filter::Filter,
-    /// The first path vertex after which Russian roulette may end a path (on its throughput):
-    /// the first bounces, which carry most of the image, are never cut short.
+    /// The first path vertex after which Russian roulette may end a path: the first bounces,
+    /// which carry most of the image, are never cut short. From there a path goes on with the
+    /// probability [`programs::roulette_survival`] of its throughput.
     pub roulette_depth: u32,
     /// Chooses the random sequence: renders with the same seed are identical, renders with
     /// different seeds independent (0 is the default sequence).

@@ -640,6 +640,24 @@ pub(crate) fn vertex(
     shadows
 }
 
+/// How much larger than a path's throughput (its largest channel) the probability that Russian
+/// roulette lets it go on is: paths whose throughput is at least its inverse, 1/3, always go on,
+/// and a survivor's throughput is raised to at least 1/3. Plain roulette (the probability the
+/// throughput itself) cuts paths whose every vertex still adds much of a closed room's light,
+/// and the weights of its survivors add more variance than the rays it saves are worth: on the
+/// Cornell box and the balloon (`docs/BENCHMARKS.md`, "Russian roulette with a floor") this
+/// factor gives 1.2x the samples per unit of error and time.
+pub const ROULETTE_SCALE: f32 = 3.0;
+
+/// The probability that Russian roulette lets a path of throughput `thr` go on:
+/// [`ROULETTE_SCALE`] times its largest channel, at most 1 and at least 0.05 (so that a
+/// survivor's weight stays bounded). The CUDA programs' `roulette_survival` is the same.
+#[inline]
+#[must_use]
+pub fn roulette_survival(thr: Vec3) -> f32 {
+    (thr.max_element() * ROULETTE_SCALE).clamp(0.05, 1.0)
+}
+
 /// The path's next ray after an accepted BSDF sample (`weight`, `pdf`, the ray from `origin`
 /// towards `wi`), and Russian roulette from vertex `p.roulette_depth` on, whose number `draw`
 /// gives (drawn only then). [`vertex`] and the wavefront's lanes both end a vertex here.
@@ -659,7 +677,7 @@ pub(crate) fn continue_path(
     s.origin = origin.to_array();
     s.direction = wi.to_array();
     if s.depth >= p.roulette_depth {
-        let q = thr.max_element().clamp(0.05, 1.0);
+        let q = roulette_survival(*thr);
         if draw() >= q {
             s.done = 1;
         } else {
@@ -908,4 +926,27 @@ pub fn module<'a>() -> Result<Module<Params<'a>>, oxray::PipelineError> {
             ctx.set_payload(1, 1);
             Ok(())
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn roulette_spares_paths_above_a_third_and_bounds_a_survivors_weight() {
+        // At or above 1/3 in any channel a path always goes on, its throughput unchanged.
+        for thr in [Vec3::ONE, Vec3::splat(1.0 / 3.0), Vec3::new(0.01, 0.4, 0.0)] {
+            assert_eq!(roulette_survival(thr), 1.0, "{thr}");
+        }
+        // Below, it goes on with three times its largest channel, and a survivor's throughput
+        // (divided by that) is back at 1/3.
+        let thr = Vec3::new(0.1, 0.2, 0.05);
+        let q = roulette_survival(thr);
+        assert!((q - 0.6).abs() < 1e-6, "{q}");
+        assert!(((thr / q).max_element() - 1.0 / 3.0).abs() < 1e-6);
+        // A nearly black path: the probability is at least 0.05, so no survivor's weight grows
+        // past 20 times.
+        assert_eq!(roulette_survival(Vec3::splat(1e-4)), 0.05);
+        assert_eq!(roulette_survival(Vec3::ZERO), 0.05);
+    }
 }

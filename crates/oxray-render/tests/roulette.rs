@@ -1,10 +1,9 @@
 //! Russian roulette on the path throughput, from a chosen vertex on (`roulette_depth`, 3 by
-//! default: the first bounces carry most of the image and are never cut short). Measured on the
-//! Cornell box at equal samples: the mean squared error against a converged reference, for
-//! roulette from the second vertex (the former setting), the third (the default) and the
-//! fourth, with wall-clock times (only indicative on a loaded machine). In this scene the three
-//! are within noise of each other: the throughput after one bounce off its walls is high
-//! enough that roulette rarely ends a path there. What the test asserts is that roulette stays
+//! default: the first bounces carry most of the image and are never cut short), with the
+//! probability `programs::roulette_survival` (three times the throughput, at most 1). Measured
+//! on the Cornell box at equal samples: the mean squared error against a converged reference,
+//! for roulette from the second vertex, the third (the default) and the fourth, with wall-clock
+//! times (only indicative on a loaded machine). What the test asserts is that roulette stays
 //! unbiased: each setting's image has the reference's mean, and its error is variance (it
 //! shrinks with the samples).
 
