@@ -12,14 +12,23 @@
 use crate::bsdf::{hash, sin_cos_turns, Rng};
 use crate::filter::sample_offset;
 use crate::programs::{self, Params, PathState, ShadowRay};
-use crate::sampler::{self, dim, Sampler};
+use crate::sampler::{self, dim, lanes_from, Sampler};
 use glam::Vec3;
 use oxray::Transform;
 use oxray_scene::MaterialDesc;
 use std::f32::consts::FRAC_1_PI;
 
-/// Paths per batch.
-pub(super) const LANES: usize = 8;
+/// Paths per batch: sixteen, one AVX-512 register of floats (two AVX2 ones).
+pub(super) const LANES: usize = 16;
+
+/// Whether the processor runs the AVX-512 forms (16 floats a register).
+#[cfg(target_arch = "x86_64")]
+fn has_avx512() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512vl")
+        && std::arch::is_x86_feature_detected!("avx512bw")
+        && std::arch::is_x86_feature_detected!("avx512dq")
+}
 
 /// Whether [`vertices`] applies to a scene at all: it samples emissive triangles and the
 /// environment but no punctual light, writes no AOVs, and reads emission without textures.
@@ -109,7 +118,7 @@ pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut 
     // pushed the vertex's own values out to the stack (measured 5 % slower a sample).
     let seq = if p.sampler == Sampler::Sobol {
         let salt = programs::stream_salt(p.seed);
-        let seeds = std::array::from_fn(|l| sampler::pixel_seed(inputs[l].image_pixel, salt));
+        let pixels = lanes_from(|l| inputs[l].image_pixel);
         // What a plain diffuse vertex draws: the light's triangle and point, its pick where
         // the environment is lit too, the direction (never a lobe: there is one), and roulette
         // where `programs::continue_path` plays it (at the new vertex's depth).
@@ -129,10 +138,16 @@ pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut 
         if depth + 1 >= p.roulette_depth {
             needed |= bit(dim::ROULETTE);
         }
-        sobol_numbers(p.sample, depth, &seeds, needed)
+        sobol_numbers(p.sample, depth, &pixels, salt, needed)
     } else {
         None
     };
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512() {
+        // SAFETY: the processor has the AVX-512 features, checked just above.
+        unsafe { vertices_avx512(p, inputs, n, seq, out) };
+        return;
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2, checked just above.
@@ -154,6 +169,11 @@ pub(super) fn camera_paths(
         return None;
     }
     #[cfg(target_arch = "x86_64")]
+    if has_avx512() {
+        // SAFETY: the processor has the AVX-512 features, checked just above.
+        return Some(unsafe { camera_paths_avx512(p, lx, ly) });
+    }
+    #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2, checked just above.
         return Some(unsafe { camera_paths_avx2(p, lx, ly) });
@@ -171,16 +191,26 @@ unsafe fn camera_paths_avx2(
     camera_paths_of(p, lx, ly)
 }
 
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
+unsafe fn camera_paths_avx512(
+    p: &Params,
+    lx: &[u32; LANES],
+    ly: &[u32; LANES],
+) -> [PathState; LANES] {
+    camera_paths_of(p, lx, ly)
+}
+
 #[inline(always)]
 fn camera_paths_of(p: &Params, lx: &[u32; LANES], ly: &[u32; LANES]) -> [PathState; LANES] {
     let [w, h] = p.image;
-    let x: [u32; LANES] = std::array::from_fn(|l| p.window[0] + lx[l]);
-    let y: [u32; LANES] = std::array::from_fn(|l| p.window[1] + ly[l]);
-    let index: [u32; LANES] = std::array::from_fn(|l| y[l] * w + x[l]);
+    let x: [u32; LANES] = lanes_from(|l| p.window[0] + lx[l]);
+    let y: [u32; LANES] = lanes_from(|l| p.window[1] + ly[l]);
+    let index: [u32; LANES] = lanes_from(|l| y[l] * w + x[l]);
     let salt = programs::stream_salt(p.seed);
     // `Rng::new(index, p.sample, salt)`, then the two draws of the pixel's offset.
     let key = hash(p.sample.wrapping_add(hash(salt)));
-    let mut rng: [u32; LANES] = std::array::from_fn(|l| hash(index[l] ^ key));
+    let mut rng: [u32; LANES] = lanes_from(|l| hash(index[l] ^ key));
     let mut hashed = [[0.0f32; LANES]; 2];
     for h in &mut hashed {
         for l in 0..LANES {
@@ -190,15 +220,15 @@ fn camera_paths_of(p: &Params, lx: &[u32; LANES], ly: &[u32; LANES]) -> [PathSta
         }
     }
     let [jx, jy] = if p.sampler == Sampler::Sobol {
-        let seeds = std::array::from_fn(|l| sampler::pixel_seed(index[l], salt));
+        let seeds = lanes_from(|l| sampler::pixel_seed(index[l], salt));
         sampler::pixel_numbers_lanes(p.sample, &seeds)
     } else {
         hashed
     };
-    let ox: F = std::array::from_fn(|l| 0.5 + sample_offset(p.filter, jx[l]));
-    let oy: F = std::array::from_fn(|l| 0.5 + sample_offset(p.filter, jy[l]));
+    let ox: F = lanes_from(|l| 0.5 + sample_offset(p.filter, jx[l]));
+    let oy: F = lanes_from(|l| 0.5 + sample_offset(p.filter, jy[l]));
     let c = p.camera;
-    std::array::from_fn(|l| {
+    lanes_from(|l| {
         let sx = 2.0 * (x[l] as f32 + ox[l]) / w as f32 - 1.0;
         let sy = 1.0 - 2.0 * (y[l] as f32 + oy[l]) / h as f32;
         let dir = (c.forward + c.right * sx + c.up * sy).normalize();
@@ -212,14 +242,39 @@ fn camera_paths_of(p: &Params, lx: &[u32; LANES], ly: &[u32; LANES]) -> [PathSta
     })
 }
 
-/// [`sampler::vertex_numbers_lanes_of`], in AVX2 where the processor has it.
-fn sobol_numbers(index: u32, depth: u32, seeds: &[u32; LANES], needed: u8) -> Option<[F; 8]> {
+/// The pixels' Sobol seeds ([`sampler::pixel_seed`]), then their numbers
+/// ([`sampler::vertex_numbers_lanes_of`]).
+#[inline(always)]
+fn sobol_numbers_of(
+    index: u32,
+    depth: u32,
+    pixels: &[u32; LANES],
+    salt: u32,
+    needed: u8,
+) -> Option<[F; 8]> {
+    let seeds = lanes_from(|l| sampler::pixel_seed(pixels[l], salt));
+    sampler::vertex_numbers_lanes_of(index, depth, &seeds, needed)
+}
+
+/// [`sobol_numbers_of`], in AVX-512 or AVX2 where the processor has them.
+fn sobol_numbers(
+    index: u32,
+    depth: u32,
+    pixels: &[u32; LANES],
+    salt: u32,
+    needed: u8,
+) -> Option<[F; 8]> {
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512() {
+        // SAFETY: the processor has the AVX-512 features, checked just above.
+        return unsafe { sobol_numbers_avx512(index, depth, pixels, salt, needed) };
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2, checked just above.
-        return unsafe { sobol_numbers_avx2(index, depth, seeds, needed) };
+        return unsafe { sobol_numbers_avx2(index, depth, pixels, salt, needed) };
     }
-    sampler::vertex_numbers_lanes_of(index, depth, seeds, needed)
+    sobol_numbers_of(index, depth, pixels, salt, needed)
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -227,15 +282,40 @@ fn sobol_numbers(index: u32, depth: u32, seeds: &[u32; LANES], needed: u8) -> Op
 unsafe fn sobol_numbers_avx2(
     index: u32,
     depth: u32,
-    seeds: &[u32; LANES],
+    pixels: &[u32; LANES],
+    salt: u32,
     needed: u8,
 ) -> Option<[F; 8]> {
-    sampler::vertex_numbers_lanes_of(index, depth, seeds, needed)
+    sobol_numbers_of(index, depth, pixels, salt, needed)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
+unsafe fn sobol_numbers_avx512(
+    index: u32,
+    depth: u32,
+    pixels: &[u32; LANES],
+    salt: u32,
+    needed: u8,
+) -> Option<[F; 8]> {
+    sobol_numbers_of(index, depth, pixels, salt, needed)
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn vertices_avx2(
+    p: &Params,
+    inputs: &[Input; LANES],
+    n: usize,
+    seq: Option<[F; 8]>,
+    out: &mut [Output],
+) {
+    vertices_of(p, inputs, n, seq, out);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
+unsafe fn vertices_avx512(
     p: &Params,
     inputs: &[Input; LANES],
     n: usize,
@@ -340,7 +420,7 @@ fn vertices_of(
 
     // The draws: the hash stream advances once per draw, the numbers are the vertex's Sobol
     // points where the sequence reaches (or the stream's own).
-    let mut rng: [u32; LANES] = std::array::from_fn(|l| i[l].state.seed);
+    let mut rng: [u32; LANES] = lanes_from(|l| i[l].state.seed);
     let mut hashed = [[0.0f32; LANES]; 7];
     // The stream after the light's four draws: the shadow ray's payload word 0.
     let mut rng4 = [0u32; LANES];
