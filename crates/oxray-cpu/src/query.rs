@@ -3,8 +3,8 @@
 //! program pipeline is built on.
 
 use crate::traversal::{
-    coherent, traverse_gas_packet, traverse_node, triangle_gas_rays, with_stack, Decision, Entry,
-    GasVisitor, NodeRef, Path, SceneVisitor, PACKET,
+    coherent, small_applies, small_gas_rays, traverse_gas_packet, traverse_node, triangle_gas_rays,
+    with_stack, Decision, Entry, GasVisitor, NodeRef, Path, SceneVisitor, PACKET,
 };
 use crate::Gas;
 use oxray_bvh::triangle::TriangleHit;
@@ -288,9 +288,11 @@ fn query<'s, C: CustomIntersector, F: CandidateFilter>(
 
 /// Closest hits (`first_hit_ends` false) or occlusion (true) of a batch under `root`
 /// (`None`: the null handle, every ray misses), in parallel, each answer mapped by `answer`
-/// into `out`. Coherent groups of eight rays under a triangle GAS go through the packet kernel
-/// (see [`traverse_gas_packet`]); the answers are those of one ray at a time (up to which of
-/// two primitives at exactly the same distance is reported), whatever the number of threads.
+/// into `out`. A small triangle GAS is tested whole, sixteen rays at a time (see
+/// [`small_gas_rays`]); otherwise coherent groups of eight rays under a triangle GAS go through
+/// the packet kernel (see [`traverse_gas_packet`]). The answers are those of one ray at a time
+/// (up to which of two primitives at exactly the same distance is reported), whatever the
+/// number of threads.
 fn batch_queries<T: Send>(
     root: Option<NodeRef<'_>>,
     rays: &[Ray],
@@ -318,7 +320,23 @@ fn batch_queries<T: Send>(
             }
         }
     };
+    let small = small_applies(gas);
     par_chunks(rays, out, |rays, out| {
+        // A small structure: its triangles tested whole, sixteen rays at a time; each ray's
+        // candidate then offered to its visitor as the walk would offer it.
+        if small
+            && small_gas_rays(gas, rays, out, first_hit_ends, |i, found| {
+                answer(found.and_then(|(slot, h)| {
+                    let mut v =
+                        QueryVisitor::new(&rays[i], NoCustomPrimitives, AcceptAll, first_hit_ends);
+                    v.gas = Some(gas);
+                    v.triangle(slot, &h);
+                    v.finish()
+                }))
+            })
+        {
+            return;
+        }
         // Rays before `pending` are answered.
         let mut pending = 0;
         for at in (0..rays.len()).step_by(PACKET) {
@@ -388,6 +406,12 @@ fn par_chunks<T: Send>(
         });
     }
     const CHUNK: usize = 256;
+    if rays.len() <= CHUNK {
+        // One chunk: on this thread, without the thread pool's bookkeeping (a renderer's
+        // tile traces its batches from inside a pool task, a few hundred rays each).
+        f(rays, out);
+        return Ok(());
+    }
     rays.par_chunks(CHUNK)
         .zip(out.par_chunks_mut(CHUNK))
         .for_each(|(rays, out)| f(rays, out));
@@ -455,9 +479,10 @@ macro_rules! query_api {
                 query($root(self), ray, custom, AcceptAll, true).is_some()
             }
 
-            /// Closest hits of a batch of rays, in parallel on the current rayon pool. Groups of eight
-            /// consecutive rays from one origin (camera rays) are traced together as a packet where
-            /// the processor has AVX2. The results are those of [`intersect`](Self::intersect) ray by
+            /// Closest hits of a batch of rays, in parallel on the current rayon pool. Under a small
+            /// triangle GAS (at most 64 leaf slots) sixteen rays are tested at a time where the
+            /// processor has AVX-512; otherwise groups of eight consecutive rays from one origin
+            /// (camera rays) are traced together as a packet where it has AVX2. The results are those of [`intersect`](Self::intersect) ray by
             /// ray (t, u, v and facing bit for bit; where two primitives are hit at exactly the same
             /// distance either may be reported), the same whatever the number of threads.
             pub fn intersect_batch(

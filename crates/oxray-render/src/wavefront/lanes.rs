@@ -1,8 +1,8 @@
-//! The wavefront's vertices on plain diffuse surfaces, eight paths at a time.
+//! The wavefront's vertices on plain diffuse surfaces, sixteen paths at a time.
 //!
 //! A tile's paths are all at one vertex, and on the commonest surfaces (Lambertian, without
 //! textures, vertex normals or vertex colours, lit by emissive triangles) a vertex is the same
-//! short sequence of arithmetic for every path. Here it runs as loops over eight paths' values
+//! short sequence of arithmetic for every path. Here it runs as loops over sixteen paths' values
 //! side by side (structure of arrays), which the compiler turns into vector instructions, and
 //! so are the Sobol numbers' hashes and scrambles ([`sampler::vertex_numbers_lanes`]); the
 //! steps that look things up (the light's triangle, the Sobol table) stay lane by lane. Every operation is the one
@@ -157,7 +157,7 @@ pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut 
     vertices_of(p, inputs, n, seq, out);
 }
 
-/// The camera paths of eight pixels (launch indices `lx`, `ly`), each what
+/// The camera paths of sixteen pixels (launch indices `lx`, `ly`), each what
 /// [`programs::camera_path`] makes: the same draws and arithmetic in the same order, as loops
 /// over the lanes. `None` for a moving camera (a shutter), whose paths draw a time.
 pub(super) fn camera_paths(

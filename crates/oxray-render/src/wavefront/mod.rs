@@ -4,7 +4,8 @@
 //! A pass traces one sample of every pixel. The launch's pixels are cut into fixed tiles of
 //! [`TILE`] consecutive pixels (the same whatever the thread count), a tile per rayon task.
 //! A tile keeps its paths' states side by side and advances them in lock step: the rays of
-//! every live path, traced as one batch (camera rays from a pinhole go as packets of eight,
+//! every live path, traced as one batch (a small structure is tested whole sixteen rays at a
+//! time; in others camera rays from a pinhole go as packets of eight,
 //! [`oxray::cpu::Gas::intersect_batch`]), then every path's vertex shaded (emission, light
 //! samples, the BSDF sample), then the light samples' shadow rays as one occlusion batch, then
 //! their radiance added to the paths they are not blocked for. A batch of one ray kind keeps
@@ -180,7 +181,7 @@ impl<'g> Wavefront<'g> {
         let (start, end) = (pixels.start as u32, pixels.end as u32);
         for first in (start..end).step_by(lanes::LANES) {
             let n = (end - first).min(lanes::LANES as u32) as usize;
-            // The camera rays eight at a time where the camera does not move; the launch
+            // The camera rays sixteen at a time where the camera does not move; the launch
             // indices past the tile's end are the last one's, computed and dropped.
             let at = |k: usize| {
                 let pixel = first + k.min(n - 1) as u32;
@@ -188,9 +189,9 @@ impl<'g> Wavefront<'g> {
             };
             let lx = std::array::from_fn(|k| at(k).0);
             let ly = std::array::from_fn(|k| at(k).1);
-            let eight = lanes::camera_paths(p, &lx, &ly);
+            let group = lanes::camera_paths(p, &lx, &ly);
             for k in 0..n {
-                let (state, time) = match &eight {
+                let (state, time) = match &group {
                     Some(states) => (states[k], 0.0),
                     None => programs::camera_path(p, lx[k], ly[k]),
                 };
