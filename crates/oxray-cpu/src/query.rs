@@ -482,9 +482,10 @@ macro_rules! query_api {
             /// Closest hits of a batch of rays, in parallel on the current rayon pool. Under a small
             /// triangle GAS (at most 64 leaf slots) sixteen rays are tested at a time where the
             /// processor has AVX-512; otherwise groups of eight consecutive rays from one origin
-            /// (camera rays) are traced together as a packet where it has AVX2. The results are those of [`intersect`](Self::intersect) ray by
-            /// ray (t, u, v and facing bit for bit; where two primitives are hit at exactly the same
-            /// distance either may be reported), the same whatever the number of threads.
+            /// (camera rays) are traced together as a packet where it has AVX2. The results are
+            /// those of [`intersect`](Self::intersect) ray by ray (t, u, v and facing bit for bit;
+            /// where two primitives are hit at exactly the same distance either may be reported),
+            /// the same whatever the number of threads.
             pub fn intersect_batch(
                 &self,
                 rays: &[Ray],
