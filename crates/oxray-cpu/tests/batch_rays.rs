@@ -4,7 +4,6 @@
 //! at one distance is reported), the same occlusion, for every kernel, with invalid rays mixed
 //! in, with several build inputs, and whatever the number of threads.
 
-use glam::Vec3;
 use oxray_core::{BuildFlags, BuildOptions, IndexBuffer, Ray, TriangleInput, VertexBuffer};
 use oxray_cpu::{Gas, Isa};
 use oxray_testkit::mesh::{grid_cube, icosphere, random_soup, Mesh};
@@ -13,7 +12,7 @@ use oxray_testkit::rays::{rays_around, rays_at_features};
 use oxray_testkit::rng::Rng;
 
 mod common;
-use common::{batched, kernels, mesh_gas, soup_mesh};
+use common::{batched, invalid_rays, kernels, mesh_gas, soup_mesh};
 
 /// A GAS with the mesh's triangles split over two build inputs (the second half's hits carry
 /// build input 1 and their own primitive indices).
@@ -37,16 +36,7 @@ fn rays(m: &Mesh, rng: &mut Rng) -> Vec<Ray> {
     for ray in rays.iter_mut().step_by(5) {
         ray.tmin = (ray.tmax * rng.f32()).min(rng.range(0.0, 8.0));
     }
-    let o = Vec3::new(0.1, 0.2, 0.3);
-    let invalid = [
-        Ray::new(o, Vec3::new(f32::NAN, 1.0, 0.0)),
-        Ray::new(o, Vec3::ZERO),
-        Ray::new(Vec3::new(f32::INFINITY, 0.0, 0.0), Vec3::X),
-        Ray::with_interval(o, Vec3::X, 2.0, 1.0),
-        Ray::with_interval(o, Vec3::X, -1.0, 1.0),
-        Ray::with_interval(o, Vec3::X, 0.0, f32::NAN),
-    ];
-    for (k, bad) in invalid.into_iter().enumerate() {
+    for (k, bad) in invalid_rays().into_iter().enumerate() {
         rays.insert(37 * k + 5, bad);
     }
     rays

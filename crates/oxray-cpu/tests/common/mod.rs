@@ -50,3 +50,19 @@ pub fn batched(gas: &Gas, rays: &[Ray], threads: usize) -> (Vec<Option<Hit>>, Ve
     });
     (hits, occluded)
 }
+
+/// One ray of each kind [`Ray::validate`] refuses (a NaN or zero direction, an infinite
+/// origin, an interval that is reversed, negative or NaN): a query answers each with a miss.
+#[allow(dead_code)] // the batch tests' helper
+pub fn invalid_rays() -> [Ray; 6] {
+    let o = glam::Vec3::new(0.1, 0.2, 0.3);
+    let x = glam::Vec3::X;
+    [
+        Ray::new(o, glam::Vec3::new(f32::NAN, 1.0, 0.0)),
+        Ray::new(o, glam::Vec3::ZERO),
+        Ray::new(glam::Vec3::new(f32::INFINITY, 0.0, 0.0), x),
+        Ray::with_interval(o, x, 2.0, 1.0),
+        Ray::with_interval(o, x, -1.0, 1.0),
+        Ray::with_interval(o, x, 0.0, f32::NAN),
+    ]
+}

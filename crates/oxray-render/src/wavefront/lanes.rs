@@ -30,6 +30,65 @@ fn has_avx512() -> bool {
         && std::arch::is_x86_feature_detected!("avx512dq")
 }
 
+/// Defines `$name`, which runs `$of` compiled for AVX-512 or AVX2 where the processor has
+/// them (so that the lanes' loops become vector code of that width), as plain code elsewhere.
+/// `$of` must be `#[inline(always)]`.
+macro_rules! simd_form {
+    ($(#[$doc:meta])* fn $name:ident($($arg:ident: $ty:ty),*) -> $ret:ty = $of:ident) => {
+        $(#[$doc])*
+        fn $name($($arg: $ty),*) -> $ret {
+            #[cfg(target_arch = "x86_64")]
+            {
+                #[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
+                unsafe fn avx512($($arg: $ty),*) -> $ret {
+                    $of($($arg),*)
+                }
+                #[target_feature(enable = "avx2")]
+                unsafe fn avx2($($arg: $ty),*) -> $ret {
+                    $of($($arg),*)
+                }
+                if has_avx512() {
+                    // SAFETY: the processor has the AVX-512 features, checked just above.
+                    return unsafe { avx512($($arg),*) };
+                }
+                if std::arch::is_x86_feature_detected!("avx2") {
+                    // SAFETY: the processor has AVX2, checked just above.
+                    return unsafe { avx2($($arg),*) };
+                }
+            }
+            $of($($arg),*)
+        }
+    };
+}
+
+simd_form!(
+    /// [`vertices_of`] in the processor's widest vector instructions.
+    fn vertices_simd(
+        p: &Params,
+        inputs: &[Input; LANES],
+        n: usize,
+        seq: Option<[F; 8]>,
+        out: &mut [Output]
+    ) -> () = vertices_of
+);
+
+simd_form!(
+    /// [`camera_paths_of`] in the processor's widest vector instructions.
+    fn camera_paths_simd(p: &Params, lx: &[u32; LANES], ly: &[u32; LANES]) -> [PathState; LANES]
+        = camera_paths_of
+);
+
+simd_form!(
+    /// [`sobol_numbers_of`] in the processor's widest vector instructions.
+    fn sobol_numbers_simd(
+        index: u32,
+        depth: u32,
+        pixels: &[u32; LANES],
+        salt: u32,
+        needed: u8
+    ) -> Option<[F; 8]> = sobol_numbers_of
+);
+
 /// Whether [`vertices`] applies to a scene at all: it samples emissive triangles and the
 /// environment but no punctual light, writes no AOVs, and reads emission without textures.
 /// Then a hit qualifies by [`qualifies_material`] and [`qualifies_prim`].
@@ -138,23 +197,11 @@ pub(super) fn vertices(p: &Params, inputs: &[Input; LANES], n: usize, out: &mut 
         if depth + 1 >= p.roulette_depth {
             needed |= bit(dim::ROULETTE);
         }
-        sobol_numbers(p.sample, depth, &pixels, salt, needed)
+        sobol_numbers_simd(p.sample, depth, &pixels, salt, needed)
     } else {
         None
     };
-    #[cfg(target_arch = "x86_64")]
-    if has_avx512() {
-        // SAFETY: the processor has the AVX-512 features, checked just above.
-        unsafe { vertices_avx512(p, inputs, n, seq, out) };
-        return;
-    }
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the processor has AVX2, checked just above.
-        unsafe { vertices_avx2(p, inputs, n, seq, out) };
-        return;
-    }
-    vertices_of(p, inputs, n, seq, out);
+    vertices_simd(p, inputs, n, seq, out);
 }
 
 /// The camera paths of sixteen pixels (launch indices `lx`, `ly`), each what
@@ -168,37 +215,7 @@ pub(super) fn camera_paths(
     if p.shutter.is_some() {
         return None;
     }
-    #[cfg(target_arch = "x86_64")]
-    if has_avx512() {
-        // SAFETY: the processor has the AVX-512 features, checked just above.
-        return Some(unsafe { camera_paths_avx512(p, lx, ly) });
-    }
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the processor has AVX2, checked just above.
-        return Some(unsafe { camera_paths_avx2(p, lx, ly) });
-    }
-    Some(camera_paths_of(p, lx, ly))
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn camera_paths_avx2(
-    p: &Params,
-    lx: &[u32; LANES],
-    ly: &[u32; LANES],
-) -> [PathState; LANES] {
-    camera_paths_of(p, lx, ly)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
-unsafe fn camera_paths_avx512(
-    p: &Params,
-    lx: &[u32; LANES],
-    ly: &[u32; LANES],
-) -> [PathState; LANES] {
-    camera_paths_of(p, lx, ly)
+    Some(camera_paths_simd(p, lx, ly))
 }
 
 #[inline(always)]
@@ -254,75 +271,6 @@ fn sobol_numbers_of(
 ) -> Option<[F; 8]> {
     let seeds = lanes_from(|l| sampler::pixel_seed(pixels[l], salt));
     sampler::vertex_numbers_lanes_of(index, depth, &seeds, needed)
-}
-
-/// [`sobol_numbers_of`], in AVX-512 or AVX2 where the processor has them.
-fn sobol_numbers(
-    index: u32,
-    depth: u32,
-    pixels: &[u32; LANES],
-    salt: u32,
-    needed: u8,
-) -> Option<[F; 8]> {
-    #[cfg(target_arch = "x86_64")]
-    if has_avx512() {
-        // SAFETY: the processor has the AVX-512 features, checked just above.
-        return unsafe { sobol_numbers_avx512(index, depth, pixels, salt, needed) };
-    }
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the processor has AVX2, checked just above.
-        return unsafe { sobol_numbers_avx2(index, depth, pixels, salt, needed) };
-    }
-    sobol_numbers_of(index, depth, pixels, salt, needed)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn sobol_numbers_avx2(
-    index: u32,
-    depth: u32,
-    pixels: &[u32; LANES],
-    salt: u32,
-    needed: u8,
-) -> Option<[F; 8]> {
-    sobol_numbers_of(index, depth, pixels, salt, needed)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
-unsafe fn sobol_numbers_avx512(
-    index: u32,
-    depth: u32,
-    pixels: &[u32; LANES],
-    salt: u32,
-    needed: u8,
-) -> Option<[F; 8]> {
-    sobol_numbers_of(index, depth, pixels, salt, needed)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn vertices_avx2(
-    p: &Params,
-    inputs: &[Input; LANES],
-    n: usize,
-    seq: Option<[F; 8]>,
-    out: &mut [Output],
-) {
-    vertices_of(p, inputs, n, seq, out);
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,avx512f,avx512vl,avx512bw,avx512dq")]
-unsafe fn vertices_avx512(
-    p: &Params,
-    inputs: &[Input; LANES],
-    n: usize,
-    seq: Option<[F; 8]>,
-    out: &mut [Output],
-) {
-    vertices_of(p, inputs, n, seq, out);
 }
 
 /// The vertex; `seq`: its Sobol numbers ([`sampler::vertex_numbers_lanes`]), if the sampler
